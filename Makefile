@@ -1,0 +1,36 @@
+# cloth_sim: `make run` and `make test` install everything into .venv on first use (and again only when
+# requirements.txt or the package metadata change), then run the node's scene or the test suite.
+PYTHON ?= python3
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+# scipy's sparse solvers and numpy's BLAS oversubscribe 2 cores badly when threaded.
+export OPENBLAS_NUM_THREADS ?= 1
+export OMP_NUM_THREADS ?= 1
+export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
+export ROS_LOG_DIR ?= $(CURDIR)/.ros_log
+
+SCENE    ?= hanging
+DURATION ?= 5
+
+.PHONY: install run test bench clean
+install: $(STAMP)
+
+$(STAMP): requirements.txt setup.py setup.cfg pyproject.toml package.xml
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --disable-pip-version-check -q -r requirements.txt
+	$(PY) -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation -e .
+	@touch $@
+
+run: $(STAMP)
+	$(VENV)/bin/cloth-sim run --scene $(SCENE) --duration $(DURATION)
+
+test: $(STAMP)
+	$(PY) -m pytest test/ $(PYTEST_ARGS)
+
+bench: $(STAMP)
+	$(VENV)/bin/cloth-sim bench steps --sizes 32 64 128
+
+clean:
+	rm -rf $(VENV) .ros_log build install log *.egg-info
+	find . -name __pycache__ -type d -prune -exec rm -rf {} +

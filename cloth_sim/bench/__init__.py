@@ -1,0 +1,1 @@
+"""Benchmarks (``cloth-sim bench …``): they print figures; nothing here is asserted in tests."""

@@ -1,0 +1,156 @@
+"""Explicit integrators: three Runge–Kutta tableaus on one stepper, symplectic Euler and Verlet.
+
+The Runge–Kutta methods integrate the first-order system ``(x, v)' = (v, M⁻¹ f(x, v))`` (the
+review's eq. 1.10); a method is only its Butcher tableau, as in ``scipy.integrate``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import register
+from .base import Integrator, oscillator_matrix
+
+
+class ExplicitRungeKutta(Integrator):
+    """Explicit Runge–Kutta step driven by a Butcher tableau ``(A, b)``."""
+
+    A: np.ndarray
+    b: np.ndarray
+
+    def __init__(self, system):
+        super().__init__(system)
+        self._stages = len(self.b)
+        self._kx: list[np.ndarray] = []
+        self._kv: list[np.ndarray] = []
+
+    def step(self, x, v, dt):
+        forces = self.system.forces
+        if len(self._kx) != self._stages or self._kx[0].shape != x.shape:
+            self._kx = [np.empty_like(x) for _ in range(self._stages)]
+            self._kv = [np.empty_like(x) for _ in range(self._stages)]
+        kx, kv = self._kx, self._kv
+        for i in range(self._stages):
+            xs, vs = x.copy(), v.copy()
+            for j in range(i):
+                a = self.A[i, j]
+                if a != 0.0:
+                    xs += (dt * a) * kx[j]
+                    vs += (dt * a) * kv[j]
+            kx[i][:] = vs
+            forces.acceleration(xs, vs, out=kv[i])
+        for i in range(self._stages):
+            if self.b[i] != 0.0:
+                x += (dt * self.b[i]) * kx[i]
+                v += (dt * self.b[i]) * kv[i]
+
+    def amplification(self, h, omega, zeta):
+        J = oscillator_matrix(omega, zeta)
+        eye = np.eye(2)
+        K = []
+        for i in range(self._stages):
+            K.append(J @ (eye + h * sum(self.A[i, j] * K[j] for j in range(i))) if i else J.copy())
+        return eye + h * sum(self.b[i] * K[i] for i in range(self._stages))
+
+
+@register
+class ExplicitEuler(ExplicitRungeKutta):
+    """Explicit (forward) Euler, order 1: ``x += dt·v``, ``v += dt·a(x, v)``, both from the old state
+    (Provot 1995; review eq. 1.11). Unstable for any ``dt`` on an undamped oscillator."""
+
+    name = "explicit_euler"
+    order = 1
+    needs_damping = True
+    A = np.array([[0.0]])
+    b = np.array([1.0])
+
+
+@register
+class SymplecticEuler(Integrator):
+    """Symplectic (semi-implicit) Euler, order 1, in Provot's form (review eq. 1.12):
+    ``v += dt·a(x, v)``, then ``x += dt·v`` with the new velocity. Undamped, it keeps the energy error
+    bounded and is stable for ``ω·dt < 2``."""
+
+    name = "symplectic_euler"
+    order = 1
+
+    def __init__(self, system):
+        super().__init__(system)
+        self._a = None
+
+    def step(self, x, v, dt):
+        if self._a is None or self._a.shape != x.shape:
+            self._a = np.empty_like(x)
+        self.system.forces.acceleration(x, v, out=self._a)
+        v += dt * self._a
+        x += dt * v
+
+    def amplification(self, h, omega, zeta):
+        w2, c = omega * omega, 2.0 * zeta * omega
+        # v' = (1 − h c) v − h ω² x ;  x' = x + h v'
+        return np.array([[1.0 - h * h * w2, h * (1.0 - h * c)], [-h * w2, 1.0 - h * c]])
+
+
+@register
+class Midpoint(ExplicitRungeKutta):
+    """Explicit midpoint method, second-order Runge–Kutta (review eq. 1.13). Like explicit Euler it
+    is unstable on an undamped oscillator (weakly: |R(iωh)|² = 1 + (ωh)⁴/4)."""
+
+    name = "midpoint"
+    order = 2
+    needs_damping = True
+    A = np.array([[0.0, 0.0], [0.5, 0.0]])
+    b = np.array([0.0, 1.0])
+
+
+@register
+class RK4(ExplicitRungeKutta):
+    """Classical fourth-order Runge–Kutta (review eq. 1.14); stable for ``ω·dt < 2√2`` undamped."""
+
+    name = "rk4"
+    order = 4
+    A = np.array([[0.0, 0.0, 0.0, 0.0],
+                  [0.5, 0.0, 0.0, 0.0],
+                  [0.0, 0.5, 0.0, 0.0],
+                  [0.0, 0.0, 1.0, 0.0]])
+    b = np.array([1.0, 2.0, 2.0, 1.0]) / 6.0
+
+
+@register
+class Verlet(Integrator):
+    """Position (Störmer) Verlet, order 2 (review eq. 1.15): ``x⁺ = 2x − x⁻ + dt²·a(x, v)``.
+
+    It is started consistently, ``x⁻ = x − dt·v + ½dt²·a``, and rebuilt that way whenever the state,
+    ``dt`` or the method changes. Its velocity, used for damping and diagnostics, is the second-order
+    one-sided estimate ``v = (3x − 4x⁻ + x⁻⁻)/(2dt)`` from the last three positions. Stable for
+    ``ω·dt < 2`` undamped; the damped limit is taken from symplectic Euler, which has the same
+    undamped one.
+    """
+
+    name = "verlet"
+    order = 2
+    velocity_follow = 1.5  # ∂v/∂x of the BDF2 velocity estimate, times dt
+
+    def __init__(self, system):
+        super().__init__(system)
+        self._prev = None
+        self._a = None
+
+    def reset(self, x, v, dt):
+        self._pins = np.flatnonzero(self.system.model.pinned)
+        self._a = self.system.forces.acceleration(x, v, out=np.empty_like(x))
+        self._prev = x - dt * v + 0.5 * dt * dt * self._a
+
+    def pins_moved(self, x, pinned):
+        """Pinned particles were placed: keep them at rest (history equal to the new position)."""
+        self._prev[pinned] = x[pinned]
+
+    def step(self, x, v, dt):
+        a = self.system.forces.acceleration(x, v, out=self._a)
+        new = 2.0 * x - self._prev + (dt * dt) * a
+        v[:] = (3.0 * new - 4.0 * x + self._prev) / (2.0 * dt)
+        v[self._pins] = 0.0  # exactly at rest, whatever the rounding of the difference quotient
+        self._prev[:] = x
+        x[:] = new
+
+    amplification = SymplecticEuler.amplification

@@ -1,0 +1,256 @@
+"""The cloth's topology and material: particles, masses, pins and spring families.
+
+A :class:`ClothModel` is read-only once built. Integrators never touch it: they advance a state
+(positions, velocities) that a :class:`~cloth_sim.simulator.Simulator` owns, so several simulators can
+share one model.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: How a spring turns its length into a force.
+LINEAR = 0  #: Hooke spring, pushes and pulls (Provot 1995, eq. 1.6 of the review).
+TENSION_ONLY = 1  #: Choi & Ko type-1 interaction: pulls when stretched, nothing when compressed.
+BUCKLING = 2  #: Choi & Ko type-2 interaction: immediate-buckling arc when compressed, Hooke when stretched.
+
+GRID_FAMILIES = ("structural", "shear", "bend")
+SPRING_FAMILY = "spring"  # the single family of a from_springs model
+MODELS = ("provot", "choi_ko")
+ORIENTATIONS = ("horizontal", "vertical")
+
+
+def _freeze(a: np.ndarray) -> np.ndarray:
+    a = np.ascontiguousarray(a)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class ClothModel:
+    """Particles joined by springs, grouped in named families.
+
+    Attributes (all read-only arrays):
+        positions: ``(n, 3)`` float64 initial positions.
+        masses: ``(n,)`` float64 particle masses (kg).
+        springs: ``(m, 2)`` int64 particle indices.
+        rest_lengths: ``(m,)`` float64.
+        stiffness, damping: ``(m,)`` float64 per spring (N/m, N·s/m).
+        family: ``(m,)`` int64 index into ``family_names``.
+        kind: ``(m,)`` int8, one of :data:`LINEAR`, :data:`TENSION_ONLY`, :data:`BUCKLING`.
+        strain_limited: ``(m,)`` bool, springs that Provot's correction shortens.
+        pinned: ``(n,)`` bool.
+        triangles: ``(t, 3)`` int64 surface triangles (for normals and wind), possibly empty.
+        rows, cols: grid shape, or ``None`` for a general spring network.
+    """
+
+    positions: np.ndarray
+    masses: np.ndarray
+    springs: np.ndarray
+    rest_lengths: np.ndarray
+    stiffness: np.ndarray
+    damping: np.ndarray
+    family: np.ndarray
+    family_names: tuple[str, ...]
+    kind: np.ndarray
+    strain_limited: np.ndarray
+    pinned: np.ndarray
+    triangles: np.ndarray
+    rows: int | None = None
+    cols: int | None = None
+    model: str = "provot"
+    spacing: float | None = None
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        n, m = len(self.masses), len(self.springs)
+        checks = [
+            (self.positions.shape == (n, 3), "positions must be (n, 3)"),
+            (self.springs.shape == (m, 2), "springs must be (m, 2)"),
+            (self.rest_lengths.shape == (m,), "rest_lengths must be (m,)"),
+            (self.stiffness.shape == (m,), "stiffness must be (m,)"),
+            (self.damping.shape == (m,), "damping must be (m,)"),
+            (self.pinned.shape == (n,), "pinned must be (n,)"),
+        ]
+        for ok, msg in checks:
+            if not ok:
+                raise ValueError(msg)
+        if m and (self.springs.min() < 0 or self.springs.max() >= n):
+            raise ValueError(f"springs: particle indices must lie in [0, {n - 1}]")
+        if m and np.any(self.springs[:, 0] == self.springs[:, 1]):
+            raise ValueError("springs: a spring must join two different particles")
+        if not np.all(np.isfinite(self.positions)):
+            raise ValueError("positions must be finite")
+        if np.any(~np.isfinite(self.masses)) or np.any(self.masses <= 0):
+            raise ValueError("masses must be finite and > 0")
+        for name in ("stiffness", "damping"):
+            a = getattr(self, name)
+            if np.any(~np.isfinite(a)) or np.any(a < 0):
+                raise ValueError(f"{name} must be finite and >= 0")
+        if np.any(~np.isfinite(self.rest_lengths)) or np.any(self.rest_lengths <= 0):
+            raise ValueError("rest_lengths must be finite and > 0")
+        for name in ("positions", "masses", "springs", "rest_lengths", "stiffness", "damping",
+                     "family", "kind", "strain_limited", "pinned", "triangles"):
+            object.__setattr__(self, name, _freeze(getattr(self, name)))
+
+    # ------------------------------------------------------------------ builders
+    @classmethod
+    def grid(cls, rows: int, cols: int, spacing: float, particle_mass: float,
+             stiffness: dict | float, damping: dict | float | None = None,
+             pinned=(), model: str = "provot", orientation: str = "horizontal") -> "ClothModel":
+        """A regular ``rows × cols`` grid after Provot (1995), or Choi & Ko (2002) with ``model="choi_ko"``.
+
+        Springs: structural ``[i,j]–[i+1,j]``, ``[i,j]–[i,j+1]``; shear ``[i,j]–[i+1,j+1]``,
+        ``[i+1,j]–[i,j+1]``; bend ``[i,j]–[i+2,j]``, ``[i,j]–[i,j+2]`` and, for ``choi_ko``, also
+        ``[i,j]–[i+2,j+2]``, ``[i+2,j]–[i,j+2]``. Particle ``(row, col)`` has index ``row*cols + col``
+        and starts at ``(col·s, row·s, 0)`` (``horizontal``) or ``(col·s, 0, −row·s)`` (``vertical``,
+        row 0 on top).
+
+        In ``choi_ko`` the structural and shear springs resist stretching only (type 1) and the bend
+        springs follow the immediate-buckling model (type 2), whose compressed branch reads the bend
+        stiffness as the flexural rigidity ``k_b`` (see :mod:`cloth_sim.forces`).
+
+        ``stiffness`` and ``damping`` are dicts keyed by family (missing families get 0) or one number
+        for all. ``pinned`` lists ``(row, col)`` pairs; negative indices count from the end.
+        """
+        rows, cols = int(rows), int(cols)
+        if rows < 2 or cols < 2:
+            raise ValueError(f"grid: rows and cols must be >= 2, got {rows}×{cols}")
+        if not (np.isfinite(spacing) and spacing > 0):
+            raise ValueError(f"grid: spacing must be > 0, got {spacing}")
+        if not (np.isfinite(particle_mass) and particle_mass > 0):
+            raise ValueError(f"grid: particle_mass must be > 0, got {particle_mass}")
+        if model not in MODELS:
+            raise ValueError(f"grid: unknown model {model!r}; expected one of {', '.join(MODELS)}")
+        if orientation not in ORIENTATIONS:
+            raise ValueError(f"grid: unknown orientation {orientation!r}; expected one of "
+                             f"{', '.join(ORIENTATIONS)}")
+        k_fam = _per_family("stiffness", stiffness)
+        c_fam = _per_family("damping", damping if damping is not None else 0.0)
+
+        idx = np.arange(rows * cols).reshape(rows, cols)
+        pairs, fams = [], []
+
+        def add(a, b, fam):
+            pairs.append(np.stack([a.ravel(), b.ravel()], axis=1))
+            fams.append(np.full(a.size, GRID_FAMILIES.index(fam)))
+
+        add(idx[:-1, :], idx[1:, :], "structural")
+        add(idx[:, :-1], idx[:, 1:], "structural")
+        add(idx[:-1, :-1], idx[1:, 1:], "shear")
+        add(idx[1:, :-1], idx[:-1, 1:], "shear")
+        add(idx[:-2, :], idx[2:, :], "bend")
+        add(idx[:, :-2], idx[:, 2:], "bend")
+        if model == "choi_ko":
+            add(idx[:-2, :-2], idx[2:, 2:], "bend")
+            add(idx[2:, :-2], idx[:-2, 2:], "bend")
+        springs = np.concatenate(pairs).astype(np.int64)
+        family = np.concatenate(fams).astype(np.int64)
+
+        r, c = np.divmod(np.arange(rows * cols), cols)
+        if orientation == "horizontal":
+            x = np.stack([c * spacing, r * spacing, np.zeros(r.size)], axis=1)
+        else:
+            x = np.stack([c * spacing, np.zeros(r.size), -r * spacing], axis=1)
+        x = x.astype(np.float64)
+        rest = np.linalg.norm(x[springs[:, 1]] - x[springs[:, 0]], axis=1)
+
+        kind = np.full(len(springs), LINEAR, dtype=np.int8)
+        if model == "choi_ko":
+            kind[family != GRID_FAMILIES.index("bend")] = TENSION_ONLY
+            kind[family == GRID_FAMILIES.index("bend")] = BUCKLING
+
+        pin_mask = np.zeros(rows * cols, dtype=bool)
+        for p in pinned:
+            try:
+                rr, cc = (int(v) for v in p)
+            except (TypeError, ValueError):
+                raise ValueError(f"grid: pinned entries must be (row, col) pairs, got {p!r}") from None
+            if not (-rows <= rr < rows and -cols <= cc < cols):
+                raise ValueError(f"grid: pinned (row, col) = {p!r} is outside the {rows}×{cols} grid")
+            pin_mask[(rr % rows) * cols + (cc % cols)] = True
+
+        # two triangles per quad, consistently oriented
+        a, b, cq, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
+        tris = np.concatenate([np.stack([a, b, cq], 1), np.stack([a, cq, d], 1)]).astype(np.int64)
+
+        return cls(positions=x, masses=np.full(rows * cols, float(particle_mass)), springs=springs,
+                   rest_lengths=rest, stiffness=np.array([k_fam[f] for f in GRID_FAMILIES])[family],
+                   damping=np.array([c_fam[f] for f in GRID_FAMILIES])[family], family=family,
+                   family_names=GRID_FAMILIES, kind=kind,
+                   strain_limited=family != GRID_FAMILIES.index("bend"), pinned=pin_mask,
+                   triangles=tris, rows=rows, cols=cols, model=model, spacing=float(spacing))
+
+    @classmethod
+    def from_springs(cls, positions, masses, springs, stiffness, damping=None, rest_lengths=None,
+                     pinned=None, triangles=None) -> "ClothModel":
+        """Any spring network: ``positions (n,3)``, ``masses (n,)``, ``springs (m,2)``, per-spring
+        ``stiffness (m,)`` and ``damping (m,)``, ``rest_lengths`` (default: the current lengths) and
+        ``pinned`` particle indices. All springs are Hooke springs in one family, ``"spring"``, and
+        all are strain-limited when the simulator has a strain limit. ``triangles (t,3)`` are
+        optional; without them there are no normals and so no wind force."""
+        x = np.array(positions, dtype=np.float64).reshape(-1, 3)
+        n = len(x)
+        s = np.array(springs, dtype=np.int64).reshape(-1, 2)
+        m = len(s)
+        k = np.broadcast_to(np.asarray(stiffness, dtype=np.float64), (m,)).copy()
+        c = np.zeros(m) if damping is None else np.broadcast_to(
+            np.asarray(damping, dtype=np.float64), (m,)).copy()
+        mass = np.broadcast_to(np.asarray(masses, dtype=np.float64), (n,)).copy()
+        if m and (s.min() < 0 or s.max() >= n):
+            raise ValueError(f"springs: particle indices must lie in [0, {n - 1}]")
+        if rest_lengths is None:
+            rest = np.linalg.norm(x[s[:, 1]] - x[s[:, 0]], axis=1)
+        else:
+            rest = np.broadcast_to(np.asarray(rest_lengths, dtype=np.float64), (m,)).copy()
+        pin_mask = np.zeros(n, dtype=bool)
+        if pinned is not None:
+            p = np.asarray(pinned, dtype=np.int64).ravel()
+            if p.size and (p.min() < -n or p.max() >= n):
+                raise ValueError(f"pinned: particle indices must lie in [0, {n - 1}]")
+            pin_mask[p] = True
+        tris = np.zeros((0, 3), np.int64) if triangles is None else np.asarray(triangles, np.int64)
+        return cls(positions=x, masses=mass, springs=s, rest_lengths=rest, stiffness=k, damping=c,
+                   family=np.zeros(m, np.int64), family_names=(SPRING_FAMILY,),
+                   kind=np.full(m, LINEAR, np.int8), strain_limited=np.ones(m, bool),
+                   pinned=pin_mask, triangles=tris.reshape(-1, 3))
+
+    # ------------------------------------------------------------------ queries
+    @property
+    def n_particles(self) -> int:
+        return len(self.masses)
+
+    @property
+    def n_springs(self) -> int:
+        return len(self.springs)
+
+    def family_index(self, name: str) -> int:
+        """Index of a family by name, with an error listing the model's families."""
+        try:
+            return self.family_names.index(name)
+        except ValueError:
+            raise ValueError(f"unknown spring family {name!r}; this model has "
+                             f"{', '.join(self.family_names)}") from None
+
+    def index(self, row: int, col: int) -> int:
+        """Particle index of grid cell ``(row, col)``."""
+        if self.cols is None:
+            raise ValueError("index(row, col) needs a grid model")
+        return (row % self.rows) * self.cols + (col % self.cols)
+
+
+def _per_family(name: str, value) -> dict:
+    if isinstance(value, dict):
+        unknown = set(value) - set(GRID_FAMILIES)
+        if unknown:
+            raise ValueError(f"{name}: unknown spring families {sorted(unknown)}; expected "
+                             f"{', '.join(GRID_FAMILIES)}")
+        out = {f: float(value.get(f, 0.0)) for f in GRID_FAMILIES}
+    else:
+        out = {f: float(value) for f in GRID_FAMILIES}
+    for f, v in out.items():
+        if not np.isfinite(v) or v < 0:
+            raise ValueError(f"{name}.{f} must be finite and >= 0, got {v}")
+    return out

@@ -1,0 +1,246 @@
+"""Scene files: load, validate, and build a model and a simulator from them.
+
+A scene is a YAML mapping (see ``config/scenes/*.yaml``)::
+
+    grid: {rows: 24, cols: 24, spacing: 0.04, orientation: horizontal}
+    model: provot                  # or choi_ko
+    particle_mass: 0.01
+    stiffness: {structural: 1000, shear: 1000, bend: 100}
+    damping: {structural: 0.05, shear: 0.05, bend: 0.01}
+    pinned: [[0, 0], [0, -1]]      # (row, col) pairs, negative counts from the end
+    pinned_edges: []               # any of first_row, last_row, first_col, last_col
+    gravity: [0, 0, -9.81]
+    wind: {direction: [0, 1, 0], strength: 0}
+    drag: 0.0
+    strain_limit: 0.1              # or null
+    integrator: symplectic_euler
+    dt: 0.001
+
+Every field but ``grid`` has a default. A malformed file raises :class:`SceneError` naming the file,
+the field and what was expected.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from . import integrators
+from .model import GRID_FAMILIES, MODELS, ORIENTATIONS, ClothModel
+from .simulator import Simulator
+
+EDGES = ("first_row", "last_row", "first_col", "last_col")
+
+
+class SceneError(ValueError):
+    """A scene file that cannot be used; the message names the file and the field."""
+
+
+@dataclass
+class Scene:
+    """A validated scene."""
+
+    name: str
+    rows: int
+    cols: int
+    spacing: float
+    orientation: str = "horizontal"
+    model: str = "provot"
+    particle_mass: float = 0.01
+    stiffness: dict = field(default_factory=lambda: {"structural": 1e3, "shear": 1e3, "bend": 1e2})
+    damping: dict = field(default_factory=lambda: {f: 0.0 for f in GRID_FAMILIES})
+    pinned: list = field(default_factory=list)
+    gravity: tuple = (0.0, 0.0, -9.81)
+    wind_direction: tuple = (0.0, 0.0, 0.0)
+    wind_strength: float = 0.0
+    drag: float = 0.0
+    strain_limit: float | None = None
+    integrator: str = "symplectic_euler"
+    dt: float = 1e-3
+    source: str = "<dict>"
+
+    @property
+    def wind(self):
+        w = self.wind_strength * np.asarray(self.wind_direction, dtype=float)
+        return None if not np.any(w) else w
+
+    def pinned_cells(self, rows: int | None = None, cols: int | None = None) -> list:
+        """``(row, col)`` pins for a grid of the given size (pins outside it are dropped)."""
+        rows = self.rows if rows is None else rows
+        cols = self.cols if cols is None else cols
+        cells = []
+        for p in self.pinned:
+            if isinstance(p, str):
+                cells += {"first_row": [(0, c) for c in range(cols)],
+                          "last_row": [(rows - 1, c) for c in range(cols)],
+                          "first_col": [(r, 0) for r in range(rows)],
+                          "last_col": [(r, cols - 1) for r in range(rows)]}[p]
+            elif -rows <= p[0] < rows and -cols <= p[1] < cols:
+                cells.append((p[0] % rows, p[1] % cols))
+        return sorted(set(cells))
+
+    def build_model(self, **override) -> ClothModel:
+        """The scene's model; ``override`` replaces rows, cols, spacing, particle_mass, model,
+        stiffness or damping (used by the node's live parameters)."""
+        p = {"rows": self.rows, "cols": self.cols, "spacing": self.spacing,
+             "particle_mass": self.particle_mass, "model": self.model,
+             "stiffness": self.stiffness, "damping": self.damping}
+        p.update(override)
+        return ClothModel.grid(p["rows"], p["cols"], p["spacing"], p["particle_mass"],
+                               stiffness=p["stiffness"], damping=p["damping"],
+                               pinned=self.pinned_cells(p["rows"], p["cols"]), model=p["model"],
+                               orientation=self.orientation)
+
+    def build_simulator(self, **override) -> Simulator:
+        return Simulator(self.build_model(**override), integrator=self.integrator, dt=self.dt,
+                         gravity=self.gravity, wind=self.wind, strain_limit=self.strain_limit,
+                         drag=self.drag)
+
+
+# --------------------------------------------------------------------------- loading
+def scene_dirs() -> list[Path]:
+    """Where named scenes are looked up: the source tree, then the installed share directory."""
+    dirs = [Path(__file__).resolve().parent.parent / "config" / "scenes",
+            Path(sys.prefix) / "share" / "cloth_sim" / "config" / "scenes"]
+    for prefix in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
+        if prefix:
+            dirs.append(Path(prefix) / "share" / "cloth_sim" / "config" / "scenes")
+    return dirs
+
+
+def available_scenes() -> list[str]:
+    names = set()
+    for d in scene_dirs():
+        if d.is_dir():
+            names.update(p.stem for p in d.glob("*.yaml"))
+    return sorted(names)
+
+
+def find_scene(name_or_path: str) -> Path:
+    """A scene file from a path or a scene name."""
+    p = Path(name_or_path)
+    if p.suffix in (".yaml", ".yml") or os.sep in str(name_or_path):
+        if not p.is_file():
+            raise SceneError(f"{name_or_path}: no such scene file")
+        return p
+    for d in scene_dirs():
+        candidate = d / f"{name_or_path}.yaml"
+        if candidate.is_file():
+            return candidate
+    raise SceneError(f"unknown scene {name_or_path!r}; available: {', '.join(available_scenes())}")
+
+
+def load_scene(name_or_path: str) -> Scene:
+    """Load and validate a scene by name (``hanging``) or path."""
+    path = find_scene(name_or_path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as e:
+        raise SceneError(f"{path}: not valid YAML: {e}") from None
+    return scene_from_dict(data, source=str(path), name=path.stem)
+
+
+def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
+    """Validate a scene mapping; errors name ``source`` and the field."""
+    v = _Validator(source)
+    if not isinstance(data, dict):
+        v.fail("(top level)", "a mapping of scene fields", data)
+    known = {"name", "grid", "model", "particle_mass", "stiffness", "damping", "pinned",
+             "pinned_edges", "gravity", "wind", "drag", "strain_limit", "integrator", "dt"}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise SceneError(f"{source}: unknown field(s) {', '.join(map(str, unknown))}; expected "
+                         f"{', '.join(sorted(known))}")
+    grid = data.get("grid")
+    if not isinstance(grid, dict):
+        v.fail("grid", "a mapping with rows, cols, spacing", grid)
+    unknown = sorted(set(grid) - {"rows", "cols", "spacing", "orientation"})
+    if unknown:
+        raise SceneError(f"{source}: unknown field(s) grid.{', grid.'.join(unknown)}; expected "
+                         "rows, cols, spacing, orientation")
+    s = Scene(name=str(data.get("name", name)), source=source,
+              rows=v.integer("grid.rows", grid.get("rows"), 2, 4096),
+              cols=v.integer("grid.cols", grid.get("cols"), 2, 4096),
+              spacing=v.number("grid.spacing", grid.get("spacing"), 0, None, lo_open=True),
+              orientation=v.choice("grid.orientation", grid.get("orientation", "horizontal"),
+                                   ORIENTATIONS))
+    s.model = v.choice("model", data.get("model", "provot"), MODELS)
+    s.particle_mass = v.number("particle_mass", data.get("particle_mass", s.particle_mass), 0, None,
+                               lo_open=True)
+    s.stiffness = v.families("stiffness", data.get("stiffness", s.stiffness))
+    s.damping = v.families("damping", data.get("damping", s.damping))
+    pins = data.get("pinned", [])
+    if not isinstance(pins, list):
+        v.fail("pinned", "a list of [row, col] pairs", pins)
+    for i, p in enumerate(pins):
+        if not (isinstance(p, (list, tuple)) and len(p) == 2 and all(
+                isinstance(q, int) and not isinstance(q, bool) for q in p)):
+            v.fail(f"pinned[{i}]", "a [row, col] pair of integers", p)
+        if not (-s.rows <= p[0] < s.rows and -s.cols <= p[1] < s.cols):
+            v.fail(f"pinned[{i}]", f"a cell inside the {s.rows}×{s.cols} grid", p)
+    edges = data.get("pinned_edges", [])
+    if not isinstance(edges, list):
+        v.fail("pinned_edges", f"a list of {', '.join(EDGES)}", edges)
+    for i, e in enumerate(edges):
+        v.choice(f"pinned_edges[{i}]", e, EDGES)
+    s.pinned = [tuple(p) for p in pins] + list(edges)
+    s.gravity = tuple(v.vector("gravity", data.get("gravity", s.gravity)))
+    wind = data.get("wind", {}) or {}
+    if not isinstance(wind, dict):
+        v.fail("wind", "a mapping with direction and strength", wind)
+    s.wind_direction = tuple(v.vector("wind.direction", wind.get("direction", (0.0, 0.0, 0.0))))
+    s.wind_strength = v.number("wind.strength", wind.get("strength", 0.0), 0, None)
+    s.drag = v.number("drag", data.get("drag", 0.0), 0, None)
+    sl = data.get("strain_limit", None)
+    s.strain_limit = None if sl is None else v.number("strain_limit", sl, 0, 10)
+    s.integrator = v.choice("integrator", data.get("integrator", s.integrator),
+                            integrators.available())
+    s.dt = v.number("dt", data.get("dt", s.dt), 0, 1, lo_open=True)
+    return s
+
+
+class _Validator:
+    def __init__(self, source):
+        self.source = source
+
+    def fail(self, fld, expected, got):
+        raise SceneError(f"{self.source}: field '{fld}' must be {expected}, got {got!r}")
+
+    def number(self, fld, x, lo, hi, lo_open=False):
+        if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+            self.fail(fld, "a finite number", x)
+        if (lo is not None and (x <= lo if lo_open else x < lo)) or (hi is not None and x > hi):
+            rng = f"{'(' if lo_open else '['}{lo}, {hi if hi is not None else '∞'}{']' if hi else ')'}"
+            self.fail(fld, f"a number in {rng}", x)
+        return float(x)
+
+    def integer(self, fld, x, lo, hi):
+        if isinstance(x, bool) or not isinstance(x, int) or not lo <= x <= hi:
+            self.fail(fld, f"an integer in [{lo}, {hi}]", x)
+        return int(x)
+
+    def choice(self, fld, x, options):
+        if x not in options:
+            self.fail(fld, f"one of {', '.join(options)}", x)
+        return x
+
+    def vector(self, fld, x):
+        if not (isinstance(x, (list, tuple)) and len(x) == 3):
+            self.fail(fld, "a list of 3 finite numbers", x)
+        return [self.number(f"{fld}[{i}]", c, None, None) for i, c in enumerate(x)]
+
+    def families(self, fld, x):
+        if isinstance(x, (int, float)) and not isinstance(x, bool):
+            x = {f: x for f in GRID_FAMILIES}
+        if not isinstance(x, dict):
+            self.fail(fld, f"a mapping of {', '.join(GRID_FAMILIES)} to numbers >= 0", x)
+        unknown = sorted(set(x) - set(GRID_FAMILIES))
+        if unknown:
+            self.fail(fld, f"keyed by {', '.join(GRID_FAMILIES)}", unknown)
+        return {f: self.number(f"{fld}.{f}", x.get(f, 0.0), 0, None) for f in GRID_FAMILIES}

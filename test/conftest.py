@@ -1,0 +1,26 @@
+import os
+
+import numpy as np
+import pytest
+
+from cloth_sim import ClothModel
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+
+def one_spring(k=100.0, m=1.0, L=1.0, amplitude=0.1, damping=0.0):
+    """Particle 0 pinned at the origin, particle 1 free at L + amplitude on the x axis."""
+    return ClothModel.from_springs(positions=[[0, 0, 0], [L + amplitude, 0, 0]], masses=[m, m],
+                                   springs=[[0, 1]], stiffness=[k], damping=[damping],
+                                   rest_lengths=[L], pinned=[0])
+
+
+def cloth16(k=1000.0, damping=0.0, model="provot"):
+    """The tests' 16×16 cloth: 1 m square, k for every family, 0.01 kg particles, two corners pinned."""
+    return ClothModel.grid(16, 16, 1.0 / 15, 0.01, stiffness=k, damping=damping,
+                           pinned=[(0, 0), (0, -1)], model=model)
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(12345)

@@ -1,0 +1,192 @@
+"""Force terms: Choi & Ko's energy and force, wind, the pipeline's active terms, strain limiting."""
+
+import numpy as np
+import pytest
+from conftest import cloth16
+
+import cloth_sim.forces as forces
+from cloth_sim import ClothModel, Simulator
+from cloth_sim.forces import buckling_h, buckling_h_exact
+
+NO_GRAVITY = (0.0, 0.0, 0.0)
+
+
+def test_choi_ko_table_matches_exact_solution(rng):
+    """The docstring's claim: relative error < 2e-10 (energy) and < 3e-8 (force) on [0, 1]."""
+    r = np.concatenate([rng.uniform(0, 1, 2000), np.linspace(0.99, 1, 100), np.linspace(0, 0.01, 100)])
+    for x in r:
+        h, dh, _ = buckling_h(x)
+        he, dhe = buckling_h_exact(x)
+        # h = 2θ² where sin θ/θ = r
+        theta = np.sqrt(he / 2)
+        assert np.sinc(theta / np.pi) == pytest.approx(x, abs=1e-12)
+        assert abs(h - he) <= 2e-10 * he + 1e-300
+        assert abs(dh - dhe) <= 3e-8 * abs(dhe)
+
+
+def choi_ko_patch(rng, k_struct=50.0, k_bend=0.02):
+    model = ClothModel.grid(5, 5, 0.1, 0.01, stiffness={"structural": k_struct, "shear": k_struct,
+                                                        "bend": k_bend}, model="choi_ko")
+    x = model.positions.copy()
+    # compress the patch to 85 % and crumple it: bend pairs buckle, some springs stretch
+    x[:, :2] *= 0.85
+    x += rng.normal(scale=0.01, size=x.shape)
+    return model, x
+
+
+def test_choi_ko_force_is_minus_the_energy_gradient(rng):
+    model, x = choi_ko_patch(rng)
+    sim = Simulator(model, gravity=NO_GRAVITY)
+    sim.positions = x
+    strains = sim.strains()
+    bend = model.family == model.family_index("bend")
+    assert np.any(strains[bend] < -0.05) and np.any(strains[~bend] > 0.01)  # both branches in play
+    f = sim.forces.force(x, np.zeros_like(x))
+    num = np.zeros_like(x)
+    h = 1e-7
+    for i in range(len(x)):
+        for d in range(3):
+            xp, xm = x.copy(), x.copy()
+            xp[i, d] += h
+            xm[i, d] -= h
+            num[i, d] = -(sim.forces.spring_energy(xp) - sim.forces.spring_energy(xm)) / (2 * h)
+    assert np.max(np.abs(f - num)) <= 1e-6 * np.max(np.abs(f))
+
+
+def test_choi_ko_onset_force_is_12_kb_over_L_squared():
+    kb = 0.3
+    model = ClothModel.grid(2, 3, 0.1, 0.01, stiffness={"bend": kb}, model="choi_ko")
+    assert model.n_springs and Simulator(model).active_terms == ("spring:bend", "gravity")
+    sim = Simulator(model, gravity=NO_GRAVITY)
+    L = 0.2
+    for r in (1 - 1e-9, 1 - 1e-6):
+        x = model.positions.copy()
+        x[[2, 5], 0] = L * r  # columns 2 pulled in: the two bend pairs are compressed to r·L
+        f = sim.forces.force(x, np.zeros_like(x))
+        assert f[0, 0] == pytest.approx(-12 * kb / L ** 2, rel=1e-5)  # pushes the ends apart
+        assert f[2, 0] == pytest.approx(12 * kb / L ** 2, rel=1e-5)
+
+
+def test_choi_ko_type1_springs_do_not_resist_compression():
+    model = ClothModel.grid(2, 2, 0.1, 0.01, stiffness={"structural": 100.0, "shear": 100.0},
+                            model="choi_ko")
+    sim = Simulator(model, gravity=NO_GRAVITY)
+    x = model.positions * 0.9
+    assert np.all(sim.forces.force(x, np.zeros_like(x)) == 0.0)
+    assert sim.forces.spring_energy(x) == 0.0
+    x = model.positions * 1.1
+    assert np.max(np.abs(sim.forces.force(x, np.zeros_like(x)))) > 0
+
+
+def flat_cloth():
+    return ClothModel.grid(6, 6, 0.1, 0.01, stiffness=100.0)
+
+
+def test_wind_pushes_along_the_normal_and_vanishes_in_plane():
+    w = 0.7
+    sim = Simulator(flat_cloth(), gravity=NO_GRAVITY, wind=(0.3, -0.2, w))
+    f = sim.forces.force(sim.positions.copy(), np.zeros((36, 3)))
+    # flat in the xy plane: n = ±z, so every particle feels (n·W) n = (0, 0, w)
+    np.testing.assert_allclose(f, np.tile([0, 0, w], (36, 1)), atol=1e-12)
+    sim.wind = (1.0, 2.0, 0.0)
+    f = sim.forces.force(sim.positions.copy(), np.zeros((36, 3)))
+    np.testing.assert_allclose(f, 0, atol=1e-12)
+    # tilt the cloth by 30° about x: the force follows the tilted normal, magnitude (n·W)
+    c, s = np.cos(np.pi / 6), np.sin(np.pi / 6)
+    rot = np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+    x = sim.positions @ rot.T
+    sim.wind = (0.0, 0.0, w)
+    f = sim.forces.force(x, np.zeros((36, 3)))
+    n = rot @ [0, 0, 1]
+    np.testing.assert_allclose(f, np.tile((n @ [0, 0, w]) * n, (36, 1)), atol=1e-12)
+
+
+def test_inactive_terms_are_not_evaluated(monkeypatch):
+    model = ClothModel.grid(6, 6, 0.1, 0.01, stiffness={"structural": 100.0, "shear": 50.0, "bend": 0.0},
+                            damping={"structural": 0.1})
+    sim = Simulator(model, wind=None)
+    assert sim.active_terms == ("spring:structural", "spring:shear", "damping:structural", "gravity")
+    bend = model.family == model.family_index("bend")
+    assert sim.forces.n_active_springs == np.count_nonzero(~bend)
+
+    def forbidden(*args):
+        raise AssertionError("an inactive term was evaluated")
+
+    monkeypatch.setattr(forces, "wind_forces", forbidden)
+    sim.step(10)  # no wind: the wind kernel is never called
+    sim.set_damping("structural", 0.0)
+    sim.gravity = (0, 0, 0)
+    assert sim.active_terms == ("spring:structural", "spring:shear")
+    assert not sim.forces.with_damping
+    sim.set_stiffness("bend", 10.0)
+    sim.drag = 0.01
+    assert sim.active_terms == ("spring:structural", "spring:shear", "spring:bend", "drag")
+    assert sim.forces.n_active_springs == model.n_springs
+    sim.wind = (0, 0, 1.0)
+    with pytest.raises(AssertionError, match="inactive term"):
+        sim.step()  # now the wind term is live and calls its kernel
+
+
+def test_damping_force_opposes_the_relative_velocity_along_the_spring():
+    model = ClothModel.from_springs([[0, 0, 0], [1, 0, 0]], [1, 1], [[0, 1]], stiffness=0.0,
+                                    damping=2.0)
+    sim = Simulator(model, gravity=NO_GRAVITY)
+    v = np.array([[0.0, 0.0, 0.0], [3.0, 5.0, 0.0]])  # separating at 3 m/s, sliding sideways at 5
+    f = sim.forces.force(sim.positions.copy(), v)
+    np.testing.assert_allclose(f, [[6.0, 0, 0], [-6.0, 0, 0]])
+
+
+def test_strain_limit_keeps_a_soft_hanging_cloth_within_tau():
+    soft = cloth16(k=50.0, damping=0.05)
+    free = Simulator(soft, dt=1e-3)
+    worst_free = 0.0
+    for _ in range(30):
+        free.step(100)
+        worst_free = max(worst_free, free.max_strain())
+    assert worst_free > 0.5  # without the correction the cloth over-stretches
+    tau = 0.1
+    sim = Simulator(soft, dt=1e-3, strain_limit=tau)
+    for _ in range(3000):
+        sim.step()
+        assert sim.max_strain() <= tau + 0.01
+    # the pins never moved
+    np.testing.assert_array_equal(sim.positions[soft.pinned], soft.positions[soft.pinned])
+
+
+def test_strain_limit_moves_only_the_free_end_next_to_a_pin():
+    def stretched(x, pinned):
+        return ClothModel.from_springs(x, np.ones(len(x)), [[i, i + 1] for i in range(len(x) - 1)],
+                                       stiffness=0.0, rest_lengths=1.0, pinned=pinned)
+
+    # one spring: the free end goes exactly to (1 + τ)·L; both free: each end moves half
+    sim = Simulator(stretched([[0, 0, 0], [2, 0, 0]], [0]), gravity=NO_GRAVITY, strain_limit=0.2, dt=0.5)
+    sim.step()
+    np.testing.assert_allclose(sim.positions[:, 0], [0.0, 1.2])
+    np.testing.assert_allclose(sim.velocities[:, 0], [0.0, (1.2 - 2.0) / 0.5])  # v follows Δx/dt
+    sim = Simulator(stretched([[0, 0, 0], [2, 0, 0]], None), gravity=NO_GRAVITY, strain_limit=0.2)
+    sim.step()
+    np.testing.assert_allclose(sim.positions[:, 0], [0.4, 1.6])
+    # a chain converges over passes to strains <= τ (within the pass tolerance), the pin fixed
+    x0 = np.array([[0, 0, 0], [2, 0, 0], [4.5, 0, 0], [5, 1, 0]], float)
+    sim = Simulator(stretched(x0, [0]), gravity=NO_GRAVITY, strain_limit=0.2, dt=1.0,
+                    strain_limit_passes=500)
+    sim.step()
+    assert np.all(sim.strains() <= 0.2 + 1e-4)
+    assert sim.positions[0, 0] == 0.0
+    np.testing.assert_allclose(sim.velocities, sim.positions - x0)
+
+
+def test_pins_stay_put_and_can_be_moved():
+    model = cloth16(k=200.0, damping=0.05)
+    sim = Simulator(model, integrator="verlet", dt=1e-3)
+    pins = np.flatnonzero(model.pinned)
+    sim.advance(0.2)
+    np.testing.assert_array_equal(sim.positions[pins], model.positions[pins])
+    assert np.all(sim.velocities[pins] == 0)
+    target = model.positions[pins] + [0.0, 0.0, 0.05]
+    sim.move_pins(target)
+    sim.advance(0.4)
+    np.testing.assert_array_equal(sim.positions[pins], target)
+    assert np.all(sim.velocities[pins] == 0)
+    with pytest.raises(ValueError, match="pinned particle"):
+        sim.move_pins([[0, 0, 0]], indices=[5])
