@@ -16,6 +16,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import shortest_path
 
+from .forces import spring_vector
+
 #: Passes per step unless the simulator is told otherwise.
 DEFAULT_STRAIN_LIMIT_PASSES = 20
 #: Strain above ``τc`` that a pass tolerates (so passes stop once nothing is meaningfully too long).
@@ -35,10 +37,7 @@ def provot_pass(x, springs, rest, tau, tol, pinned):
         pi, pj = pinned[i], pinned[j]
         if pi and pj:
             continue
-        dx = x[j, 0] - x[i, 0]
-        dy = x[j, 1] - x[i, 1]
-        dz = x[j, 2] - x[i, 2]
-        l = np.sqrt(dx * dx + dy * dy + dz * dz)
+        dx, dy, dz, l = spring_vector(x, i, j)
         lmax = (1.0 + tau) * rest[s]
         if l <= lmax + tol * rest[s]:
             continue

@@ -99,6 +99,15 @@ def buckling_h(r: float) -> tuple[float, float, float]:
 
 # --------------------------------------------------------------------------- spring kernels
 @numba.njit(cache=True, inline="always")
+def spring_vector(x, i, j):
+    """``x_j − x_i`` and its length."""
+    dx = x[j, 0] - x[i, 0]
+    dy = x[j, 1] - x[i, 1]
+    dz = x[j, 2] - x[i, 2]
+    return dx, dy, dz, np.sqrt(dx * dx + dy * dy + dz * dz)
+
+
+@numba.njit(cache=True, inline="always")
 def _axial(l, L, k, kind, tab):
     """Energy ``E(l)``, ``dE/dl`` and ``d²E/dl²`` of one spring."""
     e = l - L
@@ -117,10 +126,7 @@ def spring_forces(x, v, springs, rest, k, c, kind, tab, with_damping, f):
     for s in range(springs.shape[0]):
         i = springs[s, 0]
         j = springs[s, 1]
-        dx = x[j, 0] - x[i, 0]
-        dy = x[j, 1] - x[i, 1]
-        dz = x[j, 2] - x[i, 2]
-        l = np.sqrt(dx * dx + dy * dy + dz * dz)
+        dx, dy, dz, l = spring_vector(x, i, j)
         if l < 1e-300:
             continue
         inv = 1.0 / l
@@ -143,12 +149,7 @@ def spring_energy(x, springs, rest, k, kind, tab):
     """Total elastic energy of the listed springs."""
     total = 0.0
     for s in range(springs.shape[0]):
-        i = springs[s, 0]
-        j = springs[s, 1]
-        dx = x[j, 0] - x[i, 0]
-        dy = x[j, 1] - x[i, 1]
-        dz = x[j, 2] - x[i, 2]
-        e, _, _ = _axial(np.sqrt(dx * dx + dy * dy + dz * dz), rest[s], k[s], kind[s], tab)
+        e, _, _ = _axial(spring_vector(x, springs[s, 0], springs[s, 1])[3], rest[s], k[s], kind[s], tab)
         total += e
     return total
 
@@ -158,12 +159,7 @@ def spring_strains(x, springs, rest):
     """Strain ``(l − L)/L`` of each listed spring."""
     out = np.empty(springs.shape[0])
     for s in range(springs.shape[0]):
-        i = springs[s, 0]
-        j = springs[s, 1]
-        dx = x[j, 0] - x[i, 0]
-        dy = x[j, 1] - x[i, 1]
-        dz = x[j, 2] - x[i, 2]
-        out[s] = np.sqrt(dx * dx + dy * dy + dz * dz) / rest[s] - 1.0
+        out[s] = spring_vector(x, springs[s, 0], springs[s, 1])[3] / rest[s] - 1.0
     return out
 
 
