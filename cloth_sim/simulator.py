@@ -74,6 +74,9 @@ class Simulator:
         self._x = np.array(model.positions, dtype=np.float64)
         self._v = np.zeros_like(self._x)
         self._x_good = np.empty_like(self._x)
+        self._x_before_correction = np.empty_like(self._x)
+        self._limited_springs = np.ascontiguousarray(model.springs[model.strain_limited])
+        self._limited_rest = np.ascontiguousarray(model.rest_lengths[model.strain_limited])
         self._v_good = np.empty_like(self._x)
         self._t_base, self._n_steps_since_base = 0.0, 0
         self.steps_taken = 0
@@ -260,9 +263,9 @@ class Simulator:
 
     def strains(self, limited_only: bool = False) -> np.ndarray:
         """``(l − L)/L`` per spring (every spring, or only the strain-limited ones)."""
-        sel = self.model.strain_limited if limited_only else slice(None)
-        return spring_strains(self._x, np.ascontiguousarray(self.model.springs[sel]),
-                              np.ascontiguousarray(self.model.rest_lengths[sel]))
+        if limited_only:
+            return spring_strains(self._x, self._limited_springs, self._limited_rest)
+        return spring_strains(self._x, self.model.springs, self.model.rest_lengths)
 
     def max_strain(self) -> float:
         """Largest strain over the structural and shear springs (every spring of a network)."""
@@ -310,7 +313,8 @@ class Simulator:
         self._parameters_changed()
 
     def _apply_strain_limit(self, x, v, dt, follow):
-        start = x.copy()
+        start = self._x_before_correction
+        np.copyto(start, x)
         if self._strain.apply(x):
             v += (follow / dt) * (x - start)
 

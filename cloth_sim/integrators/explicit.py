@@ -31,6 +31,10 @@ class ExplicitRungeKutta(Integrator):
             self._kv = [np.empty_like(x) for _ in range(self._stages)]
         kx, kv = self._kx, self._kv
         for i in range(self._stages):
+            if i == 0:  # the first stage is the current state itself; no copy needed
+                kx[0][:] = v
+                forces.acceleration(x, v, out=kv[0])
+                continue
             xs, vs = x.copy(), v.copy()
             for j in range(i):
                 a = self.A[i, j]
