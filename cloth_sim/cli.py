@@ -4,6 +4,8 @@
     Simulate a scene headless and print one summary line per simulated second.
 ``cloth-sim bench steps [--sizes 32 64 128] [--integrators ...]``
     Print ms/step of integrators on the hanging cloth at several grid sizes.
+``cloth-sim bench implicit [--sizes 32 64] [--dt 0.016667]``
+    Print ms/step of the implicit methods at a large step, CG vs direct solve, CG iterations.
 """
 
 from __future__ import annotations
@@ -52,6 +54,12 @@ def _bench_steps(args) -> int:
     return 0
 
 
+def _bench_implicit(args) -> int:
+    from .bench.steps import print_implicit_table
+    print_implicit_table(args.sizes, args.dt, args.seconds)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cloth-sim", description=__doc__.split("\n")[0])
     sub = p.add_subparsers(dest="command", required=True)
@@ -69,6 +77,11 @@ def build_parser() -> argparse.ArgumentParser:
                    choices=integrators.available())
     s.add_argument("--seconds", type=float, default=1.0, help="wall time per measurement")
     s.set_defaults(func=_bench_steps)
+    i = bsub.add_parser("implicit", help="ms/step of the implicit methods, CG vs direct, CG iterations")
+    i.add_argument("--sizes", type=int, nargs="+", default=[32, 64])
+    i.add_argument("--dt", type=float, default=1.0 / 60, help="time step (default 1/60 s)")
+    i.add_argument("--seconds", type=float, default=1.0, help="wall time per measurement")
+    i.set_defaults(func=_bench_implicit)
     return p
 
 

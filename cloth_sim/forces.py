@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import numba
 import numpy as np
+import scipy.sparse as sp
 from scipy.optimize import brentq
 
 from .model import BUCKLING, LINEAR, TENSION_ONLY, ClothModel
@@ -271,3 +272,86 @@ class Forces:
 
     def spring_energy(self, x: np.ndarray) -> float:
         return float(spring_energy(x, self.springs, self.rest, self.k, self.kind, BUCKLE_TABLE))
+
+    def jacobians(self, x: np.ndarray, v: np.ndarray, clamp: bool = False):
+        """``(∂f/∂x, ∂f/∂v)`` as ``3n×3n`` sparse matrices (row ``3i + a`` is component ``a`` of the
+        force on particle ``i``), exact for every term that depends on the state: Hooke and the
+        Choi–Ko interactions, spring damping (including its dependence on positions) and drag.
+        Gravity is constant. Wind is left out: its force depends on the normals of the adjacent
+        triangles, and every implicit method here treats it explicitly. ``clamp`` drops the
+        compressive, indefinite part of the elastic blocks, as the implicit integrators may.
+
+        For inspection and tests; the integrators assemble what they need in place."""
+        n, m = len(x), len(self.springs)
+        kx, dx, cv = np.empty((m, 3, 3)), np.empty((m, 3, 3)), np.empty((m, 3, 3))
+        spring_jacobian_blocks(np.ascontiguousarray(x, dtype=np.float64),
+                               np.ascontiguousarray(v, dtype=np.float64), self.springs, self.rest,
+                               self.k, self.c, self.kind, BUCKLE_TABLE, clamp, kx, dx, cv)
+        i, j = self.springs[:, 0], self.springs[:, 1]
+        swap = np.transpose
+        dfdx = (_blocks(i, j, kx, n) + _blocks(j, i, swap(kx, (0, 2, 1)), n) - _blocks(i, i, kx, n)
+                - _blocks(j, j, kx, n) + _blocks(i, j, dx, n) + _blocks(j, i, dx, n)
+                - _blocks(i, i, dx, n) - _blocks(j, j, dx, n))
+        dfdv = (_blocks(i, j, cv, n) + _blocks(j, i, cv, n) - _blocks(i, i, cv, n)
+                - _blocks(j, j, cv, n) - self.drag * sp.identity(3 * n, format="csr"))
+        return dfdx.tocsr(), dfdv.tocsr()
+
+
+def _blocks(rows, cols, blocks, n):
+    """``3n×3n`` sparse matrix with ``blocks[s]`` at block ``(rows[s], cols[s])`` (duplicates add)."""
+    m = len(rows)
+    r = (3 * rows)[:, None, None] + np.arange(3)[None, :, None]
+    c = (3 * cols)[:, None, None] + np.arange(3)[None, None, :]
+    return sp.csr_matrix((np.ascontiguousarray(blocks).ravel(),
+                          (np.broadcast_to(r, (m, 3, 3)).ravel(), np.broadcast_to(c, (m, 3, 3)).ravel())),
+                         shape=(3 * n, 3 * n))
+
+
+# --------------------------------------------------------------------------- Jacobians
+@numba.njit(cache=True, inline="always")
+def _stiffness_coefficients(l, L, k, kind, tab, clamp):
+    """``(a, t)`` with ``∂f_i/∂x_j = a·uuᵀ + t·(I − uuᵀ)`` for one spring: ``a = E''(l)``,
+    ``t = E'(l)/l``. ``clamp`` drops the negative (compressive, indefinite) parts."""
+    _, de, d2e = _axial(l, L, k, kind, tab)
+    a, t = d2e, de / l
+    if clamp:
+        if a < 0.0:
+            a = 0.0
+        if t < 0.0:
+            t = 0.0
+    return a, t
+
+
+@numba.njit(cache=True)
+def spring_jacobian_blocks(x, v, springs, rest, k, c, kind, tab, clamp, kx, dx, cv):
+    """Per-spring 3×3 blocks of the force Jacobians, as ``∂f_i/∂x_j`` and ``∂f_i/∂v_j``:
+
+    * ``kx[s]`` — elastic ``E''·uuᵀ + (E'/l)·(I − uuᵀ)`` (symmetric),
+    * ``dx[s]`` — the damping force's dependence on positions, ``(c/l)·(u (P r)ᵀ + (r·u) P)`` with
+      ``P = I − uuᵀ`` and ``r = v_j − v_i`` (not symmetric),
+    * ``cv[s]`` — damping ``c·uuᵀ``.
+
+    The other blocks follow: ``∂f_i/∂x_i = ∂f_j/∂x_j = −block``, ``∂f_j/∂x_i = blockᵀ`` (the
+    damping blocks ``dx`` change sign with ``r``: ``∂f_j/∂x_i = dx``, as ``f_j = −f_i``)."""
+    for s in range(springs.shape[0]):
+        i = springs[s, 0]
+        j = springs[s, 1]
+        ddx, ddy, ddz, l = spring_vector(x, i, j)
+        kx[s] = 0.0
+        dx[s] = 0.0
+        cv[s] = 0.0
+        if l < 1e-300:
+            continue
+        u = np.array((ddx / l, ddy / l, ddz / l))
+        a, t = _stiffness_coefficients(l, rest[s], k[s], kind[s], tab, clamp)
+        r = np.array((v[j, 0] - v[i, 0], v[j, 1] - v[i, 1], v[j, 2] - v[i, 2]))
+        ru = r[0] * u[0] + r[1] * u[1] + r[2] * u[2]
+        pr = r - ru * u
+        cl = c[s] / l
+        for p in range(3):
+            for q in range(3):
+                uu = u[p] * u[q]
+                delta = 1.0 if p == q else 0.0
+                kx[s, p, q] = a * uu + t * (delta - uu)
+                cv[s, p, q] = c[s] * uu
+                dx[s, p, q] = cl * (u[p] * pr[q] + ru * (delta - uu))

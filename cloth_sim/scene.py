@@ -97,10 +97,19 @@ class Scene:
                                pinned=self.pinned_cells(p["rows"], p["cols"]), model=p["model"],
                                orientation=self.orientation)
 
+    SIMULATOR_OPTIONS = ("integrator", "dt", "gravity", "wind", "strain_limit", "drag",
+                         "integrator_options")
+
     def build_simulator(self, **override) -> Simulator:
-        return Simulator(self.build_model(**override), integrator=self.integrator, dt=self.dt,
-                         gravity=self.gravity, wind=self.wind, strain_limit=self.strain_limit,
-                         drag=self.drag)
+        """A simulator of the scene; ``override`` takes :meth:`build_model`'s keys and the
+        simulator's ``integrator``, ``dt``, ``gravity``, ``wind``, ``strain_limit``, ``drag`` and
+        ``integrator_options``."""
+        sim_kw = {"integrator": self.integrator, "dt": self.dt, "gravity": self.gravity,
+                  "wind": self.wind, "strain_limit": self.strain_limit, "drag": self.drag}
+        for key in self.SIMULATOR_OPTIONS:
+            if key in override:
+                sim_kw[key] = override.pop(key)
+        return Simulator(self.build_model(**override), **sim_kw)
 
 
 # --------------------------------------------------------------------------- loading

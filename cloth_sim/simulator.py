@@ -58,12 +58,15 @@ class Simulator:
         drag: linear air drag coefficient (N·s/m per particle).
         max_speed, max_coordinate: the stability guard's bounds; a step that leaves them, or
             produces NaN or inf, is undone and raises :class:`SimulationDiverged`.
+        integrator_options: keyword options of the integrator (e.g. ``{"solver": "direct"}`` for
+            ``implicit_euler``, ``{"sweeps": 3}`` for ``kang``).
     """
 
     def __init__(self, model: ClothModel, integrator: str = "symplectic_euler", dt: float = 1e-3,
                  gravity=(0.0, 0.0, -9.81), wind=None, strain_limit: float | None = None,
                  strain_limit_passes: int = DEFAULT_STRAIN_LIMIT_PASSES, drag: float = 0.0,
-                 max_speed: float = 1e3, max_coordinate: float = 1e6):
+                 max_speed: float = 1e3, max_coordinate: float = 1e6,
+                 integrator_options: dict | None = None):
         self.model = model
         self._k = np.array(model.stiffness, dtype=np.float64)
         self._c = np.array(model.damping, dtype=np.float64)
@@ -87,7 +90,7 @@ class Simulator:
         self._strain_passes = int(strain_limit_passes)
         self.strain_limit = strain_limit
         self.forces = self._build_forces()
-        self._integrator = integrators.get(integrator)(self)
+        self._integrator = integrators.get(integrator)(self, **(integrator_options or {}))
         self._integrator.reset(self._x, self._v, self._dt)
 
     # ------------------------------------------------------------------ state
@@ -165,11 +168,20 @@ class Simulator:
     def integrator(self) -> str:
         return self._integrator.name
 
-    def set_integrator(self, name: str) -> None:
-        """Switch method; positions and velocities carry over."""
-        new = integrators.get(name)(self)
+    def set_integrator(self, name: str, **options) -> None:
+        """Switch method (``options`` as for ``integrator_options``); positions and velocities
+        carry over."""
+        new = integrators.get(name)(self, **options)
         new.reset(self._x, self._v, self._dt)
         self._integrator = new
+
+    @property
+    def integrator_stats(self) -> dict:
+        """Counters of the current method's linear algebra since it was selected: ``solves``,
+        ``cg_iterations`` / ``last_cg_iterations`` / ``cg_not_converged`` (``implicit_euler`` with
+        CG), ``factorizations`` (``implicit_euler_prefactored``). Empty for explicit methods."""
+        stats = getattr(self._integrator, "stats", None)
+        return dict(stats()) if stats is not None else {}
 
     def stiffness(self, family: str) -> np.ndarray:
         """Per-spring stiffness of a family (copy)."""
@@ -286,13 +298,20 @@ class Simulator:
     def stable_dt(self) -> float:
         """Largest ``dt`` the current method is expected to survive, from ω_max and its damping
         (``inf`` for unconditionally stable methods, 0 for a method with no stable step)."""
-        if self._integrator.implicit:
+        integ = self._integrator
+        if integ.unconditionally_stable:
             return math.inf
+        if hasattr(integ, "linear_stable_dt"):  # no scalar mode model: analyse the whole system
+            key = integ.name
+            if self._stable_dt_cache.get("key") != key:
+                self._stable_dt_cache = {"key": key, "value": integ.linear_stable_dt()}
+            return self._stable_dt_cache["value"]
         omega, zeta = self.fastest_mode()
-        return self._integrator.stable_dt(omega, zeta)
+        return integ.stable_dt(omega, zeta)
 
     # ------------------------------------------------------------------ internals
     _evaluations_before = 0
+    _stable_dt_cache: dict = {}
 
     def _build_forces(self) -> Forces:
         return Forces(self.model, self._k, self._c, self._gravity, self._wind, self._drag)
@@ -302,6 +321,7 @@ class Simulator:
         self.forces = self._build_forces()
         if modes:
             self._mode_cache = None
+        self._stable_dt_cache = {}
         self._integrator.parameters_changed()
 
     def _set_family(self, arr, what, family, value):
@@ -352,12 +372,12 @@ class Simulator:
             raise ValueError(f"{name} must be a finite number >= 0, got {value}")
         return value
 
-    def _compute_fastest_mode(self) -> tuple[float, float]:
+    def rest_matrices(self) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+        """``(K, C)``: ``3n×3n`` stiffness and damping matrices ``Σ k uuᵀ`` and ``Σ c uuᵀ`` over the
+        springs, linearised about the rest shape (``u`` the rest directions; Choi–Ko buckling pairs
+        count with the stiffer of their two branches). The force is ``−K·δx − C·v`` near rest."""
         model = self.model
-        free = ~model.pinned
         n = model.n_particles
-        if not free.any() or model.n_springs == 0:
-            return 0.0, 0.0
         s = model.springs
         d = model.positions[s[:, 1]] - model.positions[s[:, 0]]
         u = d / np.linalg.norm(d, axis=1)[:, None]
@@ -368,8 +388,14 @@ class Simulator:
                                            np.linspace(0, 1, len(BUCKLE_TABLE))])))
             L = model.rest_lengths[buck]
             k_eff[buck] = np.maximum(k_eff[buck], k_eff[buck] * d2h_max / L ** 3)
-        K = _axial_matrix(s, u, k_eff, n)
-        C = _axial_matrix(s, u, self._c, n)
+        return _axial_matrix(s, u, k_eff, n), _axial_matrix(s, u, self._c, n)
+
+    def _compute_fastest_mode(self) -> tuple[float, float]:
+        model = self.model
+        free = ~model.pinned
+        if not free.any() or model.n_springs == 0:
+            return 0.0, 0.0
+        K, C = self.rest_matrices()
         dofs = np.repeat(free, 3)
         w = np.repeat(1.0 / np.sqrt(model.masses), 3)[dofs]
         Dm = sp.diags(w)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from cloth_sim import ClothModel, Simulator
 from cloth_sim.cli import main as cli_main
@@ -129,7 +130,7 @@ def test_cli_run_prints_one_line_per_simulated_second(capsys):
 
 def test_core_imports_no_ros():
     core = [p for p in (ROOT / "cloth_sim").rglob("*.py") if "ros" not in p.relative_to(ROOT).parts[1:2]]
-    allowed = {"numpy", "scipy", "numba", "yaml", "cloth_sim"}
+    allowed = {"numpy", "scipy", "numba", "yaml", "cholespy", "cloth_sim"}
     for path in core:
         for node in ast.walk(ast.parse(path.read_text())):
             names = [a.name for a in node.names] if isinstance(node, ast.Import) else (
@@ -143,7 +144,11 @@ def test_package_xml_declares_every_runtime_dependency():
     root = ET.parse(ROOT / "package.xml").getroot()
     assert root.get("format") == "3" and root.findtext("name") == "cloth_sim"
     deps = {e.text for e in root if e.tag in ("depend", "exec_depend")}
-    assert {"python3-numpy", "python3-scipy", "python3-numba", "python3-yaml"} <= deps
+    assert {"python3-numpy", "python3-scipy", "python3-numba", "python3-yaml",
+            "python3-cholespy-pip"} <= deps
+    # the keys rosdistro lacks are defined by the package's own rosdep file
+    rules = yaml.safe_load((ROOT / "rosdep" / "cloth_sim.yaml").read_text())
+    assert {"python3-numba", "python3-cholespy-pip"} <= set(rules)
     assert "python3-pytest" in {e.text for e in root.findall("test_depend")}
     assert root.find("export/build_type").text == "ament_python"
     assert (ROOT / "resource" / "cloth_sim").is_file()

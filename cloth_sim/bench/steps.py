@@ -53,3 +53,49 @@ def print_step_table(sizes, names, seconds: float = 1.0) -> list[dict]:
             rows.append({"N": n, "integrator": name, "ms_per_step": plain, "ms_per_step_strain": limited})
             print(f"| {n} | {n * n} | {name} | {plain:.3f} | {limited:.3f} | {evals:.0f} |", flush=True)
     return rows
+
+
+IMPLICIT_VARIANTS = (
+    ("implicit_euler", {"solver": "cg"}, "implicit_euler (CG)"),
+    ("implicit_euler", {"solver": "direct"}, "implicit_euler (direct)"),
+    ("implicit_euler_prefactored", {}, "implicit_euler_prefactored"),
+    ("kang", {}, "kang"),
+)
+
+
+def print_implicit_table(sizes, dt: float, seconds: float = 1.0) -> list[dict]:
+    """ms/step of the implicit methods (and the linear solver behind them) at a large step."""
+    from ..simulator import SimulationDiverged
+
+    scene = load_scene("hanging")
+    print(f"# hanging scene ({scene.source}) resized to N×N over 1 m, dt={dt:.6g} s, no strain limit; "
+          f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores; min of 3 after "
+          f"0.5 s of simulated warm-up")
+    print("| N | method | ms/step | mean CG iterations/step | factorisations | note |")
+    print("|---|---|---|---|---|---|")
+    rows = []
+    for n in sizes:
+        for name, options, label in IMPLICIT_VARIANTS:
+            scene.integrator = name
+            sim = scene.build_simulator(rows=n, cols=n, spacing=1.0 / (n - 1), dt=dt,
+                                        strain_limit=None, integrator_options=options)
+            row = {"N": n, "method": label, "ms_per_step": float("nan"), "cg_iterations": None,
+                   "factorizations": None, "note": ""}
+            try:
+                sim.advance(0.5)
+                before = sim.integrator_stats
+                s0 = sim.steps_taken
+                row["ms_per_step"] = 1e3 * time_steps(sim, seconds)
+                after = sim.integrator_stats
+                if "cg_iterations" in after and options.get("solver") == "cg":
+                    row["cg_iterations"] = ((after["cg_iterations"] - before["cg_iterations"])
+                                            / (sim.steps_taken - s0))
+                row["factorizations"] = after.get("factorizations")
+            except SimulationDiverged:
+                row["note"] = f"diverged at t = {sim.time:.3f} s"
+            rows.append(row)
+            cg = "" if row["cg_iterations"] is None else f"{row['cg_iterations']:.1f}"
+            fac = "" if row["factorizations"] is None else str(row["factorizations"])
+            ms = "—" if row["note"] else f"{row['ms_per_step']:.3f}"
+            print(f"| {n} | {label} | {ms} | {cg} | {fac} | {row['note']} |", flush=True)
+    return rows

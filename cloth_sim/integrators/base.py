@@ -18,6 +18,8 @@ class Integrator:
     name: str = ""
     order: int = 0
     implicit: bool = False
+    #: True for methods stable at any ``dt`` on a linear system (``stable_dt`` is ``inf``).
+    unconditionally_stable: bool = False
     #: After a position correction ``Δx`` (strain limiting), the velocity moves by
     #: ``velocity_follow · Δx / dt``.
     velocity_follow: float = 1.0
@@ -45,7 +47,7 @@ class Integrator:
         """Largest ``dt`` whose step is stable for a mode of frequency ``omega`` and damping ratio
         ``zeta`` (linear theory: spectral radius of :meth:`amplification` ≤ 1). 0 when no step is
         stable, ``inf`` for unconditionally stable methods or ``omega == 0``."""
-        if self.implicit or omega <= 0:
+        if self.unconditionally_stable or omega <= 0:
             return np.inf
         if self.needs_damping and zeta <= 0:
             return 0.0
