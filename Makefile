@@ -4,6 +4,8 @@ PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
+# the package's own message (msg/) generated with rosidl + cmake from the wheels: tools/build_interfaces.py
+MSGS   := build/interfaces/.built
 # scipy's sparse solvers and numpy's BLAS oversubscribe 2 cores badly when threaded.
 export OPENBLAS_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
@@ -11,24 +13,28 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export ROS_LOG_DIR ?= $(CURDIR)/.ros_log
 
 SCENE    ?= hanging
-DURATION ?= 5
 
 .PHONY: install run test bench clean
-install: $(STAMP)
+install: $(STAMP) $(MSGS)
 
-$(STAMP): requirements.txt setup.py setup.cfg pyproject.toml package.xml
+$(STAMP): requirements.txt setup.py pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --disable-pip-version-check -q -r requirements.txt
-	$(PY) -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation -e .
+	$(PY) -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation \
+		--config-settings editable_mode=compat -e .
 	@touch $@
 
-run: $(STAMP)
-	$(VENV)/bin/cloth-sim run --scene $(SCENE) --duration $(DURATION)
+$(MSGS): $(STAMP) msg/Stats.msg CMakeLists.txt package.xml tools/build_interfaces.py
+	$(PY) tools/build_interfaces.py
+	@touch $@
 
-test: $(STAMP)
+run: install
+	$(VENV)/bin/cloth_sim_node --ros-args --params-file config/cloth_sim.yaml -p scene:=$(SCENE)
+
+test: install
 	$(PY) -m pytest test/ $(PYTEST_ARGS)
 
-bench: $(STAMP)
+bench: install
 	$(VENV)/bin/cloth-sim bench steps --sizes 32 64 128
 
 clean:

@@ -1,4 +1,8 @@
-"""ament_python package (colcon build / ros2 run) that also installs with pip (make)."""
+"""The pip installation used by `make` here (console scripts cloth-sim and cloth_sim_node in .venv/bin).
+
+On a real ROS 2 install the package is built by colcon from CMakeLists.txt (build type ament_cmake,
+because it generates msg/Stats.msg); this file is not used there.
+"""
 
 from glob import glob
 
@@ -11,9 +15,10 @@ setup(
     version="0.1.0",
     packages=find_packages(exclude=["test", "test.*"]),
     data_files=[
-        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
+        ("share/" + package_name + "/config", ["config/cloth_sim.yaml"]),
         ("share/" + package_name + "/config/scenes", glob("config/scenes/*.yaml")),
+        ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
     ],
     install_requires=["setuptools"],
     zip_safe=False,
@@ -26,6 +31,7 @@ setup(
     entry_points={
         "console_scripts": [
             "cloth-sim = cloth_sim.cli:main",
+            "cloth_sim_node = cloth_sim.ros.node:main",
         ],
     },
 )

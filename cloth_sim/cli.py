@@ -6,6 +6,8 @@
     Print ms/step of integrators on the hanging cloth at several grid sizes.
 ``cloth-sim bench implicit [--sizes 32 64] [--dt 0.016667]``
     Print ms/step of the implicit methods at a large step, CG vs direct solve, CG iterations.
+``cloth-sim bench node [--sizes 32 64] [--seconds 10]``
+    Print the node's real-time factor with and without a ~/points subscriber (needs rclpy).
 """
 
 from __future__ import annotations
@@ -60,6 +62,12 @@ def _bench_implicit(args) -> int:
     return 0
 
 
+def _bench_node(args) -> int:
+    from .ros.bench import print_node_table
+    print_node_table(args.sizes, args.seconds, args.integrator, args.dt, args.rate)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cloth-sim", description=__doc__.split("\n")[0])
     sub = p.add_subparsers(dest="command", required=True)
@@ -82,6 +90,13 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--dt", type=float, default=1.0 / 60, help="time step (default 1/60 s)")
     i.add_argument("--seconds", type=float, default=1.0, help="wall time per measurement")
     i.set_defaults(func=_bench_implicit)
+    nb = bsub.add_parser("node", help="real-time factor of cloth_sim_node (needs rclpy)")
+    nb.add_argument("--sizes", type=int, nargs="+", default=[32, 64])
+    nb.add_argument("--seconds", type=float, default=10.0, help="measured wall time per row")
+    nb.add_argument("--integrator", default="symplectic_euler", choices=integrators.available())
+    nb.add_argument("--dt", type=float, default=1e-3)
+    nb.add_argument("--rate", type=float, default=60.0, help="publish_rate (Hz)")
+    nb.set_defaults(func=_bench_node)
     return p
 
 

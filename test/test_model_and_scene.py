@@ -1,6 +1,7 @@
 """Grid topology, model validation, scene files and the headless `cloth-sim run`."""
 
 import ast
+import os
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -150,8 +151,17 @@ def test_package_xml_declares_every_runtime_dependency():
     rules = yaml.safe_load((ROOT / "rosdep" / "cloth_sim.yaml").read_text())
     assert {"python3-numba", "python3-cholespy-pip"} <= set(rules)
     assert "python3-pytest" in {e.text for e in root.findall("test_depend")}
-    assert root.find("export/build_type").text == "ament_python"
-    assert (ROOT / "resource" / "cloth_sim").is_file()
+    # ament_cmake: the package generates msg/Stats.msg; its Python code is installed by CMakeLists.txt
+    assert root.find("export/build_type").text == "ament_cmake"
+    assert root.findtext("member_of_group") == "rosidl_interface_packages"
+    assert {"ament_cmake", "ament_cmake_python", "rosidl_default_generators"} <= {
+        e.text for e in root.findall("buildtool_depend")}
+    assert {"rclpy", "sensor_msgs", "visualization_msgs", "diagnostic_msgs", "std_srvs",
+            "rosidl_default_runtime"} <= deps
+    cmake = (ROOT / "CMakeLists.txt").read_text()
+    assert 'rosidl_generate_interfaces(${PROJECT_NAME}\n  "msg/Stats.msg"' in cmake
+    assert "install(PROGRAMS scripts/cloth_sim_node" in cmake
+    assert os.access(ROOT / "scripts" / "cloth_sim_node", os.X_OK)
 
 
 def test_console_script_is_installed():

@@ -1,0 +1,76 @@
+"""Real-time factor of cloth_sim_node: the node and a subscriber in one process, side by side sizes.
+
+``cloth-sim bench node --sizes 32 64 --seconds 10`` prints, per size, the mean real-time factor
+reported on ~/stats, ms per step, tick wall time and overruns, with and without a ~/points
+subscriber (building and sending the cloud is skipped when nobody listens).
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import time
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import PointCloud2
+
+
+def measure(n: int, seconds: float, subscribe: bool, integrator: str, dt: float, rate: float) -> dict:
+    from cloth_sim.msg import Stats
+
+    from .node import ClothSimNode
+
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ.get("ROS_DOMAIN_ID", "0")))
+    try:
+        node = ClothSimNode(context=ctx, parameter_overrides=[
+            Parameter("rows", value=n), Parameter("cols", value=n), Parameter("spacing", value=1.0 / (n - 1)),
+            Parameter("integrator", value=integrator), Parameter("dt", value=dt),
+            Parameter("publish_rate", value=rate)])
+        probe = rclpy.create_node("bench_probe", context=ctx)
+        stats, clouds = [], []
+        probe.create_subscription(Stats, "/cloth_sim/stats", stats.append, 100)
+        if subscribe:
+            probe.create_subscription(PointCloud2, "/cloth_sim/points", clouds.append, 100)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        ex.add_node(probe)
+        end = time.monotonic() + 2.0  # warm-up: numba caches, discovery
+        while time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.01)
+        stats.clear()
+        clouds.clear()
+        o0, s0, w0 = node.overruns, node.sim.time, time.monotonic()
+        end = w0 + seconds
+        while time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.01)
+        wall, sim = time.monotonic() - w0, node.sim.time - s0
+        steps = sum(s.steps for s in stats)
+        out = {"N": n, "subscriber": subscribe, "rtf": sim / wall,
+               "ms_per_step": 1e3 * sum(s.step_time_mean * s.steps for s in stats) / max(steps, 1),
+               "tick_ms": 1e3 * sum(s.tick_wall_time for s in stats) / max(len(stats), 1),
+               "ticks_per_s": len(stats) / wall, "clouds": len(clouds),
+               "overruns": node.overruns - o0}
+        ex.shutdown()
+        probe.destroy_node()
+        node.destroy_node()
+        return out
+    finally:
+        rclpy.shutdown(context=ctx)
+
+
+def print_node_table(sizes, seconds: float, integrator: str, dt: float, rate: float) -> list[dict]:
+    print(f"# cloth_sim_node, hanging scene resized to N×N, {integrator}, dt={dt:g} s, {rate:g} Hz, "
+          f"{seconds:g} s per row after 2 s warm-up; {platform.machine()}, {os.cpu_count()} cores")
+    print("| N | ~/points subscriber | real-time factor | ms/step | tick wall ms | ticks/s | overruns |")
+    print("|---|---|---|---|---|---|---|")
+    rows = []
+    for n in sizes:
+        for sub in (False, True):
+            r = measure(n, seconds, sub, integrator, dt, rate)
+            rows.append(r)
+            print(f"| {n} | {'yes' if sub else 'no'} | {r['rtf']:.3f} | {r['ms_per_step']:.3f} | "
+                  f"{r['tick_ms']:.2f} | {r['ticks_per_s']:.1f} | {r['overruns']} |", flush=True)
+    return rows

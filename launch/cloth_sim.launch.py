@@ -1,0 +1,22 @@
+"""Start cloth_sim_node with config/cloth_sim.yaml; `scene:=flag` picks another scene.
+
+    ros2 launch cloth_sim cloth_sim.launch.py scene:=flag
+"""
+
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+
+def generate_launch_description():
+    params = os.path.join(get_package_share_directory("cloth_sim"), "config", "cloth_sim.yaml")
+    return LaunchDescription([
+        DeclareLaunchArgument("scene", default_value="hanging",
+                              description="hanging, curtain, flag, free_fall or a scene YAML path"),
+        Node(package="cloth_sim", executable="cloth_sim_node", name="cloth_sim", output="screen",
+             parameters=[params, {"scene": LaunchConfiguration("scene")}]),
+    ])

@@ -1,0 +1,425 @@
+"""cloth_sim_node over DDS: in-process (node and test node on one executor) and as a subprocess.
+
+Every test runs on its own ROS_DOMAIN_ID with discovery limited to localhost.
+"""
+
+import ast
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy", reason="ROS 2 wheels are installed by `make`")
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
+from rcl_interfaces.msg import Parameter as ParameterMsg  # noqa: E402
+from rcl_interfaces.msg import ParameterType, ParameterValue  # noqa: E402
+from rcl_interfaces.srv import DescribeParameters, SetParameters, SetParametersAtomically  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from sensor_msgs.msg import PointCloud2  # noqa: E402
+from std_srvs.srv import SetBool, Trigger  # noqa: E402
+from visualization_msgs.msg import Marker  # noqa: E402
+
+from cloth_sim.msg import Stats  # noqa: E402
+from cloth_sim.ros.node import ClothSimNode  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+_DOMAIN = [20 + os.getpid() % 60]
+
+
+def next_domain() -> int:
+    _DOMAIN[0] = 20 + (_DOMAIN[0] - 19) % 80
+    return _DOMAIN[0]
+
+
+@pytest.fixture
+def ros():
+    """An rclpy context on a fresh domain, an executor, and a client node; torn down after."""
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=next_domain())
+    ex = SingleThreadedExecutor(context=ctx)
+    client = rclpy.create_node("cloth_sim_test", context=ctx)
+    ex.add_node(client)
+
+    class Ros:
+        context, executor, node = ctx, ex, client
+        nodes = []
+
+        def start(self, namespace="", **overrides):
+            overrides.setdefault("rows", 12)
+            overrides.setdefault("cols", 12)
+            overrides.setdefault("spacing", 1.0 / 11)
+            node = ClothSimNode(context=ctx, namespace=namespace, parameter_overrides=[
+                Parameter(k, value=v) for k, v in overrides.items()])
+            ex.add_node(node)
+            self.nodes.append(node)
+            return node
+
+        def spin_until(self, cond, timeout=10.0):
+            end = time.monotonic() + timeout
+            while time.monotonic() < end:
+                if cond():
+                    return True
+                ex.spin_once(timeout_sec=0.02)
+            return cond()
+
+        def spin_for(self, seconds):
+            end = time.monotonic() + seconds
+            while time.monotonic() < end:
+                ex.spin_once(timeout_sec=0.02)
+
+        def collect(self, msg_type, topic):
+            got = []
+            self.node.create_subscription(msg_type, topic, got.append, 50)
+            return got
+
+        def call(self, srv_type, name, request, timeout=10.0):
+            cli = self.node.create_client(srv_type, name)
+            assert self.spin_until(cli.service_is_ready, timeout), f"{name} not available"
+            fut = cli.call_async(request)
+            assert self.spin_until(fut.done, timeout), f"{name} did not answer"
+            return fut.result()
+
+        def set_params(self, node_name, params, atomically=False):
+            """Set parameters through the standard parameter services; returns the results."""
+            msgs = [ParameterMsg(name=k, value=_value(v)) for k, v in params.items()]
+            if atomically:
+                req = SetParametersAtomically.Request(parameters=msgs)
+                return [self.call(SetParametersAtomically, f"{node_name}/set_parameters_atomically",
+                                  req).result]
+            req = SetParameters.Request(parameters=msgs)
+            return self.call(SetParameters, f"{node_name}/set_parameters", req).results
+
+    r = Ros()
+    yield r
+    for n in r.nodes:
+        ex.remove_node(n)
+        n.destroy_node()
+    client.destroy_node()
+    ex.shutdown()
+    rclpy.shutdown(context=ctx)
+
+
+def _value(v) -> ParameterValue:
+    if isinstance(v, bool):
+        return ParameterValue(type=ParameterType.PARAMETER_BOOL, bool_value=v)
+    if isinstance(v, int):
+        return ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=v)
+    if isinstance(v, float):
+        return ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=v)
+    if isinstance(v, str):
+        return ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=v)
+    return ParameterValue(type=ParameterType.PARAMETER_DOUBLE_ARRAY, double_array_value=[float(x) for x in v])
+
+
+def cloud_xyz(msg: PointCloud2) -> np.ndarray:
+    return np.frombuffer(bytes(msg.data), dtype=np.float32).reshape(msg.height, msg.width, 3)
+
+
+# ------------------------------------------------------------------ topics
+def test_points_stats_mesh_and_diagnostics(ros):
+    ros.start(publish_rate=30.0)
+    clouds = ros.collect(PointCloud2, "/cloth_sim/points")
+    stats = ros.collect(Stats, "/cloth_sim/stats")
+    meshes = ros.collect(Marker, "/cloth_sim/mesh")
+    diags = ros.collect(DiagnosticArray, "/diagnostics")
+    assert ros.spin_until(lambda: len(clouds) >= 10 and len(diags) >= 2 and meshes, 15)
+    c = clouds[-1]
+    assert (c.height, c.width, c.point_step, c.row_step) == (12, 12, 12, 144)
+    assert [(f.name, f.offset, f.datatype, f.count) for f in c.fields] == [
+        ("x", 0, 7, 1), ("y", 4, 7, 1), ("z", 8, 7, 1)]
+    assert c.is_dense and c.header.frame_id == "cloth"
+    xyz = cloud_xyz(c)
+    assert np.all(np.isfinite(xyz))
+    # organised: row 0, col 0 and col -1 are the pins of the hanging scene, at their rest places
+    np.testing.assert_allclose(xyz[0, 0], [0, 0, 0], atol=1e-6)
+    np.testing.assert_allclose(xyz[0, -1], [1.0, 0, 0], atol=1e-6)
+    assert xyz[:, :, 2].min() < -0.05  # the cloth falls
+    m = meshes[-1]
+    assert m.type == Marker.TRIANGLE_LIST and len(m.points) == 3 * 2 * 11 * 11
+    s = stats[-1]
+    assert s.integrator == "symplectic_euler" and s.dt == pytest.approx(1e-3)
+    assert s.steps in (33, 34)  # 1/30 s in whole 1 ms steps, the remainder carried
+    assert sum(x.steps for x in stats[-30:]) == pytest.approx(1000 * 30 / 30, abs=2)
+    assert 0 < s.step_time_mean <= s.step_time_max < s.tick_wall_time < 1 / 30
+    assert 0.5 < s.real_time_factor < 1.5 and s.sim_time > 0.1
+    assert s.kinetic_energy > 0 and s.potential_energy < 0 and 0 < s.max_strain < 0.2
+    assert 0 < s.stability_margin < 0.8 and not s.paused
+    status = diags[-1].status[0]
+    assert status.name == "cloth_sim: simulation" and status.hardware_id == "cloth_sim"
+    assert status.level == DiagnosticStatus.OK, status.message
+    keys = {kv.key: kv.value for kv in status.values}
+    assert {"integrator", "dt", "stable_dt", "real_time_factor", "max_strain", "overruns"} <= set(keys)
+    assert float(keys["stable_dt"]) > 1e-3
+
+
+def test_the_cloud_is_not_built_without_subscribers(ros, monkeypatch):
+    node = ros.start()
+    built = []
+    original = node.point_cloud
+    monkeypatch.setattr(node, "point_cloud", lambda stamp: built.append(1) or original(stamp))
+    stats = ros.collect(Stats, "/cloth_sim/stats")
+    assert ros.spin_until(lambda: len(stats) >= 10)
+    assert not built
+    clouds = ros.collect(PointCloud2, "/cloth_sim/points")
+    assert ros.spin_until(lambda: len(clouds) >= 3)
+    assert built
+
+
+def test_use_sim_time_is_honoured(ros):
+    from rosgraph_msgs.msg import Clock
+
+    ros.start(use_sim_time=True)
+    stats = ros.collect(Stats, "/cloth_sim/stats")
+    clock = ros.node.create_publisher(Clock, "/clock", 10)
+    t = [123.0]
+
+    def tick():
+        t[0] += 0.01
+        clock.publish(Clock(clock=rclpy.time.Time(seconds=t[0]).to_msg()))
+
+    ros.node.create_timer(0.01, tick)
+    assert ros.spin_until(lambda: len(stats) >= 3)
+    # the timer runs on /clock and the stamps come from it
+    assert 123 <= stats[-1].header.stamp.sec <= t[0]
+
+
+# ------------------------------------------------------------------ parameters
+def test_parameters_are_described(ros):
+    ros.start()
+    res = ros.call(DescribeParameters, "/cloth_sim/describe_parameters",
+                   DescribeParameters.Request(names=["dt", "stiffness.bend", "integrator", "rows"]))
+    dt, bend, integ, rows = res.descriptors
+    assert "time step" in dt.description and dt.floating_point_range[0].from_value > 0
+    assert bend.floating_point_range[0].from_value == 0.0
+    assert "rk4" in integ.additional_constraints and "kang" in integ.additional_constraints
+    assert rows.integer_range[0].from_value == 2
+
+
+def test_a_softer_cloth_sags_more(ros):
+    a = ros.start(namespace="a", strain_limit=0.0)
+    b = ros.start(namespace="b", strain_limit=0.0)
+    results = ros.set_params("/b/cloth_sim", {"stiffness.structural": 100.0, "stiffness.shear": 100.0})
+    assert all(r.successful for r in results)
+    assert b.sim.stiffness("structural")[0] == 100.0
+    low_a, low_b = [], []
+
+    def sample():
+        low_a.append(a.sim.positions[:, 2].min())
+        low_b.append(b.sim.positions[:, 2].min())
+        return a.sim.time > 2.0 and b.sim.time > 2.0
+
+    ros.spin_until(sample, 20)
+    # averaged over the swing: the softer cloth hangs lower
+    assert np.mean(low_b[len(low_b) // 2:]) < np.mean(low_a[len(low_a) // 2:]) - 0.05
+
+
+def test_an_integrator_switch_keeps_the_state(ros):
+    node = ros.start()
+    ros.spin_until(lambda: node.sim.time > 0.5)
+    assert ros.call(SetBool, "/cloth_sim/pause", SetBool.Request(data=True)).success
+    x, v = node.sim.positions.copy(), node.sim.velocities.copy()
+    for name in ("rk4", "implicit_euler", "verlet"):
+        assert ros.set_params("/cloth_sim", {"integrator": name})[0].successful
+        assert node.sim.integrator == name
+        np.testing.assert_array_equal(node.sim.positions, x)
+        np.testing.assert_array_equal(node.sim.velocities, v)
+    ros.call(SetBool, "/cloth_sim/pause", SetBool.Request(data=False))
+    t0 = node.sim.time
+    ros.spin_until(lambda: node.sim.time > t0 + 0.03)
+    # continuous: after the switch no particle moved further than its speed allows
+    elapsed = node.sim.time - t0
+    bound = (np.linalg.norm(v, axis=1).max() + 9.81 * elapsed) * elapsed * 1.5
+    assert np.max(np.linalg.norm(node.sim.positions - x, axis=1)) < bound
+
+
+INVALID = [
+    ({"integrator": "rk5"}, "integrator 'rk5' is unknown; accepted values: explicit_euler"),
+    ({"dt": -0.001}, "dt"),
+    ({"dt": 0.01}, "above the stable limit of symplectic_euler"),
+    ({"dt": float("nan")}, "dt"),
+    ({"stiffness.shear": -5.0}, "stiffness.shear"),
+    ({"damping.bend": -1.0}, "damping.bend"),
+    ({"stiffness.structural": float("inf")}, "stiffness.structural"),
+    ({"gravity": [0.0, -9.81]}, "gravity must have exactly 3 elements"),
+    ({"wind.direction": [1.0, 0.0, 0.0, 0.0]}, "wind.direction must have exactly 3 elements"),
+    ({"publish_rate": 5000.0}, "publish_rate"),
+    ({"model": "cloth"}, "model 'cloth' is unknown"),
+    ({"scene": "nowhere"}, "scene"),
+]
+
+
+@pytest.mark.parametrize("change,reason", INVALID, ids=[next(iter(c)) + str(i) for i, (c, _) in enumerate(INVALID)])
+def test_invalid_values_are_refused_with_a_reason(ros, change, reason):
+    node = ros.start()
+    stats = ros.collect(Stats, "/cloth_sim/stats")
+    ros.spin_until(lambda: len(stats) >= 3)
+    before = dict(node.cfg)
+    result = ros.set_params("/cloth_sim", change)[0]
+    assert not result.successful
+    assert reason in result.reason, result.reason
+    assert node.cfg == before
+    name = next(iter(change))
+    assert node.get_parameter(name).value == before[name] or (
+        isinstance(before[name], list) and list(node.get_parameter(name).value) == before[name])
+    n = len(stats)
+    assert ros.spin_until(lambda: len(stats) >= n + 3)  # still publishing
+
+
+def test_a_publish_rate_that_cannot_be_met_is_refused(ros):
+    node = ros.start()
+    ros.spin_until(lambda: len(node._tick_costs) >= 20)
+    result = ros.set_params("/cloth_sim", {"dt": 1e-7, "publish_rate": 30.0}, atomically=True)[0]
+    assert not result.successful and "publish_rate=30 Hz cannot be met" in result.reason
+    assert node.sim.dt == 1e-3
+
+
+def test_a_batch_is_applied_all_or_nothing(ros):
+    node = ros.start()
+    result = ros.set_params("/cloth_sim", {"stiffness.bend": 10.0, "integrator": "rk5"},
+                            atomically=True)[0]
+    assert not result.successful and "rk5" in result.reason
+    assert node.sim.stiffness("bend")[0] == 100.0 and node.cfg["stiffness.bend"] == 100.0
+    result = ros.set_params("/cloth_sim", {"stiffness.bend": 10.0, "integrator": "rk4",
+                                           "dt": 5e-4}, atomically=True)[0]
+    assert result.successful, result.reason
+    assert (node.sim.stiffness("bend")[0], node.sim.integrator, node.sim.dt) == (10.0, "rk4", 5e-4)
+
+
+def test_topology_changes_rebuild_and_reset(ros):
+    node = ros.start()
+    clouds = ros.collect(PointCloud2, "/cloth_sim/points")
+    ros.spin_until(lambda: node.sim.time > 0.3)
+    assert ros.set_params("/cloth_sim", {"rows": 8, "cols": 10}, atomically=True)[0].successful
+    assert node.sim.model.n_particles == 80 and node.sim.time < 0.1
+    assert ros.spin_until(lambda: clouds and (clouds[-1].height, clouds[-1].width) == (8, 10))
+    assert ros.set_params("/cloth_sim", {"scene": "flag"})[0].successful
+    assert node.scene.name == "flag" and node.sim.wind is not None
+    ros.spin_for(0.3)  # the scene's own values are then reported through the parameters
+    assert node.get_parameter("wind.strength").value == pytest.approx(0.05)
+    assert node.get_parameter("rows").value == 20
+
+
+def test_reset_and_pause(ros):
+    node = ros.start()
+    stats = ros.collect(Stats, "/cloth_sim/stats")
+    ros.spin_until(lambda: node.sim.time > 0.5)
+    assert ros.call(SetBool, "/cloth_sim/pause", SetBool.Request(data=True)).message == "paused"
+    t = node.sim.time
+    n = len(stats)
+    ros.spin_until(lambda: len(stats) >= n + 5)
+    assert node.sim.time == t and stats[-1].paused and stats[-1].steps == 0
+    res = ros.call(Trigger, "/cloth_sim/reset", Trigger.Request())
+    assert res.success and node.sim.time < 0.1
+    np.testing.assert_array_equal(node.sim.positions, node.sim.model.positions)
+    n = len(stats)
+    ros.spin_until(lambda: len(stats) >= n + 5)
+    assert not stats[-1].paused and stats[-1].sim_time > 0
+
+
+def test_a_blow_up_never_reaches_a_topic_and_the_node_recovers(ros):
+    node = ros.start()
+    clouds = ros.collect(PointCloud2, "/cloth_sim/points")
+    diags = ros.collect(DiagnosticArray, "/diagnostics")
+    ros.spin_until(lambda: node.sim.time > 0.2)
+    assert ros.set_params("/cloth_sim", {"allow_unstable": True, "dt": 0.02, "strain_limit": 0.0},
+                          atomically=True)[0].successful
+    assert ros.spin_until(lambda: node.error is not None, 10)
+    assert node.paused
+    assert ros.spin_until(lambda: any(d.status[0].level == DiagnosticStatus.ERROR for d in diags), 5)
+    err = [d for d in diags if d.status[0].level == DiagnosticStatus.ERROR][-1].status[0]
+    assert "diverged" in err.message
+    n = len(clouds)
+    ros.spin_until(lambda: len(clouds) >= n + 3)
+    assert all(np.all(np.isfinite(cloud_xyz(c))) for c in clouds)
+    # still serving parameters and services: fix dt, un-pause, run again
+    assert ros.set_params("/cloth_sim", {"dt": 1e-3, "allow_unstable": False}, atomically=True)[0].successful
+    ros.call(SetBool, "/cloth_sim/pause", SetBool.Request(data=False))
+    t = node.sim.time
+    assert ros.spin_until(lambda: node.sim.time > t + 0.2)
+    assert node.error is None
+    diags.clear()
+    assert ros.spin_until(lambda: len(diags) >= 1, 3) and diags[-1].status[0].level != DiagnosticStatus.ERROR
+
+
+def test_diagnostics_warn_when_dt_is_close_to_the_limit(ros):
+    node = ros.start()
+    limit = node.stable_dt()
+    assert ros.set_params("/cloth_sim", {"dt": 0.9 * limit})[0].successful
+    diags = ros.collect(DiagnosticArray, "/diagnostics")
+    assert ros.spin_until(lambda: len(diags) >= 2, 5)
+    st = diags[-1].status[0]
+    assert st.level == DiagnosticStatus.WARN and "stable_dt" in st.message
+
+
+# ------------------------------------------------------------------ as a process
+def node_env(domain: int) -> dict:
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               ROS_LOG_DIR=str(ROOT / ".ros_log"), PYTHONUNBUFFERED="1")
+    return env
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_node_process_publishes_at_the_rate_and_exits_cleanly(sig):
+    domain = next_domain()
+    exe = Path(sys.executable).parent / "cloth_sim_node"
+    proc = subprocess.Popen([str(exe), "--ros-args", "--params-file", str(ROOT / "config" / "cloth_sim.yaml"),
+                             "-p", "rows:=16", "-p", "cols:=16", "-p", "spacing:=0.0667", "-p",
+                             "publish_rate:=20.0"], env=node_env(domain), stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    node = rclpy.create_node("rate_probe", context=ctx)
+    stamps = []
+    node.create_subscription(PointCloud2, "/cloth_sim/points", lambda m: stamps.append(time.monotonic()), 50)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    try:
+        end = time.monotonic() + 30
+        while time.monotonic() < end and len(stamps) < 70:
+            ex.spin_once(timeout_sec=0.05)
+        assert len(stamps) >= 70, "no cloud from the node process"
+        rate = (len(stamps[10:]) - 1) / (stamps[-1] - stamps[10])
+        assert rate == pytest.approx(20.0, rel=0.10)
+    finally:
+        ex.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=ctx)
+        proc.send_signal(sig)
+        out, _ = proc.communicate(timeout=20)
+    assert proc.returncode == 0, out
+    assert "Traceback" not in out
+
+
+def test_node_refuses_a_malformed_scene_file(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("grid: {rows: 3, cols: -4, spacing: 0.1}\n")
+    exe = Path(sys.executable).parent / "cloth_sim_node"
+    out = subprocess.run([str(exe), "--ros-args", "-p", f"scene:={bad}"], env=node_env(next_domain()),
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2
+    assert "bad.yaml" in out.stderr and "cols" in out.stderr and "Traceback" not in out.stderr
+
+
+def test_launch_file_is_minimal_and_points_at_existing_files():
+    path = ROOT / "launch" / "cloth_sim.launch.py"
+    tree = ast.parse(path.read_text())
+    mods = set()
+    for n in ast.walk(tree):
+        if isinstance(n, ast.Import):
+            mods |= {a.name.split(".")[0] for a in n.names}
+        elif isinstance(n, ast.ImportFrom):
+            mods.add(n.module.split(".")[0])
+    assert mods <= {"os", "launch", "launch_ros", "ament_index_python"}
+    text = path.read_text()
+    assert '"cloth_sim.yaml"' in text and (ROOT / "config" / "cloth_sim.yaml").is_file()
+    assert 'executable="cloth_sim_node"' in text and "generate_launch_description" in text
+    cmake = (ROOT / "CMakeLists.txt").read_text()
+    assert "install(DIRECTORY config launch" in cmake and "scripts/cloth_sim_node" in cmake

@@ -1,0 +1,99 @@
+"""Generate and build the package's own messages (msg/) with rosidl from the PyPI wheels.
+
+Run by `make` with the project's venv Python. It applies the fix the wheels need (their exported
+CMake files name the wheel build host's Python and numpy include directories), configures this
+package's CMakeLists.txt with CLOTH_SIM_INTERFACES_ONLY=ON, builds, and installs into
+build/interfaces/install (its libraries linked into the venv's lib/); a .pth file then puts the generated Python package behind the
+hand-written one, which extends its __path__ to it (see cloth_sim/__init__.py).
+On a real ROS 2 install none of this is used: `colcon build` builds the same CMakeLists.txt.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import sysconfig
+from pathlib import Path
+
+import numpy
+
+ROOT = Path(__file__).resolve().parent.parent
+BUILD = ROOT / "build" / "interfaces"
+PREFIX = BUILD / "install"
+HOST_PY_INCLUDE = "/opt/python/cp311-cp311/include/python3.11"
+HOST_NUMPY_INCLUDE = "/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include"
+
+
+def fix_wheel_cmake_paths(venv: Path) -> int:
+    """Point the wheels' exported CMake files at this venv's Python and numpy headers."""
+    ours = {HOST_PY_INCLUDE: sysconfig.get_paths()["include"], HOST_NUMPY_INCLUDE: numpy.get_include()}
+    changed = 0
+    for path in (venv / "share").rglob("*.cmake"):
+        text = path.read_text()
+        if "/opt/python/" not in text:
+            continue
+        for old, new in ours.items():
+            text = text.replace(old, new)
+        path.write_text(text)
+        changed += 1
+    return changed
+
+
+def main() -> int:
+    venv = Path(sys.prefix)
+    fixed = fix_wheel_cmake_paths(venv)
+    if fixed:
+        print(f"build_interfaces: pointed {fixed} wheel CMake files at this venv's include dirs")
+    cmake = shutil.which("cmake")
+    if cmake is None:
+        print("build_interfaces: error: cmake (>= 3.8) is needed to generate msg/", file=sys.stderr)
+        return 1
+    env = dict(os.environ)
+    env["PATH"] = f"{venv / 'bin'}{os.pathsep}{env.get('PATH', '')}"
+    env["VIRTUAL_ENV"] = str(venv)
+    env["AMENT_PREFIX_PATH"] = str(venv)
+    env["CMAKE_PREFIX_PATH"] = str(venv)
+    rpath = f"{PREFIX / 'lib'};{venv / 'lib'}"
+    if PREFIX.exists():
+        shutil.rmtree(PREFIX)
+    # CMake refuses exported include dirs inside the source tree, and the venv (with numpy's
+    # headers) lives in the repository: configure from a copy of what the interfaces need.
+    src = BUILD / "src"
+    if src.exists():
+        shutil.rmtree(src)
+    src.mkdir(parents=True)
+    for name in ("CMakeLists.txt", "package.xml"):
+        shutil.copy2(ROOT / name, src / name)
+    shutil.copytree(ROOT / "msg", src / "msg")
+    work = BUILD / "cmake"
+    work.mkdir(parents=True, exist_ok=True)
+    configure = [cmake, "-S", str(src), "-B", str(work), "-DCLOTH_SIM_INTERFACES_ONLY=ON",
+                 "-DBUILD_TESTING=OFF", f"-DPython3_EXECUTABLE={venv / 'bin' / 'python3'}",
+                 f"-DCMAKE_INSTALL_PREFIX={PREFIX}", f"-DCMAKE_INSTALL_RPATH={rpath}",
+                 "-DCMAKE_BUILD_TYPE=Release"]
+    for cmd in (configure, [cmake, "--build", str(work), "-j", str(os.cpu_count() or 2)],
+                [cmake, "--install", str(work)]):
+        out = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        if out.returncode != 0:
+            print(out.stdout[-6000:], file=sys.stderr)
+            print(f"build_interfaces: error: {' '.join(cmd[:3])} … failed ({out.returncode})",
+                  file=sys.stderr)
+            return 1
+    # rosidl's type-support dispatch dlopens the libraries by name along LD_LIBRARY_PATH, which the
+    # wheels' bootstrapper sets to the venv's lib/: link them there.
+    for lib in (PREFIX / "lib").glob("libcloth_sim__*.so"):
+        link = venv / "lib" / lib.name
+        if link.is_symlink() or link.exists():
+            link.unlink()
+        link.symlink_to(lib)
+    site = next(PREFIX.glob("lib/python3*/site-packages"))
+    pth = Path(sysconfig.get_paths()["purelib"]) / "cloth_sim_interfaces.pth"
+    pth.write_text(f"{site}\n")
+    print(f"build_interfaces: msg/ generated into {site}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
