@@ -154,7 +154,9 @@ def test_points_stats_mesh_and_diagnostics(ros):
     assert 0 < s.stability_margin < 0.8 and not s.paused
     status = diags[-1].status[0]
     assert status.name == "cloth_sim: simulation" and status.hardware_id == "cloth_sim"
-    assert status.level == DiagnosticStatus.OK, status.message
+    # OK once running steadily (a loaded machine may show a short real-time-factor WARN first)
+    assert status.level == DiagnosticStatus.OK or ros.spin_until(
+        lambda: diags[-1].status[0].level == DiagnosticStatus.OK, 10), diags[-1].status[0].message
     keys = {kv.key: kv.value for kv in status.values}
     assert {"integrator", "dt", "stable_dt", "real_time_factor", "max_strain", "overruns"} <= set(keys)
     assert float(keys["stable_dt"]) > 1e-3
