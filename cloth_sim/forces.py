@@ -287,23 +287,30 @@ class Forces:
         spring_jacobian_blocks(np.ascontiguousarray(x, dtype=np.float64),
                                np.ascontiguousarray(v, dtype=np.float64), self.springs, self.rest,
                                self.k, self.c, self.kind, BUCKLE_TABLE, clamp, kx, dx, cv)
-        i, j = self.springs[:, 0], self.springs[:, 1]
-        swap = np.transpose
-        dfdx = (_blocks(i, j, kx, n) + _blocks(j, i, swap(kx, (0, 2, 1)), n) - _blocks(i, i, kx, n)
-                - _blocks(j, j, kx, n) + _blocks(i, j, dx, n) + _blocks(j, i, dx, n)
-                - _blocks(i, i, dx, n) - _blocks(j, j, dx, n))
-        dfdv = (_blocks(i, j, cv, n) + _blocks(j, i, cv, n) - _blocks(i, i, cv, n)
-                - _blocks(j, j, cv, n) - self.drag * sp.identity(3 * n, format="csr"))
-        return dfdx.tocsr(), dfdv.tocsr()
+        # ∂f_j/∂x_i is kxᵀ (= kx) for the elastic part and +dx for damping, whose r = v_j − v_i and
+        # u both change sign with the pair's order
+        dfdx = spring_coupling_matrix(self.springs, kx + dx, np.transpose(kx, (0, 2, 1)) + dx, n)
+        dfdv = spring_coupling_matrix(self.springs, cv, cv, n)
+        if self.drag > 0:
+            dfdv = dfdv - self.drag * sp.identity(3 * n, format="csr")
+        return dfdx, dfdv.tocsr()
 
 
-def _blocks(rows, cols, blocks, n):
-    """``3n×3n`` sparse matrix with ``blocks[s]`` at block ``(rows[s], cols[s])`` (duplicates add)."""
-    m = len(rows)
-    r = (3 * rows)[:, None, None] + np.arange(3)[None, :, None]
-    c = (3 * cols)[:, None, None] + np.arange(3)[None, None, :]
-    return sp.csr_matrix((np.ascontiguousarray(blocks).ravel(),
-                          (np.broadcast_to(r, (m, 3, 3)).ravel(), np.broadcast_to(c, (m, 3, 3)).ravel())),
+def spring_coupling_matrix(springs: np.ndarray, row_i: np.ndarray, row_j: np.ndarray,
+                           n: int) -> sp.csr_matrix:
+    """Sparse ``3n×3n`` matrix coupling each spring's two particles ``(i, j)``: block ``(i, j)`` is
+    ``row_i[s]`` and block ``(i, i)`` is ``−row_i[s]``; block ``(j, i)`` is ``row_j[s]`` and
+    ``(j, j)`` is ``−row_j[s]`` (duplicates add). It is the pattern of every pairwise force's
+    Jacobian, and with ``row_i = row_j = −k uuᵀ`` the stiffness matrix ``K``."""
+    m = len(springs)
+    i, j = springs[:, 0], springs[:, 1]
+    ar = np.arange(3)
+    rows, cols, vals = [], [], []
+    for a, b, blocks in ((i, j, row_i), (i, i, -row_i), (j, i, row_j), (j, j, -row_j)):
+        rows.append(np.broadcast_to((3 * a)[:, None, None] + ar[None, :, None], (m, 3, 3)).ravel())
+        cols.append(np.broadcast_to((3 * b)[:, None, None] + ar[None, None, :], (m, 3, 3)).ravel())
+        vals.append(np.ascontiguousarray(blocks).ravel())
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                          shape=(3 * n, 3 * n))
 
 

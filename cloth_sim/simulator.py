@@ -11,7 +11,7 @@ from scipy.sparse.linalg import eigsh
 
 from . import integrators
 from .constraints import DEFAULT_STRAIN_LIMIT_PASSES, StrainLimit
-from .forces import BUCKLE_TABLE, Forces, buckling_h, spring_strains
+from .forces import BUCKLE_TABLE, Forces, buckling_h, spring_coupling_matrix, spring_strains
 from .model import BUCKLING, ClothModel
 
 
@@ -416,15 +416,5 @@ class Simulator:
 
 def _axial_matrix(springs, u, k, n):
     """Sparse ``3n×3n`` ``Σ k uuᵀ`` assembled over the springs (stiffness-matrix pattern)."""
-    m = len(springs)
-    blocks = k[:, None, None] * np.einsum("si,sj->sij", u, u)  # (m,3,3)
-    i, j = springs[:, 0], springs[:, 1]
-    rows, cols, vals = [], [], []
-    for a, b, sign in ((i, i, 1.0), (j, j, 1.0), (i, j, -1.0), (j, i, -1.0)):
-        r = (3 * a)[:, None, None] + np.arange(3)[None, :, None]
-        c = (3 * b)[:, None, None] + np.arange(3)[None, None, :]
-        rows.append(np.broadcast_to(r, (m, 3, 3)).ravel())
-        cols.append(np.broadcast_to(c, (m, 3, 3)).ravel())
-        vals.append((sign * blocks).ravel())
-    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                         shape=(3 * n, 3 * n))
+    blocks = -k[:, None, None] * np.einsum("si,sj->sij", u, u)
+    return spring_coupling_matrix(springs, blocks, blocks, n)
