@@ -137,16 +137,18 @@ def _graph_product(springs, w, v, out):
             out[j, a] -= d
 
 
+def _spring_sums(springs: np.ndarray, w: np.ndarray, n: int) -> np.ndarray:
+    """``Σ_j w_ij`` per particle over the springs it belongs to (the graph matrix's diagonal)."""
+    return np.bincount(springs.ravel(), weights=np.repeat(w, 2), minlength=n)
+
+
 @numba.njit(cache=True)
-def _kang_sweeps(f, v, dv, springs, k, masses, pinned, h, sweeps, ksum, acc, new):
+def _kang_sweeps(f, v, dv, springs, k, h, sweeps, inv_den, acc, new):
     """Kang et al.'s update ``Δv_i = (h f_i + h² Σ_j k_ij (v_j − v_i + Δv_j)) / (m_i + h² Σ_j k_ij)``,
-    ``sweeps`` Jacobi sweeps starting from ``dv`` (the previous step's ``Δv``); result in ``dv``."""
+    ``sweeps`` Jacobi sweeps starting from ``dv`` (the previous step's ``Δv``); result in ``dv``.
+    ``inv_den`` is ``1/(m_i + h² Σ_j k_ij)``, 0 for pinned particles."""
     n = f.shape[0]
     h2 = h * h
-    ksum[:] = 0.0
-    for s in range(springs.shape[0]):
-        ksum[springs[s, 0]] += k[s]
-        ksum[springs[s, 1]] += k[s]
     for _ in range(sweeps):
         for p in range(n):
             for a in range(3):
@@ -159,9 +161,8 @@ def _kang_sweeps(f, v, dv, springs, k, masses, pinned, h, sweeps, ksum, acc, new
                 acc[i, a] += ks * (v[j, a] - v[i, a] + dv[j, a])
                 acc[j, a] += ks * (v[i, a] - v[j, a] + dv[i, a])
         for p in range(n):
-            inv = 0.0 if pinned[p] else 1.0 / (masses[p] + h2 * ksum[p])
             for a in range(3):
-                new[p, a] = acc[p, a] * inv
+                new[p, a] = acc[p, a] * inv_den[p]
         dv[:] = new
 
 
@@ -249,7 +250,7 @@ class ImplicitEuler(_LinearisedImplicitEuler):
         free, index = self._free()
         n_free = int(free.sum())
         indptr, indices, slot, dslot = _block_pattern(forces.springs, index, n_free)
-        self._free_dofs = np.repeat(free, 3)
+        self._free_dofs = np.flatnonzero(np.repeat(free, 3))
         self._n = 3 * n_free
         self._slot, self._dslot = slot, dslot
         self._matrix = sp.csr_matrix((np.zeros(len(indices)), indices, indptr),
@@ -285,9 +286,7 @@ class ImplicitEuler(_LinearisedImplicitEuler):
             dv = self._cg(A, b)
         self._dv = dv
         self.solves += 1
-        vf = v.reshape(-1)
-        idx = np.flatnonzero(self._free_dofs)
-        vf[idx] += dv
+        v.reshape(-1)[self._free_dofs] += dv
         x += dt * v
 
     def _cg(self, A, b):
@@ -342,7 +341,6 @@ class ImplicitEulerPrefactored(_LinearisedImplicitEuler):
 
     def _ensure_factor(self, dt):
         forces = self.system.forces
-        key = (dt, forces.drag, forces.springs, forces.k, forces.c)
         old = self._key
         if (old is not None and old[0] == dt and old[1] == forces.drag
                 and np.array_equal(old[2], forces.springs) and np.array_equal(old[3], forces.k)
@@ -354,10 +352,7 @@ class ImplicitEulerPrefactored(_LinearisedImplicitEuler):
         n_free = int(free.sum())
         i, j = forces.springs[:, 0], forces.springs[:, 1]
         w = dt * forces.c + dt * dt * forces.k  # −(dt·C + dt²·H) off the diagonal, negated
-        diag = np.zeros(model.n_particles)
-        np.add.at(diag, i, w)
-        np.add.at(diag, j, w)
-        diag += model.masses + dt * forces.drag
+        diag = _spring_sums(forces.springs, w, model.n_particles) + model.masses + dt * forces.drag
         fi, fj = index[i], index[j]
         both = (fi >= 0) & (fj >= 0)
         rows = np.concatenate([fi[both], fj[both], np.arange(n_free)])
@@ -442,7 +437,7 @@ class Kang(_LinearisedImplicitEuler):
         s, k = forces.springs, forces.k
         adj = sp.coo_matrix((np.r_[k, k], (np.r_[s[:, 0], s[:, 1]], np.r_[s[:, 1], s[:, 0]])),
                             shape=(n, n)).tocsr()
-        ksum = np.asarray(adj.sum(axis=1)).ravel()
+        ksum = _spring_sums(s, k, n)
         A3 = sp.kron(adj, sp.identity(3), format="csr")
         H3 = A3 - sp.diags(np.repeat(ksum, 3))
         free = np.repeat(~model.pinned, 3)
@@ -499,13 +494,23 @@ class Kang(_LinearisedImplicitEuler):
         self._dv = np.zeros_like(x)
         self._acc = np.empty_like(x)
         self._new = np.empty_like(x)
-        self._ksum = np.empty(len(x))
+        self._den_of = None
+
+    def _inverse_denominators(self, dt):
+        """``1/(m_i + dt²·Σ_j k_ij)``, 0 on pins; rebuilt only when the forces or dt change."""
+        forces = self.system.forces
+        if self._den_of != (forces, dt):
+            model = self.system.model
+            den = model.masses + dt * dt * _spring_sums(forces.springs, forces.k, model.n_particles)
+            self._inv_den = np.where(model.pinned, 0.0, 1.0 / den)
+            self._den_of = (forces, dt)
+        return self._inv_den
 
     def step(self, x, v, dt):
         forces = self.system.forces
         f = self._force(x, v)
-        _kang_sweeps(f, v, self._dv, forces.springs, forces.k, self.system.model.masses,
-                     self.system.model.pinned, dt, self.sweeps, self._ksum, self._acc, self._new)
+        _kang_sweeps(f, v, self._dv, forces.springs, forces.k, dt, self.sweeps,
+                     self._inverse_denominators(dt), self._acc, self._new)
         self.solves += 1
         v += self._dv
         x += dt * v
