@@ -21,6 +21,13 @@ def cloth16(k=1000.0, damping=0.0, model="provot"):
                            pinned=[(0, 0), (0, -1)], model=model)
 
 
+def free_cloth(rng, rows=6, cols=6, damping=0.5, drift=(0.3, -0.1, 0.5)):
+    """An unpinned 6×6 cloth and random initial velocities around a common ``drift``."""
+    model = ClothModel.grid(rows, cols, 0.1, 0.01, stiffness=200.0, damping=damping)
+    v0 = rng.normal(scale=0.2, size=(rows * cols, 3)) + np.asarray(drift)
+    return model, v0
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)

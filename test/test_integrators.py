@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import cloth16, one_spring
+from conftest import cloth16, free_cloth, one_spring
 
 from cloth_sim import ClothModel, SimulationDiverged, Simulator, integrators
 
@@ -59,12 +59,6 @@ def test_rk4_matches_the_damped_oscillator_closed_form():
     e1, e2 = run(4e-3), run(2e-3)
     assert e2 < 1e-8
     assert math.log2(e1 / e2) == pytest.approx(4, abs=0.15)
-
-
-def free_cloth(rng, rows=6, cols=6, damping=0.5):
-    model = ClothModel.grid(rows, cols, 0.1, 0.01, stiffness=200.0, damping=damping)
-    v0 = rng.normal(scale=0.2, size=(rows * cols, 3)) + np.array([0.3, -0.1, 0.5])
-    return model, v0
 
 
 @pytest.mark.parametrize("name,offset_sign", [("explicit_euler", -1), ("symplectic_euler", +1),

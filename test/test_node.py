@@ -17,8 +17,6 @@ import pytest
 
 rclpy = pytest.importorskip("rclpy", reason="ROS 2 wheels are installed by `make`")
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
-from rcl_interfaces.msg import Parameter as ParameterMsg  # noqa: E402
-from rcl_interfaces.msg import ParameterType, ParameterValue  # noqa: E402
 from rcl_interfaces.srv import DescribeParameters, SetParameters, SetParametersAtomically  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
@@ -89,7 +87,7 @@ def ros():
 
         def set_params(self, node_name, params, atomically=False):
             """Set parameters through the standard parameter services; returns the results."""
-            msgs = [ParameterMsg(name=k, value=_value(v)) for k, v in params.items()]
+            msgs = [Parameter(k, value=v).to_parameter_msg() for k, v in params.items()]
             if atomically:
                 req = SetParametersAtomically.Request(parameters=msgs)
                 return [self.call(SetParametersAtomically, f"{node_name}/set_parameters_atomically",
@@ -105,18 +103,6 @@ def ros():
     client.destroy_node()
     ex.shutdown()
     rclpy.shutdown(context=ctx)
-
-
-def _value(v) -> ParameterValue:
-    if isinstance(v, bool):
-        return ParameterValue(type=ParameterType.PARAMETER_BOOL, bool_value=v)
-    if isinstance(v, int):
-        return ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=v)
-    if isinstance(v, float):
-        return ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=v)
-    if isinstance(v, str):
-        return ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=v)
-    return ParameterValue(type=ParameterType.PARAMETER_DOUBLE_ARRAY, double_array_value=[float(x) for x in v])
 
 
 def cloud_xyz(msg: PointCloud2) -> np.ndarray:
