@@ -72,7 +72,7 @@ class ClothSimNode(Node):
             if reason:
                 raise ValueError(reason)
         self.sim = self._build_simulator(self.cfg, self.scene)
-        reason = self._check_stability(self.cfg)
+        reason, self._stable_dt = self._check_stability(self.cfg)
         if reason:
             raise ValueError(reason)
 
@@ -83,7 +83,6 @@ class ClothSimNode(Node):
         self._history = collections.deque()  # (wall, sim time) over the last RTF_WINDOW s
         self._tick_costs = collections.deque(maxlen=120)  # (steps, step wall, publish wall)
         self._last_status = time.monotonic()
-        self._stable_dt = None
         self._pending_scene = None
 
         self.points_pub = self.create_publisher(PointCloud2, "~/points", 10)
@@ -122,10 +121,14 @@ class ClothSimNode(Node):
             self._stable_dt = math.inf if implicit else self.sim.stable_dt()
         return self._stable_dt
 
-    def _check_stability(self, cfg: dict, sim: Simulator | None = None) -> str | None:
-        """Refuse a dt above the explicit method's stable_dt (unless allow_unstable)."""
-        if cfg["allow_unstable"] or integrators.get(cfg["integrator"]).implicit:
-            return None
+    def _check_stability(self, cfg: dict, sim: Simulator | None = None):
+        """``(reason, stable_dt)``: the reason to refuse a dt above the explicit method's stable_dt
+        (``None`` if it is fine or ``allow_unstable``), and that limit when it was computed (``None``
+        otherwise), so the node need not compute it again once the change is applied."""
+        if integrators.get(cfg["integrator"]).implicit:
+            return None, math.inf
+        if cfg["allow_unstable"]:
+            return None, None
         sim = sim or self.sim
         probe = Simulator(sim.model, integrator=cfg["integrator"], dt=cfg["dt"], gravity=cfg["gravity"])
         for f in GRID_FAMILIES:
@@ -135,8 +138,8 @@ class ClothSimNode(Node):
         if cfg["dt"] > limit:
             return (f"dt={cfg['dt']:g} s is above the stable limit of {cfg['integrator']} for this "
                     f"cloth, stable_dt={limit:.4g} s: choose dt <= {limit:.4g}, an implicit "
-                    f"integrator, or set allow_unstable to true")
-        return None
+                    f"integrator, or set allow_unstable to true"), limit
+        return None, limit
 
     # ------------------------------------------------------------------ parameters
     def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
@@ -161,7 +164,7 @@ class ClothSimNode(Node):
                 return SetParametersResult(successful=False, reason=reason)
         try:
             new_sim = self._build_simulator(cand, scene) if topology else None
-            reason = self._check_stability(cand, new_sim)
+            reason, limit = self._check_stability(cand, new_sim)
         except ValueError as e:  # e.g. a scene whose pins fall outside the new grid size
             return SetParametersResult(successful=False, reason=str(e))
         if reason:
@@ -178,7 +181,7 @@ class ClothSimNode(Node):
             self._apply_live(cand)
         rate_changed = cand["publish_rate"] != self.cfg["publish_rate"]
         self.cfg = cand
-        self._stable_dt = None
+        self._stable_dt = limit  # None when not computed: stable_dt() computes it when asked
         if rate_changed:
             self.timer.cancel()
             self.destroy_timer(self.timer)
