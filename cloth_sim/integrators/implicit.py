@@ -418,6 +418,9 @@ class Kang(_LinearisedImplicitEuler):
 
     name = "kang"
     unconditionally_stable = False
+    # no scalar-mode amplification matrix (its lagged neighbours couple modes): not implicit
+    # Euler's, which it would otherwise inherit; see linear_stable_dt
+    amplification = Integrator.amplification
 
     def __init__(self, system, sweeps: int = 1):
         super().__init__(system)
