@@ -8,6 +8,8 @@
     Print ms/step of the implicit methods at a large step, CG vs direct solve, CG iterations.
 ``cloth-sim bench node [--sizes 32 64] [--seconds 10]``
     Print the node's real-time factor with and without a ~/points subscriber (needs rclpy).
+``cloth-sim record -o BAG [TOPIC ...]``, ``play BAG``, ``info BAG``, ``reindex BAG``
+    rosbag2-compatible MCAP bags: record the ROS graph, replay it, inspect it, repair an unclosed bag.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import sys
 import time
 
 from . import integrators
+from .bag.store import BagError
 from .scene import SceneError, load_scene
 from .simulator import SimulationDiverged
 
@@ -68,6 +71,37 @@ def _bench_node(args) -> int:
     return 0
 
 
+def _bench_record(args) -> int:
+    from .bag.bench import print_record_table
+    print_record_table(args.size, args.rate, args.seconds)
+    return 0
+
+
+def _record(args) -> int:
+    from .bag.record import main as record_main
+    return record_main(args)
+
+
+def _play(args) -> int:
+    if not args.delay >= 0:
+        raise BagError(f"--delay must be ≥ 0 s, got {args.delay}")
+    from .bag.play import main as play_main
+    return play_main(args)
+
+
+def _info(args) -> int:
+    from .bag.store import bag_info, format_info
+    print(format_info(bag_info(args.bag)))
+    return 0
+
+
+def _reindex(args) -> int:
+    from .bag.store import reindex
+    for line in reindex(args.bag):
+        print(line)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cloth-sim", description=__doc__.split("\n")[0])
     sub = p.add_subparsers(dest="command", required=True)
@@ -97,6 +131,38 @@ def build_parser() -> argparse.ArgumentParser:
     nb.add_argument("--dt", type=float, default=1e-3)
     nb.add_argument("--rate", type=float, default=60.0, help="publish_rate (Hz)")
     nb.set_defaults(func=_bench_node)
+    br = bsub.add_parser("record", help="write throughput of `cloth-sim record` against a running node")
+    br.add_argument("--size", type=int, default=64, help="cloth N×N (default 64)")
+    br.add_argument("--rate", type=float, default=60.0, help="the node's publish_rate (Hz, default 60)")
+    br.add_argument("--seconds", type=float, default=10.0, help="recorded wall time")
+    br.set_defaults(func=_bench_record)
+
+    rec = sub.add_parser("record", help="record topics into a rosbag2 (MCAP) bag, like `ros2 bag record`")
+    rec.add_argument("topics", nargs="*", metavar="TOPIC",
+                     help="topics to record (default: /cloth_sim/points /cloth_sim/stats /diagnostics "
+                          "/parameter_events)")
+    rec.add_argument("-o", "--output", metavar="BAG", help="bag directory to create (default: rosbag2_<date>)")
+    rec.add_argument("-a", "--all", action="store_true", help="record every topic (except /rosout)")
+    rec.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    rec.add_argument("--max-messages", type=int, metavar="N", help="stop after N messages")
+    rec.add_argument("--overwrite", action="store_true", help="replace an existing bag directory")
+    rec.set_defaults(func=_record)
+    pl = sub.add_parser("play", help="replay a bag's messages with their recorded timing and QoS")
+    pl.add_argument("bag", metavar="BAG", help="bag directory or .mcap file")
+    pl.add_argument("--rate", type=float, default=1.0, help="playback speed factor (default 1)")
+    pl.add_argument("--loop", action="store_true", help="play again from the start when done")
+    pl.add_argument("--topics", nargs="+", metavar="TOPIC", help="play only these topics")
+    pl.add_argument("--start-offset", type=float, default=0.0, metavar="S",
+                    help="skip the first S seconds of the bag")
+    pl.add_argument("--delay", type=float, default=0.0, metavar="S",
+                    help="wait S seconds after creating the publishers (lets subscribers connect)")
+    pl.set_defaults(func=_play)
+    inf = sub.add_parser("info", help="topics, types, counts, duration and size of a bag, like `ros2 bag info`")
+    inf.add_argument("bag", metavar="BAG", help="bag directory or .mcap file")
+    inf.set_defaults(func=_info)
+    ri = sub.add_parser("reindex", help="make a bag whose recorder died whole again (MCAP summary, metadata.yaml)")
+    ri.add_argument("bag", metavar="BAG", help="bag directory or .mcap file")
+    ri.set_defaults(func=_reindex)
     return p
 
 
@@ -104,6 +170,9 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
+    except BagError as e:
+        print(f"cloth-sim: error: {e}", file=sys.stderr)
+        return 1
     except (SceneError, ValueError) as e:
         print(f"cloth-sim: error: {e}", file=sys.stderr)
         return 2
