@@ -34,8 +34,9 @@ run: install
 test: install
 	$(PY) -m pytest test/ $(PYTEST_ARGS)
 
+# the full benchmark run docs/BENCHMARKS.md reports (about 10 minutes on 2 cores)
 bench: install
-	$(VENV)/bin/cloth-sim bench steps --sizes 32 64 128
+	for b in work-precision stability scaling; do $(VENV)/bin/cloth-sim bench $$b --out docs/bench/$$b || exit 1; done
 
 clean:
 	rm -rf $(VENV) .ros_log build install log *.egg-info

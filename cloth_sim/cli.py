@@ -77,6 +77,14 @@ def _bench_record(args) -> int:
     return 0
 
 
+def _bench_suite(args) -> int:
+    import importlib
+    from pathlib import Path
+    module = importlib.import_module(f".bench.{args.bench.replace('-', '_')}", __package__)
+    module.main(Path(args.out or f"bench_out/{args.bench}"), quick=args.quick)
+    return 0
+
+
 def _record(args) -> int:
     from .bag.record import main as record_main
     return record_main(args)
@@ -131,6 +139,13 @@ def build_parser() -> argparse.ArgumentParser:
     nb.add_argument("--dt", type=float, default=1e-3)
     nb.add_argument("--rate", type=float, default=60.0, help="publish_rate (Hz)")
     nb.set_defaults(func=_bench_node)
+    for name, text in [("work-precision", "wall time against error on hang16, reference DOP853; table, CSV, plot"),
+                       ("stability", "largest stable dt by bisection vs linear theory; stress scenarios"),
+                       ("scaling", "ms/step against N, fitted exponents; what skipping unused terms buys")]:
+        sp = bsub.add_parser(name, help=text)
+        sp.add_argument("--out", metavar="DIR", help=f"output folder (default bench_out/{name})")
+        sp.add_argument("--quick", action="store_true", help="a short run (CI)")
+        sp.set_defaults(func=_bench_suite)
     br = bsub.add_parser("record", help="write throughput of `cloth-sim record` against a running node")
     br.add_argument("--size", type=int, default=64, help="cloth N×N (default 64)")
     br.add_argument("--rate", type=float, default=60.0, help="the node's publish_rate (Hz, default 60)")

@@ -1,0 +1,140 @@
+"""``cloth-sim bench scaling``: ms/step against grid size per integrator, with the fitted exponent of
+cost against particle count, and what skipping unused force terms buys.
+
+Sizes N = 8 … 256 (N×N particles; the hanging scene resized: 1 m square, its stiffness, damping and
+mass, strain limit off, dt = 1 ms for the explicit methods and Kang, 1/60 s for implicit Euler). An
+integrator stops growing N once one step took more than ``budget`` seconds. The exponent is the
+least-squares slope of log(ms/step) against log(particles) over N ≥ 32 (below, fixed per-step overheads
+dominate). "Skipping" times the N = 64 hanging scene with wind, bend springs, Provot's strain limit and
+damping each switched off in turn (a term that is off is never evaluated), and the node's tick with and
+without a ~/points subscriber.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..model import ClothModel
+from ..scene import load_scene
+from ..simulator import SimulationDiverged, Simulator
+from ._out import fmt, machine, markdown_table, progress, pyplot, write_rows
+from .steps import time_steps
+
+METHODS = ["explicit_euler", "symplectic_euler", "midpoint", "rk4", "verlet", "implicit_euler",
+           "implicit_euler_prefactored", "kang"]
+
+
+def build(n: int, integrator: str, *, wind=None, bend=True, strain_limit=None, damping=True) -> Simulator:
+    scene = load_scene("hanging")
+    k = dict(scene.stiffness)
+    c = dict(scene.damping) if damping else {f: 0.0 for f in scene.damping}
+    if not bend:
+        k["bend"], c["bend"] = 0.0, 0.0
+    cols = [p[1] for p in scene.pinned]
+    pins = [(0, 0), (0, n - 1)] if cols else []
+    model = ClothModel.grid(n, n, 1.0 / (n - 1), scene.particle_mass, stiffness=k, damping=c, pinned=pins,
+                            model=scene.model)
+    dt = 1.0 / 60 if integrator in ("implicit_euler", "implicit_euler_prefactored") else 1e-3
+    return Simulator(model, integrator=integrator, dt=dt, gravity=scene.gravity, wind=wind,
+                     strain_limit=strain_limit)
+
+
+def fit_exponent(rows: list[dict]) -> float:
+    pts = [(r["particles"], r["ms_per_step"]) for r in rows if r["N"] >= 32 and r["ms_per_step"] > 0]
+    if len(pts) < 2:
+        return math.nan
+    return float(np.polyfit(np.log([p[0] for p in pts]), np.log([p[1] for p in pts]), 1)[0])
+
+
+def main(out: Path, quick: bool = False) -> dict:
+    t_start = time.perf_counter()
+    sizes = [8, 16, 32, 64] if quick else [8, 16, 32, 64, 128, 256]
+    seconds = 0.2 if quick else 1.0
+    budget = 0.05 if quick else 0.5
+    methods = ["symplectic_euler", "rk4", "implicit_euler_prefactored"] if quick else METHODS
+    rows = []
+    for name in progress(methods, "scaling"):
+        for n in sizes:
+            # cost per step does not depend on dt for the explicit methods; one that diverges at 1 ms
+            # (explicit Euler, midpoint: no stable step with this little damping) is timed at a smaller dt
+            for shrink in (1, 10, 100, 1000):
+                sim = build(n, name)
+                sim.dt = sim.dt / shrink
+                try:
+                    t0 = time.perf_counter()
+                    sim.step(1)
+                    first = time.perf_counter() - t0
+                    ms = 1e3 * time_steps(sim, seconds, repeats=3)
+                    break
+                except SimulationDiverged:
+                    continue
+            else:
+                continue
+            rows.append({"integrator": name, "N": n, "particles": n * n, "ms_per_step": ms,
+                         "dt": sim.dt, "ms_per_simulated_s": ms / sim.dt / 1e3 * 1e3})
+            if ms / 1e3 > budget or first > 5 * budget:
+                break
+    exponents = {m: fit_exponent([r for r in rows if r["integrator"] == m]) for m in methods}
+
+    # what skipping buys: N = 64 hanging scene, symplectic Euler
+    n_skip = 32 if quick else 64
+    full = dict(wind=(0.0, 2.0, 0.0), bend=True, strain_limit=0.1, damping=True)
+    variants = [("everything on (wind, bend, strain limit, damping)", {}),
+                ("no wind", {"wind": None}), ("no bend springs", {"bend": False}),
+                ("no strain limit", {"strain_limit": None}), ("no damping", {"damping": False}),
+                ("none of them", {"wind": None, "bend": False, "strain_limit": None, "damping": False})]
+    skip_rows = []
+    for label, change in progress(variants, "skipping"):
+        sim = build(n_skip, "symplectic_euler", **{**full, **change})
+        terms = list(sim.active_terms) + (["strain_limit"] if sim.strain_limit is not None else [])
+        skip_rows.append({"variant": label, "N": n_skip, "terms": ", ".join(terms),
+                          "ms_per_step": 1e3 * time_steps(sim, seconds, repeats=3)})
+    node_rows = []
+    if not quick:
+        try:
+            from ..ros.bench import measure
+        except ImportError:
+            measure = None
+        if measure is not None:
+            for subscribe in (False, True):
+                m = measure(64, 5.0, subscribe, "symplectic_euler", 1e-3, 60.0)
+                node_rows.append({"N": 64, "subscriber": subscribe, "tick_ms": m["tick_ms"],
+                                  "ms_per_step": m["ms_per_step"], "rtf": m["rtf"]})
+    write_rows(out, "scaling", rows, {"exponents": exponents, "skipping": skip_rows, "node": node_rows})
+
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(7.5, 5.2))
+    for name in methods:
+        rs = [r for r in rows if r["integrator"] == name]
+        ax.loglog([r["particles"] for r in rs], [r["ms_per_step"] for r in rs], "o-",
+                  label=f"{name} (∝ n^{exponents[name]:.2f})" if exponents[name] == exponents[name] else name, ms=4)
+    ax.set_xlabel("particles n = N²")
+    ax.set_ylabel("ms per step")
+    ax.set_title("hanging scene resized to N×N, strain limit off (min of 3)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "scaling.png", dpi=110)
+    plt.close(fig)
+
+    table = markdown_table(["integrator"] + [f"N={n}" for n in sizes] + ["exponent (N ≥ 32)"],
+                           [[m] + [fmt(next((r["ms_per_step"] for r in rows if r["integrator"] == m and r["N"] == n),
+                                        math.nan)) for n in sizes] + [fmt(exponents[m])] for m in methods])
+    skip_table = markdown_table(["variant", "active terms", "ms/step", "vs everything on"],
+                                [[r["variant"], r["terms"], fmt(r["ms_per_step"]),
+                                  f"{r['ms_per_step'] / skip_rows[0]['ms_per_step']:.2f}×"] for r in skip_rows])
+    node_table = (markdown_table(["N", "~/points subscriber", "tick wall (ms)", "ms/step", "real-time factor"],
+                                 [[r["N"], "yes" if r["subscriber"] else "no", fmt(r["tick_ms"]), fmt(r["ms_per_step"]),
+                                   fmt(r["rtf"])] for r in node_rows])
+                  if node_rows else "(not run: --quick, or rclpy missing)")
+    text = (f"# scaling — {machine()}\n\nms per step (min of 3); a blank cell: the previous size exceeded "
+            f"the {budget:g} s/step budget.\n\n{table}\n\n## What skipping buys (N = {n_skip}, symplectic Euler, "
+            f"dt = 1 ms)\n\n{skip_table}\n\n## The node with and without a subscriber (N = 64, 60 Hz, "
+            f"strain limit 0.1)\n\n{node_table}\n\n(run time {time.perf_counter() - t_start:.0f} s)\n")
+    (out / "scaling.md").write_text(text)
+    print(text)
+    return {"rows": rows, "exponents": exponents, "skipping": skip_rows, "node": node_rows}
