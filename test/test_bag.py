@@ -176,7 +176,7 @@ def test_record_play_record_gives_the_same_bytes_in_the_same_order(node_bag, tmp
         assert play.returncode == 0, play.stderr
         time.sleep(0.5)
     finally:
-        out, err = stop(rec)
+        out, err = stop(rec, signal.SIGTERM)
     assert rec.returncode == 0, err
     first, second = by_topic(bag), by_topic(again)
     for topic in NODE_TOPICS:
@@ -192,6 +192,34 @@ def test_record_play_record_gives_the_same_bytes_in_the_same_order(node_bag, tmp
         if len(a) > 10:
             span_a, span_b = a[-1].log_time - a[0].log_time, b[-1].log_time - b[0].log_time
             assert span_b == pytest.approx(span_a, rel=0.02)
+
+
+def test_record_stops_after_max_messages(tmp_path):
+    domain = next_domain()
+    bag = tmp_path / "counted"
+    node = start_node(domain, "rows:=8", "cols:=8", "spacing:=0.1", "publish_rate:=30.0")
+    try:
+        rec = subprocess.run([str(BIN / "cloth-sim"), "record", "-o", str(bag), "/cloth_sim/stats",
+                              "--max-messages", "25"], env=env(domain), capture_output=True, text=True, timeout=60)
+    finally:
+        stop(node)
+    assert rec.returncode == 0, rec.stderr
+    info = bag_info(bag)
+    assert info.closed and info.message_count == 25
+    assert [t.count for t in info.topics] == [25]
+
+
+def test_sigint_closes_an_empty_recording(tmp_path):
+    bag = tmp_path / "empty"
+    rec = cloth_sim(next_domain(), "record", "-o", str(bag), "/nobody/publishes/this")
+    wait_for_line(rec, "recording to", 1, 30)
+    out, err = stop(rec, signal.SIGINT)
+    assert rec.returncode == 0 and "Traceback" not in err, err
+    assert "never published" in out
+    info = bag_info(bag)
+    assert info.closed and info.message_count == 0 and info.topics == []
+    meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert meta["message_count"] == 0 and meta["topics_with_message_count"] == []
 
 
 def collect_while_playing(domain, bag, topic, msg_type, *play_args, expect=None, timeout=60):
