@@ -93,6 +93,8 @@ def _record(args) -> int:
 def _play(args) -> int:
     if not args.delay >= 0:
         raise BagError(f"--delay must be ≥ 0 s, got {args.delay}")
+    if not args.wait_for_all_acked >= 0:
+        raise BagError(f"--wait-for-all-acked must be ≥ 0 s, got {args.wait_for_all_acked}")
     from .bag.play import main as play_main
     return play_main(args)
 
@@ -171,6 +173,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="skip the first S seconds of the bag")
     pl.add_argument("--delay", type=float, default=0.0, metavar="S",
                     help="wait S seconds after creating the publishers (lets subscribers connect)")
+    pl.add_argument("--wait-for-all-acked", type=float, default=5.0, metavar="S",
+                    help="at the end, wait up to S seconds for reliable subscribers to acknowledge (default 5)")
     pl.set_defaults(func=_play)
     inf = sub.add_parser("info", help="topics, types, counts, duration and size of a bag, like `ros2 bag info`")
     inf.add_argument("bag", metavar="BAG", help="bag directory or .mcap file")

@@ -87,6 +87,28 @@ def assert_gap_free(stats_msgs, dt):
         assert b.sim_time == pytest.approx(a.sim_time + b.steps * dt, abs=1e-9), "a ~/stats message is missing"
 
 
+def wait_until_publishing(domain: int, timeout: float = 90.0) -> None:
+    """Until the node process sends ~/stats (its first tick comes after numba has compiled, which takes
+    a while on a machine whose numba cache is cold)."""
+    from cloth_sim.msg import Stats
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    node = rclpy.create_node("start_probe", context=ctx)
+    got = []
+    node.create_subscription(Stats, "/cloth_sim/stats", got.append, 10)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    try:
+        end = time.monotonic() + timeout
+        while time.monotonic() < end and not got:
+            ex.spin_once(timeout_sec=0.1)
+    finally:
+        ex.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=ctx)
+    assert got, "the node never published"
+
+
 @pytest.fixture(scope="module")
 def node_bag(tmp_path_factory):
     """Record a running node (16×16, 30 Hz) for 4 s with the default topics."""
@@ -94,6 +116,7 @@ def node_bag(tmp_path_factory):
     bag = tmp_path_factory.mktemp("bags") / "node"
     node = start_node(domain, "rows:=16", "cols:=16", "spacing:=0.0667", "publish_rate:=30.0")
     try:
+        wait_until_publishing(domain)
         rec = cloth_sim(domain, "record", "-o", str(bag), "--duration", "4")
         out, err = rec.communicate(timeout=60)
     finally:
@@ -200,7 +223,7 @@ def test_record_stops_after_max_messages(tmp_path):
     node = start_node(domain, "rows:=8", "cols:=8", "spacing:=0.1", "publish_rate:=30.0")
     try:
         rec = subprocess.run([str(BIN / "cloth-sim"), "record", "-o", str(bag), "/cloth_sim/stats",
-                              "--max-messages", "25"], env=env(domain), capture_output=True, text=True, timeout=60)
+                              "--max-messages", "25"], env=env(domain), capture_output=True, text=True, timeout=150)
     finally:
         stop(node)
     assert rec.returncode == 0, rec.stderr
@@ -236,7 +259,9 @@ def collect_while_playing(domain, bag, topic, msg_type, *play_args, expect=None,
         end = time.monotonic() + timeout
         while time.monotonic() < end and play.poll() is None:
             ex.spin_once(timeout_sec=0.05)
-        ex.spin_until_future_complete(rclpy.task.Future(), timeout_sec=0.5)
+        drain = time.monotonic() + 1.0
+        while time.monotonic() < drain:
+            ex.spin_once(timeout_sec=0.05)
         out, err = play.communicate(timeout=10)
         assert play.returncode == 0, err
     finally:
@@ -282,6 +307,7 @@ def test_a_killed_recorder_leaves_a_bag_that_info_reindex_and_play_recover(tmp_p
     node = start_node(domain, "rows:=48", "cols:=48", "spacing:=0.02", "publish_rate:=60.0",
                       "strain_limit:=0.0")
     try:
+        wait_until_publishing(domain)
         rec = cloth_sim(domain, "record", "-o", str(bag), "/cloth_sim/points", "/cloth_sim/stats")
         wait_for_line(rec, "recording /", 2, 30)
         time.sleep(3.0)
@@ -313,6 +339,36 @@ def test_a_killed_recorder_leaves_a_bag_that_info_reindex_and_play_recover(tmp_p
     def key(m):
         return (m.header.stamp.sec, m.header.stamp.nanosec, m.height, m.width, bytes(m.data))
     assert [key(m) for m in got] == [key(deserialize_message(bytes(c.data), PointCloud2)) for c in clouds]
+
+
+def test_play_start_offset_rate_and_loop(small_bag):
+    from std_msgs.msg import String
+    domain = next_domain()
+    # the bag: 200 messages "w0".."w199", 10 ms apart
+    got = collect_while_playing(domain, small_bag, "/words", String, "--start-offset", "1.0", "--rate", "4")
+    assert [m.data for m in got] == [f"w{i}" for i in range(100, 200)]
+
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    node = rclpy.create_node("loop_probe", context=ctx)
+    looped = []
+    node.create_subscription(String, "/words", looped.append, 1000)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    play = cloth_sim(domain, "play", str(small_bag), "--loop", "--rate", "10", "--delay", "3")
+    try:
+        end = time.monotonic() + 30
+        while time.monotonic() < end and len(looped) < 450:
+            ex.spin_once(timeout_sec=0.05)
+    finally:
+        out, err = stop(play, signal.SIGINT)
+        ex.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=ctx)
+    assert play.returncode == 0 and "Traceback" not in err, err
+    data = [m.data for m in looped]
+    first = data.index("w0")
+    assert data[first:first + 400] == [f"w{i}" for i in range(200)] * 2
 
 
 # ------------------------------------------------------------------------------------------ bad input

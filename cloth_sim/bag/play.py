@@ -52,13 +52,14 @@ def qos_from_offer(offer: dict | None) -> QoSProfile:
 
 class Player:
     def __init__(self, path, *, rate: float = 1.0, loop: bool = False, topics: list[str] | None = None,
-                 start_offset: float = 0.0, context=None, log=print):
+                 start_offset: float = 0.0, ack_timeout: float = 5.0, context=None, log=print):
         if not rate > 0 or rate != rate or rate == float("inf"):
             raise BagError(f"--rate must be a finite number > 0, got {rate}")
         if not start_offset >= 0:
             raise BagError(f"--start-offset must be ≥ 0 s, got {start_offset}")
         self.info = bag_info(path)
         self.path, self.rate, self.loop, self.log = path, rate, loop, log
+        self.ack_timeout = ack_timeout
         known = {t.name: t for t in self.info.topics}
         if topics:
             unknown = [t for t in topics if t not in known]
@@ -108,7 +109,18 @@ class Player:
                 self.publishers[topic.name].publish(bytes(msg.data))
                 self.published += 1
             if not self.loop or self.stop_requested:
+                self.wait_for_all_acked()
                 return time.perf_counter() - wall0
+
+    def wait_for_all_acked(self) -> bool:
+        """Let reliable subscribers acknowledge what was sent before the publishers go away (a DDS writer
+        destroyed at exit drops what it has not delivered yet); at most ``ack_timeout`` seconds."""
+        deadline = time.monotonic() + self.ack_timeout
+        ok = True
+        for pub in self.publishers.values():
+            left = max(0.0, deadline - time.monotonic())
+            ok &= bool(pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))))
+        return ok
 
     def close(self) -> None:
         self.node.destroy_node()
@@ -120,7 +132,7 @@ def main(args) -> int:
     player = None
     try:
         player = Player(args.bag, rate=args.rate, loop=args.loop, topics=args.topics,
-                        start_offset=args.start_offset, context=context)
+                        start_offset=args.start_offset, ack_timeout=args.wait_for_all_acked, context=context)
 
         def stop(signum, frame):
             player.stop_requested = True
