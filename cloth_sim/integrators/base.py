@@ -40,7 +40,8 @@ class Integrator:
         raise NotImplementedError
 
     def amplification(self, h: float, omega: float, zeta: float) -> np.ndarray:
-        """2×2 matrix taking ``(x, v)`` to the next step for ``x'' + 2ζω x' + ω² x = 0``."""
+        """The matrix taking the method's state to the next step for ``x'' + 2ζω x' + ω² x = 0``:
+        2×2 on ``(x, v)`` for one-step methods (a multistep method uses its own history)."""
         raise NotImplementedError
 
     def stable_dt(self, omega: float, zeta: float = 0.0) -> float:
