@@ -47,8 +47,28 @@ def write_rows(out: Path, stem: str, rows: list[dict], extra: dict | None = None
         w = csv.DictWriter(f, fieldnames=keys)
         w.writeheader()
         w.writerows(rows)
-    (out / f"{stem}.json").write_text(json.dumps({"machine": machine(), **(extra or {}), "rows": rows},
-                                                 indent=1, default=float))
+    doc = _strict({"machine": machine(), **(extra or {}), "rows": rows})
+    (out / f"{stem}.json").write_text(json.dumps(doc, indent=1, default=float, allow_nan=False))
+
+
+def _strict(value):
+    """Standard JSON has no NaN or infinity: NaN (not applicable, failed run) becomes null and an
+    infinite value (no stability limit) the string "inf"."""
+    if isinstance(value, dict):
+        return {k: _strict(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_strict(v) for v in value]
+    if isinstance(value, float) or type(value).__module__ == "numpy":
+        try:
+            x = float(value)
+        except (TypeError, ValueError):
+            return value
+        if x != x:
+            return None
+        if x in (float("inf"), float("-inf")):
+            return "inf" if x > 0 else "-inf"
+        return x if isinstance(value, float) else value.item()
+    return value
 
 
 def markdown_table(headers: list[str], rows: list[list]) -> str:
