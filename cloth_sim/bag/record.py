@@ -20,7 +20,6 @@ from pathlib import Path
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.expand_topic_name import expand_topic_name
-from rclpy.exceptions import InvalidTopicNameException
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from rclpy.validate_full_topic_name import validate_full_topic_name
@@ -38,7 +37,7 @@ def normalise_topics(topics: list[str]) -> list[str]:
         try:
             full = expand_topic_name(name, "cloth_sim_recorder", "/")
             validate_full_topic_name(full)
-        except (InvalidTopicNameException, ValueError, Exception) as e:  # rclpy raises several kinds
+        except Exception as e:  # rclpy raises InvalidTopicNameException, ValueError, RCLError, …
             reason = str(e).splitlines()[0] if str(e) else type(e).__name__
             raise BagError(f"invalid topic name {name!r}: {reason}") from None
         out.append(full)

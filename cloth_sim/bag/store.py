@@ -27,10 +27,9 @@ from pathlib import Path
 from typing import Iterator
 
 import yaml
-from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, DataEnd, Footer, Message, Schema
-from mcap.stream_reader import CRCValidationError, StreamReader
+from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
 VERSION = 9
@@ -40,9 +39,9 @@ INFINITE_NS = 2**63 - 1
 DEFINITION_SEPARATOR = "\n" + "=" * 80 + "\n"
 _BUILTIN_TYPES = {"bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
                   "int32", "uint32", "int64", "uint64", "string", "wstring"}
-# What parsing a damaged file raises varies (mcap's own errors, CRC mismatches, struct and zstd errors,
+# What parsing a damaged file raises varies (mcap's McapError, CRCValidationError, struct and zstd errors,
 # unicode errors in names, …): any of them means "damaged here".
-_MCAP_ERRORS = (McapError, CRCValidationError, Exception)
+_MCAP_ERRORS = Exception
 
 
 class BagError(Exception):
@@ -480,7 +479,6 @@ def _scan(path: Path, info: FileInfo, strict: bool = False) -> Iterator:
 
 def _chunk_records(chunk: Chunk) -> list:
     """A chunk's records, checking its CRC, so a damaged chunk is refused whole."""
-    from mcap.stream_reader import breakup_chunk
     return breakup_chunk(chunk, validate_crc=True)
 
 
