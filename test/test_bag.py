@@ -117,12 +117,15 @@ def node_bag(tmp_path_factory):
     node = start_node(domain, "rows:=16", "cols:=16", "spacing:=0.0667", "publish_rate:=30.0")
     try:
         wait_until_publishing(domain)
-        rec = cloth_sim(domain, "record", "-o", str(bag), "--duration", "4")
-        out, err = rec.communicate(timeout=60)
+        rec = cloth_sim(domain, "record", "-o", str(bag))
+        # the four default topics found (discovery of another process takes 0.3–3 s), then 4 s of recording
+        lines = wait_for_line(rec, "recording /", 4, 60)
+        time.sleep(4.0)
+        out, err = stop(rec, signal.SIGINT)
     finally:
         stop(node)
     assert rec.returncode == 0, err
-    return bag, out
+    return bag, "".join(lines) + out
 
 
 def test_a_recorded_node_decodes_with_independent_readers(node_bag):
@@ -180,11 +183,14 @@ def test_a_recorded_node_decodes_with_independent_readers(node_bag):
     # nothing the node published between the first and the last recorded tick is missing
     stats = decoded["/cloth_sim/stats"]
     assert_gap_free(stats, stats[0].dt)
-    stat_stamps = {(s.header.stamp.sec, s.header.stamp.nanosec) for s in stats}
+    # every tick sends a cloud and a stats message with one stamp: where both topics were being recorded
+    # (their subscriptions match at slightly different times), the two sets of stamps are the same
+    stat_stamps = [(s.header.stamp.sec, s.header.stamp.nanosec) for s in stats]
     cloud_stamps = [(c.header.stamp.sec, c.header.stamp.nanosec) for c in decoded["/cloth_sim/points"]]
-    inner = [s for s in cloud_stamps[1:-1]]
-    assert all(s in stat_stamps for s in inner), "each cloud belongs to a recorded tick"
-    assert len(cloud_stamps) >= len(stats) - 2
+    lo, hi = max(stat_stamps[0], cloud_stamps[0]), min(stat_stamps[-1], cloud_stamps[-1])
+    window = [t for t in stat_stamps if lo <= t <= hi]
+    assert len(window) > 80
+    assert window == [t for t in cloud_stamps if lo <= t <= hi], "a cloud or a stats message is missing"
 
 
 def test_record_play_record_gives_the_same_bytes_in_the_same_order(node_bag, tmp_path):
@@ -194,7 +200,7 @@ def test_record_play_record_gives_the_same_bytes_in_the_same_order(node_bag, tmp
     rec = cloth_sim(domain, "record", "-o", str(again), *NODE_TOPICS)
     try:
         wait_for_line(rec, "recording to", 1, 30)
-        play = subprocess.run([str(BIN / "cloth-sim"), "play", str(bag), "--delay", "3", "--topics", *NODE_TOPICS],
+        play = subprocess.run([str(BIN / "cloth-sim"), "play", str(bag), "--delay", "5", "--topics", *NODE_TOPICS],
                               env=env(domain), capture_output=True, text=True, timeout=60)
         assert play.returncode == 0, play.stderr
         time.sleep(0.5)
@@ -232,6 +238,16 @@ def test_record_stops_after_max_messages(tmp_path):
     assert [t.count for t in info.topics] == [25]
 
 
+def test_duration_ends_a_recording(tmp_path):
+    bag = tmp_path / "timed"
+    start = time.monotonic()
+    rec = subprocess.run([str(BIN / "cloth-sim"), "record", "-o", str(bag), "/nobody/publishes/this",
+                          "--duration", "1.5"], env=env(next_domain()), capture_output=True, text=True, timeout=60)
+    assert rec.returncode == 0, rec.stderr
+    assert "in 1.5" in rec.stdout and time.monotonic() - start < 30
+    assert bag_info(bag).closed
+
+
 def test_sigint_closes_an_empty_recording(tmp_path):
     bag = tmp_path / "empty"
     rec = cloth_sim(next_domain(), "record", "-o", str(bag), "/nobody/publishes/this")
@@ -255,7 +271,7 @@ def collect_while_playing(domain, bag, topic, msg_type, *play_args, expect=None,
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(node)
     try:
-        play = cloth_sim(domain, "play", str(bag), "--delay", "3", *play_args)
+        play = cloth_sim(domain, "play", str(bag), "--delay", "5", *play_args)
         end = time.monotonic() + timeout
         while time.monotonic() < end and play.poll() is None:
             ex.spin_once(timeout_sec=0.05)
@@ -355,7 +371,7 @@ def test_play_start_offset_rate_and_loop(small_bag):
     node.create_subscription(String, "/words", looped.append, 1000)
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(node)
-    play = cloth_sim(domain, "play", str(small_bag), "--loop", "--rate", "10", "--delay", "3")
+    play = cloth_sim(domain, "play", str(small_bag), "--loop", "--rate", "10", "--delay", "5")
     try:
         end = time.monotonic() + 30
         while time.monotonic() < end and len(looped) < 450:
