@@ -320,13 +320,20 @@ class BagWriter:
             return self.metadata
         self._closed = True
         f = FileInfo(self.file_path, 0, True, self.message_count, self.start, self.end)
-        self.metadata = metadata_dict([f], list(self.topics.values()), self.path)
-        self._writer.add_metadata("rosbag2", {"serialized_metadata": _dump_yaml(self.metadata).strip()})
-        self._writer.finish()
+        self.metadata = _finish_mcap(self._writer, f, list(self.topics.values()), self.path)
         self._file.close()
         _write_atomically(self.path / "metadata.yaml", _dump_yaml({"rosbag2_bagfile_information":
                                                                    self.metadata}))
         return self.metadata
+
+
+def _finish_mcap(writer: Writer, info: FileInfo, topics: list[TopicInfo], base: Path) -> dict:
+    """Close an MCAP file as rosbag2 does: the ``rosbag2`` metadata record (metadata.yaml's content
+    without its top key), then the summary. Returns that metadata."""
+    meta = metadata_dict([info], topics, base)
+    writer.add_metadata("rosbag2", {"serialized_metadata": _dump_yaml(meta).strip()})
+    writer.finish()
+    return meta
 
 
 def _remove_bag(path: Path) -> None:
@@ -398,10 +405,7 @@ def file_info(path: Path) -> FileInfo:
     """What one MCAP file holds: from its summary when it was closed, else by reading it up to the
     last complete record (an unclosed file)."""
     size = path.stat().st_size
-    with open(path, "rb") as f:
-        f.seek(max(0, size - len(MAGIC)))
-        closed = size > 2 * len(MAGIC) and f.read() == MAGIC
-    if closed:
+    if _is_closed(path):
         try:
             with open(path, "rb") as f:
                 summary = make_reader(f).get_summary()
@@ -421,6 +425,14 @@ def file_info(path: Path) -> FileInfo:
     for _ in _scan(path, info):
         pass
     return info
+
+
+def _is_closed(path: Path) -> bool:
+    """Whether the file ends with the closing MCAP magic (after its footer): a writer finished it."""
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        f.seek(max(0, size - len(MAGIC)))
+        return size > 2 * len(MAGIC) and f.read() == MAGIC
 
 
 def _topic_of(ch: Channel, schema: Schema | None, count: int) -> TopicInfo:
@@ -493,11 +505,8 @@ def iter_messages(path, topics: set[str] | None = None) -> Iterator[tuple[TopicI
     ends at its last complete chunk."""
     _, files, _ = bag_files(path)
     for f in files:
-        size = f.stat().st_size
-        with open(f, "rb") as fh:
-            fh.seek(max(0, size - len(MAGIC)))
-            closed = fh.read() == MAGIC
-        info = FileInfo(f, size, closed)
+        closed = _is_closed(f)
+        info = FileInfo(f, f.stat().st_size, closed)
         for r in _scan(f, info, strict=closed):
             if isinstance(r, Message):
                 topic = info.topics[r.channel_id]
@@ -528,19 +537,17 @@ def reindex(path) -> list[str]:
     done = []
     infos = []
     for f in files:
-        info = file_info(f)
-        if not info.closed:
+        if not _is_closed(f):               # (file_info would scan the whole file that _rewrite reads)
             backup = f.with_name(f.name + ".unclosed")
             if backup.exists():
                 raise BagError(f"{backup} already exists; move it away before reindexing")
             tmp = f.with_name(f.name + ".reindexing")
-            _rewrite(f, tmp)
+            count = _rewrite(f, tmp)
             os.replace(f, backup)
             os.replace(tmp, f)
-            info = file_info(f)
-            done.append(f"{f.name}: rewrote {info.message_count} messages from the complete chunks "
+            done.append(f"{f.name}: rewrote {count} messages from the complete chunks "
                         f"(original kept as {backup.name})")
-        infos.append(info)
+        infos.append(file_info(f))
     if base is not None:
         meta_path = base / "metadata.yaml"
         topics = BagInfo(base, infos, None).topics
@@ -560,8 +567,9 @@ def _split_index(p: Path) -> int:
     return int(m.group(1)) if m else 0
 
 
-def _rewrite(src: Path, dst: Path) -> None:
-    """Copy every readable schema, channel and message of ``src`` into a complete MCAP file ``dst``."""
+def _rewrite(src: Path, dst: Path) -> int:
+    """Copy every readable schema, channel and message of ``src`` into a complete MCAP file ``dst``;
+    returns the number of messages copied."""
     info = FileInfo(src, src.stat().st_size, False)
     with open(dst, "wb") as out:
         w = Writer(out, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD)
@@ -575,10 +583,9 @@ def _rewrite(src: Path, dst: Path) -> None:
                                                        schema_ids.get(r.schema_id, 0), dict(r.metadata))
             elif r.channel_id in channel_ids:
                 w.add_message(channel_ids[r.channel_id], r.log_time, r.data, r.publish_time, r.sequence)
-        done = FileInfo(dst, 0, True, info.message_count, info.start, info.end)
-        meta = metadata_dict([done], list(info.topics.values()), dst.parent)
-        w.add_metadata("rosbag2", {"serialized_metadata": _dump_yaml(meta).strip()})
-        w.finish()
+        _finish_mcap(w, FileInfo(dst, 0, True, info.message_count, info.start, info.end),
+                     list(info.topics.values()), dst.parent)
+    return info.message_count
 
 
 # ------------------------------------------------------------------------------------------------ info
