@@ -5,6 +5,7 @@ Processes talk over DDS on their own ROS_DOMAIN_ID (1..19; test_node.py uses 20.
 limited to localhost.
 """
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -87,25 +88,37 @@ def assert_gap_free(stats_msgs, dt):
         assert b.sim_time == pytest.approx(a.sim_time + b.steps * dt, abs=1e-9), "a ~/stats message is missing"
 
 
-def wait_until_publishing(domain: int, timeout: float = 90.0) -> None:
-    """Until the node process sends ~/stats (its first tick comes after numba has compiled, which takes
-    a while on a machine whose numba cache is cold)."""
-    from cloth_sim.msg import Stats
+@contextlib.contextmanager
+def subscriber(domain: int, topic: str, msg_type, depth: int = 1000):
+    """An rclpy context on ``domain`` whose one subscription collects ``topic``; yields
+    ``(spin_until, messages)`` where ``spin_until(cond, timeout)`` spins until ``cond()`` or the timeout."""
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=domain)
-    node = rclpy.create_node("start_probe", context=ctx)
+    node = rclpy.create_node("bag_probe", context=ctx)
     got = []
-    node.create_subscription(Stats, "/cloth_sim/stats", got.append, 10)
+    node.create_subscription(msg_type, topic, got.append, depth)
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(node)
-    try:
+
+    def spin_until(cond, timeout):
         end = time.monotonic() + timeout
-        while time.monotonic() < end and not got:
-            ex.spin_once(timeout_sec=0.1)
+        while time.monotonic() < end and not cond():
+            ex.spin_once(timeout_sec=0.05)
+
+    try:
+        yield spin_until, got
     finally:
         ex.shutdown()
         node.destroy_node()
         rclpy.shutdown(context=ctx)
+
+
+def wait_until_publishing(domain: int, timeout: float = 90.0) -> None:
+    """Until the node process sends ~/stats (its first tick comes after numba has compiled, which takes
+    a while on a machine whose numba cache is cold)."""
+    from cloth_sim.msg import Stats
+    with subscriber(domain, "/cloth_sim/stats", Stats, 10) as (spin_until, got):
+        spin_until(lambda: got, timeout)
     assert got, "the node never published"
 
 
@@ -261,29 +274,14 @@ def test_sigint_closes_an_empty_recording(tmp_path):
     assert meta["message_count"] == 0 and meta["topics_with_message_count"] == []
 
 
-def collect_while_playing(domain, bag, topic, msg_type, *play_args, expect=None, timeout=60):
+def collect_while_playing(domain, bag, topic, msg_type, *play_args, timeout=60):
     """Play ``bag`` in a process while this process subscribes to ``topic``; returns the messages."""
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=domain)
-    node = rclpy.create_node("bag_probe", context=ctx)
-    got = []
-    node.create_subscription(msg_type, topic, got.append, 1000)
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(node)
-    try:
+    with subscriber(domain, topic, msg_type) as (spin_until, got):
         play = cloth_sim(domain, "play", str(bag), "--delay", "5", *play_args)
-        end = time.monotonic() + timeout
-        while time.monotonic() < end and play.poll() is None:
-            ex.spin_once(timeout_sec=0.05)
-        drain = time.monotonic() + 1.0
-        while time.monotonic() < drain:
-            ex.spin_once(timeout_sec=0.05)
+        spin_until(lambda: play.poll() is not None, timeout)
+        spin_until(lambda: False, 1.0)                  # what is still in flight
         out, err = play.communicate(timeout=10)
         assert play.returncode == 0, err
-    finally:
-        ex.shutdown()
-        node.destroy_node()
-        rclpy.shutdown(context=ctx)
     return got
 
 
@@ -364,23 +362,12 @@ def test_play_start_offset_rate_and_loop(small_bag):
     got = collect_while_playing(domain, small_bag, "/words", String, "--start-offset", "1.0", "--rate", "4")
     assert [m.data for m in got] == [f"w{i}" for i in range(100, 200)]
 
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=domain)
-    node = rclpy.create_node("loop_probe", context=ctx)
-    looped = []
-    node.create_subscription(String, "/words", looped.append, 1000)
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(node)
-    play = cloth_sim(domain, "play", str(small_bag), "--loop", "--rate", "10", "--delay", "5")
-    try:
-        end = time.monotonic() + 30
-        while time.monotonic() < end and len(looped) < 450:
-            ex.spin_once(timeout_sec=0.05)
-    finally:
-        out, err = stop(play, signal.SIGINT)
-        ex.shutdown()
-        node.destroy_node()
-        rclpy.shutdown(context=ctx)
+    with subscriber(domain, "/words", String) as (spin_until, looped):
+        play = cloth_sim(domain, "play", str(small_bag), "--loop", "--rate", "10", "--delay", "5")
+        try:
+            spin_until(lambda: len(looped) >= 450, 30)
+        finally:
+            out, err = stop(play, signal.SIGINT)
     assert play.returncode == 0 and "Traceback" not in err, err
     data = [m.data for m in looped]
     first = data.index("w0")
