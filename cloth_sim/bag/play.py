@@ -53,7 +53,7 @@ def qos_from_offer(offer: dict | None) -> QoSProfile:
 class Player:
     def __init__(self, path, *, rate: float = 1.0, loop: bool = False, topics: list[str] | None = None,
                  start_offset: float = 0.0, ack_timeout: float = 5.0, context=None, log=print):
-        if not rate > 0 or rate != rate or rate == float("inf"):
+        if not 0 < rate < float("inf"):                # (also false for NaN)
             raise BagError(f"--rate must be a finite number > 0, got {rate}")
         if not start_offset >= 0:
             raise BagError(f"--start-offset must be ≥ 0 s, got {start_offset}")
