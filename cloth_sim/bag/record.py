@@ -75,9 +75,8 @@ class Recorder:
                  duration: float | None = None, max_messages: int | None = None, poll: float = 0.1,
                  context=None, log=print):
         self.wanted = None if topics is None else normalise_topics(topics)
-        self.duration, self.max_messages, self.poll, self.log = duration, max_messages, poll, log
+        self.duration, self.max_messages, self.log = duration, max_messages, log
         self.writer = BagWriter(path, overwrite=overwrite)
-        self.context = context
         self.node = rclpy.create_node("cloth_sim_recorder", context=context,
                                       start_parameter_services=False)
         self.executor = SingleThreadedExecutor(context=context)
