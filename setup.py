@@ -31,7 +31,7 @@ setup(
     entry_points={
         "console_scripts": [
             "cloth-sim = cloth_sim.cli:main",
-            "cloth_sim_node = cloth_sim.ros.node:main",
+            "cloth_sim_node = cloth_sim.ros:main",
         ],
     },
 )

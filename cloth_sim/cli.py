@@ -6,6 +6,10 @@
     Print ms/step of integrators on the hanging cloth at several grid sizes.
 ``cloth-sim bench implicit [--sizes 32 64] [--dt 0.016667]``
     Print ms/step of the implicit methods at a large step, CG vs direct solve, CG iterations.
+``cloth-sim bench blowup [--size 32]``
+    Print how long a step that diverges holds the caller (guard, restore, message), per integrator.
+``cloth-sim bench params [--size 32] [--rate 60]``
+    Print the ~/stats gap while a 24-parameter file is loaded the way `ros2 param load` does (needs rclpy).
 ``cloth-sim bench node [--sizes 32 64] [--seconds 10]``
     Print the node's real-time factor with and without a ~/points subscriber (needs rclpy).
 ``cloth-sim record -o BAG [TOPIC ...]``, ``play BAG``, ``info BAG``, ``reindex BAG``
@@ -20,6 +24,7 @@ import time
 
 from . import integrators
 from .bag.store import BagError
+from .parameters import SCHEMA
 from .scene import SceneError, load_scene
 from .simulator import SimulationDiverged
 
@@ -28,7 +33,7 @@ def _run(args) -> int:
     scene = load_scene(args.scene)
     if args.integrator:
         scene.integrator = args.integrator
-    if args.dt:
+    if args.dt is not None:
         scene.dt = args.dt
     sim = scene.build_simulator()
     print(f"scene {scene.name} ({scene.source}): {scene.rows}×{scene.cols} {scene.model}, "
@@ -62,6 +67,18 @@ def _bench_steps(args) -> int:
 def _bench_implicit(args) -> int:
     from .bench.steps import print_implicit_table
     print_implicit_table(args.sizes, args.dt, args.seconds)
+    return 0
+
+
+def _bench_blowup(args) -> int:
+    from .bench.steps import print_blowup_table
+    print_blowup_table(args.size)
+    return 0
+
+
+def _bench_params(args) -> int:
+    from .ros.bench import print_param_load_table
+    print_param_load_table(args.size, args.rate)
     return 0
 
 
@@ -112,14 +129,29 @@ def _reindex(args) -> int:
     return 0
 
 
+def _schema_value(name: str, parse):
+    """An argparse type that parses with ``parse`` and checks against the schema's ``name``."""
+    spec = SCHEMA[name]
+
+    def convert(text: str):
+        try:
+            return spec.check(parse(text))
+        except (ValueError, TypeError):
+            raise argparse.ArgumentTypeError(f"{name} = {text!r} is not accepted: expected "
+                                             f"{spec.range_text()}") from None
+
+    return convert
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cloth-sim", description=__doc__.split("\n")[0])
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("run", help="simulate a scene headless, one line per simulated second")
     r.add_argument("--scene", default="hanging", help="scene name or YAML file (default: hanging)")
     r.add_argument("--duration", type=float, default=5.0, help="simulated seconds (default 5)")
-    r.add_argument("--integrator", choices=integrators.available())
-    r.add_argument("--dt", type=float)
+    r.add_argument("--integrator", type=_schema_value("integrator", str),
+                   help=SCHEMA["integrator"].range_text())
+    r.add_argument("--dt", type=_schema_value("dt", float), help=SCHEMA["dt"].range_text())
     r.set_defaults(func=_run)
     b = sub.add_parser("bench", help="benchmarks")
     bsub = b.add_subparsers(dest="bench", required=True)
@@ -134,6 +166,13 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--dt", type=float, default=1.0 / 60, help="time step (default 1/60 s)")
     i.add_argument("--seconds", type=float, default=1.0, help="wall time per measurement")
     i.set_defaults(func=_bench_implicit)
+    bb = bsub.add_parser("blowup", help="how long a diverging step holds the caller, per integrator")
+    bb.add_argument("--size", type=int, default=32, help="cloth N×N (default 32)")
+    bb.set_defaults(func=_bench_blowup)
+    bp = bsub.add_parser("params", help="~/stats gaps while `ros2 param load` sets 24 parameters (needs rclpy)")
+    bp.add_argument("--size", type=int, default=32, help="cloth N×N (default 32)")
+    bp.add_argument("--rate", type=float, default=60.0, help="publish_rate (Hz, default 60)")
+    bp.set_defaults(func=_bench_params)
     nb = bsub.add_parser("node", help="real-time factor of cloth_sim_node (needs rclpy)")
     nb.add_argument("--sizes", type=int, nargs="+", default=[32, 64])
     nb.add_argument("--seconds", type=float, default=10.0, help="measured wall time per row")

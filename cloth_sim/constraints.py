@@ -1,4 +1,12 @@
-"""Position constraints applied after each step: Provot's super-elasticity correction.
+"""Post-step stages: corrections of positions (and velocities) after each integrator step.
+
+A stage is an object with ``name``, ``active`` and ``apply(state, dt, velocity_follow)``. The
+simulator runs its active stages in order after every step; an inactive stage costs nothing (it is
+not even called). To add a stage (contacts, grippers): a class with those three members, and one line
+where :class:`~cloth_sim.simulator.Simulator` builds its ``stages`` list.
+
+Provot's super-elasticity correction (:class:`StrainLimit`)
+------------------------------------------------------------
 
 Provot (1995) keeps structural and shear springs from stretching beyond a critical deformation rate
 ``τc``: after the particles move, every spring longer than ``(1 + τc)·L`` is shortened to exactly
@@ -10,6 +18,8 @@ one corrects nothing.
 """
 
 from __future__ import annotations
+
+import math
 
 import numba
 import numpy as np
@@ -58,33 +68,77 @@ def provot_pass(x, springs, rest, tau, tol, pinned):
     return corrected
 
 
-class StrainLimit:
-    """Provot's correction over a model's strain-limited springs."""
+class Stage:
+    """A post-step correction. ``apply`` changes ``state.x`` / ``state.v`` in place; a position
+    change ``Δx`` moves the velocity by ``velocity_follow·Δx/dt`` (the integrator's own factor: 1
+    for one-step methods, 1.5 for Verlet's BDF2 velocity)."""
 
-    def __init__(self, model, tau: float, passes: int = DEFAULT_STRAIN_LIMIT_PASSES):
-        if not (np.isfinite(tau) and tau >= 0):
-            raise ValueError(f"strain_limit must be a finite number >= 0 (or None), got {tau}")
+    name = ""
+
+    @property
+    def active(self) -> bool:
+        raise NotImplementedError
+
+    def apply(self, state, dt: float, velocity_follow: float) -> None:
+        raise NotImplementedError
+
+
+class StrainLimit(Stage):
+    """Provot's correction over a model's strain-limited springs; active when ``tau`` is set."""
+
+    name = "strain_limit"
+
+    def __init__(self, model, tau: float | None = None, passes: int = DEFAULT_STRAIN_LIMIT_PASSES):
         if int(passes) < 1:
             raise ValueError(f"strain_limit_passes must be >= 1, got {passes}")
-        self.tau = float(tau)
         self.passes = int(passes)
-        sel = np.flatnonzero(model.strain_limited)
-        sel = sel[_outward_order(model, model.springs[sel])]
-        self.springs = np.ascontiguousarray(model.springs[sel])
-        self.rest = np.ascontiguousarray(model.rest_lengths[sel])
-        self.pinned = np.ascontiguousarray(model.pinned)
+        self.model = model
+        self.tau = None
+        self._springs = None  # built when first made active
         self.last_passes = 0
+        self.set_tau(tau)
 
-    def apply(self, x: np.ndarray) -> int:
+    def set_tau(self, tau: float | None) -> None:
+        """``None`` (or 0 from the node's parameter, which maps it to ``None``) turns it off."""
+        if tau is not None:
+            tau = float(tau)
+            if not (math.isfinite(tau) and tau >= 0):
+                raise ValueError(f"strain_limit must be a finite number >= 0 (or None), got {tau}")
+            if self._springs is None:
+                model = self.model
+                sel = np.flatnonzero(model.strain_limited)
+                sel = sel[_outward_order(model, model.springs[sel])]
+                self._springs = np.ascontiguousarray(model.springs[sel])
+                self._rest = np.ascontiguousarray(model.rest_lengths[sel])
+                self._pinned = np.ascontiguousarray(model.pinned)
+        self.tau = tau
+
+    @property
+    def active(self) -> bool:
+        return self.tau is not None
+
+    def correct(self, x: np.ndarray) -> int:
         """Correct ``x`` in place; returns the number of passes that changed something."""
         used = 0
         for _ in range(self.passes):
-            if provot_pass(x, self.springs, self.rest, self.tau, STRAIN_LIMIT_TOLERANCE,
-                           self.pinned) == 0:
+            if provot_pass(x, self._springs, self._rest, self.tau, STRAIN_LIMIT_TOLERANCE,
+                           self._pinned) == 0:
                 break
             used += 1
         self.last_passes = used
         return used
+
+    def apply(self, state, dt, velocity_follow):
+        start = self._buffer_like(state.x)
+        np.copyto(start, state.x)
+        if self.correct(state.x):
+            state.v += (velocity_follow / dt) * (state.x - start)
+
+    def _buffer_like(self, x):
+        buf = getattr(self, "_start", None)
+        if buf is None or buf.shape != x.shape:
+            buf = self._start = np.empty_like(x)
+        return buf
 
 
 def _outward_order(model, springs) -> np.ndarray:

@@ -198,25 +198,19 @@ def wind_forces(x, tris, wind, normals, f):
         f[p, 2] += proj * normals[p, 2]
 
 
-# --------------------------------------------------------------------------- pipeline
-class Forces:
-    """The force pipeline of one simulator, compiled from the scene's non-zero terms.
+# --------------------------------------------------------------------------- terms
+class SpringTerm:
+    """Hooke (or Choi–Ko) and damping along every spring whose family has a non-zero stiffness or
+    damping [1.6, 1.7]: one compiled loop over the live springs. Energy: the elastic energy.
+    Jacobian blocks: :func:`spring_jacobian_blocks`, which Baraff–Witkin assembles from and
+    :meth:`Forces.jacobians` reports."""
 
-    Rebuild it (cheap) whenever stiffness, damping, gravity, wind or drag change.
-    """
-
-    def __init__(self, model: ClothModel, stiffness: np.ndarray, damping: np.ndarray,
-                 gravity=(0.0, 0.0, -9.81), wind=None, drag: float = 0.0):
-        self.model = model
-        self.gravity = np.asarray(gravity, dtype=np.float64).reshape(3)
-        self.wind = None if wind is None else np.asarray(wind, dtype=np.float64).reshape(3)
-        self.drag = float(drag)
-        names = model.family_names
-        fam = model.family
+    def __init__(self, model: ClothModel, stiffness: np.ndarray, damping: np.ndarray):
+        names, fam = model.family_names, model.family
         k_on = np.array([np.any(stiffness[fam == i] > 0) for i in range(len(names))], bool)
         c_on = np.array([np.any(damping[fam == i] > 0) for i in range(len(names))], bool)
-        terms = [f"spring:{n}" for n, on in zip(names, k_on) if on]
-        terms += [f"damping:{n}" for n, on in zip(names, c_on) if on]
+        self.labels = tuple([f"spring:{n}" for n, on in zip(names, k_on) if on]
+                            + [f"damping:{n}" for n, on in zip(names, c_on) if on])
         live = (k_on | c_on)[fam] & ((stiffness > 0) | (damping > 0))
         self.springs = np.ascontiguousarray(model.springs[live])
         self.rest = np.ascontiguousarray(model.rest_lengths[live])
@@ -224,43 +218,126 @@ class Forces:
         self.c = np.ascontiguousarray(damping[live])
         self.kind = np.ascontiguousarray(model.kind[live])
         self.with_damping = bool(np.any(self.c > 0))
-        if np.any(self.gravity != 0):
-            terms.append("gravity")
-            self._gravity_force = model.masses[:, None] * self.gravity[None, :]
-        else:
-            self._gravity_force = None
-        if self.wind is not None and np.any(self.wind != 0) and len(model.triangles):
-            terms.append("wind")
-            self._normals = np.zeros((model.n_particles, 3))
+
+    @property
+    def active(self) -> bool:
+        return len(self.springs) > 0
+
+    def add_force(self, x, v, f):
+        spring_forces(x, v, self.springs, self.rest, self.k, self.c, self.kind, BUCKLE_TABLE,
+                      self.with_damping, f)
+
+    def energy(self, x) -> float:
+        return float(spring_energy(x, self.springs, self.rest, self.k, self.kind, BUCKLE_TABLE))
+
+    def jacobian_blocks(self, x, v, clamp: bool = False, position_damping: bool = True):
+        """Per-spring ``(kx, dx, cv)`` 3×3 blocks (see :func:`spring_jacobian_blocks`); ``dx`` is
+        left zero without ``position_damping``."""
+        m = len(self.springs)
+        kx, dx, cv = np.empty((m, 3, 3)), np.empty((m, 3, 3)), np.empty((m, 3, 3))
+        spring_jacobian_blocks(np.ascontiguousarray(x, dtype=np.float64),
+                               np.ascontiguousarray(v, dtype=np.float64), self.springs, self.rest,
+                               self.k, self.c, self.kind, BUCKLE_TABLE, clamp, position_damping,
+                               kx, dx, cv)
+        return kx, dx, cv
+
+
+class GravityTerm:
+    """``m g`` [1.4]; energy ``−Σ m_i g·x_i``."""
+
+    labels = ("gravity",)
+
+    def __init__(self, masses: np.ndarray, gravity: np.ndarray):
+        self.masses = masses
+        self.gravity = gravity
+        self.force = masses[:, None] * gravity[None, :]
+
+    def add_force(self, x, v, f):
+        f += self.force
+
+    def energy(self, x) -> float:
+        return -float(np.sum(self.masses * (x @ self.gravity)))
+
+
+class WindTerm:
+    """``(n_i·W) n_i`` on each particle's unit normal [1.5]; no energy (it is not conservative)."""
+
+    labels = ("wind",)
+
+    def __init__(self, triangles: np.ndarray, wind: np.ndarray, n: int):
+        self.triangles = triangles
+        self.wind = wind
+        self._normals = np.zeros((n, 3))
+
+    def add_force(self, x, v, f):
+        wind_forces(x, self.triangles, self.wind, self._normals, f)
+
+
+class DragTerm:
+    """Linear air drag ``−c v``; its Jacobian is ``∂f/∂v = −c I``."""
+
+    labels = ("drag",)
+
+    def __init__(self, drag: float):
+        self.drag = drag
+
+    def add_force(self, x, v, f):
+        f -= self.drag * v
+
+
+class Forces:
+    """The force pipeline of one simulator: a list of terms compiled from the scene's non-zero
+    ones (:attr:`terms`). Each term adds its force; the conservative ones report their energy; the
+    springs and drag have Jacobians. Rebuild it (cheap) whenever stiffness, damping, gravity, wind
+    or drag change: integrators receive the current pipeline with every step.
+    """
+
+    def __init__(self, model: ClothModel, stiffness: np.ndarray, damping: np.ndarray,
+                 gravity=(0.0, 0.0, -9.81), wind=None, drag: float = 0.0):
+        self.model = model
+        self.gravity = np.asarray(gravity, dtype=np.float64).reshape(3)
+        wind = None if wind is None else np.asarray(wind, dtype=np.float64).reshape(3)
+        self.drag = float(drag)
+        self.spring_term = SpringTerm(model, np.asarray(stiffness, np.float64),
+                                      np.asarray(damping, np.float64))
+        # evaluation order: gravity first (it initialises the sum), then springs, wind, drag
+        terms: list = [GravityTerm(model.masses, self.gravity)] if np.any(self.gravity != 0) else []
+        if self.spring_term.active:
+            terms.append(self.spring_term)
+        if wind is not None and np.any(wind != 0) and len(model.triangles):
+            terms.append(WindTerm(model.triangles, wind, model.n_particles))
+            self.wind = wind
         else:
             self.wind = None
         if self.drag > 0:
-            terms.append("drag")
-        self.active_terms = tuple(terms)
+            terms.append(DragTerm(self.drag))
+        self.terms = tuple(terms)
+        order = [self.spring_term] + [t for t in terms if t is not self.spring_term]
+        self.active_terms = tuple(label for t in order for label in t.labels)
         inv = 1.0 / model.masses
         inv[model.pinned] = 0.0
         self.inv_mass = inv[:, None].copy()
         self.evaluations = 0
 
+    # the spring term's arrays, which the implicit integrators assemble from
+    springs = property(lambda self: self.spring_term.springs)
+    rest = property(lambda self: self.spring_term.rest)
+    k = property(lambda self: self.spring_term.k)
+    c = property(lambda self: self.spring_term.c)
+    kind = property(lambda self: self.spring_term.kind)
+    with_damping = property(lambda self: self.spring_term.with_damping)
+
     @property
     def n_active_springs(self) -> int:
         """How many springs a force evaluation visits."""
-        return len(self.springs)
+        return len(self.spring_term.springs)
 
     def force(self, x: np.ndarray, v: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Total force on each particle (pins included: their force is reported, not applied)."""
         f = np.empty_like(x) if out is None else out
-        if self._gravity_force is not None:
-            f[:] = self._gravity_force
-        else:
-            f[:] = 0.0
-        if len(self.springs):
-            spring_forces(x, v, self.springs, self.rest, self.k, self.c, self.kind, BUCKLE_TABLE,
-                          self.with_damping, f)
-        if self.wind is not None:
-            wind_forces(x, self.model.triangles, self.wind, self._normals, f)
-        if self.drag > 0:
-            f -= self.drag * v
+        f[:] = 0.0
+        for term in self.terms:
+            term.add_force(x, v, f)
         self.evaluations += 1
         return f
 
@@ -271,7 +348,7 @@ class Forces:
         return a
 
     def spring_energy(self, x: np.ndarray) -> float:
-        return float(spring_energy(x, self.springs, self.rest, self.k, self.kind, BUCKLE_TABLE))
+        return self.spring_term.energy(x)
 
     def jacobians(self, x: np.ndarray, v: np.ndarray, clamp: bool = False):
         """``(∂f/∂x, ∂f/∂v)`` as ``3n×3n`` sparse matrices (row ``3i + a`` is component ``a`` of the
@@ -281,19 +358,23 @@ class Forces:
         triangles, and every implicit method here treats it explicitly. ``clamp`` drops the
         compressive, indefinite part of the elastic blocks, as the implicit integrators may.
 
-        For inspection and tests; the integrators assemble what they need in place."""
-        n, m = len(x), len(self.springs)
-        kx, dx, cv = np.empty((m, 3, 3)), np.empty((m, 3, 3)), np.empty((m, 3, 3))
-        spring_jacobian_blocks(np.ascontiguousarray(x, dtype=np.float64),
-                               np.ascontiguousarray(v, dtype=np.float64), self.springs, self.rest,
-                               self.k, self.c, self.kind, BUCKLE_TABLE, clamp, kx, dx, cv)
+        The blocks come from :meth:`SpringTerm.jacobian_blocks`, the kernel Baraff–Witkin's
+        assembly uses, so the finite-difference tests of this method cover the solver's matrix."""
+        n = len(x)
+        springs = self.spring_term.springs
+        kx, dx, cv = self.spring_term.jacobian_blocks(x, v, clamp)
         # ∂f_j/∂x_i is kxᵀ (= kx) for the elastic part and +dx for damping, whose r = v_j − v_i and
         # u both change sign with the pair's order
-        dfdx = spring_coupling_matrix(self.springs, kx + dx, np.transpose(kx, (0, 2, 1)) + dx, n)
-        dfdv = spring_coupling_matrix(self.springs, cv, cv, n)
+        dfdx = spring_coupling_matrix(springs, kx + dx, np.transpose(kx, (0, 2, 1)) + dx, n)
+        dfdv = spring_coupling_matrix(springs, cv, cv, n)
         if self.drag > 0:
             dfdv = dfdv - self.drag * sp.identity(3 * n, format="csr")
         return dfdx, dfdv.tocsr()
+
+
+def spring_sums(springs: np.ndarray, w: np.ndarray, n: int) -> np.ndarray:
+    """``Σ_j w_ij`` per particle over the springs it belongs to (a graph Laplacian's diagonal)."""
+    return np.bincount(springs.ravel(), weights=np.repeat(np.asarray(w, np.float64), 2), minlength=n)
 
 
 def spring_coupling_matrix(springs: np.ndarray, row_i: np.ndarray, row_j: np.ndarray,
@@ -330,7 +411,8 @@ def _stiffness_coefficients(l, L, k, kind, tab, clamp):
 
 
 @numba.njit(cache=True)
-def spring_jacobian_blocks(x, v, springs, rest, k, c, kind, tab, clamp, kx, dx, cv):
+def spring_jacobian_blocks(x, v, springs, rest, k, c, kind, tab, clamp, position_damping,
+                           kx, dx, cv):
     """Per-spring 3×3 blocks of the force Jacobians, as ``∂f_i/∂x_j`` and ``∂f_i/∂v_j``:
 
     * ``kx[s]`` — elastic ``E''·uuᵀ + (E'/l)·(I − uuᵀ)`` (symmetric),
@@ -339,7 +421,8 @@ def spring_jacobian_blocks(x, v, springs, rest, k, c, kind, tab, clamp, kx, dx, 
     * ``cv[s]`` — damping ``c·uuᵀ``.
 
     The other blocks follow: ``∂f_i/∂x_i = ∂f_j/∂x_j = −block``, ``∂f_j/∂x_i = blockᵀ`` (the
-    damping blocks ``dx`` change sign with ``r``: ``∂f_j/∂x_i = dx``, as ``f_j = −f_i``)."""
+    damping blocks ``dx`` change sign with ``r``: ``∂f_j/∂x_i = dx``, as ``f_j = −f_i``).
+    Without ``position_damping`` ``dx`` stays zero (Baraff–Witkin leave it out of their matrix)."""
     for s in range(springs.shape[0]):
         i = springs[s, 0]
         j = springs[s, 1]
@@ -361,4 +444,5 @@ def spring_jacobian_blocks(x, v, springs, rest, k, c, kind, tab, clamp, kx, dx, 
                 delta = 1.0 if p == q else 0.0
                 kx[s, p, q] = a * uu + t * (delta - uu)
                 cv[s, p, q] = c[s] * uu
-                dx[s, p, q] = cl * (u[p] * pr[q] + ru * (delta - uu))
+                if position_damping:
+                    dx[s, p, q] = cl * (u[p] * pr[q] + ru * (delta - uu))

@@ -115,13 +115,14 @@ class ClothModel:
         ``stiffness`` and ``damping`` are dicts keyed by family (missing families get 0) or one number
         for all. ``pinned`` lists ``(row, col)`` pairs; negative indices count from the end.
         """
-        rows, cols = int(rows), int(cols)
-        if rows < 2 or cols < 2:
-            raise ValueError(f"grid: rows and cols must be >= 2, got {rows}×{cols}")
-        if not (np.isfinite(spacing) and spacing > 0):
-            raise ValueError(f"grid: spacing must be > 0, got {spacing}")
-        if not (np.isfinite(particle_mass) and particle_mass > 0):
-            raise ValueError(f"grid: particle_mass must be > 0, got {particle_mass}")
+        from .parameters import SCHEMA, ParameterError  # the schema imports this module
+
+        try:
+            rows, cols = SCHEMA["rows"].check(rows), SCHEMA["cols"].check(cols)
+        except ParameterError as e:
+            raise ValueError(f"grid: rows and cols: {e}") from None
+        spacing = SCHEMA["spacing"].check(spacing)
+        particle_mass = SCHEMA["particle_mass"].check(particle_mass)
         if model not in MODELS:
             raise ValueError(f"grid: unknown model {model!r}; expected one of {', '.join(MODELS)}")
         if orientation not in ORIENTATIONS:
@@ -242,15 +243,14 @@ class ClothModel:
 
 
 def _per_family(name: str, value) -> dict:
+    from .parameters import SCHEMA
+
     if isinstance(value, dict):
         unknown = set(value) - set(GRID_FAMILIES)
         if unknown:
-            raise ValueError(f"{name}: unknown spring families {sorted(unknown)}; expected "
-                             f"{', '.join(GRID_FAMILIES)}")
-        out = {f: float(value.get(f, 0.0)) for f in GRID_FAMILIES}
+            raise ValueError(f"{name}: unknown spring families {sorted(map(str, unknown))}; "
+                             f"expected {', '.join(GRID_FAMILIES)}")
+        value = {f: value.get(f, 0.0) for f in GRID_FAMILIES}
     else:
-        out = {f: float(value) for f in GRID_FAMILIES}
-    for f, v in out.items():
-        if not np.isfinite(v) or v < 0:
-            raise ValueError(f"{name}.{f} must be finite and >= 0, got {v}")
-    return out
+        value = {f: value for f in GRID_FAMILIES}
+    return {f: SCHEMA[f"{name}.{f}"].check(v) for f, v in value.items()}

@@ -22,7 +22,6 @@ the field and what was expected.
 
 from __future__ import annotations
 
-import math
 import os
 import sys
 from dataclasses import dataclass, field
@@ -31,8 +30,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from . import integrators
-from .model import GRID_FAMILIES, MODELS, ORIENTATIONS, ClothModel
+from .model import GRID_FAMILIES, ORIENTATIONS, ClothModel
+from .parameters import SCHEMA, ParameterError
 from .simulator import Simulator
 
 EDGES = ("first_row", "last_row", "first_col", "last_col")
@@ -156,32 +155,26 @@ def load_scene(name_or_path: str) -> Scene:
 
 
 def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
-    """Validate a scene mapping; errors name ``source`` and the field."""
+    """Validate a scene mapping; errors name ``source`` and the field. Every value is checked
+    against :data:`cloth_sim.parameters.SCHEMA` (the field's ``scene_key``), so a scene accepts
+    exactly what the node's parameters accept."""
     v = _Validator(source)
     if not isinstance(data, dict):
         v.fail("(top level)", "a mapping of scene fields", data)
     known = {"name", "grid", "model", "particle_mass", "stiffness", "damping", "pinned",
              "pinned_edges", "gravity", "wind", "drag", "strain_limit", "integrator", "dt"}
-    unknown = sorted(set(data) - known)
-    if unknown:
-        raise SceneError(f"{source}: unknown field(s) {', '.join(map(str, unknown))}; expected "
-                         f"{', '.join(sorted(known))}")
+    v.known("", data, known)
     grid = data.get("grid")
     if not isinstance(grid, dict):
         v.fail("grid", "a mapping with rows, cols, spacing", grid)
-    unknown = sorted(set(grid) - {"rows", "cols", "spacing", "orientation"})
-    if unknown:
-        raise SceneError(f"{source}: unknown field(s) grid.{', grid.'.join(unknown)}; expected "
-                         "rows, cols, spacing, orientation")
+    v.known("grid.", grid, {"rows", "cols", "spacing", "orientation"})
     s = Scene(name=str(data.get("name", name)), source=source,
-              rows=v.integer("grid.rows", grid.get("rows"), 2, 4096),
-              cols=v.integer("grid.cols", grid.get("cols"), 2, 4096),
-              spacing=v.number("grid.spacing", grid.get("spacing"), 0, None, lo_open=True),
+              rows=v.param("rows", grid.get("rows")), cols=v.param("cols", grid.get("cols")),
+              spacing=v.param("spacing", grid.get("spacing")),
               orientation=v.choice("grid.orientation", grid.get("orientation", "horizontal"),
                                    ORIENTATIONS))
-    s.model = v.choice("model", data.get("model", "provot"), MODELS)
-    s.particle_mass = v.number("particle_mass", data.get("particle_mass", s.particle_mass), 0, None,
-                               lo_open=True)
+    s.model = v.param("model", data.get("model", "provot"))
+    s.particle_mass = v.param("particle_mass", data.get("particle_mass", s.particle_mass))
     s.stiffness = v.families("stiffness", data.get("stiffness", s.stiffness))
     s.damping = v.families("damping", data.get("damping", s.damping))
     pins = data.get("pinned", [])
@@ -199,18 +192,18 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
     for i, e in enumerate(edges):
         v.choice(f"pinned_edges[{i}]", e, EDGES)
     s.pinned = [tuple(p) for p in pins] + list(edges)
-    s.gravity = tuple(v.vector("gravity", data.get("gravity", s.gravity)))
+    s.gravity = tuple(v.param("gravity", data.get("gravity", s.gravity)))
     wind = data.get("wind", {}) or {}
     if not isinstance(wind, dict):
         v.fail("wind", "a mapping with direction and strength", wind)
-    s.wind_direction = tuple(v.vector("wind.direction", wind.get("direction", (0.0, 0.0, 0.0))))
-    s.wind_strength = v.number("wind.strength", wind.get("strength", 0.0), 0, None)
-    s.drag = v.number("drag", data.get("drag", 0.0), 0, None)
+    v.known("wind.", wind, {"direction", "strength"})
+    s.wind_direction = tuple(v.param("wind.direction", wind.get("direction", (0.0, 0.0, 0.0))))
+    s.wind_strength = v.param("wind.strength", wind.get("strength", 0.0))
+    s.drag = v.param("drag", data.get("drag", 0.0))
     sl = data.get("strain_limit", None)
-    s.strain_limit = None if sl is None else v.number("strain_limit", sl, 0, 10)
-    s.integrator = v.choice("integrator", data.get("integrator", s.integrator),
-                            integrators.available())
-    s.dt = v.number("dt", data.get("dt", s.dt), 0, 1, lo_open=True)
+    s.strain_limit = None if sl is None else v.param("strain_limit", sl)
+    s.integrator = v.param("integrator", data.get("integrator", s.integrator))
+    s.dt = v.param("dt", data.get("dt", s.dt))
     return s
 
 
@@ -219,37 +212,38 @@ class _Validator:
         self.source = source
 
     def fail(self, fld, expected, got):
-        raise SceneError(f"{self.source}: field '{fld}' must be {expected}, got {got!r}")
+        raise SceneError(f"{self.source}: field '{fld}' must be {expected}, got {_short(got)}")
 
-    def number(self, fld, x, lo, hi, lo_open=False):
-        if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
-            self.fail(fld, "a finite number", x)
-        if (lo is not None and (x <= lo if lo_open else x < lo)) or (hi is not None and x > hi):
-            rng = f"{'(' if lo_open else '['}{lo}, {hi if hi is not None else '∞'}{']' if hi else ')'}"
-            self.fail(fld, f"a number in {rng}", x)
-        return float(x)
+    def known(self, prefix, mapping, keys):
+        unknown = sorted(str(k) for k in mapping if k not in keys)
+        if unknown:
+            raise SceneError(f"{self.source}: unknown field(s) {prefix}{(', ' + prefix).join(unknown)}; "
+                             f"expected {', '.join(sorted(keys))}")
 
-    def integer(self, fld, x, lo, hi):
-        if isinstance(x, bool) or not isinstance(x, int) or not lo <= x <= hi:
-            self.fail(fld, f"an integer in [{lo}, {hi}]", x)
-        return int(x)
+    def param(self, name, x):
+        """``x`` checked against the schema's entry ``name``, reported under its scene key."""
+        spec = SCHEMA[name]
+        try:
+            return spec.check(x, field=spec.scene_key)
+        except ParameterError as e:
+            self.fail(e.name, e.accepted, x)
 
     def choice(self, fld, x, options):
         if x not in options:
             self.fail(fld, f"one of {', '.join(options)}", x)
         return x
 
-    def vector(self, fld, x):
-        if not (isinstance(x, (list, tuple)) and len(x) == 3):
-            self.fail(fld, "a list of 3 finite numbers", x)
-        return [self.number(f"{fld}[{i}]", c, None, None) for i, c in enumerate(x)]
-
     def families(self, fld, x):
         if isinstance(x, (int, float)) and not isinstance(x, bool):
             x = {f: x for f in GRID_FAMILIES}
         if not isinstance(x, dict):
             self.fail(fld, f"a mapping of {', '.join(GRID_FAMILIES)} to numbers >= 0", x)
-        unknown = sorted(set(x) - set(GRID_FAMILIES))
+        unknown = sorted(str(k) for k in x if k not in GRID_FAMILIES)
         if unknown:
             self.fail(fld, f"keyed by {', '.join(GRID_FAMILIES)}", unknown)
-        return {f: self.number(f"{fld}.{f}", x.get(f, 0.0), 0, None) for f in GRID_FAMILIES}
+        return {f: self.param(f"{fld}.{f}", x.get(f, 0.0)) for f in GRID_FAMILIES}
+
+
+def _short(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."

@@ -1,4 +1,19 @@
-"""The simulator: a model, its force pipeline, an integrator, constraints and a stability guard."""
+"""The simulator: a façade over model + state + forces + integrator + post-step stages.
+
+* the **model** (:class:`~cloth_sim.model.ClothModel`) is read-only and may be shared;
+* the **state** (:class:`~cloth_sim.state.State`) is what changes: positions, velocities, time and
+  the integrator's history;
+* the **forces** (:class:`~cloth_sim.forces.Forces`) are a list of terms compiled from the current
+  material and rebuilt when a parameter changes;
+* the **integrator** (:mod:`cloth_sim.integrators`) advances the state with ``step(state, forces,
+  dt)`` and imports nothing from here;
+* the **stages** (:mod:`cloth_sim.constraints`) correct the state after each step; inactive ones
+  are skipped;
+* the **stability analysis** (:mod:`cloth_sim.stability`) is computed when asked, once per material,
+  never inside a step or an error path.
+
+Every value a user sets is checked against :data:`cloth_sim.parameters.SCHEMA`.
+"""
 
 from __future__ import annotations
 
@@ -7,12 +22,14 @@ import math
 import numba
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.linalg import eigsh
 
 from . import integrators
+from . import stability as stab
 from .constraints import DEFAULT_STRAIN_LIMIT_PASSES, StrainLimit
-from .forces import BUCKLE_TABLE, Forces, buckling_h, spring_coupling_matrix, spring_strains
-from .model import BUCKLING, ClothModel
+from .forces import Forces, spring_strains
+from .model import ClothModel
+from .parameters import SCHEMA, ParameterError
+from .state import State
 
 
 class SimulationDiverged(RuntimeError):
@@ -31,7 +48,7 @@ def _state_ok(x, v, vmax2, xmax):
     return True
 
 
-def _check_vector(name: str, value) -> np.ndarray:
+def _finite_vector(name: str, value) -> np.ndarray:
     a = np.asarray(value, dtype=np.float64)
     if a.shape != (3,) or not np.all(np.isfinite(a)):
         raise ValueError(f"{name} must be a finite 3-vector, got {value!r}")
@@ -70,57 +87,54 @@ class Simulator:
         self.model = model
         self._k = np.array(model.stiffness, dtype=np.float64)
         self._c = np.array(model.damping, dtype=np.float64)
-        self._gravity = _check_vector("gravity", gravity)
-        self._wind = None if wind is None else _check_vector("wind", wind)
-        self._drag = self._check_nonneg("drag", drag)
-        self._dt = self._check_dt(dt)
-        self._x = np.array(model.positions, dtype=np.float64)
-        self._v = np.zeros_like(self._x)
-        self._x_good = np.empty_like(self._x)
-        self._x_before_correction = np.empty_like(self._x)
-        self._limited_springs = np.ascontiguousarray(model.springs[model.strain_limited])
-        self._limited_rest = np.ascontiguousarray(model.rest_lengths[model.strain_limited])
-        self._v_good = np.empty_like(self._x)
-        self._t_base, self._n_steps_since_base = 0.0, 0
+        self._gravity = np.array(SCHEMA["gravity"].check(gravity), dtype=np.float64)
+        self._wind = None if wind is None else _finite_vector("wind", wind)
+        self._drag = SCHEMA["drag"].check(drag)
+        self._dt = SCHEMA["dt"].check(dt)
+        self.state = State(model.positions)
+        self._checkpoint = self.state.copy()
         self.steps_taken = 0
         self.max_speed = float(max_speed)
         self.max_coordinate = float(max_coordinate)
-        self._mode_cache = None
-        self._strain = None
-        self._strain_passes = int(strain_limit_passes)
+        sel = model.strain_limited
+        self._limited = (np.ascontiguousarray(model.springs[sel]),
+                         np.ascontiguousarray(model.rest_lengths[sel]))
+        self._strain = StrainLimit(model, None, strain_limit_passes)
+        #: the post-step stages, in order; only the active ones run
+        self.stages = [self._strain]
         self.strain_limit = strain_limit
+        self._evaluations_before = 0
+        self._analysis = None
         self.forces = self._build_forces()
-        self._integrator = integrators.get(integrator)(self, **(integrator_options or {}))
-        self._integrator.reset(self._x, self._v, self._dt)
+        self._integrator = integrators.get(integrator)(model, **(integrator_options or {}))
+        self._integrator.reset(self.state, self.forces, self._dt)
 
     # ------------------------------------------------------------------ state
     @property
     def positions(self) -> np.ndarray:
         """``(n, 3)`` positions (a read-only view; assign to change them)."""
-        view = self._x.view()
+        view = self.state.x.view()
         view.setflags(write=False)
         return view
 
     @positions.setter
     def positions(self, x) -> None:
         """Place every particle; pinned particles move with it (that is how a gripper drags the cloth)."""
-        x = self._check_state("positions", x)
-        self._x[:] = x
-        self._integrator.reset(self._x, self._v, self._dt)
+        self.state.x[:] = self._check_state("positions", x)
+        self._integrator.reset(self.state, self.forces, self._dt)
 
     @property
     def velocities(self) -> np.ndarray:
         """``(n, 3)`` velocities (a read-only view; assign to change them). Pinned rows are zero."""
-        view = self._v.view()
+        view = self.state.v.view()
         view.setflags(write=False)
         return view
 
     @velocities.setter
     def velocities(self, v) -> None:
-        v = self._check_state("velocities", v)
-        self._v[:] = v
-        self._v[self.model.pinned] = 0.0
-        self._integrator.reset(self._x, self._v, self._dt)
+        self.state.v[:] = self._check_state("velocities", v)
+        self.state.v[self.model.pinned] = 0.0
+        self._integrator.reset(self.state, self.forces, self._dt)
 
     def move_pins(self, positions, indices=None) -> None:
         """Move pinned particles to ``positions`` (``(p, 3)``; ``indices`` default to every pinned
@@ -134,22 +148,20 @@ class Simulator:
         if p.shape != (len(idx), 3) or not np.all(np.isfinite(p)):
             raise ValueError(f"move_pins: positions must be finite with shape ({len(idx)}, 3), "
                              f"got {p.shape}")
-        self._x[idx] = p
-        pins_moved = getattr(self._integrator, "pins_moved", None)
-        if pins_moved is not None:
-            pins_moved(self._x, self.model.pinned)
+        self.state.x[idx] = p
+        self._integrator.pins_moved(self.state)
 
     @property
     def time(self) -> float:
         """Simulated time (s)."""
-        return self._t_base + self._n_steps_since_base * self._dt
+        return self.state.time(self._dt)
 
     def reset(self) -> None:
         """Back to the model's initial positions, at rest, at time 0; parameters are kept."""
-        self._x[:] = self.model.positions
-        self._v[:] = 0.0
-        self._t_base, self._n_steps_since_base = 0.0, 0
-        self._integrator.reset(self._x, self._v, self._dt)
+        self.state.x[:] = self.model.positions
+        self.state.v[:] = 0.0
+        self.state.t_base, self.state.steps = 0.0, 0
+        self._integrator.reset(self.state, self.forces, self._dt)
 
     # ------------------------------------------------------------------ parameters
     @property
@@ -158,11 +170,11 @@ class Simulator:
 
     @dt.setter
     def dt(self, value: float) -> None:
-        value = self._check_dt(value)
-        self._t_base, self._n_steps_since_base = self.time, 0
+        value = SCHEMA["dt"].check(value)
+        self.state.rebase(self._dt)
         self._dt = value
-        self._integrator.reset(self._x, self._v, self._dt)
-        self._integrator.parameters_changed()
+        self._integrator.reset(self.state, self.forces, self._dt)
+        self._integrator.parameters_changed(frozenset({"dt"}))
 
     @property
     def integrator(self) -> str:
@@ -171,17 +183,16 @@ class Simulator:
     def set_integrator(self, name: str, **options) -> None:
         """Switch method (``options`` as for ``integrator_options``); positions and velocities
         carry over."""
-        new = integrators.get(name)(self, **options)
-        new.reset(self._x, self._v, self._dt)
+        new = integrators.get(name)(self.model, **options)
+        new.reset(self.state, self.forces, self._dt)
         self._integrator = new
 
     @property
     def integrator_stats(self) -> dict:
-        """Counters of the current method's linear algebra since it was selected: ``solves``,
-        ``cg_iterations`` / ``last_cg_iterations`` / ``cg_not_converged`` (``implicit_euler`` with
-        CG), ``factorizations`` (``implicit_euler_prefactored``). Empty for explicit methods."""
-        stats = getattr(self._integrator, "stats", None)
-        return dict(stats()) if stats is not None else {}
+        """The current method's counters since it was selected: ``solves``, ``cg_iterations`` /
+        ``last_cg_iterations`` / ``cg_not_converged`` (``implicit_euler``), ``factorizations``
+        (``implicit_euler_prefactored``). Empty for explicit methods."""
+        return dict(self._integrator.counters)
 
     def stiffness(self, family: str) -> np.ndarray:
         """Per-spring stiffness of a family (copy)."""
@@ -201,8 +212,8 @@ class Simulator:
 
     @gravity.setter
     def gravity(self, g) -> None:
-        self._gravity = _check_vector("gravity", g)
-        self._parameters_changed(modes=False)
+        self._gravity = np.array(SCHEMA["gravity"].check(g), dtype=np.float64)
+        self._parameters_changed("gravity")
 
     @property
     def wind(self):
@@ -210,8 +221,8 @@ class Simulator:
 
     @wind.setter
     def wind(self, w) -> None:
-        self._wind = None if w is None else _check_vector("wind", w)
-        self._parameters_changed(modes=False)
+        self._wind = None if w is None else _finite_vector("wind", w)
+        self._parameters_changed("wind")
 
     @property
     def drag(self) -> float:
@@ -219,16 +230,22 @@ class Simulator:
 
     @drag.setter
     def drag(self, value: float) -> None:
-        self._drag = self._check_nonneg("drag", value)
-        self._parameters_changed(modes=False)
+        self._drag = SCHEMA["drag"].check(value)
+        self._parameters_changed("drag")
 
     @property
     def strain_limit(self) -> float | None:
-        return None if self._strain is None else self._strain.tau
+        return self._strain.tau
 
     @strain_limit.setter
     def strain_limit(self, tau: float | None) -> None:
-        self._strain = None if tau is None else StrainLimit(self.model, tau, self._strain_passes)
+        self._strain.set_tau(None if tau is None else SCHEMA["strain_limit"].check(tau))
+        self._active_stages = [s for s in self.stages if s.active]
+
+    @property
+    def active_stages(self) -> tuple[str, ...]:
+        """Names of the post-step stages that run after each step."""
+        return tuple(s.name for s in self._active_stages)
 
     @property
     def active_terms(self) -> tuple[str, ...]:
@@ -243,18 +260,18 @@ class Simulator:
     def step(self, n: int = 1) -> None:
         """Take ``n`` steps of ``dt``. On divergence the state before the failing step is restored
         and :class:`SimulationDiverged` is raised."""
-        x, v, dt = self._x, self._v, self._dt
-        integ = self._integrator
+        state, checkpoint, dt = self.state, self._checkpoint, self._dt
+        integ, forces, stages = self._integrator, self.forces, self._active_stages
+        follow = integ.velocity_follow
         vmax2, xmax = self.max_speed ** 2, self.max_coordinate
         for _ in range(int(n)):
-            np.copyto(self._x_good, x)
-            np.copyto(self._v_good, v)
-            integ.step(x, v, dt)
-            if self._strain is not None:
-                self._apply_strain_limit(x, v, dt, integ.velocity_follow)
-            if not _state_ok(x, v, vmax2, xmax):
+            state.copy_to(checkpoint)
+            integ.step(state, forces, dt)
+            for stage in stages:
+                stage.apply(state, dt, follow)
+            if not _state_ok(state.x, state.v, vmax2, xmax):
                 self._diverged()
-            self._n_steps_since_base += 1
+            state.steps += 1
             self.steps_taken += 1
 
     def advance(self, t: float) -> int:
@@ -267,154 +284,84 @@ class Simulator:
     def energy(self) -> dict:
         """Kinetic, spring and gravitational energy (J); gravity's is ``−Σ m_i g·x_i``."""
         m = self.model.masses
+        x, v = self.state.x, self.state.v
         return {
-            "kinetic": 0.5 * float(np.sum(m * np.einsum("ij,ij->i", self._v, self._v))),
-            "spring": self.forces.spring_energy(self._x),
-            "gravity": -float(np.sum(m * (self._x @ self._gravity))),
+            "kinetic": 0.5 * float(np.sum(m * np.einsum("ij,ij->i", v, v))),
+            "spring": self.forces.spring_energy(x),
+            "gravity": -float(np.sum(m * (x @ self._gravity))),
         }
 
     def strains(self, limited_only: bool = False) -> np.ndarray:
         """``(l − L)/L`` per spring (every spring, or only the strain-limited ones)."""
+        model = self.model
         if limited_only:
-            return spring_strains(self._x, self._limited_springs, self._limited_rest)
-        return spring_strains(self._x, self.model.springs, self.model.rest_lengths)
+            return spring_strains(self.state.x, *self._limited)
+        return spring_strains(self.state.x, model.springs, model.rest_lengths)
 
     def max_strain(self) -> float:
         """Largest strain over the structural and shear springs (every spring of a network)."""
         s = self.strains(limited_only=True)
         return float(s.max()) if len(s) else 0.0
 
+    @property
+    def analysis(self) -> stab.Analysis:
+        """The stability analysis of the current material (shared, computed when asked)."""
+        if self._analysis is None:
+            self._analysis = stab.analysis_for(self.model, self._k, self._c, self._drag)
+        return self._analysis
+
     def fastest_mode(self) -> tuple[float, float]:
         """``(ω_max, ζ)``: the highest natural frequency of ``M⁻¹K`` over the free particles,
-        linearised about the rest shape, and that mode's damping ratio ``qᵀCq / 2ω``.
-
-        ``K = Σ k_eff u uᵀ`` over the springs with ``u`` the rest direction (Choi–Ko buckling pairs
-        count with the stiffer of their two branches). ω_max comes from a Lanczos eigensolver, not a
-        Gershgorin bound, so it is tight (the 16×16 test cloth: 3.15·√(k/m))."""
-        if self._mode_cache is None:
-            self._mode_cache = self._compute_fastest_mode()
-        return self._mode_cache
+        linearised about the rest shape, and that mode's damping ratio (spring damping and drag);
+        see :func:`cloth_sim.stability.fastest_mode`."""
+        return tuple(self.analysis.mode)
 
     def stable_dt(self) -> float:
-        """Largest ``dt`` the current method is expected to survive, from ω_max and its damping
-        (``inf`` for unconditionally stable methods, 0 for a method with no stable step)."""
-        integ = self._integrator
-        if integ.unconditionally_stable:
-            return math.inf
-        if hasattr(integ, "linear_stable_dt"):  # no scalar mode model: analyse the whole system
-            key = integ.name
-            if self._stable_dt_cache.get("key") != key:
-                self._stable_dt_cache = {"key": key, "value": integ.linear_stable_dt()}
-            return self._stable_dt_cache["value"]
-        omega, zeta = self.fastest_mode()
-        return integ.stable_dt(omega, zeta)
+        """Largest ``dt`` the current method is expected to survive: ``inf`` for unconditionally
+        stable methods, from ω_max and its damping for the others, or the method's own analysis
+        (``kang``); 0 for a method with no stable step. Computed once per material and method."""
+        return self._integrator.stable_dt(self.analysis)
+
+    def rest_matrices(self) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+        """``(K, C)`` linearised about the rest shape (:func:`cloth_sim.stability.rest_matrices`)."""
+        return stab.rest_matrices(self.model, self._k, self._c)
 
     # ------------------------------------------------------------------ internals
-    _evaluations_before = 0
-    _stable_dt_cache: dict = {}
-
     def _build_forces(self) -> Forces:
         return Forces(self.model, self._k, self._c, self._gravity, self._wind, self._drag)
 
-    def _parameters_changed(self, modes: bool = True) -> None:
+    def _parameters_changed(self, what: str) -> None:
         self._evaluations_before += self.forces.evaluations
         self.forces = self._build_forces()
-        if modes:
-            self._mode_cache = None
-        self._stable_dt_cache = {}
-        self._integrator.parameters_changed()
+        if what in ("stiffness", "damping", "drag"):
+            self._analysis = None
+        self._integrator.parameters_changed(frozenset({what}))
 
     def _set_family(self, arr, what, family, value):
         fi = self.model.family_index(family)
-        value = float(value)
-        if not (math.isfinite(value) and value >= 0):
-            raise ValueError(f"{what}.{family} must be a finite number >= 0, got {value}")
-        arr[self.model.family == fi] = value
-        self._parameters_changed()
-
-    def _apply_strain_limit(self, x, v, dt, follow):
-        start = self._x_before_correction
-        np.copyto(start, x)
-        if self._strain.apply(x):
-            v += (follow / dt) * (x - start)
+        spec = SCHEMA.get(f"{what}.{family}", SCHEMA[f"{what}.structural"])
+        arr[self.model.family == fi] = spec.check(value, field=f"{what}.{family}")
+        self._parameters_changed(what)
 
     def _diverged(self):
         bad_t = self.time + self._dt
-        np.copyto(self._x, self._x_good)
-        np.copyto(self._v, self._v_good)
-        self._integrator.reset(self._x, self._v, self._dt)
-        limit = self.stable_dt()
+        self._checkpoint.copy_to(self.state)
+        limit = self._integrator.known_stable_dt(self.analysis)
+        estimate = ("not computed (stable_dt() computes it)" if limit is None
+                    else f"stable_dt()={limit:.4g} s")
         raise SimulationDiverged(
             f"the {self.integrator} step from t={self.time:.6g} s to t={bad_t:.6g} s diverged "
             f"(non-finite value, speed above {self.max_speed:g} m/s or coordinate above "
             f"{self.max_coordinate:g} m) with dt={self._dt:g} s; the stable limit estimate is "
-            f"stable_dt()={limit:.4g} s. The state before that step was restored.")
+            f"{estimate}. The state before that step was restored.")
 
     def _check_state(self, name, a):
         a = np.asarray(a, dtype=np.float64)
-        if a.shape != self._x.shape:
-            raise ValueError(f"{name} must have shape {self._x.shape}, got {a.shape}")
+        if a.shape != self.state.x.shape:
+            raise ValueError(f"{name} must have shape {self.state.x.shape}, got {a.shape}")
         if not np.all(np.isfinite(a)):
             raise ValueError(f"{name} must be finite")
         return a
 
-    @staticmethod
-    def _check_dt(dt):
-        dt = float(dt)
-        if not (math.isfinite(dt) and dt > 0):
-            raise ValueError(f"dt must be a finite number > 0, got {dt}")
-        return dt
 
-    @staticmethod
-    def _check_nonneg(name, value):
-        value = float(value)
-        if not (math.isfinite(value) and value >= 0):
-            raise ValueError(f"{name} must be a finite number >= 0, got {value}")
-        return value
-
-    def rest_matrices(self) -> tuple[sp.csr_matrix, sp.csr_matrix]:
-        """``(K, C)``: ``3n×3n`` stiffness and damping matrices ``Σ k uuᵀ`` and ``Σ c uuᵀ`` over the
-        springs, linearised about the rest shape (``u`` the rest directions; Choi–Ko buckling pairs
-        count with the stiffer of their two branches). The force is ``−K·δx − C·v`` near rest."""
-        model = self.model
-        n = model.n_particles
-        s = model.springs
-        d = model.positions[s[:, 1]] - model.positions[s[:, 0]]
-        u = d / np.linalg.norm(d, axis=1)[:, None]
-        k_eff = self._k.copy()
-        buck = model.kind == BUCKLING
-        if buck.any():
-            d2h_max = float(np.max(np.abs([buckling_h(r)[2] for r in
-                                           np.linspace(0, 1, len(BUCKLE_TABLE))])))
-            L = model.rest_lengths[buck]
-            k_eff[buck] = np.maximum(k_eff[buck], k_eff[buck] * d2h_max / L ** 3)
-        return _axial_matrix(s, u, k_eff, n), _axial_matrix(s, u, self._c, n)
-
-    def _compute_fastest_mode(self) -> tuple[float, float]:
-        model = self.model
-        free = ~model.pinned
-        if not free.any() or model.n_springs == 0:
-            return 0.0, 0.0
-        K, C = self.rest_matrices()
-        dofs = np.repeat(free, 3)
-        w = np.repeat(1.0 / np.sqrt(model.masses), 3)[dofs]
-        Dm = sp.diags(w)
-        A = (Dm @ K[dofs][:, dofs] @ Dm).tocsc()
-        if A.shape[0] <= 3:
-            vals, vecs = np.linalg.eigh(A.toarray())
-            lam, q = vals[-1], vecs[:, -1]
-        else:
-            vals, vecs = eigsh(A, k=1, which="LA", tol=1e-8)
-            lam, q = vals[0], vecs[:, 0]
-        omega = math.sqrt(max(lam, 0.0))
-        if omega == 0.0:
-            return 0.0, 0.0
-        Cm = (Dm @ C[dofs][:, dofs] @ Dm)
-        zeta = float(q @ (Cm @ q)) / (2.0 * omega)
-        return omega, zeta
-
-
-def _axial_matrix(springs, u, k, n):
-    """Sparse ``3n×3n`` ``Σ k uuᵀ`` assembled over the springs (stiffness-matrix pattern)."""
-    blocks = -k[:, None, None] * np.einsum("si,sj->sij", u, u)
-    return spring_coupling_matrix(springs, blocks, blocks, n)
+__all__ = ["ParameterError", "SimulationDiverged", "Simulator"]

@@ -17,7 +17,9 @@ import pytest
 
 rclpy = pytest.importorskip("rclpy", reason="ROS 2 wheels are installed by `make`")
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
-from rcl_interfaces.srv import DescribeParameters, SetParameters, SetParametersAtomically  # noqa: E402
+from rcl_interfaces.msg import Parameter as ParameterMsg  # noqa: E402
+from rcl_interfaces.srv import (DescribeParameters, GetParameters, ListParameters,  # noqa: E402
+                                SetParameters, SetParametersAtomically)
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from sensor_msgs.msg import PointCloud2  # noqa: E402
@@ -25,6 +27,7 @@ from std_srvs.srv import SetBool, Trigger  # noqa: E402
 from visualization_msgs.msg import Marker  # noqa: E402
 
 from cloth_sim.msg import Stats  # noqa: E402
+from cloth_sim.parameters import SCHEMA  # noqa: E402
 from cloth_sim.ros.node import ClothSimNode  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -411,3 +414,215 @@ def test_launch_file_is_minimal_and_points_at_existing_files():
     assert 'executable="cloth_sim_node"' in text and "generate_launch_description" in text
     cmake = (ROOT / "CMakeLists.txt").read_text()
     assert "install(DIRECTORY config launch" in cmake and "scripts/cloth_sim_node" in cmake
+
+
+# ------------------------------------------------------------------ the core split's defects
+def test_kang_above_its_limit_is_refused_like_any_conditionally_stable_method(ros):
+    """kang is not unconditionally stable: a 12×12 node once accepted it at dt = 1/60 s, reported
+    stable_dt = inf and margin 0, and diverged."""
+    node = ros.start()
+    stats = ros.collect(Stats, "/cloth_sim/stats")
+    result = ros.set_params("/cloth_sim", {"integrator": "kang", "dt": 1 / 60}, atomically=True)[0]
+    assert not result.successful and "above the stable limit of kang" in result.reason
+    assert node.sim.integrator == "symplectic_euler"
+    limit = float(result.reason.split("stable_dt=")[1].split(" ")[0])
+    assert 1e-4 < limit < 1 / 60
+    assert ros.set_params("/cloth_sim", {"integrator": "kang"})[0].successful  # dt = 1 ms is below
+    assert node.stable_dt() == pytest.approx(limit, rel=1e-3)
+    assert ros.spin_until(lambda: stats and stats[-1].integrator == "kang")
+    assert stats[-1].stability_margin == pytest.approx(1e-3 / node.stable_dt(), rel=1e-6)
+    assert not ros.set_params("/cloth_sim", {"dt": 1 / 60})[0].successful
+
+
+def test_a_scene_change_with_other_values_in_one_request(ros):
+    """What `ros2 param load` sends: scene and other parameters together (once an InvalidHandle
+    crash). The scene's values come in through the pre-set callback; the request's own win."""
+    node = ros.start()
+    stats = ros.collect(Stats, "/cloth_sim/stats")
+    result = ros.set_params("/cloth_sim", {"scene": "flag", "integrator": "rk4", "dt": 5e-4},
+                            atomically=True)[0]
+    assert result.successful, result.reason
+    assert node.scene.name == "flag" and node.sim.integrator == "rk4" and node.sim.dt == 5e-4
+    assert node.get_parameter("rows").value == 20 and node.get_parameter("integrator").value == "rk4"
+    assert node.get_parameter("wind.strength").value == pytest.approx(0.05)
+    assert node.sim.model.n_particles == 20 * 32
+    n = len(stats)
+    assert ros.spin_until(lambda: len(stats) >= n + 5)
+    results = ros.set_params("/cloth_sim", {"scene": "hanging", "rows": 10, "cols": 10})
+    assert all(r.successful for r in results)
+    assert node.sim.model.n_particles == 100 and node.scene.name == "hanging"
+
+
+def _stats_gaps(ros, stats, during):
+    """Largest interval between consecutive ~/stats stamps around ``during()``, in ticks."""
+    n = len(stats)
+    during()
+    assert ros.spin_until(lambda: len(stats) >= n + 10)
+    stamps = [s.header.stamp.sec + 1e-9 * s.header.stamp.nanosec for s in stats[max(n - 3, 0):]]
+    return np.max(np.diff(stamps))
+
+
+def test_loading_a_parameter_file_keeps_the_stats_flowing(ros):
+    """`ros2 param load` sets one parameter at a time, inside one service call. Each set used to
+    recompute stable_dt on the thread that ticks: loading the node's own dump stopped ~/stats for
+    3–10 s. Now a set that changes nothing costs nothing, and a material change one analysis (tens of
+    ms at 32×32, kept per material)."""
+    rate = 30.0
+    node = ros.start(rows=16, cols=16, spacing=1 / 15, publish_rate=rate)
+    stats = ros.collect(Stats, "/cloth_sim/stats")
+    assert ros.spin_until(lambda: len(stats) >= 10)
+    names = ros.call(ListParameters, "/cloth_sim/list_parameters", ListParameters.Request()).result.names
+    assert len(names) == 24  # what `ros2 param dump` writes
+    values = ros.call(GetParameters, "/cloth_sim/get_parameters", GetParameters.Request(names=names)).values
+    dump = [Parameter.from_parameter_msg(ParameterMsg(name=n, value=v)) for n, v in zip(names, values)]
+
+    def load(params):
+        req = SetParameters.Request(parameters=[p.to_parameter_msg() for p in params])
+        results = ros.call(SetParameters, "/cloth_sim/set_parameters", req).results
+        return [r for p, r in zip(params, results) if not r.successful and p.name in SCHEMA]
+
+    period = 1.0 / rate
+    gap = _stats_gaps(ros, stats, lambda: load(dump) == [] or pytest.fail("dump refused"))
+    assert gap <= 3 * period, f"~/stats stopped for {gap:.3f} s"
+    changed = [Parameter(p.name, value=(p.value * 1.1 if p.name.startswith(("stiffness", "damping"))
+                                        else p.value)) for p in dump]
+    changed += [Parameter("drag", value=0.001), Parameter("gravity", value=[0.0, 0.5, -9.81])]
+    gap = _stats_gaps(ros, stats, lambda: load(changed) == [] or pytest.fail("file refused"))
+    assert gap <= 3 * period, f"~/stats stopped for {gap:.3f} s"
+    assert node.sim.stiffness("bend")[0] == pytest.approx(110.0) and node.sim.drag == 0.001
+
+
+def test_messages_are_built_by_pure_functions():
+    from rclpy.time import Time
+
+    from cloth_sim.ros import messages
+
+    stamp = Time(seconds=12, nanoseconds=5).to_msg()
+    x = np.arange(2 * 3 * 3, dtype=np.float64).reshape(6, 3) / 7
+    cloud = messages.point_cloud(x, 2, 3, "base", stamp)
+    assert (cloud.height, cloud.width, cloud.row_step, cloud.is_dense) == (2, 3, 36, True)
+    np.testing.assert_array_equal(cloud_xyz(cloud).reshape(-1, 3), x.astype(np.float32))
+    assert cloud.header.frame_id == "base" and cloud.header.stamp.sec == 12
+    tris = np.array([[0, 1, 4], [0, 4, 3]])
+    marker = messages.mesh(x, tris, "base", stamp)
+    assert len(marker.points) == 6 and marker.points[2].x == pytest.approx(x[4, 0])
+    energy = {"kinetic": 1.0, "spring": 2.0, "gravity": -5.0}
+    common = dict(stamp=stamp, frame_id="base", integrator="rk4", dt=1e-3, steps=4, step_wall=2e-3,
+                  step_max=1e-3, tick_wall=3e-3, rtf=1.0, sim_time=2.0, energy=energy,
+                  max_strain=0.1, overruns=0, paused=False)
+    s = messages.stats(Stats, stable_dt=4e-3, **common)
+    assert s.step_time_mean == pytest.approx(5e-4) and s.potential_energy == -3.0
+    assert s.stability_margin == pytest.approx(0.25)
+    assert messages.stats(Stats, stable_dt=math.inf, **common).stability_margin == 0.0
+    assert messages.stats(Stats, stable_dt=0.0, **common).stability_margin == math.inf
+    kw = dict(paused=False, rtf=1.0, rtf_known=True, rtf_warn=0.95, dt=1e-3, warn_margin=0.8,
+              values={"a": 1})
+    assert messages.diagnostic_status(error=None, stable_dt=2e-3, **kw).level == DiagnosticStatus.OK
+    warn = messages.diagnostic_status(error=None, stable_dt=1.1e-3, **kw)
+    assert warn.level == DiagnosticStatus.WARN and "stable_dt" in warn.message
+    slow = messages.diagnostic_status(error=None, stable_dt=1.0, **dict(kw, rtf=0.5))
+    assert slow.level == DiagnosticStatus.WARN and "real-time factor 0.50" in slow.message
+    err = messages.diagnostic_status(error="boom", stable_dt=1.0, **kw)
+    assert err.level == DiagnosticStatus.ERROR and "boom" in err.message
+    assert err.values[0].key == "a" and err.values[0].value == "1"
+
+
+# ------------------------------------------------------------------ signals (process)
+def _caught_signals(pid: int) -> int:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("SigCgt:"):
+            return int(line.split()[1], 16)
+    return 0
+
+
+def _start_node(domain, *extra, ignore_sigint=False):
+    exe = Path(sys.executable).parent / "cloth_sim_node"
+    pre = (lambda: signal.signal(signal.SIGINT, signal.SIG_IGN)) if ignore_sigint else None
+    proc = subprocess.Popen([str(exe), "--ros-args", "--params-file",
+                             str(ROOT / "config" / "cloth_sim.yaml"), *extra],
+                            env=node_env(domain), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True, preexec_fn=pre)
+    # the node's own handlers are in place once it catches SIGTERM (Python catches SIGINT from
+    # start-up; nothing catches SIGTERM before cloth_sim.ros.main): the race this test covers
+    # starts there. Before it, a signal meets Python's start-up and the ROS wheels' re-exec.
+    end = time.monotonic() + 20
+    while time.monotonic() < end and not _caught_signals(proc.pid) & (1 << (signal.SIGTERM - 1)):
+        time.sleep(0.005)
+    return proc
+
+
+def _end(proc, timeout=30):
+    out, _ = proc.communicate(timeout=timeout)
+    return proc.returncode, out
+
+
+def test_signals_at_random_moments_end_the_default_node_cleanly():
+    """SIGINT and SIGTERM at random moments of the default node's life (`make run`'s scene: 32×32,
+    60 Hz, a tick is most of its period, so most signals land inside a tick) end it with exit 0 and
+    no traceback; so does a double SIGINT (what `ros2 launch` sends on Ctrl-C). Moments are drawn
+    in [0, 4] s after the handlers are in place: start-up (scene, numba, DDS), the first ticks and
+    steady running. 3 nodes run at a time; 8 draws per signal plus 4 double SIGINTs in `make test`
+    (about 30 s); CLOTH_SIM_SIGNAL_DRAWS=25 runs the issue's 25 per signal."""
+    draws = int(os.environ.get("CLOTH_SIM_SIGNAL_DRAWS", "8"))
+    rng = np.random.default_rng(2026)
+    early = max(1, draws // 4)
+    plan = [(s, float(t)) for s in (signal.SIGINT, signal.SIGTERM) for t in
+            (rng.uniform(0, 0.5, early).tolist() + rng.uniform(0.5, 4.0, draws - early).tolist())]
+    plan += [("double", float(t)) for t in rng.uniform(0.5, 4.0, max(4, draws // 2))]
+    failures = []
+    for batch in range(0, len(plan), 3):
+        procs = []
+        for sig, delay in plan[batch:batch + 3]:
+            procs.append((sig, delay, _start_node(next_domain()), time.monotonic()))
+        for sig, delay, proc, t0 in sorted(procs, key=lambda p: p[1]):
+            time.sleep(max(0.0, t0 + delay - time.monotonic()))
+            if sig == "double":
+                proc.send_signal(signal.SIGINT)
+                time.sleep(0.01)
+                proc.send_signal(signal.SIGINT)
+            else:
+                proc.send_signal(sig)
+        for sig, delay, proc, _ in procs:
+            code, out = _end(proc)
+            if code != 0 or "Traceback" in out:
+                failures.append((str(sig), round(delay, 3), code, out[-2000:]))
+    assert not failures, failures
+
+
+def test_sigint_ends_a_node_started_with_sigint_ignored():
+    """A node started in the background of a script inherits SIGINT ignored; it once exited 1 on
+    SIGINT. Its handlers are its own: exit 0."""
+    proc = _start_node(next_domain(), "-p", "rows:=12", "-p", "cols:=12", ignore_sigint=True)
+    time.sleep(2.0)
+    proc.send_signal(signal.SIGINT)
+    code, out = _end(proc)
+    assert code == 0 and "Traceback" not in out, out
+
+
+@pytest.mark.parametrize("arg,words", [("rows:=600", "rows = 600 is not accepted: expected an integer in [2, 512]"),
+                                       ("dt:=-1.0", "dt = -1.0 is not accepted"),
+                                       ("dt:=abc", "dt = 'abc' is not accepted"),
+                                       ("publish_rate:=0.0", "publish_rate = 0.0 is not accepted"),
+                                       ("dt:=1", "dt = 1 is not accepted")])
+def test_a_bad_start_up_value_is_one_line_naming_it(arg, words):
+    out = subprocess.run([str(Path(sys.executable).parent / "cloth_sim_node"), "--ros-args", "-p", arg],
+                         env=node_env(next_domain()), capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and words in lines[0], out.stderr
+
+
+def test_the_venv_is_an_ament_prefix_of_the_generated_interfaces():
+    """`ros2 interface show cloth_sim/msg/Stats` said "Unknown package" in the `make` set-up: the
+    generated interfaces' prefix was on no ament prefix path. `make` links them into the venv."""
+    code = ("from ament_index_python import get_resource, get_package_share_directory\n"
+            "import os\n"
+            "content, prefix = get_resource('rosidl_interfaces', 'cloth_sim')\n"
+            "share = get_package_share_directory('cloth_sim')\n"
+            "print(content.split()); print(os.path.isfile(os.path.join(share, 'msg', 'Stats.msg')))\n"
+            "print(os.path.isfile(os.path.join(share, 'launch', 'cloth_sim.launch.py')))\n"
+            "print(os.access(os.path.join(prefix, 'lib', 'cloth_sim', 'cloth_sim_node'), os.X_OK))")
+    env = dict(os.environ, AMENT_PREFIX_PATH=sys.prefix)
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split("\n")[:4] == ["['msg/Stats.idl', 'msg/Stats.msg']", "True", "True", "True"]

@@ -3,8 +3,10 @@
 Run by `make` with the project's venv Python. It applies the fix the wheels need (their exported
 CMake files name the wheel build host's Python and numpy include directories), configures this
 package's CMakeLists.txt with CLOTH_SIM_INTERFACES_ONLY=ON, builds, and installs into
-build/interfaces/install (its libraries linked into the venv's lib/); a .pth file then puts the generated Python package behind the
-hand-written one, which extends its __path__ to it (see cloth_sim/__init__.py).
+build/interfaces/install (its libraries linked into the venv's lib/); a .pth file then puts the
+generated Python package behind the hand-written one, which extends its __path__ to it (see
+cloth_sim/__init__.py). The ament index entries and share/cloth_sim are linked into the venv, so the
+venv is an ament prefix of cloth_sim (`ros2 interface show`, `ros2 run`, `ros2 launch` find it).
 On a real ROS 2 install none of this is used: `colcon build` builds the same CMakeLists.txt.
 """
 
@@ -39,6 +41,31 @@ def fix_wheel_cmake_paths(venv: Path) -> int:
         path.write_text(text)
         changed += 1
     return changed
+
+
+def _link(link: Path, target: Path) -> None:
+    link.parent.mkdir(parents=True, exist_ok=True)
+    if link.is_symlink() or link.is_file():
+        link.unlink()
+    elif link.exists():
+        shutil.rmtree(link)
+    link.symlink_to(target)
+
+
+def expose_in_venv(venv: Path) -> None:
+    """Make the venv an ament prefix of cloth_sim, as a colcon install is: its ament index entries
+    and ``share/cloth_sim`` (the generated interfaces, package.xml, and the repository's config/
+    and launch/) linked under ``venv/share``, and ``lib/cloth_sim/cloth_sim_node``. With
+    ``AMENT_PREFIX_PATH`` holding the venv, ``ros2 interface show cloth_sim/msg/Stats``,
+    ``ros2 run cloth_sim cloth_sim_node`` and ``ros2 launch cloth_sim cloth_sim.launch.py`` work."""
+    index = PREFIX / "share" / "ament_index" / "resource_index"
+    for entry in index.glob("*/cloth_sim"):
+        _link(venv / "share" / "ament_index" / "resource_index" / entry.parent.name / "cloth_sim", entry)
+    share = PREFIX / "share" / "cloth_sim"
+    for name in ("config", "launch"):
+        _link(share / name, ROOT / name)
+    _link(venv / "share" / "cloth_sim", share)
+    _link(venv / "lib" / "cloth_sim" / "cloth_sim_node", venv / "bin" / "cloth_sim_node")
 
 
 def main() -> int:
@@ -88,6 +115,7 @@ def main() -> int:
         if link.is_symlink() or link.exists():
             link.unlink()
         link.symlink_to(lib)
+    expose_in_venv(venv)
     site = next(PREFIX.glob("lib/python3*/site-packages"))
     pth = Path(sysconfig.get_paths()["purelib"]) / "cloth_sim_interfaces.pth"
     pth.write_text(f"{site}\n")

@@ -99,3 +99,50 @@ def print_implicit_table(sizes, dt: float, seconds: float = 1.0) -> list[dict]:
             ms = "—" if row["note"] else f"{row['ms_per_step']:.3f}"
             print(f"| {n} | {label} | {ms} | {cg} | {fac} | {row['note']} |", flush=True)
     return rows
+
+
+def print_blowup_table(size: int = 32) -> list[dict]:
+    """How long a step that blows up holds the caller, per integrator, on the hanging cloth at N×N:
+    from the call of the failing ``step()`` to its :class:`SimulationDiverged` (guard, restore of
+    the state before the step, message). The stability analysis is not known yet (a fresh model),
+    which is the worst case: the error path never computes it. Conditionally stable methods run at
+    10× their stable dt (measured on a twin model), the unconditionally stable ones with the
+    guard's speed bound lowered to 0.5 m/s."""
+    from .. import integrators
+    from ..integrators.base import Stability
+    from ..simulator import SimulationDiverged
+
+    scene = load_scene("hanging")
+    spacing = 1.0 / (size - 1)
+    print(f"# a blow-up's cost: hanging scene at {size}×{size}, strain limit off; "
+          f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores")
+    print("| integrator | dt (s) | steps before the blow-up | ms in the failing step() | "
+          "ms per normal step | message says |")
+    print("|---|---|---|---|---|---|")
+    rows = []
+    for name in integrators.available():
+        twin = scene.build_simulator(rows=size, cols=size, spacing=spacing, integrator=name,
+                                     strain_limit=None)
+        unconditional = integrators.get(name).stability is Stability.UNCONDITIONAL
+        dt = 1.0 / 60 if unconditional else min(1.0, 10.0 * twin.stable_dt()) or 1e-3
+        sim = scene.build_simulator(rows=size, cols=size, spacing=spacing, integrator=name, dt=dt,
+                                    strain_limit=None)
+        if unconditional:
+            sim.max_speed = 0.5
+        steps, normal, failing, message = 0, 0.0, float("nan"), ""
+        while steps < 100_000:
+            t = time.perf_counter()
+            try:
+                sim.step()
+            except SimulationDiverged as e:
+                failing = time.perf_counter() - t
+                message = "stable_dt not computed" if "not computed" in str(e) else "stable_dt known"
+                break
+            normal += time.perf_counter() - t
+            steps += 1
+        row = {"integrator": name, "dt": dt, "steps": steps, "failing_ms": 1e3 * failing,
+               "step_ms": 1e3 * normal / max(steps, 1), "message": message}
+        rows.append(row)
+        print(f"| {name} | {dt:.3g} | {steps} | {row['failing_ms']:.2f} | {row['step_ms']:.3f} | "
+              f"{message} |", flush=True)
+    return rows

@@ -1,74 +1,131 @@
-"""The integrator interface and the linear stability analysis shared by all methods."""
+"""The integrator protocol: what every method declares and the duties it implements.
+
+Like ``scipy.integrate.OdeSolver``, the base class states the duties and keeps the bookkeeping in
+one place. A method is constructed for one model (``cls(model, **options)``) and then
+
+* ``reset(state, forces, dt)`` — rebuild its history in ``state.history`` from ``state.x``,
+  ``state.v`` (called when the state, ``dt`` or the method changes);
+* ``step(state, forces, dt)`` — advance ``state.x``, ``state.v`` by one step in place, reading
+  forces only through ``forces`` (a :class:`~cloth_sim.forces.Forces`, rebuilt by the simulator
+  when parameters change, so a method never holds stale forces);
+* ``pins_moved(state)`` — pinned particles were placed; keep them at rest;
+* ``parameters_changed(changed)`` — a set of names from :data:`CHANGES` saying what changed, so a
+  method refactorises only when it must;
+* ``stable_dt(analysis)`` — the largest stable ``dt`` by its :class:`Stability` class, from a
+  :class:`~cloth_sim.stability.Analysis` of the material (computed once per material and kept).
+
+It declares ``name``, ``order``, ``stability``, ``counter_names`` (the counters it keeps in
+:attr:`counters`: solves, CG iterations, factorisations) and ``conserves_momentum``. Integrators
+import nothing from the simulator.
+
+To add a method: a subclass in this package decorated with ``@register`` (or a module imported at the
+end of ``integrators/__init__.py``); the tests parametrised over ``integrators.available()`` then check
+its free fall, momentum, declared order and stability limit.
+"""
 
 from __future__ import annotations
 
+import enum
+import math
+
 import numpy as np
+
+from .. import stability as stab
+
+#: What ``parameters_changed`` may report.
+CHANGES = frozenset({"stiffness", "damping", "drag", "dt", "gravity", "wind"})
+
+
+class Stability(enum.Enum):
+    """How a method's step limit is known."""
+
+    #: from ω_max and the method's amplification matrix on ``x'' + 2ζω x' + ω² x = 0``
+    AMPLIFICATION = "amplification"
+    #: from the method's own analysis of the whole linearised step (:meth:`Integrator.analyse`)
+    ANALYSIS = "analysis"
+    #: stable at any ``dt`` on a linear system
+    UNCONDITIONAL = "unconditional"
 
 
 class Integrator:
-    """Advances the simulator's state ``(x, v)`` by one step of ``dt``, in place.
-
-    Subclasses set ``name``, ``order`` and ``implicit`` and implement :meth:`step`. An integrator
-    reads forces through ``system.forces`` (a :class:`~cloth_sim.forces.Forces`), which the
-    simulator rebuilds when parameters change, so it never holds stale forces. Methods with history
-    (Verlet) rebuild it in :meth:`reset`, which the simulator calls whenever the state, ``dt`` or
-    the method changes.
-    """
+    """Advances a :class:`~cloth_sim.state.State` by one step of ``dt``, in place."""
 
     name: str = ""
     order: int = 0
+    stability: Stability = Stability.AMPLIFICATION
+    #: True for methods that solve with the force Jacobian (Baraff–Witkin, its approximations).
     implicit: bool = False
-    #: True for methods stable at any ``dt`` on a linear system (``stable_dt`` is ``inf``).
-    unconditionally_stable: bool = False
     #: After a position correction ``Δx`` (strain limiting), the velocity moves by
     #: ``velocity_follow · Δx / dt``.
     velocity_follow: float = 1.0
     #: True for methods whose stability region misses the imaginary axis near 0 (explicit Euler,
     #: midpoint): an undamped oscillator grows at every dt.
     needs_damping: bool = False
+    #: False for a method whose step does not conserve linear momentum when no external force acts.
+    conserves_momentum: bool = True
+    #: Names of the counters the method keeps in :attr:`counters`.
+    counter_names: tuple[str, ...] = ()
 
-    def __init__(self, system):
-        self.system = system
+    def __init__(self, model):
+        self.model = model
+        self.counters = dict.fromkeys(self.counter_names, 0)
 
-    def reset(self, x: np.ndarray, v: np.ndarray, dt: float) -> None:
+    # ------------------------------------------------------------------ duties
+    def reset(self, state, forces, dt: float) -> None:
         """Rebuild any history from the current state (no-op for one-step methods)."""
 
-    def parameters_changed(self) -> None:
-        """Stiffness, damping, masses, pins or external forces changed (no-op by default)."""
-
-    def step(self, x: np.ndarray, v: np.ndarray, dt: float) -> None:
+    def step(self, state, forces, dt: float) -> None:
         raise NotImplementedError
 
-    def amplification(self, h: float, omega: float, zeta: float) -> np.ndarray:
-        """The matrix taking the method's state to the next step for ``x'' + 2ζω x' + ω² x = 0``:
-        2×2 on ``(x, v)`` for one-step methods (a multistep method uses its own history)."""
+    def pins_moved(self, state) -> None:
+        """Pinned particles were placed (no-op for methods without position history)."""
+
+    def parameters_changed(self, changed: frozenset) -> None:
+        """Some of :data:`CHANGES` changed (no-op by default)."""
+
+    # ------------------------------------------------------------------ stability
+    @classmethod
+    def amplification(cls, h: float, omega: float, zeta: float) -> np.ndarray:
+        """The matrix taking the method's state to the next step for ``x'' + 2ζω x' + ω² x = 0``
+        (:attr:`Stability.AMPLIFICATION` methods): 2×2 on ``(x, v)`` for one-step methods."""
         raise NotImplementedError
 
-    def stable_dt(self, omega: float, zeta: float = 0.0) -> float:
-        """Largest ``dt`` whose step is stable for a mode of frequency ``omega`` and damping ratio
-        ``zeta`` (linear theory: spectral radius of :meth:`amplification` ≤ 1). 0 when no step is
-        stable, ``inf`` for unconditionally stable methods or ``omega == 0``."""
-        if self.unconditionally_stable or omega <= 0:
-            return np.inf
-        if self.needs_damping and zeta <= 0:
-            return 0.0
+    def analysis_key(self):
+        """What, beside the material, the method's own analysis depends on (its options)."""
+        return ()
 
-        def stable(h):
-            return np.max(np.abs(np.linalg.eigvals(self.amplification(h, omega, zeta)))) <= 1 + 1e-12
+    def analyse(self, analysis: "stab.Analysis") -> float:
+        """The method's own stability analysis (:attr:`Stability.ANALYSIS` methods)."""
+        raise NotImplementedError
 
-        grid = np.linspace(0.0, 8.0 / omega, 8001)[1:]
-        last_ok = 0.0
-        for h in grid:
-            if not stable(h):
-                break
-            last_ok = h
-        else:
-            return np.inf
-        lo, hi = last_ok, h
-        for _ in range(60):
-            mid = 0.5 * (lo + hi)
-            lo, hi = (mid, hi) if stable(mid) else (lo, mid)
-        return lo
+    def stable_dt(self, analysis: "stab.Analysis") -> float:
+        """Largest ``dt`` expected to be stable on this material: ``inf`` for unconditionally
+        stable methods, the amplification matrix's limit on the fastest mode, or the method's own
+        analysis; each computed once per material and kept in ``analysis``."""
+        if self.stability is Stability.UNCONDITIONAL:
+            return math.inf
+        if self.stability is Stability.AMPLIFICATION:
+            return analysis.limit(("amplification", type(self)),
+                                  lambda a: stab.limit_from_mode(type(self), a.mode))
+        return analysis.limit(("analysis", type(self), self.analysis_key()), self.analyse)
+
+    def known_stable_dt(self, analysis: "stab.Analysis") -> float | None:
+        """:meth:`stable_dt` if it costs nothing now (computed before, or unconditional), else
+        ``None``: what an error path may report."""
+        if self.stability is Stability.UNCONDITIONAL:
+            return math.inf
+        if self.stability is Stability.AMPLIFICATION:
+            return analysis.known(("amplification", type(self)))
+        return analysis.known(("analysis", type(self), self.analysis_key()))
+
+    # ------------------------------------------------------------------ helpers
+    def _buffer(self, name: str, like: np.ndarray) -> np.ndarray:
+        """A scratch array of ``like``'s shape, allocated once."""
+        buf = self.__dict__.get(name)
+        if buf is None or buf.shape != like.shape:
+            buf = np.empty_like(like)
+            self.__dict__[name] = buf
+        return buf
 
 
 def oscillator_matrix(omega: float, zeta: float) -> np.ndarray:

@@ -18,19 +18,12 @@ class ExplicitRungeKutta(Integrator):
     A: np.ndarray
     b: np.ndarray
 
-    def __init__(self, system):
-        super().__init__(system)
-        self._stages = len(self.b)
-        self._kx: list[np.ndarray] = []
-        self._kv: list[np.ndarray] = []
-
-    def step(self, x, v, dt):
-        forces = self.system.forces
-        if len(self._kx) != self._stages or self._kx[0].shape != x.shape:
-            self._kx = [np.empty_like(x) for _ in range(self._stages)]
-            self._kv = [np.empty_like(x) for _ in range(self._stages)]
-        kx, kv = self._kx, self._kv
-        for i in range(self._stages):
+    def step(self, state, forces, dt):
+        x, v = state.x, state.v
+        stages = len(self.b)
+        kx = [self._buffer(f"_kx{i}", x) for i in range(stages)]
+        kv = [self._buffer(f"_kv{i}", x) for i in range(stages)]
+        for i in range(stages):
             if i == 0:  # the first stage is the current state itself; no copy needed
                 kx[0][:] = v
                 forces.acceleration(x, v, out=kv[0])
@@ -43,18 +36,19 @@ class ExplicitRungeKutta(Integrator):
                     vs += (dt * a) * kv[j]
             kx[i][:] = vs
             forces.acceleration(xs, vs, out=kv[i])
-        for i in range(self._stages):
+        for i in range(stages):
             if self.b[i] != 0.0:
                 x += (dt * self.b[i]) * kx[i]
                 v += (dt * self.b[i]) * kv[i]
 
-    def amplification(self, h, omega, zeta):
+    @classmethod
+    def amplification(cls, h, omega, zeta):
         J = oscillator_matrix(omega, zeta)
         eye = np.eye(2)
         K = []
-        for i in range(self._stages):
-            K.append(J @ (eye + h * sum(self.A[i, j] * K[j] for j in range(i))) if i else J.copy())
-        return eye + h * sum(self.b[i] * K[i] for i in range(self._stages))
+        for i in range(len(cls.b)):
+            K.append(J @ (eye + h * sum(cls.A[i, j] * K[j] for j in range(i))) if i else J.copy())
+        return eye + h * sum(cls.b[i] * K[i] for i in range(len(cls.b)))
 
 
 @register
@@ -78,18 +72,13 @@ class SymplecticEuler(Integrator):
     name = "symplectic_euler"
     order = 1
 
-    def __init__(self, system):
-        super().__init__(system)
-        self._a = None
+    def step(self, state, forces, dt):
+        a = forces.acceleration(state.x, state.v, out=self._buffer("_a", state.x))
+        state.v += dt * a
+        state.x += dt * state.v
 
-    def step(self, x, v, dt):
-        if self._a is None or self._a.shape != x.shape:
-            self._a = np.empty_like(x)
-        self.system.forces.acceleration(x, v, out=self._a)
-        v += dt * self._a
-        x += dt * v
-
-    def amplification(self, h, omega, zeta):
+    @classmethod
+    def amplification(cls, h, omega, zeta):
         w2, c = omega * omega, 2.0 * zeta * omega
         # v' = (1 − h c) v − h ω² x ;  x' = x + h v'
         return np.array([[1.0 - h * h * w2, h * (1.0 - h * c)], [-h * w2, 1.0 - h * c]])
@@ -135,29 +124,27 @@ class Verlet(Integrator):
     order = 2
     velocity_follow = 1.5  # ∂v/∂x of the BDF2 velocity estimate, times dt
 
-    def __init__(self, system):
-        super().__init__(system)
-        self._prev = None
-        self._a = None
+    def reset(self, state, forces, dt):
+        x, v = state.x, state.v
+        a = forces.acceleration(x, v, out=self._buffer("_a", x))
+        state.history["x_prev"] = x - dt * v + 0.5 * dt * dt * a
 
-    def reset(self, x, v, dt):
-        self._pins = np.flatnonzero(self.system.model.pinned)
-        self._a = self.system.forces.acceleration(x, v, out=np.empty_like(x))
-        self._prev = x - dt * v + 0.5 * dt * dt * self._a
-
-    def pins_moved(self, x, pinned):
+    def pins_moved(self, state):
         """Pinned particles were placed: keep them at rest (history equal to the new position)."""
-        self._prev[pinned] = x[pinned]
+        pinned = self.model.pinned
+        state.history["x_prev"][pinned] = state.x[pinned]
 
-    def step(self, x, v, dt):
-        a = self.system.forces.acceleration(x, v, out=self._a)
-        new = 2.0 * x - self._prev + (dt * dt) * a
-        v[:] = (3.0 * new - 4.0 * x + self._prev) / (2.0 * dt)
-        v[self._pins] = 0.0  # exactly at rest, whatever the rounding of the difference quotient
-        self._prev[:] = x
+    def step(self, state, forces, dt):
+        x, v, prev = state.x, state.v, state.history["x_prev"]
+        a = forces.acceleration(x, v, out=self._buffer("_a", x))
+        new = 2.0 * x - prev + (dt * dt) * a
+        v[:] = (3.0 * new - 4.0 * x + prev) / (2.0 * dt)
+        v[self.model.pinned] = 0.0  # exactly at rest, whatever the rounding of the difference quotient
+        prev[:] = x
         x[:] = new
 
-    def amplification(self, h, omega, zeta):
+    @classmethod
+    def amplification(cls, h, omega, zeta):
         """3×3, on ``(xₙ, xₙ₋₁, xₙ₋₂)``: ``xₙ₊₁ = 2xₙ − xₙ₋₁ + h²·(−ω²xₙ − c·vₙ)`` with
         ``vₙ = (3xₙ − 4xₙ₋₁ + xₙ₋₂)/(2h)`` and ``c = 2ζω``."""
         w2, c = omega * omega, 2.0 * zeta * omega

@@ -28,11 +28,12 @@ import math
 import numba
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.linalg import cg, eigs, splu
+from scipy.sparse.linalg import cg, splu
 
-from ..forces import BUCKLE_TABLE, _stiffness_coefficients, spring_vector
+from .. import stability as stab
+from ..forces import spring_sums
 from . import register
-from .base import Integrator
+from .base import Integrator, Stability
 
 SOLVERS = ("cg", "direct")
 
@@ -73,14 +74,15 @@ def _block_pattern(springs: np.ndarray, free_index: np.ndarray, n_free: int):
 
 
 @numba.njit(cache=True)
-def _assemble_baraff_witkin(x, v, f, springs, rest, k, c, kind, tab, clamp, h, diag, slot, dslot,
-                            data, rhs):
-    """Fill ``data`` with ``M − h·∂f/∂v − h²·∂f/∂x`` and ``rhs`` with ``h·(f + h·∂f/∂x·v)``.
-
-    ``diag[i]`` is ``m_i + h·drag``. The damping force's dependence on positions is left out (it
-    would make the matrix unsymmetric), as Baraff & Witkin do."""
+def _assemble_baraff_witkin(springs, kx, cv, f, v, h, diag, slot, dslot, data, rhs):
+    """Fill ``data`` with ``M − h·∂f/∂v − h²·∂f/∂x`` and ``rhs`` with ``h·(f + h·∂f/∂x·v)`` from
+    the springs' Jacobian blocks ``kx`` (elastic) and ``cv`` (damping), as
+    :meth:`~cloth_sim.forces.SpringTerm.jacobian_blocks` gives them (the same blocks
+    :meth:`~cloth_sim.forces.Forces.jacobians` reports). ``diag[i]`` is ``m_i + h·drag``. The damping
+    force's dependence on positions is left out (it would make the matrix unsymmetric), as Baraff &
+    Witkin do."""
     data[:] = 0.0
-    n = x.shape[0]
+    n = f.shape[0]
     for p in range(n):
         for a in range(3):
             rhs[p, a] = h * f[p, a]
@@ -88,40 +90,22 @@ def _assemble_baraff_witkin(x, v, f, springs, rest, k, c, kind, tab, clamp, h, d
             if d >= 0:
                 data[d] += diag[p]
     h2 = h * h
-    blk = np.empty((3, 3))
     for s in range(springs.shape[0]):
         i = springs[s, 0]
         j = springs[s, 1]
-        dx, dy, dz, l = spring_vector(x, i, j)
-        if l < 1e-300:
-            continue
-        u0, u1, u2 = dx / l, dy / l, dz / l
-        a, t = _stiffness_coefficients(l, rest[s], k[s], kind[s], tab, clamp)
-        cs = c[s]
-        r0, r1, r2 = v[j, 0] - v[i, 0], v[j, 1] - v[i, 1], v[j, 2] - v[i, 2]
-        ut = u0 * r0 + u1 * r1 + u2 * r2
-        # K r = a u (u·r) + t (r − u (u·r))
-        kr0 = (a - t) * ut * u0 + t * r0
-        kr1 = (a - t) * ut * u1 + t * r1
-        kr2 = (a - t) * ut * u2 + t * r2
-        rhs[i, 0] += h2 * kr0
-        rhs[i, 1] += h2 * kr1
-        rhs[i, 2] += h2 * kr2
-        rhs[j, 0] -= h2 * kr0
-        rhs[j, 1] -= h2 * kr1
-        rhs[j, 2] -= h2 * kr2
-        uu = (u0, u1, u2)
         for p in range(3):
+            kr = 0.0
             for q in range(3):
-                w = uu[p] * uu[q]
-                blk[p, q] = h * cs * w + h2 * (a * w + t * ((1.0 if p == q else 0.0) - w))
+                kr += kx[s, p, q] * (v[j, q] - v[i, q])
+            rhs[i, p] += h2 * kr
+            rhs[j, p] -= h2 * kr
         for b in range(4):
             sign = 1.0 if b < 2 else -1.0
             for p in range(3):
                 for q in range(3):
                     e = slot[s, b, p, q]
                     if e >= 0:
-                        data[e] += sign * blk[p, q]
+                        data[e] += sign * (h * cv[s, p, q] + h2 * kx[s, p, q])
 
 
 @numba.njit(cache=True)
@@ -135,11 +119,6 @@ def _graph_product(springs, w, v, out):
             d = ws * (v[j, a] - v[i, a])
             out[i, a] += d
             out[j, a] -= d
-
-
-def _spring_sums(springs: np.ndarray, w: np.ndarray, n: int) -> np.ndarray:
-    """``Σ_j w_ij`` per particle over the springs it belongs to (the graph matrix's diagonal)."""
-    return np.bincount(springs.ravel(), weights=np.repeat(w, 2), minlength=n)
 
 
 @numba.njit(cache=True)
@@ -170,34 +149,22 @@ def _kang_sweeps(f, v, dv, springs, k, h, sweeps, inv_den, acc, new):
 class _LinearisedImplicitEuler(Integrator):
     order = 1
     implicit = True
-    unconditionally_stable = True
+    stability = Stability.UNCONDITIONAL
+    counter_names = ("solves",)
 
-    def __init__(self, system):
-        super().__init__(system)
-        self._f = None
-        self.solves = 0
-
-    def amplification(self, h, omega, zeta):
+    @classmethod
+    def amplification(cls, h, omega, zeta):
         # (1 + 2ζωh + ω²h²) Δv = h(−ω² x − 2ζω v − h ω² v); exact for a linear oscillator
         w2, c = omega * omega, 2.0 * zeta * omega
         den = 1.0 + h * c + h * h * w2
         dv_x, dv_v = -h * w2 / den, -h * (c + h * w2) / den
         return np.array([[1.0 + h * dv_x, h * (1.0 + dv_v)], [dv_x, 1.0 + dv_v]])
 
-    def _force(self, x, v):
-        if self._f is None or self._f.shape != x.shape:
-            self._f = np.empty_like(x)
-        return self.system.forces.force(x, v, out=self._f)
-
     def _free(self):
-        model = self.system.model
-        free = ~model.pinned
-        index = np.full(model.n_particles, -1, dtype=np.int64)
+        free = ~self.model.pinned
+        index = np.full(self.model.n_particles, -1, dtype=np.int64)
         index[free] = np.arange(int(free.sum()))
         return free, index
-
-    def stats(self) -> dict:
-        return {"solves": self.solves}
 
 
 @register
@@ -217,15 +184,19 @@ class ImplicitEuler(_LinearisedImplicitEuler):
       it costs accuracy there, and a method built on the exact Jacobian (a BDF2 step, a full Newton
       iteration) would lose its higher order.
 
-    The damping force's dependence on positions is left out of the matrix (Baraff & Witkin do the
-    same: it is small and unsymmetric). Wind and gravity are explicit.
+    The matrix is assembled from the spring term's Jacobian blocks (the ones
+    :meth:`~cloth_sim.forces.Forces.jacobians` reports and the tests check by finite differences)
+    refilled into a sparsity pattern built once. The damping force's dependence on positions is
+    left out of the matrix (Baraff & Witkin do the same: it is small and unsymmetric). Wind and
+    gravity are explicit.
     """
 
     name = "implicit_euler"
+    counter_names = ("solves", "cg_iterations", "last_cg_iterations", "cg_not_converged")
 
-    def __init__(self, system, solver: str = "cg", cg_tolerance: float = 1e-6,
+    def __init__(self, model, solver: str = "cg", cg_tolerance: float = 1e-6,
                  cg_max_iterations: int = 1000, clamp_compression: bool = True):
-        super().__init__(system)
+        super().__init__(model)
         if solver not in SOLVERS:
             raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
         if not (cg_tolerance > 0 and math.isfinite(cg_tolerance)):
@@ -236,20 +207,15 @@ class ImplicitEuler(_LinearisedImplicitEuler):
         self.cg_tolerance = float(cg_tolerance)
         self.cg_max_iterations = int(cg_max_iterations)
         self.clamp_compression = bool(clamp_compression)
-        self.cg_iterations = 0
-        self.last_cg_iterations = 0
-        self.cg_not_converged = 0
-        self._pattern_of = None
-        self._dv = None
+        self._pattern_springs = None
 
-    def reset(self, x, v, dt):
-        self._dv = None  # the warm start is stale after a jump of the state or of dt
+    def reset(self, state, forces, dt):
+        state.history.pop("dv", None)  # the warm start is stale after a jump of the state or of dt
 
-    def _build(self):
-        forces = self.system.forces
+    def _build(self, springs):
         free, index = self._free()
         n_free = int(free.sum())
-        indptr, indices, slot, dslot = _block_pattern(forces.springs, index, n_free)
+        indptr, indices, slot, dslot = _block_pattern(springs, index, n_free)
         self._free_dofs = np.flatnonzero(np.repeat(free, 3))
         self._n = 3 * n_free
         self._slot, self._dslot = slot, dslot
@@ -257,59 +223,61 @@ class ImplicitEuler(_LinearisedImplicitEuler):
                                      shape=(self._n, self._n))
         self._matrix.has_sorted_indices = True
         self._diag_entries = dslot[free].ravel()
-        self._rhs = np.empty((self.system.model.n_particles, 3))
-        self._pattern_of = forces
+        self._rhs = np.empty((self.model.n_particles, 3))
+        self._pattern_springs = springs
 
-    def step(self, x, v, dt):
-        forces = self.system.forces
-        if self._pattern_of is not forces:  # a new pipeline: is the set of active springs the same?
-            if self._pattern_of is None or not np.array_equal(self._pattern_of.springs,
-                                                              forces.springs):
-                self._build()
-                self._dv = None
-            self._pattern_of = forces
-        f = self._force(x, v)
-        masses = self.system.model.masses
+    def step(self, state, forces, dt):
+        x, v = state.x, state.v
+        springs = forces.springs
+        if self._pattern_springs is not springs and not (
+                self._pattern_springs is not None and np.array_equal(self._pattern_springs, springs)):
+            self._build(springs)  # the set of active springs changed
+            state.history.pop("dv", None)
+        self._pattern_springs = springs
+        f = forces.force(x, v, out=self._buffer("_f", x))
+        kx, _, cv = forces.spring_term.jacobian_blocks(x, v, self.clamp_compression,
+                                                       position_damping=False)
         A = self._matrix
-        _assemble_baraff_witkin(x, v, f, forces.springs, forces.rest, forces.k, forces.c,
-                                forces.kind, BUCKLE_TABLE, self.clamp_compression, dt,
-                                masses + dt * forces.drag, self._slot, self._dslot, A.data,
-                                self._rhs)
-        b = self._rhs.ravel()[self._free_dofs]
+        _assemble_baraff_witkin(springs, kx, cv, f, v, dt, self.model.masses + dt * forces.drag,
+                                self._slot, self._dslot, A.data, self._rhs)
         if self._n == 0:
             return
+        b = self._rhs.ravel()[self._free_dofs]
         if self.solver == "direct":
             # the matrix is symmetric: a symmetric ordering and diagonal pivots halve SuperLU's time
             dv = splu(A.tocsc(), permc_spec="MMD_AT_PLUS_A",
                       options={"SymmetricMode": True}).solve(b)
         else:
-            dv = self._cg(A, b)
-        self._dv = dv
-        self.solves += 1
+            dv = self._cg(A, b, state.history.get("dv"))
+        state.history["dv"] = dv
+        self.counters["solves"] += 1
         v.reshape(-1)[self._free_dofs] += dv
         x += dt * v
 
-    def _cg(self, A, b):
-        inv_diag = 1.0 / A.data[self._diag_entries]
-        pre = sp.diags(inv_diag)
+    def _cg(self, A, b, x0):
+        """CG on ``A·dv = b``, solved as ``A·y = b/s`` with ``s`` the power of two nearest ``|b|``
+        (exact, so the iterates are those of the unscaled solve) so that a right-hand side near zero
+        (a cloth coming to rest: its velocities decay into subnormal numbers) cannot make CG divide
+        0 by 0; ``b = 0`` gives ``dv = 0``."""
+        norm = float(np.linalg.norm(b))
+        self.counters["last_cg_iterations"] = 0
+        if norm == 0.0:
+            return np.zeros_like(b)
+        scale = math.ldexp(1.0, math.frexp(norm)[1])  # a power of two: scaling by it is exact
+        pre = sp.diags(1.0 / A.data[self._diag_entries])
         count = [0]
 
         def counter(_):
             count[0] += 1
 
-        x0 = self._dv if self._dv is not None and len(self._dv) == len(b) else None
-        dv, info = cg(A, b, x0=x0, rtol=self.cg_tolerance, atol=0.0, maxiter=self.cg_max_iterations,
-                      M=pre, callback=counter)
-        self.last_cg_iterations = count[0]
-        self.cg_iterations += count[0]
+        x0 = x0 / scale if x0 is not None and len(x0) == len(b) else None
+        y, info = cg(A, b / scale, x0=x0, rtol=self.cg_tolerance, atol=0.0,
+                     maxiter=self.cg_max_iterations, M=pre, callback=counter)
+        self.counters["last_cg_iterations"] = count[0]
+        self.counters["cg_iterations"] += count[0]
         if info != 0:
-            self.cg_not_converged += 1
-        return dv
-
-    def stats(self) -> dict:
-        return {"solves": self.solves, "cg_iterations": self.cg_iterations,
-                "last_cg_iterations": self.last_cg_iterations,
-                "cg_not_converged": self.cg_not_converged}
+            self.counters["cg_not_converged"] += 1
+        return scale * y
 
 
 @register
@@ -320,39 +288,41 @@ class ImplicitEulerPrefactored(_LinearisedImplicitEuler):
 
     It is symmetric positive definite, factorised once by sparse Cholesky (``cholespy``) and reused
     for every step; it is refactorised when stiffness, damping, drag, dt, pins or topology change
-    (:attr:`factorizations` counts them). ``H`` ignores the springs' directions and the Choi–Ko
-    nonlinearity, so the step is stable but damps and distorts more than :class:`ImplicitEuler`.
+    (the counter ``factorizations`` counts them). ``H`` ignores the springs' directions and the
+    Choi–Ko nonlinearity, so the step is stable but damps and distorts more than
+    :class:`ImplicitEuler`.
     """
 
     name = "implicit_euler_prefactored"
+    counter_names = ("solves", "factorizations")
+    _REFACTOR = frozenset({"stiffness", "damping", "drag", "dt"})
 
-    def __init__(self, system):
-        super().__init__(system)
-        self.factorizations = 0
+    def __init__(self, model):
+        super().__init__(model)
         self._key = None
         self._solver = None
         self._stale = True
 
-    def reset(self, x, v, dt):
+    def reset(self, state, forces, dt):
         self._stale = True
 
-    def parameters_changed(self):
-        self._stale = True
+    def parameters_changed(self, changed):
+        if changed & self._REFACTOR:
+            self._stale = True
 
-    def _ensure_factor(self, dt):
-        forces = self.system.forces
+    def _ensure_factor(self, forces, dt):
         old = self._key
         if (old is not None and old[0] == dt and old[1] == forces.drag
                 and np.array_equal(old[2], forces.springs) and np.array_equal(old[3], forces.k)
                 and np.array_equal(old[4], forces.c)):
             self._stale = False
             return
-        model = self.system.model
+        model = self.model
         free, index = self._free()
         n_free = int(free.sum())
         i, j = forces.springs[:, 0], forces.springs[:, 1]
         w = dt * forces.c + dt * dt * forces.k  # −(dt·C + dt²·H) off the diagonal, negated
-        diag = _spring_sums(forces.springs, w, model.n_particles) + model.masses + dt * forces.drag
+        diag = spring_sums(forces.springs, w, model.n_particles) + model.masses + dt * forces.drag
         fi, fj = index[i], index[j]
         both = (fi >= 0) & (fj >= 0)
         rows = np.concatenate([fi[both], fj[both], np.arange(n_free)])
@@ -362,7 +332,7 @@ class ImplicitEulerPrefactored(_LinearisedImplicitEuler):
         A.sum_duplicates()
         self._matrix = A
         self._factor(A, n_free)
-        self.factorizations += 1
+        self.counters["factorizations"] += 1
         self._key = (dt, forces.drag, forces.springs.copy(), forces.k.copy(), forces.c.copy())
         self._free_mask = free
         self._rhs_full = np.empty((model.n_particles, 3))
@@ -379,11 +349,11 @@ class ImplicitEulerPrefactored(_LinearisedImplicitEuler):
         self._solver = CholeskySolverD(n, A.indptr.astype(np.int32), A.indices.astype(np.int32),
                                        np.ascontiguousarray(A.data), MatrixType.CSC)
 
-    def step(self, x, v, dt):
+    def step(self, state, forces, dt):
         if self._stale:
-            self._ensure_factor(dt)
-        forces = self.system.forces
-        f = self._force(x, v)
+            self._ensure_factor(forces, dt)
+        x, v = state.x, state.v
+        f = forces.force(x, v, out=self._buffer("_f", x))
         rhs = self._rhs_full
         rhs[:] = 0.0
         _graph_product(forces.springs, forces.k, v, rhs)  # H v
@@ -394,12 +364,9 @@ class ImplicitEulerPrefactored(_LinearisedImplicitEuler):
             return
         np.copyto(self._b, rhs[self._free_mask])
         self._solver.solve(self._b, self._dv)
-        self.solves += 1
+        self.counters["solves"] += 1
         v[self._free_mask] += self._dv
         x += dt * v
-
-    def stats(self) -> dict:
-        return {"solves": self.solves, "factorizations": self.factorizations}
 
 
 @register
@@ -410,110 +377,55 @@ class Kang(_LinearisedImplicitEuler):
 
         Δv_i = (dt·f_i + dt²·Σ_j k_ij·(v_j − v_i + Δv_j)) / (m_i + dt²·Σ_j k_ij),
 
-    with the neighbours' ``Δv_j`` from the previous step. Spring damping stays explicit in ``f``.
-    Not unconditionally stable: the lagged ``Δv_j`` and explicit damping limit the step
-    (:meth:`linear_stable_dt` finds the limit of the linearised step), and the simulator's guard
-    catches a blow-up like any explicit method's.
+    with the neighbours' ``Δv_j`` from the previous step (kept in ``state.history["dv"]``). Spring
+    damping stays explicit in ``f``. Not unconditionally stable: the lagged ``Δv_j`` and explicit
+    damping limit the step, which its own analysis finds (:func:`cloth_sim.stability.kang_stable_dt`:
+    a von Neumann analysis of the grid, milliseconds; the whole linearised step for other spring
+    networks), and the simulator's guard catches a blow-up like any explicit method's. The per-particle
+    scaling does not conserve linear momentum while ``Δv`` changes from step to step.
     """
 
     name = "kang"
-    unconditionally_stable = False
-    # no scalar-mode amplification matrix (its lagged neighbours couple modes): not implicit
-    # Euler's, which it would otherwise inherit; see linear_stable_dt
-    amplification = Integrator.amplification
+    stability = Stability.ANALYSIS
+    conserves_momentum = False
 
-    def __init__(self, system, sweeps: int = 1):
-        super().__init__(system)
+    @classmethod
+    def amplification(cls, h, omega, zeta):
+        raise NotImplementedError("kang has no scalar mode model (its lagged neighbours couple the "
+                                  "modes): see cloth_sim.stability.kang_stable_dt")
+
+    def __init__(self, model, sweeps: int = 1):
+        super().__init__(model)
         if int(sweeps) < 1:
             raise ValueError(f"sweeps must be >= 1, got {sweeps}")
         self.sweeps = int(sweeps)
-        self._dv = None
-
-    def linear_step_matrix(self, dt: float) -> sp.csr_matrix:
-        """The step as a linear map of ``(δx, v, Δv_prev)`` over the free coordinates, for the
-        system linearised about its rest shape (force ``−K·δx − C·v − drag·v``)."""
-        system = self.system
-        model = system.model
-        forces = system.forces
-        K, C = system.rest_matrices()
-        n = model.n_particles
-        s, k = forces.springs, forces.k
-        adj = sp.coo_matrix((np.r_[k, k], (np.r_[s[:, 0], s[:, 1]], np.r_[s[:, 1], s[:, 0]])),
-                            shape=(n, n)).tocsr()
-        ksum = _spring_sums(s, k, n)
-        A3 = sp.kron(adj, sp.identity(3), format="csr")
-        H3 = A3 - sp.diags(np.repeat(ksum, 3))
-        free = np.repeat(~model.pinned, 3)
-        W = sp.diags(1.0 / np.repeat(model.masses + dt * dt * ksum, 3)[free])
-
-        def sel(X):
-            return X.tocsr()[free][:, free]
-
-        K, C, H3, A3 = sel(K), sel(C), sel(H3), sel(A3)
-        eye = sp.identity(K.shape[0], format="csr")
-        Dx = W @ (-dt * K)
-        Dv = W @ (-dt * (C + forces.drag * eye) + dt * dt * H3)
-        Dd = W @ (dt * dt * A3)
-        # Δv' = Dx δx + Dv v + Dd Δv ;  v' = v + Δv' ;  δx' = δx + dt·v'
-        return sp.bmat([[eye + dt * Dx, dt * (eye + Dv), dt * Dd],
-                        [Dx, eye + Dv, Dd],
-                        [Dx, Dv, Dd]], format="csr")
-
-    def spectral_radius(self, dt: float) -> float:
-        """Largest eigenvalue modulus of :meth:`linear_step_matrix` (ARPACK)."""
-        T = self.linear_step_matrix(dt)
-        if T.shape[0] == 0:
-            return 0.0
-        if T.shape[0] <= 600:
-            return float(np.max(np.abs(np.linalg.eigvals(T.toarray()))))
-        vals = eigs(T, k=3, which="LM", return_eigenvectors=False, tol=1e-6, maxiter=100000)
-        return float(np.max(np.abs(vals)))
-
-    def linear_stable_dt(self, rel_tol: float = 0.05) -> float:
-        """Largest ``dt`` whose linearised step (:meth:`linear_step_matrix`) has spectral radius
-        ≤ 1, by bisection to ``rel_tol``. Kang's method has no scalar mode model (its matrix ignores
-        the springs' directions and lags the neighbours' ``Δv``), so the whole system is analysed;
-        It costs seconds (about 4 s for a 16×16 cloth, minutes at 32×32; the simulator caches it) and
-        is conservative: a cloth that leaves its flat rest shape under gravity survives up to about
-        twice this step."""
-        omega, _ = self.system.fastest_mode()
-        if omega == 0.0:
-            return math.inf
-
-        def stable(h):
-            return self.spectral_radius(h) <= 1.0 + 1e-7
-
-        lo, hi = 0.0, 1.0 / omega
-        while stable(hi):
-            lo, hi = hi, 2.0 * hi
-            if hi > 1e3 / omega:
-                return math.inf
-        while hi - lo > rel_tol * hi:
-            mid = 0.5 * (lo + hi)
-            lo, hi = (mid, hi) if stable(mid) else (lo, mid)
-        return lo
-
-    def reset(self, x, v, dt):
-        self._dv = np.zeros_like(x)
-        self._acc = np.empty_like(x)
-        self._new = np.empty_like(x)
         self._den_of = None
 
-    def _inverse_denominators(self, dt):
+    def analysis_key(self):
+        return (self.sweeps,)
+
+    def analyse(self, analysis):
+        return stab.kang_stable_dt(self.model, analysis.k, analysis.c, analysis.drag, self.sweeps,
+                                   omega=analysis.mode.omega)
+
+    def reset(self, state, forces, dt):
+        state.history["dv"] = np.zeros_like(state.x)
+
+    def _inverse_denominators(self, forces, dt):
         """``1/(m_i + dt²·Σ_j k_ij)``, 0 on pins; rebuilt only when the forces or dt change."""
-        forces = self.system.forces
         if self._den_of != (forces, dt):
-            model = self.system.model
-            den = model.masses + dt * dt * _spring_sums(forces.springs, forces.k, model.n_particles)
+            model = self.model
+            den = model.masses + dt * dt * spring_sums(forces.springs, forces.k, model.n_particles)
             self._inv_den = np.where(model.pinned, 0.0, 1.0 / den)
             self._den_of = (forces, dt)
         return self._inv_den
 
-    def step(self, x, v, dt):
-        forces = self.system.forces
-        f = self._force(x, v)
-        _kang_sweeps(f, v, self._dv, forces.springs, forces.k, dt, self.sweeps,
-                     self._inverse_denominators(dt), self._acc, self._new)
-        self.solves += 1
-        v += self._dv
+    def step(self, state, forces, dt):
+        x, v, dv = state.x, state.v, state.history["dv"]
+        f = forces.force(x, v, out=self._buffer("_f", x))
+        _kang_sweeps(f, v, dv, forces.springs, forces.k, dt, self.sweeps,
+                     self._inverse_denominators(forces, dt), self._buffer("_acc", x),
+                     self._buffer("_new", x))
+        self.counters["solves"] += 1
+        v += dv
         x += dt * v

@@ -74,3 +74,75 @@ def print_node_table(sizes, seconds: float, integrator: str, dt: float, rate: fl
             print(f"| {n} | {'yes' if sub else 'no'} | {r['rtf']:.3f} | {r['ms_per_step']:.3f} | "
                   f"{r['tick_ms']:.2f} | {r['ticks_per_s']:.1f} | {r['overruns']} |", flush=True)
     return rows
+
+
+def print_param_load_table(size: int = 32, rate: float = 60.0) -> list[dict]:
+    """What `ros2 param load` costs the ticking node: its own 24 parameters sent in one
+    ``set_parameters`` request (rclpy sets them one at a time), unchanged and then with every
+    stiffness and damping ×1.1 and a new drag, the node's default scene at N×N and ``rate``.
+    Prints the largest interval between consecutive ~/stats stamps around the request, in ticks,
+    and how long the request took."""
+    from rcl_interfaces.msg import Parameter as ParameterMsg
+    from rcl_interfaces.srv import GetParameters, ListParameters, SetParameters
+
+    from cloth_sim.msg import Stats
+
+    from .node import ClothSimNode
+
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ.get("ROS_DOMAIN_ID", "0")))
+    print(f"# ros2 param load semantics on cloth_sim_node: hanging scene at {size}×{size}, "
+          f"{rate:g} Hz; {platform.machine()}, {os.cpu_count()} cores")
+    print("| file | parameters | material changes | request ms | largest ~/stats interval (ticks) |")
+    print("|---|---|---|---|---|")
+    rows = []
+    try:
+        node = ClothSimNode(context=ctx, parameter_overrides=[
+            Parameter("rows", value=size), Parameter("cols", value=size),
+            Parameter("spacing", value=1.0 / (size - 1)), Parameter("publish_rate", value=rate)])
+        probe = rclpy.create_node("bench_probe", context=ctx)
+        stats = []
+        probe.create_subscription(Stats, "/cloth_sim/stats", stats.append, 1000)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        ex.add_node(probe)
+
+        def call(srv, name, req):
+            cli = probe.create_client(srv, name)
+            while not cli.service_is_ready():
+                ex.spin_once(timeout_sec=0.01)
+            fut = cli.call_async(req)
+            while not fut.done():
+                ex.spin_once(timeout_sec=0.01)
+            return fut.result()
+
+        def spin(seconds):
+            end = time.monotonic() + seconds
+            while time.monotonic() < end:
+                ex.spin_once(timeout_sec=0.005)
+
+        spin(2.0)
+        names = call(ListParameters, "/cloth_sim/list_parameters", ListParameters.Request()).result.names
+        values = call(GetParameters, "/cloth_sim/get_parameters", GetParameters.Request(names=names)).values
+        dump = [Parameter.from_parameter_msg(ParameterMsg(name=n, value=v)) for n, v in zip(names, values)]
+        scaled = [Parameter(p.name, value=p.value * 1.1) if p.name.startswith(("stiffness", "damping"))
+                  else p for p in dump] + [Parameter("drag", value=0.001)]
+        for label, params, changes in (("its own dump", dump, 0), ("material ×1.1, drag", scaled, 7)):
+            spin(1.0)
+            n = len(stats)
+            t = time.perf_counter()
+            call(SetParameters, "/cloth_sim/set_parameters",
+                 SetParameters.Request(parameters=[p.to_parameter_msg() for p in params]))
+            request = time.perf_counter() - t
+            spin(1.0)
+            stamps = [s.header.stamp.sec + 1e-9 * s.header.stamp.nanosec for s in stats[n - 2:]]
+            gap = max(b - a for a, b in zip(stamps, stamps[1:])) * rate
+            rows.append({"file": label, "parameters": len(params), "changes": changes,
+                         "request_ms": 1e3 * request, "gap_ticks": gap})
+            print(f"| {label} | {len(params)} | {changes} | {1e3 * request:.1f} | {gap:.2f} |", flush=True)
+        ex.shutdown()
+        probe.destroy_node()
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=ctx)
+    return rows

@@ -2,13 +2,22 @@
 
 Every tick (``publish_rate`` Hz) advances the simulation by ``1/publish_rate`` s in whole steps of
 ``dt`` (the remainder carries over), then publishes ``~/points`` (organised PointCloud2),
-``~/mesh`` (Marker, only with subscribers) and ``~/stats``; ``/diagnostics`` at 1 Hz. Parameters
-apply live (see :mod:`cloth_sim.ros.params`); a blow-up restores the last good state and pauses.
+``~/mesh`` (Marker) and ``~/stats``; ``/diagnostics`` at 1 Hz. The messages are built by the pure
+functions of :mod:`cloth_sim.ros.messages`.
+
+Parameters (:data:`cloth_sim.parameters.SCHEMA`) are handled as rclpy intends: the pre-set callback
+expands a scene change into the scene's values, the on-set callback validates the whole batch with no
+side effects (the stability analysis it needs is computed once per material and kept,
+:mod:`cloth_sim.stability`), and the post-set callback applies it. A blow-up restores the state
+before the failing step and pauses.
+
+The process (:func:`cloth_sim.ros.main`, then :func:`run`) handles SIGINT/SIGTERM itself (rclpy's
+handlers are off): a signal at any moment, or two (``ros2 launch`` forwards Ctrl-C), only asks the spin
+loop to stop; the node is then destroyed and the process exits 0.
 """
 
 from __future__ import annotations
 
-import array
 import collections
 import math
 import sys
@@ -16,21 +25,24 @@ import time
 
 import numpy as np
 import rclpy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Point
+from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.exceptions import ParameterException
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from sensor_msgs.msg import PointCloud2, PointField
-from std_msgs.msg import ColorRGBA
+from rclpy.signals import SignalHandlerOptions
+from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import Marker
 
 from .. import integrators
+from .. import stability as stab
 from ..model import GRID_FAMILIES
-from ..scene import load_scene
+from ..parameters import SCHEMA
+from ..scene import SceneError, load_scene
 from ..simulator import SimulationDiverged, Simulator
+from . import messages
 from . import params as P
 
 STATUS_PERIOD = 5.0  # s of wall time between status log lines
@@ -39,9 +51,12 @@ WARN_MARGIN = 0.8    # WARN when dt is above this fraction of stable_dt
 #: the few per cent that timer jitter and whole-step quantisation give a node that keeps up
 RTF_WARN = 0.95
 RTF_WINDOW = 2.0
+#: the rebuild parameters that shape the model (``scene`` is the other one)
+MODEL_KEYS = ("rows", "cols", "spacing", "model", "particle_mass")
 
-_FIELDS = [PointField(name=n, offset=4 * i, datatype=PointField.FLOAT32, count=1)
-           for i, n in enumerate("xyz")]
+
+class StartupError(ValueError):
+    """A value the node cannot start with; one line naming it."""
 
 
 def _stats_type():
@@ -50,31 +65,52 @@ def _stats_type():
     return Stats
 
 
+def _material(model, cfg: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Per-spring stiffness and damping of ``model`` from the family parameters in ``cfg``."""
+    k = np.array([cfg[f"stiffness.{f}"] for f in GRID_FAMILIES])[model.family]
+    c = np.array([cfg[f"damping.{f}"] for f in GRID_FAMILIES])[model.family]
+    return k, c
+
+
+def _wind(cfg: dict):
+    w = cfg["wind.strength"] * np.asarray(cfg["wind.direction"], dtype=float)
+    return w if np.any(w) else None
+
+
 class ClothSimNode(Node):
     """The ``cloth_sim`` node. ``parameter_overrides`` etc. are passed to :class:`rclpy.node.Node`."""
 
     def __init__(self, **kwargs):
         super().__init__("cloth_sim", **kwargs)
+        self._ready = False
         self.Stats = _stats_type()
+        overrides = {name: p.value for name, p in self._parameter_overrides.items()}
         # the scene first: it provides the other parameters' defaults
-        self.declare_parameter("scene", "hanging", P.SPEC["scene"].descriptor())
-        scene_name = self.get_parameter("scene").value
-        reason = P.check_value("scene", scene_name)
+        scene_name = self._startup_value("scene", overrides.get("scene", "hanging"))
+        try:
+            self.scene = load_scene(scene_name)
+        except SceneError as e:
+            raise StartupError(f"scene: {e}") from None
+        defaults = P.defaults(self.scene)
+        self.cfg = {}
+        for name in SCHEMA:
+            value = self._startup_value(name, overrides.get(name, defaults[name]))
+            try:
+                self.declare_parameter(name, defaults[name] if name != "scene" else scene_name,
+                                       P.descriptor(SCHEMA[name]))
+            except ParameterException:  # e.g. an integer given for a double: rclpy's types are strict
+                raise StartupError(f"{name} = {overrides.get(name)!r} is not accepted: expected "
+                                   f"{SCHEMA[name].range_text()}, as a ROS "
+                                   f"{P.type_name(SCHEMA[name])} (write 1.0, not 1, for a "
+                                   f"double)") from None
+            self.cfg[name] = value
+        self._models = {}  # rebuild key -> model (a scene's model at a size), last few kept
+        self._validated = None  # what the on-set callback checked, for the post-set callback
+        model = self._model(self.cfg, self.scene)
+        reason, self._stable_dt = self._check_stability(self.cfg, model)
         if reason:
-            raise ValueError(reason)
-        self.scene = load_scene(scene_name)
-        for name, value in P.defaults(self.scene).items():
-            if name != "scene":
-                self.declare_parameter(name, value, P.SPEC[name].descriptor())
-        self.cfg = {name: self.get_parameter(name).value for name in P.SPEC}
-        for name, value in self.cfg.items():
-            reason = P.check_value(name, value)
-            if reason:
-                raise ValueError(reason)
-        self.sim = self._build_simulator(self.cfg, self.scene)
-        reason, self._stable_dt = self._check_stability(self.cfg)
-        if reason:
-            raise ValueError(reason)
+            raise StartupError(reason)
+        self.sim = self._build_simulator(self.cfg, model)
 
         self.paused = False
         self.error: str | None = None
@@ -83,7 +119,6 @@ class ClothSimNode(Node):
         self._history = collections.deque()  # (wall, sim time) over the last RTF_WINDOW s
         self._tick_costs = collections.deque(maxlen=120)  # (steps, step wall, publish wall)
         self._last_status = time.monotonic()
-        self._pending_scene = None
 
         self.points_pub = self.create_publisher(PointCloud2, "~/points", 10)
         self.mesh_pub = self.create_publisher(Marker, "~/mesh", 10)
@@ -91,110 +126,131 @@ class ClothSimNode(Node):
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SetBool, "~/pause", self._on_pause)
-        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.add_pre_set_parameters_callback(self._pre_set)
+        self.add_on_set_parameters_callback(self._on_set)
+        self.add_post_set_parameters_callback(self._post_set)
         self.timer = self.create_timer(1.0 / self.cfg["publish_rate"], self._tick)
         self.diag_timer = self.create_timer(1.0, self._publish_diagnostics)
+        self._ready = True
         self.get_logger().info(
             f"scene {self.scene.name}: {self.cfg['rows']}×{self.cfg['cols']} {self.cfg['model']}, "
             f"{self.sim.integrator}, dt={self.sim.dt:g} s, {self.cfg['publish_rate']:g} Hz, "
             f"terms: {', '.join(self.sim.active_terms)}")
 
+    @staticmethod
+    def _startup_value(name, value):
+        value, reason = P.check_value(name, value)
+        if reason:
+            raise StartupError(reason)
+        return value
+
     # ------------------------------------------------------------------ building
-    def _build_simulator(self, cfg: dict, scene) -> Simulator:
-        model = scene.build_model(rows=cfg["rows"], cols=cfg["cols"], spacing=cfg["spacing"],
-                                  particle_mass=cfg["particle_mass"], model=cfg["model"],
-                                  stiffness={f: cfg[f"stiffness.{f}"] for f in GRID_FAMILIES},
-                                  damping={f: cfg[f"damping.{f}"] for f in GRID_FAMILIES})
-        return Simulator(model, integrator=cfg["integrator"], dt=cfg["dt"], gravity=cfg["gravity"],
-                         wind=self._wind(cfg), drag=cfg["drag"],
-                         strain_limit=cfg["strain_limit"] or None)
+    def _model(self, cfg: dict, scene):
+        """The model for ``cfg``'s rebuild values (kept: validation and application share it)."""
+        key = (scene.source, *(cfg[k] for k in MODEL_KEYS))
+        model = self._models.get(key)
+        if model is None:
+            model = scene.build_model(rows=cfg["rows"], cols=cfg["cols"], spacing=cfg["spacing"],
+                                      particle_mass=cfg["particle_mass"], model=cfg["model"],
+                                      stiffness={f: cfg[f"stiffness.{f}"] for f in GRID_FAMILIES},
+                                      damping={f: cfg[f"damping.{f}"] for f in GRID_FAMILIES})
+            if len(self._models) >= 4:
+                self._models.pop(next(iter(self._models)))
+            self._models[key] = model
+        return model
 
     @staticmethod
-    def _wind(cfg):
-        w = cfg["wind.strength"] * np.asarray(cfg["wind.direction"], dtype=float)
-        return w if np.any(w) else None
+    def _build_simulator(cfg: dict, model) -> Simulator:
+        sim = Simulator(model, integrator=cfg["integrator"], dt=cfg["dt"], gravity=cfg["gravity"],
+                        wind=_wind(cfg), drag=cfg["drag"], strain_limit=cfg["strain_limit"] or None)
+        for f in GRID_FAMILIES:  # the model may be shared with other values: set them
+            sim.set_stiffness(f, cfg[f"stiffness.{f}"])
+            sim.set_damping(f, cfg[f"damping.{f}"])
+        return sim
 
-    def stable_dt(self) -> float:
-        """The current explicit method's stable_dt (cached); ``inf`` for implicit methods."""
-        if self._stable_dt is None:
-            implicit = integrators.get(self.sim.integrator).implicit
-            self._stable_dt = math.inf if implicit else self.sim.stable_dt()
-        return self._stable_dt
-
-    def _check_stability(self, cfg: dict, sim: Simulator | None = None):
-        """``(reason, stable_dt)``: the reason to refuse a dt above the explicit method's stable_dt
-        (``None`` if it is fine or ``allow_unstable``), and that limit when it was computed (``None``
-        otherwise), so the node need not compute it again once the change is applied."""
-        if integrators.get(cfg["integrator"]).implicit:
-            return None, math.inf
-        if cfg["allow_unstable"]:
-            return None, None
-        sim = sim or self.sim
-        probe = Simulator(sim.model, integrator=cfg["integrator"], dt=cfg["dt"], gravity=cfg["gravity"])
-        for f in GRID_FAMILIES:
-            probe.set_stiffness(f, cfg[f"stiffness.{f}"])
-            probe.set_damping(f, cfg[f"damping.{f}"])
-        limit = probe.stable_dt()
-        if cfg["dt"] > limit:
+    @staticmethod
+    def _check_stability(cfg: dict, model) -> tuple[str | None, float]:
+        """``(reason, stable_dt)``: the limit of ``cfg``'s method on ``model`` with ``cfg``'s
+        material (computed once per material and method, :mod:`cloth_sim.stability`), and the
+        reason to refuse ``cfg["dt"]`` above it (``None`` when fine or ``allow_unstable``)."""
+        k, c = _material(model, cfg)
+        analysis = stab.analysis_for(model, k, c, cfg["drag"])
+        limit = integrators.get(cfg["integrator"])(model).stable_dt(analysis)
+        if cfg["dt"] > limit and not cfg["allow_unstable"]:
             return (f"dt={cfg['dt']:g} s is above the stable limit of {cfg['integrator']} for this "
-                    f"cloth, stable_dt={limit:.4g} s: choose dt <= {limit:.4g}, an implicit "
-                    f"integrator, or set allow_unstable to true"), limit
+                    f"cloth, stable_dt={limit:.4g} s: choose dt <= {limit:.4g}, an unconditionally "
+                    f"stable integrator (implicit_euler, implicit_euler_prefactored), or set "
+                    f"allow_unstable to true"), limit
         return None, limit
 
     # ------------------------------------------------------------------ parameters
-    def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
-        """Validate the whole batch, then apply it; a refused batch changes nothing."""
-        changes = {p.name: p.value for p in parameters if p.name in P.SPEC}
-        for name, value in changes.items():
-            reason = P.check_value(name, value)
+    def _pre_set(self, parameters: list[Parameter]) -> list[Parameter]:
+        """A scene change brings the scene's values for every parameter the batch does not set."""
+        scene = next((p for p in parameters if p.name == "scene"), None)
+        if scene is None or scene.value == self.cfg["scene"] or not isinstance(scene.value, str):
+            return parameters
+        try:
+            new = load_scene(scene.value)
+        except SceneError:
+            return parameters  # the on-set callback refuses it with the reason
+        named = {p.name for p in parameters}
+        return list(parameters) + [Parameter(k, value=v) for k, v in P.scene_values(new).items()
+                                   if k not in named]
+
+    def _on_set(self, parameters: list[Parameter]) -> SetParametersResult:
+        """Validate the whole batch; nothing changes here (the post-set callback applies it)."""
+        if not self._ready:
+            return SetParametersResult(successful=True)
+        self._validated = None
+        cand = dict(self.cfg)
+        for p in parameters:
+            if p.name not in SCHEMA:
+                continue
+            value, reason = P.check_value(p.name, p.value)
             if reason:
                 return SetParametersResult(successful=False, reason=reason)
-        cand = dict(self.cfg)
-        cand.update({k: (list(v) if P.SPEC[k].type == P.DA else v) for k, v in changes.items()})
+            cand[p.name] = value
+        if cand == self.cfg:
+            self._validated = (cand, None, None, self._stable_dt)
+            return SetParametersResult(successful=True)
         scene = self.scene
-        if "scene" in changes and changes["scene"] != self.cfg["scene"]:
-            scene = load_scene(changes["scene"])
-            for k, v in P.scene_values(scene).items():  # the new scene brings its own values
-                if k not in changes:
-                    cand[k] = v
-        topology = any(cand[k] != self.cfg[k] for k in P.TOPOLOGY) or scene is not self.scene
-        if "publish_rate" in changes:
+        try:
+            if cand["scene"] != self.cfg["scene"]:
+                scene = load_scene(cand["scene"])
+            rebuild = scene is not self.scene or any(cand[k] != self.cfg[k] for k in MODEL_KEYS)
+            model = self._model(cand, scene) if rebuild else self.sim.model
+        except (SceneError, ValueError) as e:  # e.g. a scene whose file changed since
+            return SetParametersResult(successful=False, reason=f"scene: {e}")
+        if cand["publish_rate"] != self.cfg["publish_rate"]:
             reason = self._check_rate(cand)
             if reason:
                 return SetParametersResult(successful=False, reason=reason)
-        try:
-            new_sim = self._build_simulator(cand, scene) if topology else None
-            reason, limit = self._check_stability(cand, new_sim)
-        except ValueError as e:  # e.g. a scene whose pins fall outside the new grid size
-            return SetParametersResult(successful=False, reason=str(e))
+        reason, limit = self._check_stability(cand, model)
         if reason:
             return SetParametersResult(successful=False, reason=reason)
-        # accepted: apply everything (nothing below can fail on validated values)
-        if topology:
-            self.sim = new_sim
+        self._validated = (cand, scene if rebuild else None, model if rebuild else None, limit)
+        return SetParametersResult(successful=True)
+
+    def _post_set(self, parameters: list[Parameter]) -> None:
+        """Apply what :meth:`_on_set` accepted."""
+        if not self._ready or self._validated is None:
+            return
+        cand, scene, model, limit = self._validated
+        self._validated = None
+        if scene is not None:
+            self.sim = self._build_simulator(cand, model)
             self.scene = scene
             self._carry = 0.0
             self._history.clear()
-            if "scene" in changes and changes["scene"] != self.cfg["scene"]:
-                self._pending_scene = {k: cand[k] for k in P.scene_values(scene) if k not in changes}
         else:
             self._apply_live(cand)
         rate_changed = cand["publish_rate"] != self.cfg["publish_rate"]
         self.cfg = cand
-        self._stable_dt = limit  # None when not computed: stable_dt() computes it when asked
+        self._stable_dt = limit
         if rate_changed:
             self.timer.cancel()
             self.destroy_timer(self.timer)
             self.timer = self.create_timer(1.0 / cand["publish_rate"], self._tick)
-        if self._pending_scene:  # report the scene's values through the parameters, after this call
-            self._scene_timer = self.create_timer(0.0, self._publish_scene_values)
-        return SetParametersResult(successful=True)
-
-    def _publish_scene_values(self):
-        self._scene_timer.cancel()
-        self.destroy_timer(self._scene_timer)
-        values, self._pending_scene = self._pending_scene, None
-        self.set_parameters([Parameter(k, value=v) for k, v in values.items()])
 
     def _apply_live(self, cand: dict) -> None:
         sim, cur = self.sim, self.cfg
@@ -207,11 +263,11 @@ class ClothSimNode(Node):
             sim.set_integrator(cand["integrator"])
         if cand["dt"] != sim.dt:
             sim.dt = cand["dt"]
-        if list(cand["gravity"]) != list(cur["gravity"]):
+        if cand["gravity"] != cur["gravity"]:
             sim.gravity = cand["gravity"]
-        if (cand["wind.strength"], list(cand["wind.direction"])) != (cur["wind.strength"],
-                                                                    list(cur["wind.direction"])):
-            sim.wind = self._wind(cand)
+        if (cand["wind.strength"], cand["wind.direction"]) != (cur["wind.strength"],
+                                                              cur["wind.direction"]):
+            sim.wind = _wind(cand)
         if cand["drag"] != cur["drag"]:
             sim.drag = cand["drag"]
         if cand["strain_limit"] != cur["strain_limit"]:
@@ -232,6 +288,10 @@ class ClothSimNode(Node):
                     f"({1e3 * pub_wall:.3f} ms/tick) would need {load:.2f} s of work per second; "
                     f"lower publish_rate, or raise dt")
         return None
+
+    def stable_dt(self) -> float:
+        """The current method's stable_dt (``inf`` for unconditionally stable methods)."""
+        return self._stable_dt
 
     # ------------------------------------------------------------------ services
     def _on_reset(self, request, response):
@@ -280,15 +340,21 @@ class ClothSimNode(Node):
                 self._publish_diagnostics()
         t1 = time.perf_counter()
         stamp = self.get_clock().now().to_msg()
+        frame = self.cfg["frame_id"]
         if self.points_pub.get_subscription_count() > 0:
             self.points_pub.publish(self.point_cloud(stamp))
         if self.mesh_pub.get_subscription_count() > 0:
-            self.mesh_pub.publish(self.mesh(stamp))
+            self.mesh_pub.publish(messages.mesh(sim.positions, sim.model.triangles, frame, stamp))
         wall_now = time.monotonic()
         self._history.append((wall_now, sim.time))
         while self._history and wall_now - self._history[0][0] > RTF_WINDOW:
             self._history.popleft()
-        self.stats_pub.publish(self._stats(stamp, steps, step_wall, step_max, t0))
+        self.stats_pub.publish(messages.stats(
+            self.Stats, stamp=stamp, frame_id=frame, integrator=sim.integrator, dt=sim.dt,
+            steps=steps, step_wall=step_wall, step_max=step_max,
+            tick_wall=time.perf_counter() - t0, rtf=self.real_time_factor(), sim_time=sim.time,
+            energy=sim.energy(), max_strain=sim.max_strain(), overruns=self.overruns,
+            stable_dt=self._stable_dt, paused=self.paused))
         tick_wall = time.perf_counter() - t0
         if tick_wall > period:
             self.overruns += 1
@@ -296,6 +362,10 @@ class ClothSimNode(Node):
         if wall_now - self._last_status >= STATUS_PERIOD:
             self._last_status = wall_now
             self.get_logger().info(self.status_line())
+
+    def point_cloud(self, stamp) -> PointCloud2:
+        return messages.point_cloud(self.sim.positions, self.cfg["rows"], self.cfg["cols"],
+                                    self.cfg["frame_id"], stamp)
 
     def real_time_factor(self) -> float:
         if len(self._history) < 2:
@@ -309,113 +379,59 @@ class ClothSimNode(Node):
                 f"rtf={self.real_time_factor():.2f}  max_strain={self.sim.max_strain():+.4f}  "
                 f"overruns={self.overruns}")
 
-    # ------------------------------------------------------------------ messages
-    def point_cloud(self, stamp) -> PointCloud2:
-        rows, cols = self.cfg["rows"], self.cfg["cols"]
-        msg = PointCloud2()
-        msg.header.stamp = stamp
-        msg.header.frame_id = self.cfg["frame_id"]
-        msg.height, msg.width = rows, cols
-        msg.fields = _FIELDS
-        msg.is_bigendian = sys.byteorder == "big"
-        msg.point_step = 12
-        msg.row_step = 12 * cols
-        msg.is_dense = True  # the guard never lets a non-finite state through
-        msg.data = array.array("B", self.sim.positions.astype(np.float32).tobytes())
-        return msg
-
-    def mesh(self, stamp) -> Marker:
-        m = Marker()
-        m.header.stamp = stamp
-        m.header.frame_id = self.cfg["frame_id"]
-        m.ns, m.id = "cloth", 0
-        m.type, m.action = Marker.TRIANGLE_LIST, Marker.ADD
-        m.pose.orientation.w = 1.0
-        m.scale.x = m.scale.y = m.scale.z = 1.0
-        m.color = ColorRGBA(r=0.2, g=0.5, b=0.9, a=1.0)
-        verts = self.sim.positions[self.sim.model.triangles.ravel()].tolist()
-        m.points = [Point(x=p[0], y=p[1], z=p[2]) for p in verts]
-        return m
-
-    def _stats(self, stamp, steps, step_wall, step_max, t0):
-        sim = self.sim
-        e = sim.energy()
-        msg = self.Stats()
-        msg.header.stamp = stamp
-        msg.header.frame_id = self.cfg["frame_id"]
-        msg.integrator = sim.integrator
-        msg.dt = sim.dt
-        msg.steps = steps
-        msg.step_time_mean = step_wall / steps if steps else 0.0
-        msg.step_time_max = step_max
-        msg.tick_wall_time = time.perf_counter() - t0
-        msg.real_time_factor = self.real_time_factor()
-        msg.sim_time = sim.time
-        msg.kinetic_energy = e["kinetic"]
-        msg.potential_energy = e["spring"] + e["gravity"]
-        msg.max_strain = sim.max_strain()
-        msg.overruns = self.overruns
-        limit = self.stable_dt()
-        msg.stability_margin = sim.dt / limit if math.isfinite(limit) and limit > 0 else (
-            0.0 if math.isinf(limit) else math.inf)
-        msg.paused = self.paused
-        return msg
-
-    def diagnostic_status(self) -> DiagnosticStatus:
+    def diagnostic_status(self):
         sim = self.sim
         rtf = self.real_time_factor()
-        limit = self.stable_dt()
-        level, message = DiagnosticStatus.OK, "running"
-        problems = []
-        if self.error:
-            level, message = DiagnosticStatus.ERROR, f"simulation diverged and is paused: {self.error}"
-        else:
-            if not self.paused and len(self._history) >= 2 and rtf < RTF_WARN:
-                problems.append(f"real-time factor {rtf:.2f} < 1")
-            if math.isfinite(limit) and sim.dt > WARN_MARGIN * limit:
-                problems.append(f"dt={sim.dt:g} s is above {WARN_MARGIN:.0%} of stable_dt={limit:.4g} s")
-            if problems:
-                level, message = DiagnosticStatus.WARN, "; ".join(problems)
-            elif self.paused:
-                message = "paused"
         values = {
-            "integrator": sim.integrator, "dt": f"{sim.dt:g}", "stable_dt": f"{limit:.6g}",
+            "integrator": sim.integrator, "dt": f"{sim.dt:g}", "stable_dt": f"{self._stable_dt:.6g}",
             "real_time_factor": f"{rtf:.3f}", "sim_time": f"{sim.time:.4f}",
-            "particles": str(sim.model.n_particles), "max_strain": f"{sim.max_strain():.5f}",
-            "overruns": str(self.overruns), "paused": str(self.paused).lower(),
+            "particles": sim.model.n_particles, "max_strain": f"{sim.max_strain():.5f}",
+            "overruns": self.overruns, "paused": str(self.paused).lower(),
             "publish_rate": f"{self.cfg['publish_rate']:g}", "scene": self.scene.name,
         }
-        return DiagnosticStatus(level=level, name="cloth_sim: simulation", message=message,
-                                hardware_id="cloth_sim",
-                                values=[KeyValue(key=k, value=v) for k, v in values.items()])
+        return messages.diagnostic_status(
+            error=self.error, paused=self.paused, rtf=rtf, rtf_known=len(self._history) >= 2,
+            rtf_warn=RTF_WARN, dt=sim.dt, stable_dt=self._stable_dt, warn_margin=WARN_MARGIN,
+            values=values)
 
     def _publish_diagnostics(self) -> None:
-        msg = DiagnosticArray()
-        msg.header.stamp = self.get_clock().now().to_msg()
-        msg.status = [self.diagnostic_status()]
-        self.diag_pub.publish(msg)
+        self.diag_pub.publish(messages.diagnostic_array(self.diagnostic_status(),
+                                                        self.get_clock().now().to_msg()))
 
 
-def main(argv=None) -> int:
-    """Entry point of ``cloth_sim_node`` (``ros2 run cloth_sim cloth_sim_node``)."""
-    rclpy.init(args=argv if argv is not None else sys.argv)
-    node = None
+# ---------------------------------------------------------------------- process
+def run(argv, stop) -> int:
+    """Spin the node until ``stop`` (a :class:`cloth_sim.ros.StopRequest`, installed by
+    :func:`cloth_sim.ros.main` before anything heavy is imported) says a signal came. Exit status
+    0 after SIGINT/SIGTERM (one or several, at any moment), 2 with one line on stderr when a value
+    given at start-up is refused."""
+    rclpy.init(args=argv if argv is not None else sys.argv,
+               signal_handler_options=SignalHandlerOptions.NO)
+    node = executor = None
     try:
-        node = ClothSimNode()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ValueError as e:  # a refused parameter or scene at start-up
+        if not stop:
+            node = ClothSimNode()
+            executor = SingleThreadedExecutor()
+            executor.add_node(node)
+        while not stop and rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
+    except StartupError as e:
         print(f"cloth_sim_node: error: {e}", file=sys.stderr)
         return 2
     finally:
+        if executor is not None:
+            executor.shutdown(timeout_sec=1.0)
         if node is not None:
             node.destroy_node()
-        if rclpy.ok():
-            rclpy.try_shutdown()
+        rclpy.try_shutdown()
     return 0
+
+
+def main(argv=None) -> int:
+    """Entry point of ``cloth_sim_node``; see :func:`cloth_sim.ros.main`."""
+    from . import main as ros_main
+
+    return ros_main(argv)
 
 
 if __name__ == "__main__":

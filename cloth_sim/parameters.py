@@ -1,0 +1,197 @@
+"""One schema for every quantity a user can set: name, type, unit, range, description, how it applies.
+
+Scene files (:mod:`cloth_sim.scene`), the model and simulator (:class:`~cloth_sim.model.ClothModel`,
+:class:`~cloth_sim.simulator.Simulator`), the ``cloth-sim`` command line and the ROS node's parameter
+descriptors and checks (:mod:`cloth_sim.ros.params`) all read their bounds from :data:`SCHEMA`, so a
+quantity has one range everywhere. :meth:`Param.check` turns a value into its canonical form or
+raises :class:`ParameterError`, whose message names the parameter, the value and what is accepted.
+
+``apply`` says what a change does: ``live`` (the running simulation takes it and keeps its state),
+``rebuild`` (the cloth is rebuilt from the scene and reset) or ``node`` (the node's own settings).
+
+To add a parameter: one :class:`Param` here (``scene_key`` if scene files may set it), then the
+code that uses it (``Simulator`` for a live value, ``Scene.build_model`` for a rebuild one).
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from dataclasses import dataclass
+
+from .model import GRID_FAMILIES, MODELS
+
+#: The largest grid side anywhere (scene files, the node, ``ClothModel.grid``).
+MAX_GRID = 512
+
+
+class ParameterError(ValueError):
+    """A value outside its parameter's accepted set; the message names both."""
+
+    def __init__(self, name: str, value, accepted: str, message: str | None = None):
+        self.name, self.value, self.accepted = name, value, accepted
+        super().__init__(message or f"{name} = {_show(value)} is not accepted: expected {accepted}")
+
+
+def _show(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+def _num(x: float) -> str:
+    return f"{x:g}"
+
+
+@dataclass(frozen=True)
+class Param:
+    """One user-settable quantity.
+
+    ``type`` is ``float``, ``int``, ``bool``, ``str`` or ``"vector3"`` (three floats). Numbers and
+    vector components lie in ``[lo, hi]`` (``(lo, hi]`` with ``lo_open``); strings in ``choices`` when
+    given, and non-empty when ``nonempty``. ``scene_key`` is the field's path in a scene file
+    (``grid.rows``), ``None`` for parameters only the node has.
+    """
+
+    name: str
+    type: object
+    unit: str
+    description: str
+    apply: str = "live"
+    lo: float | None = None
+    hi: float | None = None
+    lo_open: bool = False
+    choices: tuple[str, ...] | None = None
+    nonempty: bool = False
+    scene_key: str | None = None
+
+    # ------------------------------------------------------------------ text
+    def range_text(self) -> str:
+        """The accepted set in words: ``a number in [1e-07, 1] s``."""
+        unit = f" {self.unit}" if self.unit else ""
+        if self.type is bool:
+            return "true or false"
+        if self.type is str:
+            if self.choices is not None:
+                return "one of " + ", ".join(self.choices)
+            return "a non-empty string" if self.nonempty else "a string"
+        lo = "(" if self.lo_open else "["
+        interval = f"{lo}{_num(self.lo)}, {_num(self.hi)}]"
+        if self.type is int:
+            return f"an integer in {interval}{unit}"
+        if self.type == "vector3":
+            return f"3 numbers, each in {interval}{unit}"
+        return f"a number in {interval}{unit}"
+
+    # ------------------------------------------------------------------ checks
+    def check(self, value, field: str | None = None):
+        """``value`` in canonical form (float, int, bool, str or a list of 3 floats), or
+        :class:`ParameterError` naming ``field`` (default: the parameter's name)."""
+        name = field or self.name
+        if self.type is bool:
+            if not isinstance(value, bool):
+                raise ParameterError(name, value, self.range_text())
+            return value
+        if self.type is str:
+            if isinstance(value, str) and self.choices is not None and value not in self.choices:
+                raise ParameterError(name, value, self.range_text(),
+                                     f"{name} {_show(value)} is unknown; accepted values: "
+                                     f"{', '.join(self.choices)}")
+            if not isinstance(value, str) or (self.nonempty and not value):
+                raise ParameterError(name, value, self.range_text())
+            return value
+        if self.type == "vector3":
+            if isinstance(value, (str, bytes, dict)) or not hasattr(value, "__len__"):
+                raise ParameterError(name, value, self.range_text())
+            if len(value) != 3:
+                raise ParameterError(name, value, self.range_text(),
+                                     f"{name} must have exactly 3 elements [x, y, z], got "
+                                     f"{len(value)}: {_show(value)}")
+            return [self._number(v, f"{name}[{i}]") for i, v in enumerate(value)]
+        if self.type is int:
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+                raise ParameterError(name, value, self.range_text())
+            v = int(value)
+            if not self.lo <= v <= self.hi:
+                raise ParameterError(name, value, self.range_text())
+            return v
+        return self._number(value, name)
+
+    def _number(self, x, name) -> float:
+        """One number (a scalar parameter or one vector component) in range."""
+        ok = not isinstance(x, bool) and isinstance(x, numbers.Real)  # numpy scalars are Real too
+        if ok:
+            f = float(x)
+            ok = math.isfinite(f) and f <= self.hi and (f > self.lo if self.lo_open else f >= self.lo)
+        if not ok:
+            lo = "(" if self.lo_open else "["
+            unit = f" {self.unit}" if self.unit else ""
+            raise ParameterError(name, x, f"a number in {lo}{_num(self.lo)}, {_num(self.hi)}]{unit}")
+        return f
+
+    def is_valid(self, value) -> bool:
+        try:
+            self.check(value)
+        except ParameterError:
+            return False
+        return True
+
+
+def _integrator_names() -> tuple[str, ...]:
+    from . import integrators  # the registry imports the simulator's pieces, not this module
+
+    return tuple(integrators.available())
+
+
+def _schema() -> dict[str, Param]:
+    P = Param
+    params = [
+        P("scene", str, "", "Scene name (hanging, curtain, flag, free_fall) or path to a scene YAML "
+          "file. Changing it rebuilds the cloth from that scene, its values included, and resets it.",
+          apply="rebuild", nonempty=True),
+        P("integrator", str, "", "Time integrator; switching keeps positions and velocities.",
+          choices=_integrator_names(), scene_key="integrator"),
+        P("dt", float, "s", "Simulation time step. A conditionally stable method refuses a dt above "
+          "its stable_dt unless allow_unstable is true.", lo=1e-7, hi=1.0, scene_key="dt"),
+        P("allow_unstable", bool, "", "Accept a dt above the method's stable_dt.", apply="node"),
+        P("publish_rate", float, "Hz", "Ticks per second: each tick advances 1/publish_rate of "
+          "simulated time in whole steps of dt and publishes.", lo=0.1, hi=1000.0, apply="node"),
+        *[P(f"stiffness.{f}", float, "N/m", f"Spring stiffness of the {f} springs.", lo=0.0, hi=1e9,
+            scene_key=f"stiffness.{f}") for f in GRID_FAMILIES],
+        *[P(f"damping.{f}", float, "N·s/m", f"Damping along the {f} springs.", lo=0.0, hi=1e6,
+            scene_key=f"damping.{f}") for f in GRID_FAMILIES],
+        P("particle_mass", float, "kg", "Mass of each particle; rebuilds and resets the cloth.",
+          lo=1e-6, hi=1e3, apply="rebuild", scene_key="particle_mass"),
+        P("gravity", "vector3", "m/s²", "Gravity acceleration [x, y, z].", lo=-1e3, hi=1e3,
+          scene_key="gravity"),
+        P("wind.direction", "vector3", "", "Wind direction [x, y, z]; particle i feels "
+          "strength·(n_i·d) n_i.", lo=-1e3, hi=1e3, scene_key="wind.direction"),
+        P("wind.strength", float, "N", "Wind strength w (N per unit of normal projection); 0 turns "
+          "wind off.", lo=0.0, hi=1e3, scene_key="wind.strength"),
+        P("drag", float, "N·s/m", "Linear air drag on each particle.", lo=0.0, hi=1e3,
+          scene_key="drag"),
+        P("strain_limit", float, "", "Provot's critical deformation rate (0.1 = 10 %); 0 turns it "
+          "off.", lo=0.0, hi=10.0, scene_key="strain_limit"),
+        P("rows", int, "", "Particles along the grid's rows; rebuilds and resets the cloth.", lo=2,
+          hi=MAX_GRID, apply="rebuild", scene_key="grid.rows"),
+        P("cols", int, "", "Particles along the grid's columns; rebuilds and resets the cloth.", lo=2,
+          hi=MAX_GRID, apply="rebuild", scene_key="grid.cols"),
+        P("spacing", float, "m", "Rest distance between neighbouring particles; rebuilds and "
+          "resets the cloth.", lo=1e-4, hi=10.0, apply="rebuild", scene_key="grid.spacing"),
+        P("model", str, "", "Spring model; rebuilds and resets the cloth.", choices=MODELS,
+          apply="rebuild", scene_key="model"),
+        P("frame_id", str, "", "frame_id of the published cloud, mesh and stats.", apply="node",
+          nonempty=True),
+    ]
+    return {p.name: p for p in params}
+
+
+#: Every user-settable quantity by name (the node's parameter names).
+SCHEMA: dict[str, Param] = _schema()
+
+#: Parameters whose change rebuilds the cloth and resets it.
+REBUILD = tuple(name for name, p in SCHEMA.items() if p.apply == "rebuild")
+
+
+def check(name: str, value, field: str | None = None):
+    """``SCHEMA[name].check(value, field)``."""
+    return SCHEMA[name].check(value, field)

@@ -1,0 +1,424 @@
+"""Linear stability analysis: pure functions of a model and its material, and a cache of their results.
+
+* :func:`rest_matrices` — stiffness and damping matrices ``K``, ``C`` linearised about the rest shape.
+* :func:`fastest_mode` — ``(ω_max, ζ)``: the highest natural frequency of ``M⁻¹K`` over the free
+  particles (Lanczos, tight) and that mode's damping ratio, spring damping and drag included.
+* :func:`amplification_limit` — a one-step method's largest stable ``ω·dt`` at damping ratio ``ζ``,
+  from its amplification matrix (spectral radius ≤ 1); cached per method and ``ζ``.
+* :func:`kang_step_matrix`, :func:`kang_stable_dt` — Kang et al.'s approximated implicit step has no
+  scalar mode model (its matrix ignores the springs' directions and lags the neighbours' ``Δv``), so
+  its step is analysed as a whole: a von Neumann (Fourier) analysis of the infinite grid for a
+  regular grid with uniform families (milliseconds), the spectral radius of the whole linearised
+  step matrix otherwise (ARPACK: seconds at 16×16, minutes at 32×32).
+* :class:`Analysis` — one material's results, computed at most once: :func:`analysis_for` returns
+  the same object for the same model, stiffness, damping and drag, so the node's parameter checks
+  and the simulator share them, and nothing here runs inside a step or an error path.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import OrderedDict
+from functools import lru_cache
+from typing import NamedTuple
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.linalg import ArpackNoConvergence, eigs, eigsh
+
+from .forces import BUCKLE_TABLE, buckling_h, spring_coupling_matrix, spring_sums
+from .model import BUCKLING, ClothModel
+
+#: The amplification scan's resolution in ω·dt and its end (no method here is stable beyond 8).
+_SCAN_STEP, _SCAN_END = 0.05, 8.0
+
+
+class Mode(NamedTuple):
+    """The fastest linear mode: natural frequency ``omega`` (rad/s) and damping ratio ``zeta``."""
+
+    omega: float
+    zeta: float
+
+
+# --------------------------------------------------------------------------- matrices
+def effective_stiffness(model: ClothModel, k: np.ndarray) -> np.ndarray:
+    """Per-spring stiffness of the linearisation: Choi–Ko buckling pairs count with the stiffer of
+    their two branches (``k`` stretched, ``k·max|h''|/L³`` compressed)."""
+    k_eff = np.array(k, dtype=np.float64)
+    buck = model.kind == BUCKLING
+    if buck.any():
+        L = model.rest_lengths[buck]
+        k_eff[buck] = np.maximum(k_eff[buck], k_eff[buck] * _buckling_curvature_max() / L ** 3)
+    return k_eff
+
+
+@lru_cache(maxsize=1)
+def _buckling_curvature_max() -> float:
+    return float(np.max(np.abs([buckling_h(r)[2] for r in np.linspace(0, 1, len(BUCKLE_TABLE))])))
+
+
+def rest_directions(model: ClothModel) -> np.ndarray:
+    """Unit vectors along each spring at rest, ``(m, 3)``."""
+    d = model.positions[model.springs[:, 1]] - model.positions[model.springs[:, 0]]
+    return d / np.linalg.norm(d, axis=1)[:, None]
+
+
+def rest_matrices(model: ClothModel, k: np.ndarray, c: np.ndarray) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """``(K, C)``: ``3n×3n`` ``Σ k uuᵀ`` and ``Σ c uuᵀ`` over the springs about the rest shape
+    (``u`` the rest directions; :func:`effective_stiffness` for Choi–Ko). Near rest the force is
+    ``−K·δx − C·v``."""
+    u = rest_directions(model)
+    uu = np.einsum("si,sj->sij", u, u)
+    n = model.n_particles
+
+    def axial(w):
+        blocks = -np.asarray(w)[:, None, None] * uu
+        return spring_coupling_matrix(model.springs, blocks, blocks, n)
+
+    return axial(effective_stiffness(model, k)), axial(c)
+
+
+class _ModeBasis(NamedTuple):
+    """Per model: ``B`` (m × free dofs), row ``s`` = ``u_sᵀ`` at ``j`` and ``−u_sᵀ`` at ``i``, columns
+    scaled by ``m^-½``, so that ``M^-½ K M^-½ = Bᵀ diag(k_eff) B`` over the free particles; and the
+    squared scale per free dof (``1/m``)."""
+
+    B: sp.csr_matrix
+    inv_mass: np.ndarray
+    last_mode: list  # [q] of the last fastest mode found on this model: the next solve starts there
+
+
+_BASES: OrderedDict = OrderedDict()
+
+
+def _mode_basis(model: ClothModel) -> _ModeBasis:
+    hit = _BASES.get(id(model))
+    if hit is not None and hit[0] is model:
+        return hit[1]
+    m, n = model.n_springs, model.n_particles
+    u = rest_directions(model)
+    i, j = model.springs[:, 0], model.springs[:, 1]
+    rows = np.repeat(np.arange(m), 6)
+    cols = np.concatenate([3 * j[:, None] + np.arange(3), 3 * i[:, None] + np.arange(3)], axis=1).ravel()
+    vals = np.concatenate([u, -u], axis=1).ravel()
+    B = sp.csr_matrix((vals, (rows, cols)), shape=(m, 3 * n))
+    dofs = np.repeat(~model.pinned, 3)
+    scale = np.repeat(1.0 / np.sqrt(model.masses), 3)[dofs]
+    basis = _ModeBasis((B[:, dofs] @ sp.diags(scale)).tocsr(), scale * scale,
+                       [np.linspace(1.0, 2.0, int(dofs.sum()))])
+    _BASES[id(model)] = (model, basis)
+    while len(_BASES) > _ANALYSES_KEPT:
+        _BASES.popitem(last=False)
+    return basis
+
+
+def fastest_mode(model: ClothModel, k: np.ndarray, c: np.ndarray, drag: float = 0.0) -> Mode:
+    """``(ω_max, ζ)`` of the free particles linearised about the rest shape: ``ω_max²`` the largest
+    eigenvalue of ``M^-½ K M^-½`` (Lanczos, so tight: the tests' 16×16 cloth gives 3.15·√(k/m);
+    assembled as ``Bᵀ diag(k_eff) B`` from a basis kept per model, started from the model's last
+    mode), ``ζ = qᵀ(C + drag·I)q / 2ω`` in the mass-weighted mode ``q``. 5–15 ms at 32×32."""
+    if not (~model.pinned).any() or model.n_springs == 0:
+        return Mode(0.0, 0.0)
+    basis = _mode_basis(model)
+    B, k_eff = basis.B, effective_stiffness(model, k)
+    nd = B.shape[1]
+    if nd <= 3:
+        vals, vecs = np.linalg.eigh((B.T @ sp.diags(k_eff) @ B).toarray())
+        lam, q = vals[-1], vecs[:, -1]
+    else:
+        A = (B.T @ sp.diags(k_eff) @ B).tocsr()
+        # started from the model's last mode (a material change moves it little: 3–5× fewer
+        # iterations); tol 1e-6 gives ω to about 1e-8 relative, whatever the start
+        vals, vecs = eigsh(A, k=1, which="LA", tol=1e-6, v0=basis.last_mode[0])
+        lam, q = vals[0], vecs[:, 0]
+        basis.last_mode[0] = q
+    omega = math.sqrt(max(lam, 0.0))
+    if omega == 0.0:
+        return Mode(0.0, 0.0)
+    Bq = B @ q
+    damping = float(Bq @ (np.asarray(c, np.float64) * Bq)) + float(drag) * float(q @ (basis.inv_mass * q))
+    return Mode(omega, damping / (2.0 * omega))
+
+
+# --------------------------------------------------------------------------- one-step methods
+@lru_cache(maxsize=256)
+def amplification_limit(method: type, zeta: float) -> float:
+    """Largest ``x = ω·dt`` with spectral radius of ``method.amplification(x, 1, ζ)`` ≤ 1, found by
+    scanning ``x`` in steps of 0.05 up to the first unstable point, then bisecting. 0 when no step
+    is stable (an undamped explicit Euler or midpoint), ``inf`` when none up to 8 is unstable."""
+    if method.needs_damping and zeta <= 0:
+        return 0.0
+
+    def stable(x):
+        return spectral_radius_small(method.amplification(x, 1.0, zeta)) <= 1 + 1e-12
+
+    last_ok = 0.0
+    for x in np.arange(_SCAN_STEP, _SCAN_END + _SCAN_STEP / 2, _SCAN_STEP):
+        if not stable(x):
+            break
+        last_ok = x
+    else:
+        return math.inf
+    lo, hi = last_ok, x
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if stable(mid) else (lo, mid)
+    return lo
+
+
+def spectral_radius_small(A: np.ndarray) -> float:
+    """Spectral radius of a small dense matrix (closed form for 2×2)."""
+    if A.shape == (2, 2):
+        half_tr = 0.5 * (A[0, 0] + A[1, 1])
+        det = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
+        disc = half_tr * half_tr - det
+        if disc < 0:  # a complex pair: |λ|² = det
+            return math.sqrt(det)
+        root = math.sqrt(disc)
+        return max(abs(half_tr + root), abs(half_tr - root))
+    return float(np.max(np.abs(np.linalg.eigvals(A))))
+
+
+def limit_from_mode(method: type, mode: Mode) -> float:
+    """``dt`` limit of a one-step method on the fastest mode (``inf`` when ``ω = 0``)."""
+    if mode.omega <= 0:
+        return math.inf
+    return amplification_limit(method, round(mode.zeta, 12)) / mode.omega
+
+
+# --------------------------------------------------------------------------- Kang et al. 2000
+def _kang_parts(model: ClothModel, k: np.ndarray):
+    """Kang's graph matrices: adjacency ``A`` (weights ``k``) and the per-particle sums ``Σ_j k_ij``."""
+    n = model.n_particles
+    s = model.springs
+    adj = sp.coo_matrix((np.r_[k, k], (np.r_[s[:, 0], s[:, 1]], np.r_[s[:, 1], s[:, 0]])),
+                        shape=(n, n)).tocsr()
+    return adj, spring_sums(s, k, n)
+
+
+def kang_step_matrix(model: ClothModel, k: np.ndarray, c: np.ndarray, drag: float, dt: float,
+                     sweeps: int = 1) -> sp.csr_matrix:
+    """Kang's step as a linear map of ``(δx, v, Δv_prev)`` over the free coordinates, for the system
+    linearised about its rest shape (force ``−K·δx − C·v − drag·v``), with ``sweeps`` Jacobi sweeps:
+    ``Δv⁽ˢ⁺¹⁾ = R + G·Δv⁽ˢ⁾`` from ``Δv⁽⁰⁾ = Δv_prev``, so ``Δv' = (I + G + … + G^{S−1}) R + G^S Δv_prev``
+    with ``R = W(dt·f + dt²·H v)``, ``G = dt²·W·A`` and ``W = (M + dt²·diag Σk)⁻¹``."""
+    K, C = rest_matrices(model, k, c)
+    adj, ksum = _kang_parts(model, k)
+    A3 = sp.kron(adj, sp.identity(3), format="csr")
+    H3 = A3 - sp.diags(np.repeat(ksum, 3))
+    free = np.repeat(~model.pinned, 3)
+    W = sp.diags(1.0 / np.repeat(model.masses + dt * dt * ksum, 3)[free])
+
+    def sel(X):
+        return X.tocsr()[free][:, free]
+
+    K, C, H3, A3 = sel(K), sel(C), sel(H3), sel(A3)
+    eye = sp.identity(K.shape[0], format="csr")
+    G = (W @ (dt * dt * A3)).tocsr()
+    P, Gs = eye.copy(), eye.copy()
+    for _ in range(int(sweeps) - 1):
+        Gs = (Gs @ G).tocsr()
+        P = P + Gs
+    Gs = (Gs @ G).tocsr()
+    Dx = P @ (W @ (-dt * K))
+    Dv = P @ (W @ (-dt * (C + drag * eye) + dt * dt * H3))
+    # Δv' = Dx δx + Dv v + Gs Δv ;  v' = v + Δv' ;  δx' = δx + dt·v'
+    return sp.bmat([[eye + dt * Dx, dt * (eye + Dv), dt * Gs],
+                    [Dx, eye + Dv, Gs],
+                    [Dx, Dv, Gs]], format="csr")
+
+
+def spectral_radius(T: sp.spmatrix) -> float:
+    """Largest eigenvalue modulus of a sparse matrix (dense up to 600 rows, ARPACK above, dense
+    again up to 4000 rows where ARPACK does not converge)."""
+    if T.shape[0] == 0:
+        return 0.0
+    if T.shape[0] > 600:
+        try:
+            vals = eigs(T, k=3, which="LM", return_eigenvectors=False, tol=1e-6, maxiter=100000)
+            return float(np.max(np.abs(vals)))
+        except ArpackNoConvergence:
+            if T.shape[0] > 4000:
+                raise
+    return float(np.max(np.abs(np.linalg.eigvals(T.toarray()))))
+
+
+class GridStencil(NamedTuple):
+    """A regular grid's springs grouped by offset ``(dr, dc)``, each group uniform: per group the
+    offset, rest direction ``u``, stiffness ``k``, linearised stiffness ``k_eff`` and damping ``c``;
+    and the particle mass."""
+
+    offsets: np.ndarray  # (g, 2)
+    u: np.ndarray        # (g, 3)
+    k: np.ndarray
+    k_eff: np.ndarray
+    c: np.ndarray
+    mass: float
+
+
+def grid_stencil(model: ClothModel, k: np.ndarray, c: np.ndarray) -> GridStencil | None:
+    """The model's stencil when it is a regular grid with uniform masses and every offset's springs
+    share stiffness and damping; ``None`` otherwise (then only the whole-system analysis applies)."""
+    if model.cols is None or model.n_springs == 0 or np.ptp(model.masses) != 0:
+        return None
+    s = model.springs
+    r0, c0 = np.divmod(s[:, 0], model.cols)
+    r1, c1 = np.divmod(s[:, 1], model.cols)
+    d = np.stack([r1 - r0, c1 - c0], axis=1)
+    flip = (d[:, 0] < 0) | ((d[:, 0] == 0) & (d[:, 1] < 0))
+    d[flip] *= -1
+    u = rest_directions(model)
+    u[flip] *= -1
+    k_eff = effective_stiffness(model, k)
+    offsets, group = np.unique(d, axis=0, return_inverse=True)
+    group = group.ravel()
+    rows = []
+    for g in range(len(offsets)):
+        sel = group == g
+        for arr in (k[sel], k_eff[sel], c[sel]):
+            if np.ptp(arr) != 0:
+                return None
+        if np.max(np.abs(u[sel] - u[sel][0])) > 1e-9:
+            return None
+        rows.append((u[sel][0], k[sel][0], k_eff[sel][0], c[sel][0]))
+    return GridStencil(offsets.astype(float), np.array([r[0] for r in rows]),
+                       np.array([r[1] for r in rows]), np.array([r[2] for r in rows]),
+                       np.array([r[3] for r in rows]), float(model.masses[0]))
+
+
+def _fourier_symbols(st: GridStencil, n_theta: int = 24):
+    """Per wavenumber ``θ`` on ``[0, π] × [−π, π]``: ``K̂, Ĉ`` (3×3), ``Ĥ`` and ``Â`` (scalars times
+    the identity) and ``D = Σ_j k_ij`` of an interior particle."""
+    tr = np.linspace(0.0, np.pi, n_theta + 1)
+    tc = np.linspace(-np.pi, np.pi, 2 * n_theta + 1)
+    TR, TC = np.meshgrid(tr, tc, indexing="ij")
+    phase = TR.ravel()[:, None] * st.offsets[None, :, 0] + TC.ravel()[:, None] * st.offsets[None, :, 1]
+    s = 2.0 - 2.0 * np.cos(phase)  # (θ, g): (2 − e^{iφ} − e^{−iφ}) of a pair coupling
+    uu = np.einsum("gi,gj->gij", st.u, st.u)
+    K = np.einsum("tg,g,gij->tij", s, st.k_eff, uu)
+    C = np.einsum("tg,g,gij->tij", s, st.c, uu)
+    H = -(s @ st.k)
+    A = (2.0 * np.cos(phase)) @ st.k
+    return K, C, H, A, 2.0 * st.k.sum()
+
+
+def kang_fourier_radius(st: GridStencil, drag: float, dt: float, sweeps: int = 1) -> float:
+    """Largest spectral radius over wavenumbers of Kang's step on the infinite grid (the 9×9
+    Fourier symbol of :func:`kang_step_matrix`)."""
+    K, C, H, A, D = _fourier_symbols(st)
+    nt = len(K)
+    W = 1.0 / (st.mass + dt * dt * D)
+    I3 = np.broadcast_to(np.eye(3), (nt, 3, 3))
+    g = W * dt * dt * A  # G = g·I
+    P = sum(g ** j for j in range(int(sweeps)))
+    gS = g ** int(sweeps)
+    Dx = (P * W * -dt)[:, None, None] * K
+    Dv = (P * W)[:, None, None] * (-dt * (C + drag * I3) + (dt * dt * H)[:, None, None] * I3)
+    Dd = gS[:, None, None] * I3
+    T = np.empty((nt, 9, 9))
+    T[:, 0:3, 0:3] = I3 + dt * Dx
+    T[:, 0:3, 3:6] = dt * (I3 + Dv)
+    T[:, 0:3, 6:9] = dt * Dd
+    T[:, 3:6, 0:3] = Dx
+    T[:, 3:6, 3:6] = I3 + Dv
+    T[:, 3:6, 6:9] = Dd
+    T[:, 6:9, 0:3] = Dx
+    T[:, 6:9, 3:6] = Dv
+    T[:, 6:9, 6:9] = Dd
+    return float(np.max(np.abs(np.linalg.eigvals(T))))
+
+
+def _bisect_stable(stable, omega: float, rel_tol: float) -> float:
+    """Largest ``dt`` with ``stable(dt)``, bracketed from ``1/ω`` by doubling/halving, then bisected
+    to ``rel_tol``; ``inf`` when still stable at ``1000/ω``."""
+    lo, hi = 0.0, 1.0 / omega
+    while stable(hi):
+        lo, hi = hi, 2.0 * hi
+        if hi > 1e3 / omega:
+            return math.inf
+    if lo == 0.0:
+        lo = hi / 2
+        while not stable(lo):
+            hi, lo = lo, lo / 2
+            if lo < 1e-6 / omega:
+                return 0.0
+    while hi - lo > rel_tol * hi:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if stable(mid) else (lo, mid)
+    return lo
+
+
+def kang_stable_dt(model: ClothModel, k: np.ndarray, c: np.ndarray, drag: float, sweeps: int = 1,
+                   omega: float | None = None, rel_tol: float = 0.01,
+                   method: str = "auto") -> float:
+    """Largest ``dt`` whose linearised Kang step has spectral radius ≤ 1, by bisection to
+    ``rel_tol``. ``method``: ``"fourier"`` (a regular grid with uniform families: the infinite
+    grid's von Neumann analysis, which leaves out the boundary rows and the pins), ``"full"`` (the
+    whole step matrix, seconds to minutes) or ``"auto"`` (Fourier where it applies). Linearised about
+    the flat rest shape, it is conservative: a cloth hanging under gravity survives up to about twice
+    this step."""
+    if omega is None:
+        omega = fastest_mode(model, k, c, drag).omega
+    if omega == 0.0:
+        return math.inf
+    st = grid_stencil(model, k, c) if method in ("auto", "fourier") else None
+    if st is None and method == "fourier":
+        raise ValueError("the Fourier analysis needs a regular grid with uniform spring families")
+    if st is not None:
+        def stable(h):
+            return kang_fourier_radius(st, drag, h, sweeps) <= 1.0 + 1e-9
+    else:
+        def stable(h):
+            return spectral_radius(kang_step_matrix(model, k, c, drag, h, sweeps)) <= 1.0 + 1e-7
+    return _bisect_stable(stable, omega, rel_tol)
+
+
+# --------------------------------------------------------------------------- cache
+class Analysis:
+    """The stability results of one material (model, per-spring stiffness and damping, drag),
+    each computed when first asked and kept."""
+
+    def __init__(self, model: ClothModel, k: np.ndarray, c: np.ndarray, drag: float):
+        self.model = model
+        self.k = np.array(k, dtype=np.float64)
+        self.c = np.array(c, dtype=np.float64)
+        self.drag = float(drag)
+        self._mode: Mode | None = None
+        self._limits: dict = {}
+
+    @property
+    def mode(self) -> Mode:
+        if self._mode is None:
+            self._mode = fastest_mode(self.model, self.k, self.c, self.drag)
+        return self._mode
+
+    def limit(self, key, compute) -> float:
+        """``compute(self)`` the first time ``key`` is asked for, the kept value after."""
+        if key not in self._limits:
+            self._limits[key] = float(compute(self))
+        return self._limits[key]
+
+    def known(self, key) -> float | None:
+        """A limit already computed, or ``None`` (never computes)."""
+        return self._limits.get(key)
+
+
+_ANALYSES: OrderedDict = OrderedDict()
+_ANALYSES_KEPT = 16
+
+
+def analysis_for(model: ClothModel, k: np.ndarray, c: np.ndarray, drag: float) -> Analysis:
+    """The :class:`Analysis` of this material, shared by every caller that asks with equal values
+    (the last 16 are kept)."""
+    k = np.ascontiguousarray(k, dtype=np.float64)
+    c = np.ascontiguousarray(c, dtype=np.float64)
+    key = (id(model), k.tobytes(), c.tobytes(), float(drag))
+    hit = _ANALYSES.get(key)
+    if hit is not None and hit.model is model:
+        _ANALYSES.move_to_end(key)
+        return hit
+    a = Analysis(model, k, c, drag)
+    _ANALYSES[key] = a
+    while len(_ANALYSES) > _ANALYSES_KEPT:
+        _ANALYSES.popitem(last=False)
+    return a
