@@ -24,7 +24,8 @@ $(STAMP): requirements.txt setup.py pyproject.toml
 		--config-settings editable_mode=compat -e .
 	@touch $@
 
-$(MSGS): $(STAMP) msg/Stats.msg CMakeLists.txt package.xml tools/build_interfaces.py
+$(MSGS): $(STAMP) msg/Stats.msg CMakeLists.txt package.xml tools/build_interfaces.py \
+		$(wildcard launch/* config/*.yaml config/scenes/*.yaml)
 	$(PY) tools/build_interfaces.py
 	@touch $@
 

@@ -62,8 +62,14 @@ def expose_in_venv(venv: Path) -> None:
     for entry in index.glob("*/cloth_sim"):
         _link(venv / "share" / "ament_index" / "resource_index" / entry.parent.name / "cloth_sim", entry)
     share = PREFIX / "share" / "cloth_sim"
+    # real directories of linked files: `ros2 launch` looks for launch files with os.walk, which
+    # does not enter linked directories
     for name in ("config", "launch"):
-        _link(share / name, ROOT / name)
+        if (share / name).is_symlink():  # an older layout linked the directories themselves
+            (share / name).unlink()
+        for path in (ROOT / name).rglob("*"):
+            if path.is_file():
+                _link(share / path.relative_to(ROOT), path)
     _link(venv / "share" / "cloth_sim", share)
     _link(venv / "lib" / "cloth_sim" / "cloth_sim_node", venv / "bin" / "cloth_sim_node")
 
