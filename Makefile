@@ -14,7 +14,7 @@ export ROS_LOG_DIR ?= $(CURDIR)/.ros_log
 
 SCENE    ?= hanging
 
-.PHONY: install run test bench clean
+.PHONY: install run test fuzz bench clean
 install: $(STAMP) $(MSGS)
 
 $(STAMP): requirements.txt setup.py pyproject.toml
@@ -34,6 +34,11 @@ run: install
 
 test: install
 	$(PY) -m pytest test/ $(PYTEST_ARGS)
+
+# a long seeded fuzz of the live node through its parameter services; prints its figures (~8 min)
+FUZZ_SETS ?= 5000
+fuzz: install
+	ROS_DOMAIN_ID=$${ROS_DOMAIN_ID:-97} $(PY) test/fuzz_node.py --sets $(FUZZ_SETS) --seed 1
 
 # the full benchmark run docs/BENCHMARKS.md reports (about 10 minutes on 2 cores)
 bench: install

@@ -1,6 +1,6 @@
 """Post-step stages: corrections of positions (and velocities) after each integrator step.
 
-A stage is an object with ``name``, ``active`` and ``apply(state, dt, velocity_follow)``. The
+A stage is an object with ``name``, ``active`` and ``apply(state, start, dt, velocity_follow)``. The
 simulator runs its active stages in order after every step; an inactive stage costs nothing (it is
 not even called). To add a stage (contacts, grippers): a class with those three members, and one line
 where :class:`~cloth_sim.simulator.Simulator` builds its ``stages`` list.
@@ -69,9 +69,10 @@ def provot_pass(x, springs, rest, tau, tol, pinned):
 
 
 class Stage:
-    """A post-step correction. ``apply`` changes ``state.x`` / ``state.v`` in place; a position
-    change ``Δx`` moves the velocity by ``velocity_follow·Δx/dt`` (the integrator's own factor: 1
-    for one-step methods, 1.5 for Verlet's BDF2 velocity)."""
+    """A post-step correction. ``apply(state, start, dt, velocity_follow)`` changes ``state.x`` /
+    ``state.v`` in place; ``start`` is the state before the step. A position change ``Δx`` moves the
+    velocity by ``velocity_follow·Δx/dt`` (the integrator's own factor: 1 for one-step methods, 1.5
+    for Verlet's BDF2 velocity)."""
 
     name = ""
 
@@ -79,7 +80,7 @@ class Stage:
     def active(self) -> bool:
         raise NotImplementedError
 
-    def apply(self, state, dt: float, velocity_follow: float) -> None:
+    def apply(self, state, start, dt: float, velocity_follow: float) -> None:
         raise NotImplementedError
 
 
@@ -128,17 +129,38 @@ class StrainLimit(Stage):
         self.last_passes = used
         return used
 
-    def apply(self, state, dt, velocity_follow):
-        start = self._buffer_like(state.x)
-        np.copyto(start, state.x)
+    def apply(self, state, start, dt, velocity_follow):
+        """Correct the positions; the velocities follow the part of each particle's correction no
+        longer than its own motion over the step. A correction beyond that undoes stretch that was
+        there before the step (the limit was just tightened, or a pass left some over): moving it
+        back is a projection, and divided by a small dt it would be a false speed (1.6 mm over
+        dt = 1e-6 s is 1600 m/s)."""
+        if self._before is None or self._before.shape != state.x.shape:
+            self._before = np.empty_like(state.x)
+        before = self._before
+        np.copyto(before, state.x)
         if self.correct(state.x):
-            state.v += (velocity_follow / dt) * (state.x - start)
+            _follow_corrections(state.x, before, start.x, state.v, velocity_follow / dt)
 
-    def _buffer_like(self, x):
-        buf = getattr(self, "_start", None)
-        if buf is None or buf.shape != x.shape:
-            buf = self._start = np.empty_like(x)
-        return buf
+    _before = None
+
+
+@numba.njit(cache=True)
+def _follow_corrections(x, before, start, v, gain):
+    """``v += gain·Δx`` per particle, ``Δx = x − before`` shortened to at most ``|before − start|``."""
+    for p in range(x.shape[0]):
+        d0, d1, d2 = x[p, 0] - before[p, 0], x[p, 1] - before[p, 1], x[p, 2] - before[p, 2]
+        corr2 = d0 * d0 + d1 * d1 + d2 * d2
+        if corr2 == 0.0:
+            continue
+        m0, m1, m2 = before[p, 0] - start[p, 0], before[p, 1] - start[p, 1], before[p, 2] - start[p, 2]
+        move2 = m0 * m0 + m1 * m1 + m2 * m2
+        scale = gain
+        if corr2 > move2:
+            scale *= np.sqrt(move2 / corr2)
+        v[p, 0] += scale * d0
+        v[p, 1] += scale * d1
+        v[p, 2] += scale * d2
 
 
 def _outward_order(model, springs) -> np.ndarray:

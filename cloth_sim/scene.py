@@ -23,6 +23,7 @@ the field and what was expected.
 from __future__ import annotations
 
 import os
+import reprlib
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -130,28 +131,94 @@ def available_scenes() -> list[str]:
     return sorted(names)
 
 
+#: scene files larger than this are refused unread (a scene is a few hundred bytes)
+MAX_SCENE_BYTES = 1 << 20
+#: nesting deeper than this is refused (a scene is three levels deep)
+MAX_SCENE_DEPTH = 32
+
+
 def find_scene(name_or_path: str) -> Path:
     """A scene file from a path or a scene name."""
+    if not isinstance(name_or_path, str) or not name_or_path:
+        raise SceneError(f"scene must be a scene name or a path, got {_short(name_or_path)}")
     p = Path(name_or_path)
-    if p.suffix in (".yaml", ".yml") or os.sep in str(name_or_path):
-        if not p.is_file():
-            raise SceneError(f"{name_or_path}: no such scene file")
-        return p
-    for d in scene_dirs():
-        candidate = d / f"{name_or_path}.yaml"
-        if candidate.is_file():
-            return candidate
-    raise SceneError(f"unknown scene {name_or_path!r}; available: {', '.join(available_scenes())}")
+    try:
+        if p.suffix in (".yaml", ".yml") or os.sep in name_or_path:
+            if p.is_dir():
+                raise SceneError(f"{_short_path(name_or_path)}: is a directory, not a scene file")
+            if p.is_symlink() and not p.exists():
+                raise SceneError(f"{_short_path(name_or_path)}: a symbolic link to nothing, or a "
+                                 f"loop of links")
+            if not p.is_file():
+                raise SceneError(f"{_short_path(name_or_path)}: no such scene file")
+            return p
+        for d in scene_dirs():
+            candidate = d / f"{name_or_path}.yaml"
+            if candidate.is_file():
+                return candidate
+    except OSError as e:  # a name too long for the file system, a symbolic link loop, …
+        raise SceneError(f"{_short_path(name_or_path)}: cannot be opened ({e.strerror or e})") from None
+    raise SceneError(f"unknown scene {_short(name_or_path)}; available: {', '.join(available_scenes())}")
+
+
+class _SceneLoader(yaml.SafeLoader):
+    """PyYAML's safe loader without anchors and aliases (scenes need none, and an alias bomb — the
+    'billion laughs' — would expand exponentially in whatever walks the result) and with a bound
+    on nesting."""
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            mark = self.peek_event().start_mark
+            raise yaml.MarkedYAMLError(problem="aliases (*name) are not accepted in a scene file",
+                                       problem_mark=mark)
+        self._depth = getattr(self, "_depth", 0) + 1
+        try:
+            if self._depth > MAX_SCENE_DEPTH:
+                raise yaml.MarkedYAMLError(problem=f"nesting deeper than {MAX_SCENE_DEPTH} levels",
+                                           problem_mark=self.peek_event().start_mark)
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+    def compose_document(self):  # anchors are allowed by the grammar: drop them, and the aliases fail
+        node = super().compose_document()
+        self.anchors = {}
+        return node
 
 
 def load_scene(name_or_path: str) -> Scene:
-    """Load and validate a scene by name (``hanging``) or path."""
+    """Load and validate a scene by name (``hanging``) or path. Anything wrong — no such file, a
+    directory, unreadable, larger than :data:`MAX_SCENE_BYTES`, not UTF-8, not YAML (reported by
+    line and column, never quoting the file), aliases, deep nesting, wrong fields or values — is
+    one :class:`SceneError` naming the file and what is expected."""
     path = find_scene(name_or_path)
+    where = _short_path(str(path))
     try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as e:
-        raise SceneError(f"{path}: not valid YAML: {e}") from None
+        with open(path, "rb") as f:
+            raw = f.read(MAX_SCENE_BYTES + 1)
+    except OSError as e:
+        raise SceneError(f"{where}: cannot be read ({e.strerror or e})") from None
+    if len(raw) > MAX_SCENE_BYTES:
+        raise SceneError(f"{where}: larger than {MAX_SCENE_BYTES} bytes; a scene file is a short "
+                         f"YAML mapping")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise SceneError(f"{where}: not UTF-8 text (byte {e.start})") from None
+    try:
+        data = yaml.load(text, Loader=_SceneLoader)  # noqa: S506 (a safe loader)
+    except yaml.MarkedYAMLError as e:
+        mark = e.problem_mark or e.context_mark
+        at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        why = e.problem if isinstance(e.problem, str) and e.problem.startswith(("aliases", "nesting")) else ""
+        raise SceneError(f"{where}: not valid YAML{at}{': ' + why if why else ''}") from None
+    except (yaml.YAMLError, RecursionError):
+        raise SceneError(f"{where}: not valid YAML") from None
     return scene_from_dict(data, source=str(path), name=path.stem)
+
+
+def _short_path(path: str) -> str:
+    return path if len(path) <= 120 else path[:60] + "…" + path[-40:]
 
 
 def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
@@ -215,7 +282,8 @@ class _Validator:
         raise SceneError(f"{self.source}: field '{fld}' must be {expected}, got {_short(got)}")
 
     def known(self, prefix, mapping, keys):
-        unknown = sorted(str(k) for k in mapping if k not in keys)
+        unknown = sorted(k if isinstance(k, str) and k.isprintable() else _short(k)
+                         for k in mapping if k not in keys)
         if unknown:
             raise SceneError(f"{self.source}: unknown field(s) {prefix}{(', ' + prefix).join(unknown)}; "
                              f"expected {', '.join(sorted(keys))}")
@@ -238,12 +306,17 @@ class _Validator:
             x = {f: x for f in GRID_FAMILIES}
         if not isinstance(x, dict):
             self.fail(fld, f"a mapping of {', '.join(GRID_FAMILIES)} to numbers >= 0", x)
-        unknown = sorted(str(k) for k in x if k not in GRID_FAMILIES)
+        unknown = sorted(_short(k) for k in x if k not in GRID_FAMILIES)
         if unknown:
             self.fail(fld, f"keyed by {', '.join(GRID_FAMILIES)}", unknown)
         return {f: self.param(f"{fld}.{f}", x.get(f, 0.0)) for f in GRID_FAMILIES}
 
 
+_REPR = reprlib.Repr()
+_REPR.maxstring = _REPR.maxother = 60
+_REPR.maxlevel, _REPR.maxdict, _REPR.maxlist = 3, 4, 6
+
+
 def _short(value) -> str:
-    text = repr(value)
-    return text if len(text) <= 80 else text[:77] + "..."
+    """A bounded repr: a value from an untrusted file may be huge or deep."""
+    return _REPR.repr(value)

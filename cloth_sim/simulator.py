@@ -163,6 +163,24 @@ class Simulator:
         self.state.t_base, self.state.steps = 0.0, 0
         self._integrator.reset(self.state, self.forces, self._dt)
 
+    def save_state(self) -> State:
+        """A copy of the state (positions, velocities, time, the integrator's history), for
+        :meth:`restore_state`."""
+        saved = self.state.copy()
+        saved.t_base, saved.steps = self.time, 0  # independent of a later change of dt
+        saved.method = self.integrator
+        return saved
+
+    def restore_state(self, saved: State) -> None:
+        """Go back to a state from :meth:`save_state` (time included). The integrator's history is
+        the saved one when the same method saved it, rebuilt from the state otherwise."""
+        if saved.x.shape != self.state.x.shape:
+            raise ValueError(f"restore_state: a state of {len(saved.x)} particles for a cloth of "
+                             f"{len(self.state.x)}")
+        saved.copy_to(self.state)
+        if saved.method != self.integrator:
+            self._integrator.reset(self.state, self.forces, self._dt)
+
     # ------------------------------------------------------------------ parameters
     @property
     def dt(self) -> float:
@@ -268,7 +286,7 @@ class Simulator:
             state.copy_to(checkpoint)
             integ.step(state, forces, dt)
             for stage in stages:
-                stage.apply(state, dt, follow)
+                stage.apply(state, checkpoint, dt, follow)
             if not _state_ok(state.x, state.v, vmax2, xmax):
                 self._diverged()
             state.steps += 1

@@ -44,10 +44,15 @@ class Mode(NamedTuple):
 def effective_stiffness(model: ClothModel, k: np.ndarray) -> np.ndarray:
     """Per-spring stiffness of the linearisation: Choi–Ko buckling pairs count with the stiffer of
     their two branches (``k`` stretched, ``k·max|h''|/L³`` compressed)."""
+    return springs_effective_stiffness(model.kind, model.rest_lengths, k)
+
+
+def springs_effective_stiffness(kind: np.ndarray, rest: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """:func:`effective_stiffness` of a list of springs given by their kinds and rest lengths."""
     k_eff = np.array(k, dtype=np.float64)
-    buck = model.kind == BUCKLING
+    buck = kind == BUCKLING
     if buck.any():
-        L = model.rest_lengths[buck]
+        L = rest[buck]
         k_eff[buck] = np.maximum(k_eff[buck], k_eff[buck] * _buckling_curvature_max() / L ** 3)
     return k_eff
 
@@ -122,6 +127,8 @@ def fastest_mode(model: ClothModel, k: np.ndarray, c: np.ndarray, drag: float = 
     basis = _mode_basis(model)
     B, k_eff = basis.B, effective_stiffness(model, k)
     nd = B.shape[1]
+    if not np.any(k_eff > 0):  # no stiffness at all: no oscillation (ARPACK would fail on A = 0)
+        return Mode(0.0, 0.0)
     if nd <= 3:
         vals, vecs = np.linalg.eigh((B.T @ sp.diags(k_eff) @ B).toarray())
         lam, q = vals[-1], vecs[:, -1]
@@ -149,9 +156,13 @@ def amplification_limit(method: type, zeta: float) -> float:
     if method.needs_damping and zeta <= 0:
         return 0.0
 
-    def stable(x):
-        return spectral_radius_small(method.amplification(x, 1.0, zeta)) <= 1 + 1e-12
+    return _scan_then_bisect(
+        lambda x: spectral_radius_small(method.amplification(x, 1.0, zeta)) <= 1 + 1e-12)
 
+
+def _scan_then_bisect(stable) -> float:
+    """The end of the stable interval starting at 0: scan in steps of ``_SCAN_STEP`` to the first
+    unstable point, then bisect 60 times; ``inf`` when stable up to ``_SCAN_END``."""
     last_ok = 0.0
     for x in np.arange(_SCAN_STEP, _SCAN_END + _SCAN_STEP / 2, _SCAN_STEP):
         if not stable(x):
@@ -179,11 +190,33 @@ def spectral_radius_small(A: np.ndarray) -> float:
     return float(np.max(np.abs(np.linalg.eigvals(A))))
 
 
+@lru_cache(maxsize=64)
+def damping_limit(method: type) -> float:
+    """Largest ``y = c·dt`` at which a one-step method is stable on pure damping ``v' = −c v`` (a
+    mode without stiffness: a particle's drag, ``c = drag/m``), from the same amplification matrix
+    with ``ω → 0``; ``inf`` when none up to 8 is unstable."""
+    eps = 1e-8  # ω = ε, ζ = 1/(2ε): unit damping, stiffness ε² (nothing)
+    return _scan_then_bisect(
+        lambda y: spectral_radius_small(method.amplification(y, eps, 0.5 / eps)) <= 1 + 1e-9)
+
+
 def limit_from_mode(method: type, mode: Mode) -> float:
     """``dt`` limit of a one-step method on the fastest mode (``inf`` when ``ω = 0``)."""
     if mode.omega <= 0:
         return math.inf
     return amplification_limit(method, round(mode.zeta, 12)) / mode.omega
+
+
+def one_step_limit(method: type, analysis: "Analysis") -> float:
+    """A one-step method's ``dt`` limit on a material: the fastest mode's, and that of the slowest
+    modes, which drag alone damps (``c = drag/m`` of the lightest free particle, no stiffness): an
+    explicit method overshoots a damping it takes explicitly (symplectic Euler needs ``c·dt ≤ 2``)."""
+    limit = limit_from_mode(method, analysis.mode)
+    free = ~analysis.model.pinned
+    if analysis.drag > 0 and free.any():
+        c = analysis.drag / float(analysis.model.masses[free].min())
+        limit = min(limit, damping_limit(method) / c)
+    return limit
 
 
 # --------------------------------------------------------------------------- Kang et al. 2000

@@ -21,6 +21,8 @@ class State:
         self.t_base = 0.0
         self.steps = 0
         self.history: dict[str, np.ndarray] = {}
+        #: the integrator that wrote ``history`` (set by ``Simulator.save_state``)
+        self.method: str | None = None
 
     def time(self, dt: float) -> float:
         return self.t_base + self.steps * dt

@@ -603,7 +603,8 @@ def test_sigint_ends_a_node_started_with_sigint_ignored():
                                        ("dt:=-1.0", "dt = -1.0 is not accepted"),
                                        ("dt:=abc", "dt = 'abc' is not accepted"),
                                        ("publish_rate:=0.0", "publish_rate = 0.0 is not accepted"),
-                                       ("dt:=1", "dt = 1 is not accepted")])
+                                       ("dt:=1", "dt=1 s is above the stable limit"),
+                                       ("rows:=16.0", "rows = 16.0 is not accepted")])
 def test_a_bad_start_up_value_is_one_line_naming_it(arg, words):
     out = subprocess.run([str(Path(sys.executable).parent / "cloth_sim_node"), "--ros-args", "-p", arg],
                          env=node_env(next_domain()), capture_output=True, text=True, timeout=60)

@@ -106,7 +106,7 @@ class Integrator:
             return math.inf
         if self.stability is Stability.AMPLIFICATION:
             return analysis.limit(("amplification", type(self)),
-                                  lambda a: stab.limit_from_mode(type(self), a.mode))
+                                  lambda a: stab.one_step_limit(type(self), a))
         return analysis.limit(("analysis", type(self), self.analysis_key()), self.analyse)
 
     def known_stable_dt(self, analysis: "stab.Analysis") -> float | None:

@@ -284,7 +284,9 @@ class ImplicitEuler(_LinearisedImplicitEuler):
 class ImplicitEulerPrefactored(_LinearisedImplicitEuler):
     """The review's eqs. 1.16–1.20: implicit Euler with the constant matrix
     ``M − dt·C − dt²·H`` (``H_ij = k_ij``, ``H_ii = −Σ_j k_ij``; ``C`` the same from the damping
-    coefficients; drag on the diagonal), one ``n×n`` matrix shared by the three coordinates.
+    coefficients; drag on the diagonal), one ``n×n`` matrix shared by the three coordinates. For
+    Choi & Ko's buckling pairs ``k_ij`` is their linearised stiffness, the stiffer of the two branches
+    (:func:`cloth_sim.stability.effective_stiffness`); with the bare ``k`` the step diverges.
 
     It is symmetric positive definite, factorised once by sparse Cholesky (``cholespy``) and reused
     for every step; it is refactorised when stiffness, damping, drag, dt, pins or topology change
@@ -321,7 +323,10 @@ class ImplicitEulerPrefactored(_LinearisedImplicitEuler):
         free, index = self._free()
         n_free = int(free.sum())
         i, j = forces.springs[:, 0], forces.springs[:, 1]
-        w = dt * forces.c + dt * dt * forces.k  # −(dt·C + dt²·H) off the diagonal, negated
+        # H from the springs' linearised stiffness: a Choi–Ko buckling pair resists compression
+        # with k·max|h''|/L³, far above k (with k the matrix was too soft and the step diverged)
+        self._h = stab.springs_effective_stiffness(forces.kind, forces.rest, forces.k)
+        w = dt * forces.c + dt * dt * self._h  # −(dt·C + dt²·H) off the diagonal, negated
         diag = spring_sums(forces.springs, w, model.n_particles) + model.masses + dt * forces.drag
         fi, fj = index[i], index[j]
         both = (fi >= 0) & (fj >= 0)
@@ -356,7 +361,7 @@ class ImplicitEulerPrefactored(_LinearisedImplicitEuler):
         f = forces.force(x, v, out=self._buffer("_f", x))
         rhs = self._rhs_full
         rhs[:] = 0.0
-        _graph_product(forces.springs, forces.k, v, rhs)  # H v
+        _graph_product(forces.springs, self._h, v, rhs)  # H v
         rhs *= dt
         rhs += f
         rhs *= dt

@@ -51,6 +51,16 @@ WARN_MARGIN = 0.8    # WARN when dt is above this fraction of stable_dt
 #: the few per cent that timer jitter and whole-step quantisation give a node that keeps up
 RTF_WARN = 0.95
 RTF_WINDOW = 2.0
+#: a tick steps for at most this fraction of its period, so parameters and services are answered
+#: in time whatever dt is; what does not fit waits for the next ticks, up to MAX_BACKLOG s of
+#: simulated time, and beyond that is dropped (the real-time factor falls below 1, /diagnostics warns)
+TICK_BUDGET = 0.8
+MAX_BACKLOG = 0.25
+#: a publish_rate is refused only when the measured cost exceeds the time available this many times
+RATE_REFUSAL_LOAD = 10.0
+#: recovery checkpoints: one every CHECKPOINT_EVERY s of simulated time, the last CHECKPOINTS kept
+CHECKPOINT_EVERY = 0.1
+CHECKPOINTS = 20
 #: the rebuild parameters that shape the model (``scene`` is the other one)
 MODEL_KEYS = ("rows", "cols", "spacing", "model", "particle_mass")
 
@@ -72,6 +82,15 @@ def _material(model, cfg: dict) -> tuple[np.ndarray, np.ndarray]:
     return k, c
 
 
+def _as_declared(p: Parameter) -> Parameter:
+    """An integer given for a double parameter (``ros2 param set /cloth_sim dt 1``), as a double:
+    the schema accepts it, rclpy's type check would not."""
+    spec = SCHEMA.get(p.name)
+    if spec is not None and spec.type is float and p.type_ == Parameter.Type.INTEGER:
+        return Parameter(p.name, value=float(p.value))
+    return p
+
+
 def _wind(cfg: dict):
     w = cfg["wind.strength"] * np.asarray(cfg["wind.direction"], dtype=float)
     return w if np.any(w) else None
@@ -84,6 +103,7 @@ class ClothSimNode(Node):
         super().__init__("cloth_sim", **kwargs)
         self._ready = False
         self.Stats = _stats_type()
+        self._parameter_overrides = {n: _as_declared(p) for n, p in self._parameter_overrides.items()}
         overrides = {name: p.value for name, p in self._parameter_overrides.items()}
         # the scene first: it provides the other parameters' defaults
         scene_name = self._startup_value("scene", overrides.get("scene", "hanging"))
@@ -119,6 +139,11 @@ class ClothSimNode(Node):
         self._history = collections.deque()  # (wall, sim time) over the last RTF_WINDOW s
         self._tick_costs = collections.deque(maxlen=120)  # (steps, step wall, publish wall)
         self._last_status = time.monotonic()
+        self._rates_run = {self.cfg["publish_rate"]}  # rates the node has run with: never refused
+        self._gate_errors: list[str] = []  # found by the pre-set callback, reported by on-set
+        self._checkpoints = collections.deque(maxlen=CHECKPOINTS)  # (sim time, saved state)
+        self._change_checkpoint = None  # the state before the last accepted live change
+        self.dropped = 0.0  # simulated seconds dropped by ticks over their budget
 
         self.points_pub = self.create_publisher(PointCloud2, "~/points", 10)
         self.mesh_pub = self.create_publisher(Marker, "~/mesh", 10)
@@ -185,7 +210,25 @@ class ClothSimNode(Node):
 
     # ------------------------------------------------------------------ parameters
     def _pre_set(self, parameters: list[Parameter]) -> list[Parameter]:
-        """A scene change brings the scene's values for every parameter the batch does not set."""
+        """The gate every value passes first (it runs before rclpy's own type and range checks,
+        whose refusals do not name the parameter): a value the schema refuses is noted, and stands
+        in the batch as the parameter's current value, so that the on-set callback refuses the batch
+        with the schema's reason. A scene change brings the scene's values for every parameter the
+        batch does not set."""
+        self._gate_errors = []
+        gated = []
+        for p in parameters:
+            reason = self._gate(p)
+            if reason:
+                self._gate_errors.append(reason)
+                # a stand-in that passes rclpy's checks, so the on-set callback gives the reason
+                # (an unknown name would raise before it, with an empty list in rclpy 7.1's text)
+                gated.append(self.get_parameter(p.name if self.has_parameter(p.name) else "frame_id"))
+                continue
+            gated.append(_as_declared(p))
+        parameters = gated
+        if self._gate_errors:
+            return parameters
         scene = next((p for p in parameters if p.name == "scene"), None)
         if scene is None or scene.value == self.cfg["scene"] or not isinstance(scene.value, str):
             return parameters
@@ -197,11 +240,30 @@ class ClothSimNode(Node):
         return list(parameters) + [Parameter(k, value=v) for k, v in P.scene_values(new).items()
                                    if k not in named]
 
+    def _gate(self, p: Parameter) -> str | None:
+        """The schema's reason to refuse ``p`` (or the declared type's, for rclpy's own
+        parameters), ``None`` when it may go on."""
+        if not self.has_parameter(p.name):
+            return (f"{p.name} is not a parameter of this node; its parameters are "
+                    f"{', '.join(sorted(SCHEMA))}")
+        if p.type_ == Parameter.Type.NOT_SET:
+            return f"{p.name} cannot be unset"
+        if p.name in SCHEMA:
+            return P.check_value(p.name, p.value)[1]
+        declared = self.describe_parameter(p.name)
+        if not declared.dynamic_typing and declared.type != p.type_.value:
+            return (f"{p.name} = {p.value!r} is not accepted: expected a "
+                    f"{Parameter.Type(declared.type).name.lower()}")
+        return None
+
     def _on_set(self, parameters: list[Parameter]) -> SetParametersResult:
         """Validate the whole batch; nothing changes here (the post-set callback applies it)."""
         if not self._ready:
             return SetParametersResult(successful=True)
         self._validated = None
+        if self._gate_errors:
+            reason, self._gate_errors = "; ".join(self._gate_errors), []
+            return SetParametersResult(successful=False, reason=reason)
         cand = dict(self.cfg)
         for p in parameters:
             if p.name not in SCHEMA:
@@ -221,12 +283,17 @@ class ClothSimNode(Node):
             model = self._model(cand, scene) if rebuild else self.sim.model
         except (SceneError, ValueError) as e:  # e.g. a scene whose file changed since
             return SetParametersResult(successful=False, reason=f"scene: {e}")
-        if cand["publish_rate"] != self.cfg["publish_rate"]:
+        if cand["publish_rate"] not in self._rates_run:
             reason = self._check_rate(cand)
             if reason:
                 return SetParametersResult(successful=False, reason=reason)
         reason, limit = self._check_stability(cand, model)
         if reason:
+            changed = [p.name for p in parameters if p.name in SCHEMA and p.name != "dt"
+                       and cand[p.name] != self.cfg[p.name]]
+            if changed:  # the refusal names what made the limit fall, as well as dt
+                reason = (f"{', '.join(f'{n} = {cand[n]!r}' for n in changed)}: with "
+                          f"{'this value' if len(changed) == 1 else 'these values'}, {reason}")
             return SetParametersResult(successful=False, reason=reason)
         self._validated = (cand, scene if rebuild else None, model if rebuild else None, limit)
         return SetParametersResult(successful=True)
@@ -242,8 +309,13 @@ class ClothSimNode(Node):
             self.scene = scene
             self._carry = 0.0
             self._history.clear()
+            self._checkpoints.clear()
+            self._change_checkpoint = None
         else:
+            if cand != self.cfg:
+                self._change_checkpoint = (self.sim.time, self.sim.save_state())
             self._apply_live(cand)
+        self._rates_run.add(cand["publish_rate"])
         rate_changed = cand["publish_rate"] != self.cfg["publish_rate"]
         self.cfg = cand
         self._stable_dt = limit
@@ -274,7 +346,10 @@ class ClothSimNode(Node):
             sim.strain_limit = cand["strain_limit"] or None
 
     def _check_rate(self, cand: dict) -> str | None:
-        """A rate is refused when the measured cost of stepping and publishing would not fit."""
+        """A rate is refused only when the measured cost of stepping and publishing exceeds the
+        time available many times over (RATE_REFUSAL_LOAD): measured costs are noisy, and a tick
+        that does not fit only lowers the real-time factor (ticks are bounded, /diagnostics warns).
+        A rate the node has run with is never refused."""
         if len(self._tick_costs) < 10:
             return None
         steps = sum(c[0] for c in self._tick_costs)
@@ -282,7 +357,7 @@ class ClothSimNode(Node):
         pub_wall = sum(c[2] for c in self._tick_costs) / len(self._tick_costs)
         per_step = step_wall / steps if steps else 0.0
         load = per_step / cand["dt"] + cand["publish_rate"] * pub_wall
-        if load > 1.0:
+        if load > RATE_REFUSAL_LOAD:
             return (f"publish_rate={cand['publish_rate']:g} Hz cannot be met: stepping "
                     f"({1e3 * per_step:.3f} ms/step at dt={cand['dt']:g}) and publishing "
                     f"({1e3 * pub_wall:.3f} ms/tick) would need {load:.2f} s of work per second; "
@@ -296,6 +371,8 @@ class ClothSimNode(Node):
     # ------------------------------------------------------------------ services
     def _on_reset(self, request, response):
         self.sim.reset()
+        self._checkpoints.clear()
+        self._change_checkpoint = None
         self._carry = 0.0
         self._history.clear()
         self.error = None
@@ -323,6 +400,7 @@ class ClothSimNode(Node):
             self._carry += period
             n = int(math.floor(self._carry / sim.dt + 1e-9))
             self._carry -= n * sim.dt
+            budget = TICK_BUDGET * period
             try:
                 for _ in range(n):
                     s0 = time.perf_counter()
@@ -331,13 +409,15 @@ class ClothSimNode(Node):
                     step_wall += el
                     step_max = max(step_max, el)
                     steps += 1
+                    if s0 + el - t0 > budget and steps < n:  # the rest waits for the next ticks
+                        self._carry += (n - steps) * sim.dt
+                        break
+                if self._carry > MAX_BACKLOG:
+                    self.dropped += self._carry - MAX_BACKLOG
+                    self._carry = MAX_BACKLOG
+                self._keep_checkpoint()
             except SimulationDiverged as e:
-                self.error = str(e)
-                self.paused = True
-                self._carry = 0.0
-                self.get_logger().error(f"{e} Paused: fix the parameters, then call ~/pause "
-                                        f"with data=false or ~/reset.")
-                self._publish_diagnostics()
+                self._recover(e)
         t1 = time.perf_counter()
         stamp = self.get_clock().now().to_msg()
         frame = self.cfg["frame_id"]
@@ -362,6 +442,31 @@ class ClothSimNode(Node):
         if wall_now - self._last_status >= STATUS_PERIOD:
             self._last_status = wall_now
             self.get_logger().info(self.status_line())
+
+    def _keep_checkpoint(self) -> None:
+        if not self._checkpoints or self.sim.time - self._checkpoints[-1][0] >= CHECKPOINT_EVERY:
+            self._checkpoints.append((self.sim.time, self.sim.save_state()))
+
+    def _recover(self, error: SimulationDiverged) -> None:
+        """Pause after a blow-up, back at a state from before the run-away began: the one saved
+        before the last parameter change when that came within the last second of simulated time
+        (a dt or stiffness that does not hold diverges within a few steps, and the steps in
+        between are already running away), else the oldest kept checkpoint (up to 2 s back). A
+        stable dt and ``~/pause false`` then resume from there."""
+        sim = self.sim
+        candidates = [c for c in (self._change_checkpoint,) if c and sim.time - c[0] <= 1.0]
+        candidates += list(self._checkpoints)[:1]
+        if candidates:
+            when, saved = candidates[0]
+            sim.restore_state(saved)
+        self._checkpoints.clear()
+        self._change_checkpoint = None
+        self.error = str(error)
+        self.paused = True
+        self._carry = 0.0
+        self.get_logger().error(f"{error} Went back to t={sim.time:.3f} s and paused: fix the "
+                                f"parameters, then call ~/pause with data=false, or ~/reset.")
+        self._publish_diagnostics()
 
     def point_cloud(self, stamp) -> PointCloud2:
         return messages.point_cloud(self.sim.positions, self.cfg["rows"], self.cfg["cols"],
@@ -388,6 +493,7 @@ class ClothSimNode(Node):
             "particles": sim.model.n_particles, "max_strain": f"{sim.max_strain():.5f}",
             "overruns": self.overruns, "paused": str(self.paused).lower(),
             "publish_rate": f"{self.cfg['publish_rate']:g}", "scene": self.scene.name,
+            "dropped_sim_time": f"{self.dropped:.4f}",
         }
         return messages.diagnostic_status(
             error=self.error, paused=self.paused, rtf=rtf, rtf_known=len(self._history) >= 2,
