@@ -292,7 +292,10 @@ class GridStencil(NamedTuple):
 def grid_stencil(model: ClothModel, k: np.ndarray, c: np.ndarray) -> GridStencil | None:
     """The model's stencil when it is a regular grid with uniform masses and every offset's springs
     share stiffness and damping; ``None`` otherwise (then only the whole-system analysis applies)."""
-    if model.cols is None or model.n_springs == 0 or np.ptp(model.masses) != 0:
+    def uniform(a):  # rest lengths differ in the last bits from spring to spring
+        return np.ptp(a) <= 1e-9 * np.max(np.abs(a))
+
+    if model.cols is None or model.n_springs == 0 or not uniform(model.masses):
         return None
     s = model.springs
     r0, c0 = np.divmod(s[:, 0], model.cols)
@@ -308,9 +311,8 @@ def grid_stencil(model: ClothModel, k: np.ndarray, c: np.ndarray) -> GridStencil
     rows = []
     for g in range(len(offsets)):
         sel = group == g
-        for arr in (k[sel], k_eff[sel], c[sel]):
-            if np.ptp(arr) != 0:
-                return None
+        if not all(uniform(arr) for arr in (k[sel], k_eff[sel], c[sel])):
+            return None
         if np.max(np.abs(u[sel] - u[sel][0])) > 1e-9:
             return None
         rows.append((u[sel][0], k[sel][0], k_eff[sel][0], c[sel][0]))
@@ -335,30 +337,39 @@ def _fourier_symbols(st: GridStencil, n_theta: int = 24):
     return K, C, H, A, 2.0 * st.k.sum()
 
 
-def kang_fourier_radius(st: GridStencil, drag: float, dt: float, sweeps: int = 1) -> float:
-    """Largest spectral radius over wavenumbers of Kang's step on the infinite grid (the 9×9
-    Fourier symbol of :func:`kang_step_matrix`)."""
-    K, C, H, A, D = _fourier_symbols(st)
+def kang_fourier_radius(st: GridStencil, drag: float, dt: float, sweeps: int = 1,
+                        symbols=None) -> float:
+    """Largest spectral radius over wavenumbers of Kang's step on the infinite grid: the Fourier
+    symbol of :func:`kang_step_matrix`, split into the span of the springs' directions (the cloth's
+    plane: a 6×6 per wavenumber) and the directions across it, where no spring acts at rest (a 2×2
+    closed form, with the translation's eigenvalue 1). ``symbols``: :func:`_fourier_symbols` of
+    ``st``, which do not depend on ``dt`` (computed here when not given)."""
+    K, C, H, A, D = symbols if symbols is not None else _fourier_symbols(st)
     nt = len(K)
+    _, sv, vt = np.linalg.svd(st.u)
+    d = int(np.sum(sv > 1e-9 * sv[0]))
+    E = vt[:d].T  # (3, d): an orthonormal basis of the springs' directions
+    K, C = E.T @ K @ E, E.T @ C @ E
     W = 1.0 / (st.mass + dt * dt * D)
-    I3 = np.broadcast_to(np.eye(3), (nt, 3, 3))
     g = W * dt * dt * A  # G = g·I
     P = sum(g ** j for j in range(int(sweeps)))
     gS = g ** int(sweeps)
+    Id = np.broadcast_to(np.eye(d), (nt, d, d))
     Dx = (P * W * -dt)[:, None, None] * K
-    Dv = (P * W)[:, None, None] * (-dt * (C + drag * I3) + (dt * dt * H)[:, None, None] * I3)
-    Dd = gS[:, None, None] * I3
-    T = np.empty((nt, 9, 9))
-    T[:, 0:3, 0:3] = I3 + dt * Dx
-    T[:, 0:3, 3:6] = dt * (I3 + Dv)
-    T[:, 0:3, 6:9] = dt * Dd
-    T[:, 3:6, 0:3] = Dx
-    T[:, 3:6, 3:6] = I3 + Dv
-    T[:, 3:6, 6:9] = Dd
-    T[:, 6:9, 0:3] = Dx
-    T[:, 6:9, 3:6] = Dv
-    T[:, 6:9, 6:9] = Dd
-    return float(np.max(np.abs(np.linalg.eigvals(T))))
+    Dv = (P * W)[:, None, None] * (-dt * (C + drag * Id) + (dt * dt * H)[:, None, None] * Id)
+    Dd = gS[:, None, None] * Id
+    T = np.empty((nt, 3 * d, 3 * d))
+    blocks = [[Id + dt * Dx, dt * (Id + Dv), dt * Dd], [Dx, Id + Dv, Dd], [Dx, Dv, Dd]]
+    for i, row in enumerate(blocks):
+        for j, block in enumerate(row):
+            T[:, i * d:(i + 1) * d, j * d:(j + 1) * d] = block
+    rho = float(np.max(np.abs(np.linalg.eigvals(T))))
+    if d < 3:  # across the plane: Δv' = dv·v + gS·Δv (no spring force at rest), and x' = x + dt·v'
+        dv = P * W * (-dt * drag + dt * dt * H)
+        across = np.empty((nt, 2, 2))
+        across[:, 0, 0], across[:, 0, 1], across[:, 1, 0], across[:, 1, 1] = 1 + dv, gS, dv, gS
+        rho = max(rho, 1.0, float(np.max(np.abs(np.linalg.eigvals(across)))))
+    return rho
 
 
 def _bisect_stable(stable, omega: float, rel_tol: float) -> float:
@@ -398,8 +409,10 @@ def kang_stable_dt(model: ClothModel, k: np.ndarray, c: np.ndarray, drag: float,
     if st is None and method == "fourier":
         raise ValueError("the Fourier analysis needs a regular grid with uniform spring families")
     if st is not None:
+        symbols = _fourier_symbols(st)
+
         def stable(h):
-            return kang_fourier_radius(st, drag, h, sweeps) <= 1.0 + 1e-9
+            return kang_fourier_radius(st, drag, h, sweeps, symbols) <= 1.0 + 1e-9
     else:
         def stable(h):
             return spectral_radius(kang_step_matrix(model, k, c, drag, h, sweeps)) <= 1.0 + 1e-7

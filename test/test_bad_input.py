@@ -384,3 +384,14 @@ def test_a_short_seeded_fuzz_of_the_live_node():
     examples = figures.pop("examples")
     assert figures["sets"] == 60 and figures["accepted"] > 10 and figures["refused"] > 10
     assert all(figures[k] == 0 for k in FAILURES), (figures, examples)
+
+
+def test_every_malformed_scene_is_refused_at_start_up(ros, tmp_path):
+    """The start-up path of all 41 (in this process; a few run as processes above): one StartupError
+    naming the file, which `cloth_sim_node` prints as one line with exit status 2."""
+    from cloth_sim.ros.node import ClothSimNode, StartupError
+
+    for name, path in write_corpus(tmp_path).items():
+        with pytest.raises(StartupError) as e:
+            ClothSimNode(context=ros.context, parameter_overrides=[Parameter("scene", value=str(path))])
+        assert str(path) in str(e.value) and "\n" not in str(e.value) and SECRET not in str(e.value), name
