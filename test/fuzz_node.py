@@ -95,8 +95,8 @@ class Generator:
                                 spec.hi * 1.5 if spec.hi else 1e9, "abc", True, [1.0, 2.0], None])
 
     def value(self, name):
-        if name not in SCHEMA:
-            return self.pick([1.0, "x", True])
+        if name not in SCHEMA:  # an unknown name, or use_sim_time: never true here, since with no
+            return self.pick([1.0, "x", False, [True]])  # /clock the node's time stands still
         spec = SCHEMA[name]
         r = self.rng.random()
         if spec.type is bool:
@@ -280,7 +280,13 @@ def run(sets: int, seed: int, domain: int, quiet: bool = False) -> dict:
                     note("mismatches", (params, m))
                 if any(n == "allow_unstable" and v is True for n, v in params):
                     last_blowup_ok = True
-            spin(0.05)
+            # at least one tick must follow (a paused node ticks too), within 3 ticks' time
+            wait_end = time.monotonic() + 3.0 / node.cfg["publish_rate"] + 0.2
+            while len(stats) <= n_stats and time.monotonic() < wait_end:
+                spin(0.005)
+            if len(stats) <= n_stats:
+                note("hangs", (params, "no ~/stats after the request"))
+            spin(0.02)
             if node.error:
                 if not (last_blowup_ok or node.cfg["allow_unstable"]):
                     note("unexpected_blowups", (params, node.error[:200]))

@@ -2,18 +2,16 @@
 and the accepted range, and nothing a user sends stops the simulation. Scene files are untrusted."""
 
 import math
-import os
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from cloth_sim import SimulationDiverged, Simulator
+from cloth_sim import SimulationDiverged
 from cloth_sim.cli import main as cli_main
 from cloth_sim.parameters import SCHEMA, ParameterError
 from cloth_sim.scene import MAX_SCENE_BYTES, SceneError, load_scene, scene_from_dict

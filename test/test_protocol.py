@@ -212,7 +212,7 @@ def test_damping_ratio_of_the_fastest_mode_includes_drag():
 
 
 def test_kangs_grid_analysis_is_conservative_against_the_whole_system():
-    """The von Neumann analysis of the infinite grid (milliseconds) against the spectral radius of the
+    """The von Neumann analysis of the grid (tens of milliseconds) against the spectral radius of the
     whole 12×12 step matrix (seconds): below it, within 20 %."""
     model = load_scene("hanging").build_model(rows=12, cols=12, spacing=1 / 11)
     k, c = np.array(model.stiffness), np.array(model.damping)

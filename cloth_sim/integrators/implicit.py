@@ -385,7 +385,7 @@ class Kang(_LinearisedImplicitEuler):
     with the neighbours' ``Δv_j`` from the previous step (kept in ``state.history["dv"]``). Spring
     damping stays explicit in ``f``. Not unconditionally stable: the lagged ``Δv_j`` and explicit
     damping limit the step, which its own analysis finds (:func:`cloth_sim.stability.kang_stable_dt`:
-    a von Neumann analysis of the grid, milliseconds; the whole linearised step for other spring
+    a von Neumann analysis of the grid, tens of milliseconds; the whole linearised step for other spring
     networks), and the simulator's guard catches a blow-up like any explicit method's. The per-particle
     scaling does not conserve linear momentum while ``Δv`` changes from step to step.
     """
