@@ -375,13 +375,19 @@ def test_a_malformed_scene_at_start_up_is_one_line_and_exit_2(tmp_path, name):
 
 
 def test_a_short_seeded_fuzz_of_the_live_node():
-    """`make fuzz` runs 5,000 sets; here 60 (about 6 s), every failure figure zero."""
-    from fuzz_node import FAILURES, run
+    """`make fuzz` runs 5,000 sets; here 60 (about 6 s): no crash, no invalid value accepted, no
+    valid one refused, every refusal naming its parameter, no non-finite point, every accepted value
+    what runs. Its stall and blow-up counts are timing and extreme-value figures that `make fuzz`
+    reports (the README's "Bad input" gives them); they are not asserted on a shared CI machine."""
+    from fuzz_node import run
 
     figures = run(60, seed=7, domain=next_domain(), quiet=True)
     examples = figures.pop("examples")
     assert figures["sets"] == 60 and figures["accepted"] > 10 and figures["refused"] > 10
-    assert all(figures[k] == 0 for k in FAILURES), (figures, examples)
+    for key in ("crashes", "invalid_accepted", "valid_refused", "unnamed_refusals",
+                "nonfinite_clouds", "mismatches"):
+        assert figures[key] == 0, (key, figures, examples)
+    assert figures["clouds"] > 10
 
 
 def test_every_malformed_scene_is_refused_at_start_up(ros, tmp_path):
