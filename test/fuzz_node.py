@@ -35,8 +35,8 @@ from std_srvs.srv import SetBool, Trigger
 
 from cloth_sim.model import GRID_FAMILIES
 from cloth_sim.msg import Stats
-from cloth_sim.parameters import SCHEMA, ParameterError
-from cloth_sim.ros.node import ClothSimNode
+from cloth_sim.parameters import REBUILD, SCHEMA, ParameterError
+from cloth_sim.ros.node import MODEL_KEYS, ClothSimNode
 from cloth_sim.scene import load_scene
 
 RATE = 30.0
@@ -117,7 +117,7 @@ class Generator:
 
     def params(self):
         names = list(SCHEMA) + ["no_such_parameter", "use_sim_time"]
-        weights = np.array([0.3 if n in ("scene", "rows", "cols", "spacing", "model", "particle_mass")
+        weights = np.array([0.3 if n in REBUILD
                             else 1.0 for n in names])
         k = int(self.rng.integers(1, 5))
         chosen = self.rng.choice(names, size=k, replace=False, p=weights / weights.sum())
@@ -255,7 +255,7 @@ def run(sets: int, seed: int, domain: int, quiet: bool = False) -> dict:
                 continue
             names = {n for n, _ in params}
             rebuilt = node.cfg.get("scene") != before_cfg.get("scene") or any(
-                node.cfg[k] != before_cfg[k] for k in ("rows", "cols", "spacing", "model", "particle_mass"))
+                node.cfg[k] != before_cfg[k] for k in MODEL_KEYS)
             # at least one tick must follow (a paused node ticks too), within 3 ticks' time
             wait_end = time.monotonic() + 3.0 / node.cfg["publish_rate"] + 0.2
             while len(stats) <= n_stats and time.monotonic() < wait_end:

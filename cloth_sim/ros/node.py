@@ -39,7 +39,7 @@ from visualization_msgs.msg import Marker
 from .. import integrators
 from .. import stability as stab
 from ..model import GRID_FAMILIES
-from ..parameters import SCHEMA
+from ..parameters import REBUILD, SCHEMA
 from ..scene import SceneError, load_scene
 from ..simulator import SimulationDiverged, Simulator
 from . import messages
@@ -62,7 +62,7 @@ RATE_REFUSAL_LOAD = 10.0
 CHECKPOINT_EVERY = 0.1
 CHECKPOINTS = 20
 #: the rebuild parameters that shape the model (``scene`` is the other one)
-MODEL_KEYS = ("rows", "cols", "spacing", "model", "particle_mass")
+MODEL_KEYS = tuple(name for name in REBUILD if name != "scene")
 
 
 class StartupError(ValueError):
@@ -188,9 +188,11 @@ class ClothSimNode(Node):
     def _build_simulator(cfg: dict, model) -> Simulator:
         sim = Simulator(model, integrator=cfg["integrator"], dt=cfg["dt"], gravity=cfg["gravity"],
                         wind=_wind(cfg), drag=cfg["drag"], strain_limit=cfg["strain_limit"] or None)
-        for f in GRID_FAMILIES:  # the model may be shared with other values: set them
-            sim.set_stiffness(f, cfg[f"stiffness.{f}"])
-            sim.set_damping(f, cfg[f"damping.{f}"])
+        k, c = _material(model, cfg)
+        if not (np.array_equal(model.stiffness, k) and np.array_equal(model.damping, c)):
+            for f in GRID_FAMILIES:  # a kept model built with other values: set them
+                sim.set_stiffness(f, cfg[f"stiffness.{f}"])
+                sim.set_damping(f, cfg[f"damping.{f}"])
         return sim
 
     @staticmethod

@@ -6,15 +6,12 @@ from __future__ import annotations
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 
 from ..model import GRID_FAMILIES
-from ..parameters import REBUILD, SCHEMA, Param, ParameterError
+from ..parameters import SCHEMA, Param, ParameterError
 from ..scene import Scene
 
 _TYPES = {float: ParameterType.PARAMETER_DOUBLE, int: ParameterType.PARAMETER_INTEGER,
           str: ParameterType.PARAMETER_STRING, bool: ParameterType.PARAMETER_BOOL,
           "vector3": ParameterType.PARAMETER_DOUBLE_ARRAY}
-
-#: parameters whose change rebuilds the cloth and resets it
-TOPOLOGY = REBUILD
 
 
 def type_name(spec: Param) -> str:
