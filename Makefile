@@ -22,6 +22,7 @@ $(STAMP): requirements.txt setup.py pyproject.toml
 	$(PY) -m pip install --disable-pip-version-check -q -r requirements.txt
 	$(PY) -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation \
 		--config-settings editable_mode=compat -e .
+	$(PY) -c "from cloth_sim.simulator import compile_kernels as c; print(f'kernels compiled in {c():.1f} s')"
 	@touch $@
 
 $(MSGS): $(STAMP) msg/Stats.msg CMakeLists.txt package.xml tools/build_interfaces.py \

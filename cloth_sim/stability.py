@@ -29,8 +29,6 @@ from scipy.sparse.linalg import ArpackNoConvergence, eigs, eigsh
 from .forces import BUCKLE_TABLE, buckling_h, spring_coupling_matrix, spring_sums
 from .model import BUCKLING, ClothModel
 
-#: The amplification scan's resolution in ω·dt and its end (no method here is stable beyond 8).
-_SCAN_STEP, _SCAN_END = 0.05, 8.0
 
 
 class Mode(NamedTuple):
@@ -118,24 +116,38 @@ def _mode_basis(model: ClothModel) -> _ModeBasis:
 
 
 def fastest_mode(model: ClothModel, k: np.ndarray, c: np.ndarray, drag: float = 0.0) -> Mode:
-    """``(ω_max, ζ)`` of the free particles linearised about the rest shape: ``ω_max²`` the largest
-    eigenvalue of ``M^-½ K M^-½`` (Lanczos, so tight: the tests' 16×16 cloth gives 3.15·√(k/m);
-    assembled as ``Bᵀ diag(k_eff) B`` from a basis kept per model, started from the model's last
-    mode), ``ζ = qᵀ(C + drag·I)q / 2ω`` in the mass-weighted mode ``q``. 5–15 ms at 32×32."""
+    """``(ω_max, ζ)`` of the free particles linearised about the rest shape, ``ζ`` that mode's damping
+    ratio (spring damping and drag).
+
+    On a regular grid whose families are uniform (:func:`grid_stencil`: every scene) it is the von
+    Neumann analysis of the infinite grid: ``ω_max² = sup_θ λ_max(K̂(θ))/m``, an upper bound of the
+    finite grid's (its quadratic form is the infinite grid's restricted to the cloth, with fewer
+    springs), 1 % above it at 16×16, 0.3 % at 32×32, and the same cost at any size (about 3 ms).
+    Elsewhere it is ``λ_max(M^-½ K M^-½)`` by Lanczos (tight, but its cost grows with the grid and
+    jumps on materials whose stiffnesses differ by orders of magnitude: 2 s at 24×32)."""
     if not (~model.pinned).any() or model.n_springs == 0:
         return Mode(0.0, 0.0)
+    if not np.any(effective_stiffness(model, k) > 0):  # no stiffness at all: no oscillation
+        return Mode(0.0, 0.0)
+    st = grid_stencil(model, k, c)
+    if st is not None:
+        return _stencil_mode(st, drag)
+    return _lanczos_mode(model, k, c, drag)
+
+
+def _lanczos_mode(model: ClothModel, k: np.ndarray, c: np.ndarray, drag: float) -> Mode:
+    """:func:`fastest_mode` of any spring network: ``ω_max²`` the largest eigenvalue of
+    ``Bᵀ diag(k_eff) B`` (Lanczos, from the model's last mode), ``ζ = qᵀ(C + drag·I)q / 2ω`` in the
+    mass-weighted mode ``q``."""
     basis = _mode_basis(model)
     B, k_eff = basis.B, effective_stiffness(model, k)
     nd = B.shape[1]
-    if not np.any(k_eff > 0):  # no stiffness at all: no oscillation (ARPACK would fail on A = 0)
-        return Mode(0.0, 0.0)
     if nd <= 3:
         vals, vecs = np.linalg.eigh((B.T @ sp.diags(k_eff) @ B).toarray())
         lam, q = vals[-1], vecs[:, -1]
     else:
         A = (B.T @ sp.diags(k_eff) @ B).tocsr()
-        # started from the model's last mode (a material change moves it little: 3–5× fewer
-        # iterations); tol 1e-6 gives ω to about 1e-8 relative, whatever the start
+        # tol 1e-6 gives ω to about 1e-8 relative, whatever the start
         vals, vecs = eigsh(A, k=1, which="LA", tol=1e-6, v0=basis.last_mode[0])
         lam, q = vals[0], vecs[:, 0]
         basis.last_mode[0] = q
@@ -147,95 +159,137 @@ def fastest_mode(model: ClothModel, k: np.ndarray, c: np.ndarray, drag: float = 
     return Mode(omega, damping / (2.0 * omega))
 
 
-# --------------------------------------------------------------------------- one-step methods
-@lru_cache(maxsize=256)
-def amplification_limit(method: type, zeta: float) -> float:
-    """Largest ``x = ω·dt`` with spectral radius of ``method.amplification(x, 1, ζ)`` ≤ 1, found by
-    scanning ``x`` in steps of 0.05 up to the first unstable point, then bisecting. 0 when no step
-    is stable (an undamped explicit Euler or midpoint), ``inf`` when none up to 8 is unstable."""
-    if method.needs_damping and zeta <= 0:
+#: Wavenumbers per half axis of the von Neumann bounds (the sup is sampled on them; the symbols are
+#: smooth, and the corners (π, π), (π, 0), (0, π) are among them).
+_BOUND_THETA = 48
+
+
+def _plane_symbols(st: "GridStencil", weights: np.ndarray) -> np.ndarray:
+    """``Σ_g w_g (2 − 2cos θ·o_g) u_g u_gᵀ`` in the cloth's plane (:func:`_plane_basis`), per
+    wavenumber of the bounds' sampling: ``(θ, d, d)``."""
+    uE = st.u @ _plane_basis(st)
+    d = uE.shape[1]
+    uu = np.einsum("gi,gj->gij", uE, uE).reshape(len(uE), d * d)
+    s = 2.0 - 2.0 * _cosines(st.offsets, _BOUND_THETA, _mirror_symmetric(st))
+    return (s @ (np.asarray(weights)[:, None] * uu)).reshape(-1, d, d)
+
+
+def _stencil_mode(st: "GridStencil", drag: float) -> Mode:
+    """``(ω, ζ)`` of the infinite grid's fastest Fourier mode: the largest eigenvalue of ``K̂(θ)/m``
+    over the wavenumbers (in the cloth's plane: no spring acts across it at rest), and
+    ``ζ = (qᵀĈq + drag)/(2mω)`` in its eigenvector ``q``."""
+    lam, vec = _largest_eigenpairs(_plane_symbols(st, st.k_eff))
+    t = int(np.argmax(lam))
+    if lam[t] <= 0.0:
+        return Mode(0.0, 0.0)
+    q = vec[t]
+    omega = math.sqrt(float(lam[t]) / st.mass)
+    C = _plane_symbols(st, st.c)[t]
+    return Mode(omega, (float(q @ C @ q) + float(drag)) / (2.0 * st.mass * omega))
+
+
+def damping_rate(model: ClothModel, c: np.ndarray, drag: float) -> float:
+    """The fastest decay a step must follow, over every shape the cloth can take: the largest
+    eigenvalue of ``M⁻¹(C(x) + drag·I)`` over all directions of the springs, which is that of the
+    scalar graph Laplacian ``L = Σ c_s (e_j − e_i)(e_j − e_i)ᵀ`` (reached when each spring points
+    along the motion across it; at rest a grid's bend springs are crossed and give half of it, and a
+    heavily damped cloth stretched under gravity went unstable at 0.6× the rest shape's limit). An
+    explicit method overshoots a damping it takes explicitly: symplectic Euler needs ``rate·dt ≤ 2``.
+    The infinite grid's bound on a regular grid, Lanczos elsewhere."""
+    free = ~model.pinned
+    if not free.any():
         return 0.0
-
-    return _scan_then_bisect(
-        lambda x: spectral_radius_small(method.amplification(x, 1.0, zeta)) <= 1 + 1e-12)
-
-
-def _scan_then_bisect(stable) -> float:
-    """The end of the stable interval starting at 0: scan in steps of ``_SCAN_STEP`` to the first
-    unstable point, then bisect 60 times; ``inf`` when stable up to ``_SCAN_END``."""
-    last_ok = 0.0
-    for x in np.arange(_SCAN_STEP, _SCAN_END + _SCAN_STEP / 2, _SCAN_STEP):
-        if not stable(x):
-            break
-        last_ok = x
+    c = np.asarray(c, dtype=np.float64)
+    drag_rate = float(drag) / float(model.masses[free].min())
+    if model.n_springs == 0 or not np.any(c > 0):
+        return drag_rate
+    st = grid_stencil(model, c, c)  # (``c`` for ``k`` too: only the damping is used)
+    if st is not None:
+        s = 2.0 - 2.0 * _cosines(st.offsets, _BOUND_THETA, _mirror_symmetric(st))
+        return (float(np.max(s @ st.c)) + float(drag)) / st.mass
+    n = model.n_particles
+    i, j = model.springs[:, 0], model.springs[:, 1]
+    L = sp.coo_matrix((np.r_[c, c, -c, -c], (np.r_[i, j, i, j], np.r_[i, j, j, i])), shape=(n, n)).tocsr()
+    scale = sp.diags(1.0 / np.sqrt(model.masses[free]))
+    A = (scale @ L[free][:, free] @ scale).tocsr()
+    if A.shape[0] <= 16:
+        lam = float(np.linalg.eigvalsh(A.toarray())[-1])
     else:
+        lam = float(eigsh(A, k=1, which="LA", tol=1e-6, v0=np.linspace(1.0, 2.0, A.shape[0]),
+                          return_eigenvectors=False)[0])
+    return lam + drag_rate
+
+
+# --------------------------------------------------------------------------- one-step methods
+def spectral_radii(A: np.ndarray) -> np.ndarray:
+    """Spectral radius of each small dense matrix in a batch ``(..., n, n)`` (closed form for
+    2×2: ``|λ|² = det`` for a complex pair, ``|tr/2 ± √disc|`` for real roots)."""
+    A = np.asarray(A, dtype=np.float64)
+    if A.shape[-2:] != (2, 2):
+        return np.max(np.abs(np.linalg.eigvals(A)), axis=-1)
+    half_tr = 0.5 * (A[..., 0, 0] + A[..., 1, 1])
+    det = A[..., 0, 0] * A[..., 1, 1] - A[..., 0, 1] * A[..., 1, 0]
+    disc = half_tr * half_tr - det
+    root = np.sqrt(np.abs(disc))
+    real = np.maximum(np.abs(half_tr + root), np.abs(half_tr - root))
+    return np.where(disc < 0, np.sqrt(np.abs(det)), real)
+
+
+def mode_set(omega: float, rate: float, alpha: float, n: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """Sample points ``(ω_i, c_i)`` of every linear mode a material can have: natural frequency
+    ``ω ≤ ω_max`` and decay rate ``c`` (``= 2ζω``) with ``α·ω² ≤ c ≤ rate``, where ``rate`` is
+    :func:`damping_rate` and ``α = min c_s/k_s`` over the stiff springs (``C ≥ α·K`` spring by
+    spring, so in every mode). The boundary is sampled densely, corners included; ``ω`` runs from
+    ω_max/1024 (a slow, lightly damped mode that explicit Euler and midpoint cannot follow)."""
+    if omega > 0:
+        w = np.unique(np.concatenate([omega * np.geomspace(1 / 1024, 1, n),
+                                      omega * np.linspace(0.5, 1, n)]))
+    else:
+        w = np.array([0.0])
+    lo = alpha * w * w
+    hi = np.maximum(rate, lo)
+    t = np.linspace(0.0, 1.0, n)
+    return np.repeat(w, n), (lo[:, None] + (hi - lo)[:, None] * t[None, :]).ravel()
+
+
+def mode_set_limit(method: type, omega: float, rate: float, alpha: float,
+                   rel_tol: float = 1e-6) -> float:
+    """Largest ``dt`` at which ``method``'s amplification matrix has spectral radius ≤ 1 on every
+    point of :func:`mode_set`: the fastest mode, the fastest decay, and what lies between (a heavily
+    damped soft family is limited by its damping, not by its stiffness: symplectic Euler needs
+    ``ω²dt² + 2c·dt ≤ 4``). ``inf`` when nothing oscillates or decays, 0 when some mode is unstable at
+    every step (an undamped spring under explicit Euler)."""
+    if omega <= 0 and rate <= 0:
         return math.inf
-    lo, hi = last_ok, x
-    for _ in range(60):
+    if method.needs_damping and omega > 0 and alpha <= 0:
+        return 0.0
+    W, C = mode_set(omega, rate, alpha)
+    W = np.maximum(W, 1e-300 if omega <= 0 else omega * 1e-12)  # a pure decay: ω → 0, c kept
+    Z = C / (2.0 * W)
+
+    def stable(h):
+        return bool(np.all(spectral_radii(method.amplification(h, W, Z)) <= 1 + 1e-12))
+
+    scale = 1.0 / max(omega, rate)
+    if stable(8.0 * scale):
+        if stable(1e3 * scale):
+            return math.inf
+        lo, hi = 8.0 * scale, 1e3 * scale
+    else:
+        lo, hi = 0.0, 8.0 * scale
+    while hi - lo > rel_tol * hi:
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if stable(mid) else (lo, mid)
     return lo
 
 
-def spectral_radius_small(A: np.ndarray) -> float:
-    """Spectral radius of a small dense matrix (closed form for 2×2)."""
-    if A.shape == (2, 2):
-        half_tr = 0.5 * (A[0, 0] + A[1, 1])
-        det = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
-        disc = half_tr * half_tr - det
-        if disc < 0:  # a complex pair: |λ|² = det
-            return math.sqrt(det)
-        root = math.sqrt(disc)
-        return max(abs(half_tr + root), abs(half_tr - root))
-    return float(np.max(np.abs(np.linalg.eigvals(A))))
-
-
-@lru_cache(maxsize=64)
-def damping_limit(method: type) -> float:
-    """Largest ``y = c·dt`` at which a one-step method is stable on pure damping ``v' = −c v`` (a
-    mode without stiffness: a particle's drag, ``c = drag/m``), from the same amplification matrix
-    with ``ω → 0``; ``inf`` when none up to 8 is unstable."""
-    eps = 1e-8  # ω = ε, ζ = 1/(2ε): unit damping, stiffness ε² (nothing)
-    return _scan_then_bisect(
-        lambda y: spectral_radius_small(method.amplification(y, eps, 0.5 / eps)) <= 1 + 1e-9)
-
-
-def limit_from_mode(method: type, mode: Mode) -> float:
-    """``dt`` limit of a one-step method on the fastest mode (``inf`` when ``ω = 0``)."""
-    if mode.omega <= 0:
-        return math.inf
-    return amplification_limit(method, round(mode.zeta, 12)) / mode.omega
-
-
 def one_step_limit(method: type, analysis: "Analysis") -> float:
-    """A one-step method's ``dt`` limit on a material: the fastest mode's, and that of the slowest
-    modes, which drag alone damps (``c = drag/m`` of the lightest free particle, no stiffness): an
-    explicit method overshoots a damping it takes explicitly (symplectic Euler needs ``c·dt ≤ 2``)."""
-    limit = limit_from_mode(method, analysis.mode)
-    free = ~analysis.model.pinned
-    if analysis.drag > 0 and free.any():
-        c = analysis.drag / float(analysis.model.masses[free].min())
-        limit = min(limit, damping_limit(method) / c)
-    if method.needs_damping:
-        limit = min(limit, _lightly_damped_limit(method, analysis))
-    return limit
-
-
-def _lightly_damped_limit(method: type, analysis: "Analysis") -> float:
-    """For a method that needs damping on every mode (explicit Euler, midpoint), the fastest mode is
-    not the only danger: a slower, lightly damped one grows too. With ``α = min c_s/k_s`` over the
-    stiff springs, ``C ≥ αK`` spring by spring, so every mode has ``ζ ≥ αω/2``; the limit along
-    ``ζ = αω/2`` for ``ω`` from ω_max/32 to ω_max (8 points) bounds them (explicit Euler: exactly ``dt ≤ α``). A stiff
-    spring without damping (α = 0) leaves a mode no step is stable for: 0."""
-    stiff = analysis.k > 0
-    omega_max = analysis.mode.omega
-    if not stiff.any() or omega_max <= 0:
-        return math.inf
-    alpha = float(np.min(analysis.c[stiff] / analysis.k[stiff]))
-    if alpha <= 0:
-        return 0.0
-    return min(amplification_limit(method, round(alpha * w / 2, 12)) / w
-               for w in omega_max * np.geomspace(1 / 32, 1, 8))
+    """A one-step method's ``dt`` limit on a material: :func:`mode_set_limit` with the material's
+    ω_max, damping rate and ``α``."""
+    k_eff = effective_stiffness(analysis.model, analysis.k)
+    stiff = k_eff > 0
+    alpha = float(np.min(analysis.c[stiff] / k_eff[stiff])) if stiff.any() else 0.0
+    return mode_set_limit(method, analysis.mode.omega, analysis.damping_rate, alpha)
 
 
 # --------------------------------------------------------------------------- Kang et al. 2000
@@ -308,13 +362,38 @@ class GridStencil(NamedTuple):
     mass: float
 
 
-def grid_stencil(model: ClothModel, k: np.ndarray, c: np.ndarray) -> GridStencil | None:
-    """The model's stencil when it is a regular grid with uniform masses and every offset's springs
-    share stiffness and damping; ``None`` otherwise (then only the whole-system analysis applies)."""
-    def uniform(a):  # rest lengths differ in the last bits from spring to spring
-        return np.ptp(a) <= 1e-9 * np.max(np.abs(a))
+class _Layout(NamedTuple):
+    """Per model: its springs grouped by grid offset (sorted by group, ``starts`` of each), each
+    group's offset and rest direction; ``None`` for a model that is not a regular grid with uniform
+    masses and directions."""
 
-    if model.cols is None or model.n_springs == 0 or not uniform(model.masses):
+    offsets: np.ndarray  # (g, 2)
+    u: np.ndarray        # (g, 3)
+    order: np.ndarray    # springs sorted by group
+    starts: np.ndarray   # (g,) first sorted index of each group
+    mass: float
+
+
+_LAYOUTS: OrderedDict = OrderedDict()
+
+
+def _layout(model: ClothModel) -> _Layout | None:
+    hit = _LAYOUTS.get(id(model))
+    if hit is not None and hit[0] is model:
+        return hit[1]
+    layout = _build_layout(model)
+    _LAYOUTS[id(model)] = (model, layout)
+    while len(_LAYOUTS) > _ANALYSES_KEPT:
+        _LAYOUTS.popitem(last=False)
+    return layout
+
+
+def _uniform(a) -> bool:  # rest lengths differ in the last bits from spring to spring
+    return np.ptp(a) <= 1e-9 * np.max(np.abs(a))
+
+
+def _build_layout(model: ClothModel) -> _Layout | None:
+    if model.cols is None or model.n_springs == 0 or not _uniform(model.masses):
         return None
     s = model.springs
     r0, c0 = np.divmod(s[:, 0], model.cols)
@@ -324,20 +403,35 @@ def grid_stencil(model: ClothModel, k: np.ndarray, c: np.ndarray) -> GridStencil
     d[flip] *= -1
     u = rest_directions(model)
     u[flip] *= -1
-    k_eff = effective_stiffness(model, k)
     offsets, group = np.unique(d, axis=0, return_inverse=True)
     group = group.ravel()
-    rows = []
-    for g in range(len(offsets)):
-        sel = group == g
-        if not all(uniform(arr) for arr in (k[sel], k_eff[sel], c[sel])):
-            return None
-        if np.max(np.abs(u[sel] - u[sel][0])) > 1e-9:
-            return None
-        rows.append((u[sel][0], k[sel][0], k_eff[sel][0], c[sel][0]))
-    return GridStencil(offsets.astype(float), np.array([r[0] for r in rows]),
-                       np.array([r[1] for r in rows]), np.array([r[2] for r in rows]),
-                       np.array([r[3] for r in rows]), float(model.masses[0]))
+    order = np.argsort(group, kind="stable")
+    starts = np.searchsorted(group[order], np.arange(len(offsets)))
+    us = u[order]
+    lo, hi = np.minimum.reduceat(us, starts, axis=0), np.maximum.reduceat(us, starts, axis=0)
+    if np.max(hi - lo) > 1e-9:
+        return None
+    return _Layout(offsets.astype(float), us[starts], order, starts, float(model.masses[0]))
+
+
+def grid_stencil(model: ClothModel, k: np.ndarray, c: np.ndarray) -> GridStencil | None:
+    """The model's stencil when it is a regular grid with uniform masses and every offset's springs
+    share stiffness and damping; ``None`` otherwise (then only the whole-system analysis applies).
+    The grouping is computed once per model; a material costs a few reductions."""
+    layout = _layout(model)
+    if layout is None:
+        return None
+    k = np.asarray(k, dtype=np.float64)
+    c = np.asarray(c, dtype=np.float64)
+    k_eff = effective_stiffness(model, k)
+    values = np.stack([k, k_eff, c], axis=1)[layout.order]
+    lo = np.minimum.reduceat(values, layout.starts, axis=0)
+    hi = np.maximum.reduceat(values, layout.starts, axis=0)
+    if np.any(hi - lo > 1e-9 * np.maximum(np.abs(hi), np.abs(lo))):
+        return None
+    first = values[layout.starts]
+    return GridStencil(layout.offsets, layout.u, first[:, 0].copy(), first[:, 1].copy(),
+                       first[:, 2].copy(), layout.mass)
 
 
 def _mirror_symmetric(st: GridStencil) -> bool:
@@ -352,21 +446,60 @@ def _mirror_symmetric(st: GridStencil) -> bool:
     return True
 
 
+_COSINES: OrderedDict = OrderedDict()
+
+
+def _cosines(offsets: np.ndarray, n_theta: int, mirror: bool) -> np.ndarray:
+    """``cos(θ·offset)`` per wavenumber and offset, ``(θ, g)`` (kept: it depends on the grid only)."""
+    key = (offsets.tobytes(), n_theta, mirror)
+    hit = _COSINES.get(key)
+    if hit is None:
+        tr = np.linspace(0.0, np.pi, n_theta + 1)
+        tc = tr if mirror else np.linspace(-np.pi, np.pi, 2 * n_theta + 1)
+        TR, TC = np.meshgrid(tr, tc, indexing="ij")
+        hit = np.cos(TR.ravel()[:, None] * offsets[None, :, 0] + TC.ravel()[:, None] * offsets[None, :, 1])
+        _COSINES[key] = hit
+        while len(_COSINES) > 8:
+            _COSINES.popitem(last=False)
+    return hit
+
+
 def _fourier_symbols(st: GridStencil, n_theta: int = 24):
     """Per wavenumber ``θ`` on ``[0, π] × [−π, π]`` (``[0, π]²`` for a mirror-symmetric stencil) in
     steps of ``π/n_theta``: ``K̂, Ĉ`` (3×3), ``Ĥ`` and ``Â`` (scalars times the identity) and
     ``D = Σ_j k_ij`` of an interior particle."""
-    tr = np.linspace(0.0, np.pi, n_theta + 1)
-    tc = tr if _mirror_symmetric(st) else np.linspace(-np.pi, np.pi, 2 * n_theta + 1)
-    TR, TC = np.meshgrid(tr, tc, indexing="ij")
-    phase = TR.ravel()[:, None] * st.offsets[None, :, 0] + TC.ravel()[:, None] * st.offsets[None, :, 1]
-    s = 2.0 - 2.0 * np.cos(phase)  # (θ, g): (2 − e^{iφ} − e^{−iφ}) of a pair coupling
-    uu = np.einsum("gi,gj->gij", st.u, st.u)
-    K = np.einsum("tg,g,gij->tij", s, st.k_eff, uu)
-    C = np.einsum("tg,g,gij->tij", s, st.c, uu)
+    cos = _cosines(st.offsets, n_theta, _mirror_symmetric(st))
+    s = 2.0 - 2.0 * cos  # (θ, g): (2 − e^{iφ} − e^{−iφ}) of a pair coupling
+    uu = np.einsum("gi,gj->gij", st.u, st.u).reshape(len(st.u), 9)
+    K = (s @ (st.k_eff[:, None] * uu)).reshape(-1, 3, 3)
+    C = (s @ (st.c[:, None] * uu)).reshape(-1, 3, 3)
     H = -(s @ st.k)
-    A = (2.0 * np.cos(phase)) @ st.k
+    A = (2.0 * cos) @ st.k
     return K, C, H, A, 2.0 * st.k.sum()
+
+
+def _plane_basis(st: GridStencil) -> np.ndarray:
+    """``(3, d)``: an orthonormal basis of the springs' directions (the cloth's plane at rest)."""
+    _, sv, vt = np.linalg.svd(st.u)
+    return vt[:int(np.sum(sv > 1e-9 * sv[0]))].T
+
+
+def _largest_eigenpairs(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Largest eigenvalue and its unit eigenvector of each symmetric matrix in ``(t, d, d)``
+    (closed form for 2×2)."""
+    if S.shape[-1] != 2:
+        vals, vecs = np.linalg.eigh(S)
+        return vals[:, -1], vecs[:, :, -1]
+    a, b, c = S[:, 0, 0], S[:, 0, 1], S[:, 1, 1]
+    half, r = 0.5 * (a + c), np.hypot(0.5 * (a - c), b)
+    lam = half + r
+    # eigenvector (b, λ − a), or (λ − c, b): the larger of the two, for accuracy
+    v1 = np.stack([b, lam - a], axis=1)
+    v2 = np.stack([lam - c, b], axis=1)
+    v = np.where((np.abs(lam - a) >= np.abs(lam - c))[:, None], v1, v2)
+    norm = np.linalg.norm(v, axis=1)
+    v = np.where(norm[:, None] > 0, v / np.where(norm > 0, norm, 1.0)[:, None], [[1.0, 0.0]])
+    return lam, v
 
 
 def kang_fourier_radius(st: GridStencil, drag: float, dt: float, sweeps: int = 1,
@@ -376,11 +509,19 @@ def kang_fourier_radius(st: GridStencil, drag: float, dt: float, sweeps: int = 1
     plane: a 6×6 per wavenumber) and the directions across it, where no spring acts at rest (a 2×2
     closed form, with the translation's eigenvalue 1). ``symbols``: :func:`_fourier_symbols` of
     ``st``, which do not depend on ``dt`` (computed here when not given)."""
-    K, C, H, A, D = symbols if symbols is not None else _fourier_symbols(st)
+    symbols = symbols if symbols is not None else _fourier_symbols(st)
+    return max(1.0, float(np.max(kang_fourier_radii(st, drag, dt, sweeps, symbols))))
+
+
+def kang_fourier_radii(st: GridStencil, drag: float, dt: float, sweeps: int, symbols,
+                       which=None) -> np.ndarray:
+    """:func:`kang_fourier_radius` per wavenumber (those of ``which``, an index array, or all)."""
+    K, C, H, A, D = symbols
+    if which is not None:
+        K, C, H, A = K[which], C[which], H[which], A[which]
     nt = len(K)
-    _, sv, vt = np.linalg.svd(st.u)
-    d = int(np.sum(sv > 1e-9 * sv[0]))
-    E = vt[:d].T  # (3, d): an orthonormal basis of the springs' directions
+    E = _plane_basis(st)
+    d = E.shape[1]
     K, C = E.T @ K @ E, E.T @ C @ E
     W = 1.0 / (st.mass + dt * dt * D)
     g = W * dt * dt * A  # G = g·I
@@ -395,33 +536,49 @@ def kang_fourier_radius(st: GridStencil, drag: float, dt: float, sweeps: int = 1
     for i, row in enumerate(blocks):
         for j, block in enumerate(row):
             T[:, i * d:(i + 1) * d, j * d:(j + 1) * d] = block
-    rho = float(np.max(np.abs(np.linalg.eigvals(T))))
+    rho = np.max(np.abs(np.linalg.eigvals(T)), axis=-1)
     if d < 3:  # across the plane: Δv' = dv·v + gS·Δv (no spring force at rest), and x' = x + dt·v'
         dv = P * W * (-dt * drag + dt * dt * H)
         across = np.empty((nt, 2, 2))
         across[:, 0, 0], across[:, 0, 1], across[:, 1, 0], across[:, 1, 1] = 1 + dv, gS, dv, gS
-        rho = max(rho, 1.0, float(np.max(np.abs(np.linalg.eigvals(across)))))
+        rho = np.maximum(rho, spectral_radii(across))
     return rho
 
 
-def _bisect_stable(stable, omega: float, rel_tol: float) -> float:
-    """Largest ``dt`` with ``stable(dt)``, bracketed from ``1/ω`` by doubling/halving, then bisected
-    to ``rel_tol``; ``inf`` when still stable at ``1000/ω``."""
-    lo, hi = 0.0, 1.0 / omega
-    while stable(hi):
-        lo, hi = hi, 2.0 * hi
-        if hi > 1e3 / omega:
-            return math.inf
-    if lo == 0.0:
-        lo = hi / 8
-        while not stable(lo):
-            hi, lo = lo, lo / 8
-            if lo < 1e-6 / omega:
+def _bisect_stable(stable, omega: float, rel_tol: float, guess: float = 1.0) -> float:
+    """Largest ``dt`` with ``stable(dt)`` on the grid ``dt_j = (1 + rel_tol)^j / ω``: bracketed from
+    the point nearest ``guess/ω`` (the last material's ``ω·dt`` limit: a material change moves it
+    little, and a good guess is bracketed by 10 grid steps in two evaluations) by widening steps,
+    then bisected over ``j``. The answer is a grid point, so it does not depend on the guess
+    (stability being monotone near the limit), only the number of evaluations does. ``inf`` when
+    still stable at ``1000/ω``, 0 when unstable at ``1e-6/ω``."""
+    r = math.log1p(rel_tol)
+
+    def at(j):
+        return math.exp(j * r) / omega
+
+    j_max, j_min = math.ceil(math.log(1e3) / r), math.floor(math.log(1e-6) / r)
+    j = min(max(round(math.log(guess) / r), j_min), j_max)
+    if stable(at(j)):
+        lo, hi = j, j + 10
+        while stable(at(hi)):
+            if hi >= j_max:
+                return math.inf
+            lo, hi = hi, min(hi + 2 * (hi - lo), j_max)
+    else:
+        lo, hi = j - 10, j
+        while not stable(at(lo)):
+            if lo <= j_min:
                 return 0.0
-    while hi - lo > rel_tol * hi:
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if stable(mid) else (lo, mid)
-    return lo
+            hi, lo = lo, max(lo - 2 * (hi - lo), j_min)
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        lo, hi = (mid, hi) if stable(at(mid)) else (lo, mid)
+    return at(lo)
+
+
+#: Kang's last ``ω·dt`` limit per number of sweeps: where the next analysis starts.
+_KANG_GUESS: dict = {}
 
 
 def kang_stable_dt(model: ClothModel, k: np.ndarray, c: np.ndarray, drag: float, sweeps: int = 1,
@@ -445,13 +602,24 @@ def kang_stable_dt(model: ClothModel, k: np.ndarray, c: np.ndarray, drag: float,
         # instability sits at long wavelengths, so the limit falls slowly as the sampling gets finer:
         # 24 per axis is within 1.5 % of 48)
         symbols = _fourier_symbols(st, min(24, max(model.rows, model.cols)))
+        watch = [None]  # the wavenumbers that were worst last time: checked first, alone
 
         def stable(h):
-            return kang_fourier_radius(st, drag, h, sweeps, symbols) <= 1.0 + 1e-9
+            # an instability found on the watched few is one of the whole set: most unstable
+            # evaluations of the search cost a tenth of a full one
+            if watch[0] is not None and np.max(
+                    kang_fourier_radii(st, drag, h, sweeps, symbols, watch[0])) > 1.0 + 1e-9:
+                return False
+            rho = kang_fourier_radii(st, drag, h, sweeps, symbols)
+            watch[0] = np.argsort(rho)[-8:]
+            return float(np.max(rho)) <= 1.0 + 1e-9
     else:
         def stable(h):
             return spectral_radius(kang_step_matrix(model, k, c, drag, h, sweeps)) <= 1.0 + 1e-7
-    return _bisect_stable(stable, omega, rel_tol)
+    limit = _bisect_stable(stable, omega, rel_tol, _KANG_GUESS.get(int(sweeps), 1.0))
+    if 0.0 < limit < math.inf:
+        _KANG_GUESS[int(sweeps)] = limit * omega
+    return limit
 
 
 # --------------------------------------------------------------------------- cache
@@ -465,6 +633,7 @@ class Analysis:
         self.c = np.array(c, dtype=np.float64)
         self.drag = float(drag)
         self._mode: Mode | None = None
+        self._damping_rate: float | None = None
         self._limits: dict = {}
 
     @property
@@ -472,6 +641,12 @@ class Analysis:
         if self._mode is None:
             self._mode = fastest_mode(self.model, self.k, self.c, self.drag)
         return self._mode
+
+    @property
+    def damping_rate(self) -> float:
+        if self._damping_rate is None:
+            self._damping_rate = damping_rate(self.model, self.c, self.drag)
+        return self._damping_rate
 
     def limit(self, key, compute) -> float:
         """``compute(self)`` the first time ``key`` is asked for, the kept value after."""

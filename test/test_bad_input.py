@@ -126,9 +126,32 @@ def test_no_stiffness_at_all_is_a_cloth_that_falls():
     sim = hanging()
     for f in ("structural", "shear", "bend"):
         sim.set_stiffness(f, 0.0)
-    assert sim.fastest_mode() == (0.0, 0.0) and sim.stable_dt() == math.inf
+    assert sim.fastest_mode() == (0.0, 0.0)
+    # no oscillation, but the springs' damping still limits an explicit step: rate·dt ≤ 2
+    assert sim.stable_dt() == pytest.approx(2 / sim.analysis.damping_rate, rel=1e-5)
     sim.advance(0.1)
     assert np.all(np.isfinite(sim.positions))
+    for f in ("structural", "shear", "bend"):
+        sim.set_damping(f, 0.0)
+    assert sim.stable_dt() == math.inf
+
+
+def test_the_limit_accounts_for_heavily_damped_springs():
+    """A soft family with a heavy damping (bend k = 915, c = 1e6 on 52 kg particles) passed the
+    fastest mode's check (ω = 8 rad/s: dt ≤ 0.24 s) and blew up at dt = 2e-5 s: the fastest decay
+    limits an explicit method (symplectic Euler: rate·dt ≤ 2), whatever the stiffness, and over the
+    shapes the cloth takes, not only the rest shape (this one stretches 17-fold: at the rest shape's
+    decay limit, twice this one, it blows up)."""
+    def sim_at(dt):
+        return hanging(strain_limit=None, particle_mass=52.0, stiffness={"bend": 915.0},
+                       damping={"bend": 1e6}, dt=dt)
+
+    sim = sim_at(1e-3)
+    limit = sim.stable_dt()
+    assert limit == pytest.approx(2 / sim.analysis.damping_rate, rel=1e-5)
+    sim_at(0.97 * limit).advance(0.5)
+    with pytest.raises(SimulationDiverged):
+        sim_at(2 * limit).advance(0.5)
 
 
 def test_the_limit_accounts_for_drag():
@@ -377,15 +400,16 @@ def test_a_malformed_scene_at_start_up_is_one_line_and_exit_2(tmp_path, name):
 def test_a_short_seeded_fuzz_of_the_live_node():
     """`make fuzz` runs 5,000 sets; here 60 (about 6 s): no crash, no invalid value accepted, no
     valid one refused, every refusal naming its parameter, no non-finite point, every accepted value
-    what runs. Its stall and blow-up counts are timing and extreme-value figures that `make fuzz`
-    reports (the README's "Bad input" gives them); they are not asserted on a shared CI machine."""
+    what runs, no blow-up after a set accepted without allow_unstable that a smaller step would
+    have avoided. Its stall counts are timing figures that `make fuzz` reports (the README's "Bad
+    input" gives them); they are not asserted on a shared CI machine."""
     from fuzz_node import run
 
     figures = run(60, seed=7, domain=next_domain(), quiet=True)
     examples = figures.pop("examples")
     assert figures["sets"] == 60 and figures["accepted"] > 10 and figures["refused"] > 10
     for key in ("crashes", "invalid_accepted", "valid_refused", "unnamed_refusals",
-                "nonfinite_clouds", "mismatches"):
+                "nonfinite_clouds", "mismatches", "unexpected_blowups"):
         assert figures[key] == 0, (key, figures, examples)
     assert figures["clouds"] > 10
 

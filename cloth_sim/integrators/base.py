@@ -87,7 +87,9 @@ class Integrator:
     @classmethod
     def amplification(cls, h: float, omega: float, zeta: float) -> np.ndarray:
         """The matrix taking the method's state to the next step for ``x'' + 2ζω x' + ω² x = 0``
-        (:attr:`Stability.AMPLIFICATION` methods): 2×2 on ``(x, v)`` for one-step methods."""
+        (:attr:`Stability.AMPLIFICATION` methods): 2×2 on ``(x, v)`` for one-step methods. ``h``,
+        ``omega`` and ``zeta`` may be arrays (broadcast together): the result is then
+        ``(*batch, n, n)``, one matrix per step and oscillator."""
         raise NotImplementedError
 
     def analysis_key(self):
@@ -128,6 +130,18 @@ class Integrator:
         return buf
 
 
-def oscillator_matrix(omega: float, zeta: float) -> np.ndarray:
-    """``J`` of the first-order system ``(x, v)' = J (x, v)`` of a damped oscillator."""
-    return np.array([[0.0, 1.0], [-omega * omega, -2.0 * zeta * omega]])
+def oscillator_matrix(omega, zeta) -> np.ndarray:
+    """``J`` of the first-order system ``(x, v)' = J (x, v)`` of a damped oscillator (a batch of
+    them for arrays ``omega``, ``zeta``: ``(..., 2, 2)``)."""
+    omega, zeta = np.asarray(omega, dtype=np.float64), np.asarray(zeta, dtype=np.float64)
+    return matrices([[0.0, 1.0], [-omega * omega, -2.0 * zeta * omega]])
+
+
+def matrices(entries) -> np.ndarray:
+    """Stack a matrix given entry by entry, each a scalar or an array (broadcast together: a batch
+    of steps or of oscillators), into ``(*batch, n, n)``: :meth:`Integrator.amplification`
+    evaluates many at once."""
+    entries = [[np.asarray(e, dtype=np.float64) for e in row] for row in entries]
+    shape = np.broadcast_shapes(*(e.shape for row in entries for e in row))
+    return np.stack([np.stack([np.broadcast_to(e, shape) for e in row], axis=-1) for row in entries],
+                    axis=-2)

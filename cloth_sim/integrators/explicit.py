@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import register
-from .base import Integrator, oscillator_matrix
+from .base import Integrator, matrices, oscillator_matrix
 
 
 class ExplicitRungeKutta(Integrator):
@@ -44,10 +44,11 @@ class ExplicitRungeKutta(Integrator):
     @classmethod
     def amplification(cls, h, omega, zeta):
         J = oscillator_matrix(omega, zeta)
+        h = np.asarray(h, dtype=np.float64)[..., None, None]  # a batch: (..., 2, 2)
         eye = np.eye(2)
-        K = []
-        for i in range(len(cls.b)):
-            K.append(J @ (eye + h * sum(cls.A[i, j] * K[j] for j in range(i))) if i else J.copy())
+        K = [J]
+        for i in range(1, len(cls.b)):
+            K.append(J @ (eye + h * sum(cls.A[i, j] * K[j] for j in range(i))))
         return eye + h * sum(cls.b[i] * K[i] for i in range(len(cls.b)))
 
 
@@ -81,7 +82,7 @@ class SymplecticEuler(Integrator):
     def amplification(cls, h, omega, zeta):
         w2, c = omega * omega, 2.0 * zeta * omega
         # v' = (1 − h c) v − h ω² x ;  x' = x + h v'
-        return np.array([[1.0 - h * h * w2, h * (1.0 - h * c)], [-h * w2, 1.0 - h * c]])
+        return matrices([[1.0 - h * h * w2, h * (1.0 - h * c)], [-h * w2, 1.0 - h * c]])
 
 
 @register
@@ -148,6 +149,6 @@ class Verlet(Integrator):
         """3×3, on ``(xₙ, xₙ₋₁, xₙ₋₂)``: ``xₙ₊₁ = 2xₙ − xₙ₋₁ + h²·(−ω²xₙ − c·vₙ)`` with
         ``vₙ = (3xₙ − 4xₙ₋₁ + xₙ₋₂)/(2h)`` and ``c = 2ζω``."""
         w2, c = omega * omega, 2.0 * zeta * omega
-        return np.array([[2.0 - h * h * w2 - 1.5 * h * c, -1.0 + 2.0 * h * c, -0.5 * h * c],
-                         [1.0, 0.0, 0.0],
-                         [0.0, 1.0, 0.0]])
+        return matrices([[2.0 - h * h * w2 - 1.5 * h * c, -1.0 + 2.0 * h * c, -0.5 * h * c],
+                            [1.0, 0.0, 0.0],
+                            [0.0, 1.0, 0.0]])

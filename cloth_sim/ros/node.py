@@ -41,7 +41,7 @@ from .. import stability as stab
 from ..model import GRID_FAMILIES
 from ..parameters import REBUILD, SCHEMA
 from ..scene import SceneError, load_scene
-from ..simulator import SimulationDiverged, Simulator
+from ..simulator import SimulationDiverged, Simulator, compile_kernels
 from . import messages
 from . import params as P
 
@@ -131,6 +131,9 @@ class ClothSimNode(Node):
         if reason:
             raise StartupError(reason)
         self.sim = self._build_simulator(self.cfg, model)
+        # every kernel compiled (or loaded from numba's cache) now, not in the tick that first
+        # needs it: switching to kang live once stalled the node for 6 s
+        kernels = compile_kernels()
 
         self.paused = False
         self.error: str | None = None
@@ -160,7 +163,7 @@ class ClothSimNode(Node):
         self.get_logger().info(
             f"scene {self.scene.name}: {self.cfg['rows']}×{self.cfg['cols']} {self.cfg['model']}, "
             f"{self.sim.integrator}, dt={self.sim.dt:g} s, {self.cfg['publish_rate']:g} Hz, "
-            f"terms: {', '.join(self.sim.active_terms)}")
+            f"terms: {', '.join(self.sim.active_terms)}; kernels ready in {kernels:.2f} s")
 
     @staticmethod
     def _startup_value(name, value):
