@@ -145,6 +145,57 @@ def spring_forces(x, v, springs, rest, k, c, kind, tab, with_damping, f):
         f[j, 2] -= fz
 
 
+@numba.njit(cache=True, parallel=True)
+def spring_forces_gather(x, v, springs, rest, k, c, kind, tab, with_damping, ptr, adj, sign, fs, f):
+    """:func:`spring_forces` on every core, deterministically: each spring's force into ``fs`` (one
+    spring per iteration), then each particle gathers its springs' forces in increasing spring
+    order (``ptr``/``adj``/``sign``: :func:`incidence`) — the order the serial loop adds them in, so
+    the result is bit-identical to it at any thread count (no racy scatter)."""
+    for s in numba.prange(springs.shape[0]):
+        i = springs[s, 0]
+        j = springs[s, 1]
+        dx, dy, dz, l = spring_vector(x, i, j)
+        if l < 1e-300:
+            fs[s, 0] = 0.0
+            fs[s, 1] = 0.0
+            fs[s, 2] = 0.0
+            continue
+        inv = 1.0 / l
+        ux, uy, uz = dx * inv, dy * inv, dz * inv
+        _, de, _ = _axial(l, rest[s], k[s], kind[s], tab)
+        mag = de
+        if with_damping:
+            mag += c[s] * ((v[j, 0] - v[i, 0]) * ux + (v[j, 1] - v[i, 1]) * uy + (v[j, 2] - v[i, 2]) * uz)
+        fs[s, 0] = mag * ux
+        fs[s, 1] = mag * uy
+        fs[s, 2] = mag * uz
+    for p in numba.prange(f.shape[0]):
+        ax, ay, az = f[p, 0], f[p, 1], f[p, 2]
+        for e in range(ptr[p], ptr[p + 1]):
+            s = adj[e]
+            if sign[e] > 0:
+                ax += fs[s, 0]
+                ay += fs[s, 1]
+                az += fs[s, 2]
+            else:
+                ax -= fs[s, 0]
+                ay -= fs[s, 1]
+                az -= fs[s, 2]
+        f[p, 0] = ax
+        f[p, 1] = ay
+        f[p, 2] = az
+
+
+def incidence(springs: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(ptr, adj, sign)``: particle ``p``'s springs are ``adj[ptr[p]:ptr[p+1]]`` in increasing
+    order, ``sign`` +1 where ``p`` is the spring's first end (it feels ``+f``), −1 where second."""
+    ends = springs.ravel()
+    perm = np.argsort(ends, kind="stable")  # stable: within a particle, in spring order
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(ends, minlength=n), out=ptr[1:])
+    return ptr, np.ascontiguousarray(perm // 2), np.where(perm % 2 == 0, 1, -1).astype(np.int8)
+
+
 @numba.njit(cache=True)
 def spring_energy(x, springs, rest, k, kind, tab):
     """Total elastic energy of the listed springs."""
@@ -199,6 +250,22 @@ def wind_forces(x, tris, wind, normals, f):
 
 
 # --------------------------------------------------------------------------- terms
+_INCIDENCE: dict = {}
+
+
+def _incidence_of(model: ClothModel, live: np.ndarray):
+    """:func:`incidence` of the model's live springs, kept per model and set of live springs (a
+    material change rebuilds the force pipeline; the springs it keeps rarely change)."""
+    key = (id(model), live.tobytes())
+    hit = _INCIDENCE.get(key)
+    if hit is None or hit[0] is not model:
+        hit = (model, incidence(np.ascontiguousarray(model.springs[live]), model.n_particles))
+        _INCIDENCE[key] = hit
+        while len(_INCIDENCE) > 16:
+            _INCIDENCE.pop(next(iter(_INCIDENCE)))
+    return hit[1]
+
+
 class SpringTerm:
     """Hooke (or Choi–Ko) and damping along every spring whose family has a non-zero stiffness or
     damping [1.6, 1.7]: one compiled loop over the live springs. Energy: the elastic energy.
@@ -218,14 +285,16 @@ class SpringTerm:
         self.c = np.ascontiguousarray(damping[live])
         self.kind = np.ascontiguousarray(model.kind[live])
         self.with_damping = bool(np.any(self.c > 0))
+        self._incidence = _incidence_of(model, live)
+        self._fs = np.empty((len(self.springs), 3))
 
     @property
     def active(self) -> bool:
         return len(self.springs) > 0
 
     def add_force(self, x, v, f):
-        spring_forces(x, v, self.springs, self.rest, self.k, self.c, self.kind, BUCKLE_TABLE,
-                      self.with_damping, f)
+        spring_forces_gather(x, v, self.springs, self.rest, self.k, self.c, self.kind, BUCKLE_TABLE,
+                             self.with_damping, *self._incidence, self._fs, f)
 
     def energy(self, x) -> float:
         return float(spring_energy(x, self.springs, self.rest, self.k, self.kind, BUCKLE_TABLE))

@@ -506,6 +506,13 @@ def test_messages_are_built_by_pure_functions():
     tris = np.array([[0, 1, 4], [0, 4, 3]])
     marker = messages.mesh(x, tris, "base", stamp)
     assert len(marker.points) == 6 and marker.points[2].x == pytest.approx(x[4, 0])
+    # what the node publishes: the same marker, serialised without a Python object per point
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    for pts, frame in ((x, "base"), (np.random.default_rng(3).normal(size=(6, 3)), "a_longer_frame")):
+        fast = deserialize_message(messages.mesh_bytes(pts, tris, frame, stamp), Marker)
+        assert fast == deserialize_message(serialize_message(messages.mesh(pts, tris, frame, stamp)),
+                                           Marker)
     energy = {"kinetic": 1.0, "spring": 2.0, "gravity": -5.0}
     common = dict(stamp=stamp, frame_id="base", integrator="rk4", dt=1e-3, steps=4, step_wall=2e-3,
                   step_max=1e-3, tick_wall=3e-3, rtf=1.0, sim_time=2.0, energy=energy,

@@ -429,7 +429,7 @@ class ClothSimNode(Node):
         if self.points_pub.get_subscription_count() > 0:
             self.points_pub.publish(self.point_cloud(stamp))
         if self.mesh_pub.get_subscription_count() > 0:
-            self.mesh_pub.publish(messages.mesh(sim.positions, sim.model.triangles, frame, stamp))
+            self.mesh_pub.publish(messages.mesh_bytes(sim.positions, sim.model.triangles, frame, stamp))
         wall_now = time.monotonic()
         self._history.append((wall_now, sim.time))
         while self._history and wall_now - self._history[0][0] > RTF_WINDOW:
