@@ -14,7 +14,7 @@ export ROS_LOG_DIR ?= $(CURDIR)/.ros_log
 
 SCENE    ?= hanging
 
-.PHONY: install run test fuzz bench clean
+.PHONY: install run test fuzz bench bench-peers clean
 install: $(STAMP) $(MSGS)
 
 $(STAMP): requirements.txt setup.py pyproject.toml
@@ -44,6 +44,11 @@ fuzz: install
 # the full benchmark run docs/BENCHMARKS.md reports (about 10 minutes on 2 cores)
 bench: install
 	for b in work-precision stability scaling; do $(VENV)/bin/cloth-sim bench $$b --out docs/bench/$$b || exit 1; done
+
+# NVIDIA Warp's CPU cloth kernel beside ours (installs the pinned optional extra, ~150 MB)
+bench-peers: install
+	$(PY) -m pip install --disable-pip-version-check -q -r requirements-peers.txt
+	$(VENV)/bin/cloth-sim bench peers
 
 clean:
 	rm -rf $(VENV) .ros_log build install log *.egg-info

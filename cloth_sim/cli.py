@@ -11,6 +11,8 @@
 ``cloth-sim bench params [--size 32] [--rate 60]``
     Print the ~/stats gap while a 24-parameter file is loaded the way `ros2 param load` does (needs rclpy).
 ``cloth-sim bench node [--sizes 32 64] [--seconds 10]``
+
+``cloth-sim bench peers [--sizes 32 64 128] [--rounds 9]`` (NVIDIA Warp's CPU cloth kernel beside ours)
     Print the node's real-time factor with and without a ~/points subscriber (needs rclpy).
 ``cloth-sim record -o BAG [TOPIC ...]``, ``play BAG``, ``info BAG``, ``reindex BAG``
     rosbag2-compatible MCAP bags: record the ROS graph, replay it, inspect it, repair an unclosed bag.
@@ -86,6 +88,12 @@ def _bench_node(args) -> int:
     from .ros.bench import print_node_table
     print_node_table(args.sizes, args.seconds, args.integrator, args.dt, args.rate)
     return 0
+
+
+def _bench_peers(args) -> int:
+    from .bench.peers import print_peer_table
+
+    return print_peer_table(tuple(args.sizes), rounds=args.rounds)
 
 
 def _bench_record(args) -> int:
@@ -166,6 +174,11 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--dt", type=float, default=1.0 / 60, help="time step (default 1/60 s)")
     i.add_argument("--seconds", type=float, default=1.0, help="wall time per measurement")
     i.set_defaults(func=_bench_implicit)
+    pp = bsub.add_parser("peers", help="NVIDIA Warp's CPU cloth kernel beside symplectic Euler and RK4 "
+                                      "(needs the optional warp-lang: make bench-peers)")
+    pp.add_argument("--sizes", type=int, nargs="+", default=[32, 64, 128])
+    pp.add_argument("--rounds", type=int, default=9, help="alternating bursts per size (median)")
+    pp.set_defaults(func=_bench_peers)
     bb = bsub.add_parser("blowup", help="how long a diverging step holds the caller, per integrator")
     bb.add_argument("--size", type=int, default=32, help="cloth N×N (default 32)")
     bb.set_defaults(func=_bench_blowup)

@@ -404,8 +404,13 @@ class Forces:
     def force(self, x: np.ndarray, v: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Total force on each particle (pins included: their force is reported, not applied)."""
         f = np.empty_like(x) if out is None else out
-        f[:] = 0.0
-        for term in self.terms:
+        terms = self.terms
+        if terms and isinstance(terms[0], GravityTerm):  # it initialises the sum: 0 + m·g is m·g
+            np.copyto(f, terms[0].force)
+            terms = terms[1:]
+        else:
+            f[:] = 0.0
+        for term in terms:
             term.add_force(x, v, f)
         self.evaluations += 1
         return f
