@@ -128,7 +128,7 @@ def test_no_stiffness_at_all_is_a_cloth_that_falls():
         sim.set_stiffness(f, 0.0)
     assert sim.fastest_mode() == (0.0, 0.0)
     # no oscillation, but the springs' damping still limits an explicit step: rate·dt ≤ 2
-    assert sim.stable_dt() == pytest.approx(2 / sim.analysis.damping_rate, rel=1e-5)
+    assert sim.stable_dt() == pytest.approx(2 / sim.analysis.damping_rate, rel=1e-3)
     sim.advance(0.1)
     assert np.all(np.isfinite(sim.positions))
     for f in ("structural", "shear", "bend"):
@@ -148,7 +148,7 @@ def test_the_limit_accounts_for_heavily_damped_springs():
 
     sim = sim_at(1e-3)
     limit = sim.stable_dt()
-    assert limit == pytest.approx(2 / sim.analysis.damping_rate, rel=1e-5)
+    assert limit == pytest.approx(2 / sim.analysis.damping_rate, rel=1e-3)
     sim_at(0.97 * limit).advance(0.5)
     with pytest.raises(SimulationDiverged):
         sim_at(2 * limit).advance(0.5)

@@ -92,6 +92,12 @@ class Integrator:
         ``(*batch, n, n)``, one matrix per step and oscillator."""
         raise NotImplementedError
 
+    @classmethod
+    def spectral_radii(cls, h, omega, zeta) -> np.ndarray:
+        """Spectral radius of :meth:`amplification` (arrays broadcast together); methods with a
+        cheaper closed form override it."""
+        return stab.spectral_radii(cls.amplification(h, omega, zeta))
+
     def analysis_key(self):
         """What, beside the material, the method's own analysis depends on (its options)."""
         return ()

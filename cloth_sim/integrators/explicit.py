@@ -42,6 +42,33 @@ class ExplicitRungeKutta(Integrator):
                 v += (dt * self.b[i]) * kv[i]
 
     @classmethod
+    def spectral_radii(cls, h, omega, zeta):
+        """``max |R(hλ)|`` over the oscillator's eigenvalues ``λ = ω(−ζ ± √(ζ²−1))``, with ``R`` the
+        tableau's stability polynomial ``1 + Σ_k (b·A^{k−1}·1) z^k`` (the eigenvalues of a polynomial
+        of a matrix are the polynomial of its eigenvalues): the same as the amplification matrix's
+        radius, without building it."""
+        h, omega, zeta = (np.asarray(a, dtype=np.float64) for a in (h, omega, zeta))
+        root = np.sqrt((zeta * zeta - 1.0).astype(np.complex128))
+        radius = 0.0
+        for sign in (1.0, -1.0):
+            z = h * omega * (-zeta + sign * root)
+            r = np.zeros_like(z)
+            for g in cls._polynomial()[::-1]:  # Horner
+                r = r * z + g
+            radius = np.maximum(radius, np.abs(r))
+        return radius
+
+    @classmethod
+    def _polynomial(cls) -> tuple[float, ...]:
+        """Coefficients ``γ_0 … γ_s`` of the stability polynomial."""
+        s = len(cls.b)
+        coeffs, vec = [1.0], np.ones(s)
+        for _ in range(s):
+            coeffs.append(float(cls.b @ vec))
+            vec = cls.A @ vec
+        return tuple(coeffs)
+
+    @classmethod
     def amplification(cls, h, omega, zeta):
         J = oscillator_matrix(omega, zeta)
         h = np.asarray(h, dtype=np.float64)[..., None, None]  # a batch: (..., 2, 2)

@@ -15,6 +15,7 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import PointCloud2
+from visualization_msgs.msg import Marker
 
 
 def measure(n: int, seconds: float, subscribe: bool, integrator: str, dt: float, rate: float) -> dict:
@@ -30,10 +31,12 @@ def measure(n: int, seconds: float, subscribe: bool, integrator: str, dt: float,
             Parameter("integrator", value=integrator), Parameter("dt", value=dt),
             Parameter("publish_rate", value=rate)])
         probe = rclpy.create_node("bench_probe", context=ctx)
-        stats, clouds = [], []
+        stats, clouds, meshes = [], [], []
         probe.create_subscription(Stats, "/cloth_sim/stats", stats.append, 100)
-        if subscribe:
-            probe.create_subscription(PointCloud2, "/cloth_sim/points", clouds.append, 100)
+        if subscribe:  # what RViz's two displays ask for; raw: this probe shares the node's thread,
+            # so it counts the messages without deserialising them (RViz does that in its own process)
+            probe.create_subscription(PointCloud2, "/cloth_sim/points", clouds.append, 100, raw=True)
+            probe.create_subscription(Marker, "/cloth_sim/mesh", meshes.append, 100, raw=True)
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(node)
         ex.add_node(probe)
@@ -42,6 +45,7 @@ def measure(n: int, seconds: float, subscribe: bool, integrator: str, dt: float,
             ex.spin_once(timeout_sec=0.01)
         stats.clear()
         clouds.clear()
+        meshes.clear()
         o0, s0, w0 = node.overruns, node.sim.time, time.monotonic()
         end = w0 + seconds
         while time.monotonic() < end:
@@ -51,7 +55,7 @@ def measure(n: int, seconds: float, subscribe: bool, integrator: str, dt: float,
         out = {"N": n, "subscriber": subscribe, "rtf": sim / wall,
                "ms_per_step": 1e3 * sum(s.step_time_mean * s.steps for s in stats) / max(steps, 1),
                "tick_ms": 1e3 * sum(s.tick_wall_time for s in stats) / max(len(stats), 1),
-               "ticks_per_s": len(stats) / wall, "clouds": len(clouds),
+               "ticks_per_s": len(stats) / wall, "clouds": len(clouds), "meshes_per_s": len(meshes) / wall,
                "overruns": node.overruns - o0}
         ex.shutdown()
         probe.destroy_node()
@@ -64,15 +68,17 @@ def measure(n: int, seconds: float, subscribe: bool, integrator: str, dt: float,
 def print_node_table(sizes, seconds: float, integrator: str, dt: float, rate: float) -> list[dict]:
     print(f"# cloth_sim_node, hanging scene resized to N×N, {integrator}, dt={dt:g} s, {rate:g} Hz, "
           f"{seconds:g} s per row after 2 s warm-up; {platform.machine()}, {os.cpu_count()} cores")
-    print("| N | ~/points subscriber | real-time factor | ms/step | tick wall ms | ticks/s | overruns |")
-    print("|---|---|---|---|---|---|---|")
+    print("| N | ~/points + ~/mesh subscribers | real-time factor | ms/step | tick wall ms | ticks/s | "
+          "meshes/s | overruns |")
+    print("|---|---|---|---|---|---|---|---|")
     rows = []
     for n in sizes:
         for sub in (False, True):
             r = measure(n, seconds, sub, integrator, dt, rate)
             rows.append(r)
             print(f"| {n} | {'yes' if sub else 'no'} | {r['rtf']:.3f} | {r['ms_per_step']:.3f} | "
-                  f"{r['tick_ms']:.2f} | {r['ticks_per_s']:.1f} | {r['overruns']} |", flush=True)
+                  f"{r['tick_ms']:.2f} | {r['ticks_per_s']:.1f} | {r['meshes_per_s']:.1f} | "
+                  f"{r['overruns']} |", flush=True)
     return rows
 
 
