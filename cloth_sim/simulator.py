@@ -26,7 +26,7 @@ import scipy.sparse as sp
 from . import integrators
 from . import stability as stab
 from .constraints import DEFAULT_STRAIN_LIMIT_PASSES, StrainLimit
-from .forces import Forces, spring_strains
+from .forces import BUCKLE_TABLE, Forces, incidence, spring_forces_gather, spring_strains
 from .model import ClothModel
 from .parameters import SCHEMA, ParameterError
 from .state import State
@@ -403,4 +403,10 @@ def compile_kernels() -> float:
             sim.step(2)
             sim.energy()
             sim.max_strain()
+        # the parallel gather, which only cloths above forces.PARALLEL_MIN_SPRINGS use
+        term = sim.forces.spring_term
+        x, f = sim.positions, np.zeros_like(sim.positions)
+        spring_forces_gather(x, sim.velocities, term.springs, term.rest, term.k, term.c, term.kind,
+                             BUCKLE_TABLE, True, *incidence(term.springs, model.n_particles),
+                             np.empty((len(term.springs), 3)), f)
     return time.perf_counter() - t0

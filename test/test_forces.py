@@ -208,10 +208,12 @@ def test_spring_forces_are_bit_identical_at_any_thread_count(model_name):
     import numba
 
     rng = np.random.default_rng(5)
-    model = ClothModel.grid(12, 12, 0.05, 0.01, stiffness=300.0, damping=0.05, pinned=[(0, 0)],
+    n = 56  # above forces.PARALLEL_MIN_SPRINGS: the parallel gather runs
+    model = ClothModel.grid(n, n, 1.0 / n, 0.01, stiffness=300.0, damping=0.05, pinned=[(0, 0)],
                             model=model_name)
     sim = Simulator(model, dt=1e-4)
     term = sim.forces.spring_term
+    assert len(term.springs) >= forces.PARALLEL_MIN_SPRINGS
     x = model.positions + rng.normal(scale=0.01, size=model.positions.shape)
     v = rng.normal(size=x.shape)
     serial, gathered = np.zeros_like(x), np.zeros_like(x)
@@ -220,12 +222,16 @@ def test_spring_forces_are_bit_identical_at_any_thread_count(model_name):
     term.add_force(x, v, gathered)
     assert np.array_equal(serial, gathered)
 
+    v0 = rng.normal(scale=0.01, size=x.shape)
+    provot = ClothModel.grid(n, n, 1.0 / n, 0.01, stiffness=300.0, damping=0.05, pinned=[(0, 0)])
+
     def run(threads):
         before = numba.get_num_threads()
         numba.set_num_threads(threads)
-        try:
-            s = Simulator(model, dt=1e-4, wind=(0.0, 1.0, 2.0), strain_limit=0.1)
-            s.step(300)
+        try:  # a Provot run (Choi–Ko's onset force, 12k/L², throws a grid this fine apart)
+            s = Simulator(provot, dt=2e-5, wind=(0.0, 0.01, 0.02), strain_limit=0.1)
+            s.velocities = v0
+            s.step(100)
             return s.positions
         finally:
             numba.set_num_threads(before)
