@@ -23,23 +23,26 @@ class ExplicitRungeKutta(Integrator):
         stages = len(self.b)
         kx = [self._buffer(f"_kx{i}", x) for i in range(stages)]
         kv = [self._buffer(f"_kv{i}", x) for i in range(stages)]
+        xs, tmp = self._buffer("_xs", x), self._buffer("_tmp", x)
         for i in range(stages):
             if i == 0:  # the first stage is the current state itself; no copy needed
                 kx[0][:] = v
                 forces.acceleration(x, v, out=kv[0])
                 continue
-            xs, vs = x.copy(), v.copy()
+            # the stage's velocity is kx[i] itself; no temporaries (each product goes through tmp)
+            vs = kx[i]
+            np.copyto(xs, x)
+            np.copyto(vs, v)
             for j in range(i):
                 a = self.A[i, j]
                 if a != 0.0:
-                    xs += (dt * a) * kx[j]
-                    vs += (dt * a) * kv[j]
-            kx[i][:] = vs
+                    xs += np.multiply(kx[j], dt * a, out=tmp)
+                    vs += np.multiply(kv[j], dt * a, out=tmp)
             forces.acceleration(xs, vs, out=kv[i])
         for i in range(stages):
             if self.b[i] != 0.0:
-                x += (dt * self.b[i]) * kx[i]
-                v += (dt * self.b[i]) * kv[i]
+                x += np.multiply(kx[i], dt * self.b[i], out=tmp)
+                v += np.multiply(kv[i], dt * self.b[i], out=tmp)
 
     @classmethod
     def spectral_radii(cls, h, omega, zeta):
