@@ -9,9 +9,15 @@ same name: in one directory on a colcon install, in a separate prefix for the pi
 set-up, which ``extend_path`` below joins to this package.
 """
 
+import os
 from pkgutil import extend_path
 
 __path__ = extend_path(__path__, __name__)
+
+# The large-cloth spring forces run in numba's OpenMP pool: its idle workers must sleep, not spin,
+# or they take a core from the ROS executor (and from anything else on a 2-core machine) between
+# steps. Read when the OpenMP runtime starts, so set before any parallel kernel runs.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 __all__ = ["ClothModel", "Simulator", "SimulationDiverged", "integrators"]
 __version__ = "0.1.0"

@@ -250,10 +250,11 @@ def wind_forces(x, tris, wind, normals, f):
 
 
 # --------------------------------------------------------------------------- terms
-#: From this many springs (a 52×52 grid) the spring forces run on every core; below it a parallel
-#: region costs more than it saves (0.081 against 0.076 ms at 32×32), and on a loaded 2-core machine
-#: its wait for a busy core made one 20×23 evaluation take 14 ms. Both give the same bits.
-PARALLEL_MIN_SPRINGS = 16384
+#: From this many springs (a 105×105 grid) the spring forces run on every core. Below it a parallel
+#: region costs more than it saves: with the OpenMP workers sleeping between regions (as they must in
+#: a node, see ``cloth_sim/__init__.py``) waking them costs more than a 64×64 evaluation gains, and on
+#: a loaded 2-core machine a region waited 14 ms for a busy core. Both give the same bits.
+PARALLEL_MIN_SPRINGS = 65536
 
 _INCIDENCE: dict = {}
 
