@@ -150,7 +150,9 @@ def spring_forces_gather(x, v, springs, rest, k, c, kind, tab, with_damping, ptr
     """:func:`spring_forces` on every core, deterministically: each spring's force into ``fs`` (one
     spring per iteration), then each particle gathers its springs' forces in increasing spring
     order (``ptr``/``adj``/``sign``: :func:`incidence`) — the order the serial loop adds them in, so
-    the result is bit-identical to it at any thread count (no racy scatter)."""
+    the result is bit-identical to it at any thread count (no racy scatter). The per-spring lines
+    repeat :func:`spring_forces`'s on purpose: moved into a shared helper (inlined or not), numba
+    compiled the serial loop 3–4× slower (0.34 → 1.1 ms at 64×64)."""
     for s in numba.prange(springs.shape[0]):
         i = springs[s, 0]
         j = springs[s, 1]
