@@ -252,11 +252,13 @@ def wind_forces(x, tris, wind, normals, f):
 
 
 # --------------------------------------------------------------------------- terms
-#: From this many springs (a 105×105 grid) the spring forces run on every core. Below it a parallel
-#: region costs more than it saves: with the OpenMP workers sleeping between regions (as they must in
-#: a node, see ``cloth_sim/__init__.py``) waking them costs more than a 64×64 evaluation gains, and on
-#: a loaded 2-core machine a region waited 14 ms for a busy core. Both give the same bits.
-PARALLEL_MIN_SPRINGS = 65536
+#: From this many springs (a 210×210 grid) the spring forces run on every core. With the OpenMP
+#: workers sleeping between regions (as they must in a node, see ``cloth_sim/__init__.py``), waking
+#: them costs what a smaller cloth gains: at 128×128 the gather on 2 cores ties the serial loop
+#: (1.17 vs 1.13 ms), at 256×256 it gains 15 % (2× with spinning workers, which take a core from
+#: everything else); on a loaded 2-core machine one region waited 14 ms for a busy core. Both give
+#: the same bits.
+PARALLEL_MIN_SPRINGS = 262144
 
 _INCIDENCE: dict = {}
 
