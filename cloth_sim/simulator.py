@@ -72,6 +72,8 @@ class Simulator:
         wind: 3-vector ``w·W``; particle ``i`` feels ``(n_i·wind)·n_i``. ``None``: no wind.
         strain_limit: Provot's critical deformation rate ``τc`` (0.1 = 10 %), ``None`` for none.
         strain_limit_passes: maximum correction passes per step.
+        strain_limit_long_range: long-range attachments to the pins before the passes (see
+            :mod:`cloth_sim.constraints`); ``False`` for Provot's passes alone.
         drag: linear air drag coefficient (N·s/m per particle).
         max_speed, max_coordinate: the stability guard's bounds; a step that leaves them, or
             produces NaN or inf, is undone and raises :class:`SimulationDiverged`.
@@ -81,7 +83,8 @@ class Simulator:
 
     def __init__(self, model: ClothModel, integrator: str = "symplectic_euler", dt: float = 1e-3,
                  gravity=(0.0, 0.0, -9.81), wind=None, strain_limit: float | None = None,
-                 strain_limit_passes: int = DEFAULT_STRAIN_LIMIT_PASSES, drag: float = 0.0,
+                 strain_limit_passes: int = DEFAULT_STRAIN_LIMIT_PASSES,
+                 strain_limit_long_range: bool = True, drag: float = 0.0,
                  max_speed: float = 1e3, max_coordinate: float = 1e6,
                  integrator_options: dict | None = None):
         self.model = model
@@ -99,7 +102,7 @@ class Simulator:
         sel = model.strain_limited
         self._limited = (np.ascontiguousarray(model.springs[sel]),
                          np.ascontiguousarray(model.rest_lengths[sel]))
-        self._strain = StrainLimit(model, None, strain_limit_passes)
+        self._strain = StrainLimit(model, None, strain_limit_passes, strain_limit_long_range)
         #: the post-step stages, in order; only the active ones run
         self.stages = [self._strain]
         self.strain_limit = strain_limit

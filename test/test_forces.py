@@ -238,3 +238,27 @@ def test_spring_forces_are_bit_identical_at_any_thread_count(model_name, monkeyp
             numba.set_num_threads(before)
 
     assert np.array_equal(run(1), run(min(2, numba.config.NUMBA_NUM_THREADS)))
+
+
+def test_long_range_attachments_reach_is_the_rest_geodesic_and_never_over_constrains():
+    """Kim et al. 2012's attachments: a particle's reach to a pin is its rest distance along the
+    springs; a chain stretched 50 % comes back within (1 + τ) of it, every spring within τ, and a
+    cloth at rest is left exactly where it is."""
+    from cloth_sim.constraints import StrainLimit, nearest_attachments
+
+    n, L = 12, 0.1
+    x = np.c_[np.arange(n) * L, np.zeros(n), np.zeros(n)]
+    chain = ClothModel.from_springs(x, np.full(n, 0.01), [[i, i + 1] for i in range(n - 1)], 100.0,
+                                    pinned=[0])
+    anchor, reach = nearest_attachments(chain)
+    assert anchor[0, 0] == -1 and np.all(anchor[1:, 0] == 0) and np.all(anchor[:, 1] == -1)
+    np.testing.assert_allclose(reach[1:, 0], np.arange(1, n) * L)
+    stretched = 1.5 * x
+    limit = StrainLimit(chain, 0.1)
+    limit.correct(stretched)
+    assert np.all(np.linalg.norm(stretched[1:] - stretched[0], axis=1) <= 1.1 * reach[1:, 0] * (1 + 1e-12))
+    assert np.max(np.linalg.norm(np.diff(stretched, axis=0), axis=1)) <= 1.1 * L * (1 + 1e-4)
+    cloth = cloth16()
+    at_rest = cloth.positions.copy()
+    StrainLimit(cloth, 0.1).correct(at_rest)
+    assert np.array_equal(at_rest, cloth.positions)
