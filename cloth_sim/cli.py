@@ -13,6 +13,8 @@
 ``cloth-sim bench node [--sizes 32 64] [--seconds 10]``
 
 ``cloth-sim bench peers [--sizes 32 64 128] [--rounds 9]`` (NVIDIA Warp's CPU cloth kernel beside ours)
+
+``cloth-sim bench strain [--sizes 32 64] [--seconds 3]`` (worst strain and cost of the strain limit)
     Print the node's real-time factor with and without a ~/points subscriber (needs rclpy).
 ``cloth-sim record -o BAG [TOPIC ...]``, ``play BAG``, ``info BAG``, ``reindex BAG``
     rosbag2-compatible MCAP bags: record the ROS graph, replay it, inspect it, repair an unclosed bag.
@@ -87,6 +89,13 @@ def _bench_params(args) -> int:
 def _bench_node(args) -> int:
     from .ros.bench import print_node_table
     print_node_table(args.sizes, args.seconds, args.integrator, args.dt, args.rate)
+    return 0
+
+
+def _bench_strain(args) -> int:
+    from .bench.steps import print_strain_limit_table
+
+    print_strain_limit_table(tuple(args.sizes), args.seconds)
     return 0
 
 
@@ -174,6 +183,10 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--dt", type=float, default=1.0 / 60, help="time step (default 1/60 s)")
     i.add_argument("--seconds", type=float, default=1.0, help="wall time per measurement")
     i.set_defaults(func=_bench_implicit)
+    sl = bsub.add_parser("strain", help="worst strain and cost of the strain limit on the hanging scene")
+    sl.add_argument("--sizes", type=int, nargs="+", default=[32, 64])
+    sl.add_argument("--seconds", type=float, default=3.0, help="simulated time per run")
+    sl.set_defaults(func=_bench_strain)
     pp = bsub.add_parser("peers", help="NVIDIA Warp's CPU cloth kernel beside symplectic Euler and RK4 "
                                       "(needs the optional warp-lang: make bench-peers)")
     pp.add_argument("--sizes", type=int, nargs="+", default=[32, 64, 128])

@@ -146,3 +146,34 @@ def print_blowup_table(size: int = 32) -> list[dict]:
         print(f"| {name} | {dt:.3g} | {steps} | {row['failing_ms']:.2f} | {row['step_ms']:.3f} | "
               f"{message} |", flush=True)
     return rows
+
+
+def print_strain_limit_table(sizes=(32, 64), seconds: float = 3.0, tau: float = 0.1) -> list[dict]:
+    """The hanging scene at N×N (the 1 m, 10.24 kg cloth: spacing 1/(N−1), mass 10.24/N²) over
+    ``seconds``: worst structural/shear strain (sampled every 10 steps) and ms/step without the strain
+    limit, with Provot's passes alone, and with long-range attachments; the cost ratios to the run
+    without, measured in one process."""
+    print(f"# strain limit τ = {tau} on the hanging scene, {seconds:g} s, symplectic Euler dt = 1 ms; "
+          f"{platform.machine()}, {os.cpu_count()} cores")
+    print("| N | method | worst strain | ms/step | × the step without |")
+    print("|---|---|---|---|---|")
+    rows = []
+    for n in sizes:
+        base = None
+        for label, kw in (("off", dict(strain_limit=None)),
+                          ("provot", dict(strain_limit=tau, strain_limit_long_range=False)),
+                          ("provot + long-range attachments", dict(strain_limit=tau))):
+            sim = load_scene("hanging").build_simulator(rows=n, cols=n, spacing=1 / (n - 1),
+                                                        particle_mass=10.24 / n ** 2, **kw)
+            worst, wall, steps = 0.0, 0.0, 0
+            while sim.time < seconds - 1e-9:
+                t = time.perf_counter()
+                sim.step(10)
+                wall += time.perf_counter() - t
+                steps += 10
+                worst = max(worst, float(sim.strains(limited_only=True).max()))
+            ms = 1e3 * wall / steps
+            base = base or ms
+            rows.append({"N": n, "method": label, "worst": worst, "ms": ms})
+            print(f"| {n} | {label} | {worst:.4f} | {ms:.3f} | {ms / base:.2f} |", flush=True)
+    return rows
