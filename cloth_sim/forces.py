@@ -364,9 +364,12 @@ class DragTerm:
 
     def __init__(self, drag: float):
         self.drag = drag
+        self._dv = None
 
     def add_force(self, x, v, f):
-        f -= self.drag * v
+        if self._dv is None or self._dv.shape != v.shape:
+            self._dv = np.empty_like(v)
+        f -= np.multiply(v, self.drag, out=self._dv)  # no temporary per evaluation
 
 
 class Forces:
@@ -401,6 +404,9 @@ class Forces:
         inv = 1.0 / model.masses
         inv[model.pinned] = 0.0
         self.inv_mass = inv[:, None].copy()
+        # the same values per coordinate: an in-place product with the (n, 1) column makes numpy
+        # allocate a temporary of the whole array on every evaluation
+        self._inv_mass3 = np.repeat(self.inv_mass, 3, axis=1)
         self.evaluations = 0
 
     # the spring term's arrays, which the implicit integrators assemble from
@@ -433,7 +439,7 @@ class Forces:
     def acceleration(self, x: np.ndarray, v: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """``M⁻¹ f``, zero on pinned particles."""
         a = self.force(x, v, out)
-        a *= self.inv_mass
+        a *= self._inv_mass3
         return a
 
     def spring_energy(self, x: np.ndarray) -> float:

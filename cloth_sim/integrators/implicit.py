@@ -464,4 +464,4 @@ class Kang(_LinearisedImplicitEuler):
                      self._buffer("_new", x))
         self.counters["solves"] += 1
         v += dv
-        x += dt * v
+        x += np.multiply(v, dt, out=self._buffer("_new", x))  # no temporary
