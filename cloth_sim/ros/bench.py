@@ -31,12 +31,18 @@ def measure(n: int, seconds: float, subscribe: bool, integrator: str, dt: float,
             Parameter("integrator", value=integrator), Parameter("dt", value=dt),
             Parameter("publish_rate", value=rate)])
         probe = rclpy.create_node("bench_probe", context=ctx)
-        stats, clouds, meshes = [], [], []
+        stats, clouds, meshes = [], [0], [0]
         probe.create_subscription(Stats, "/cloth_sim/stats", stats.append, 100)
         if subscribe:  # what RViz's two displays ask for; raw: this probe shares the node's thread,
-            # so it counts the messages without deserialising them (RViz does that in its own process)
-            probe.create_subscription(PointCloud2, "/cloth_sim/points", clouds.append, 100, raw=True)
-            probe.create_subscription(Marker, "/cloth_sim/mesh", meshes.append, 100, raw=True)
+            # so it only counts the messages, without deserialising or keeping them (RViz does that in
+            # its own process)
+            def counter(box):
+                def count(_):
+                    box[0] += 1
+                return count
+
+            probe.create_subscription(PointCloud2, "/cloth_sim/points", counter(clouds), 100, raw=True)
+            probe.create_subscription(Marker, "/cloth_sim/mesh", counter(meshes), 100, raw=True)
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(node)
         ex.add_node(probe)
@@ -44,8 +50,7 @@ def measure(n: int, seconds: float, subscribe: bool, integrator: str, dt: float,
         while time.monotonic() < end:
             ex.spin_once(timeout_sec=0.01)
         stats.clear()
-        clouds.clear()
-        meshes.clear()
+        clouds[0] = meshes[0] = 0
         o0, s0, w0 = node.overruns, node.sim.time, time.monotonic()
         end = w0 + seconds
         while time.monotonic() < end:
@@ -55,8 +60,8 @@ def measure(n: int, seconds: float, subscribe: bool, integrator: str, dt: float,
         out = {"N": n, "subscriber": subscribe, "rtf": sim / wall,
                "ms_per_step": 1e3 * sum(s.step_time_mean * s.steps for s in stats) / max(steps, 1),
                "tick_ms": 1e3 * sum(s.tick_wall_time for s in stats) / max(len(stats), 1),
-               "ticks_per_s": len(stats) / wall, "clouds": len(clouds), "meshes_per_s": len(meshes) / wall,
-               "overruns": node.overruns - o0}
+               "ticks_per_s": len(stats) / wall, "clouds": clouds[0], "meshes_per_s": meshes[0] / wall,
+               "overruns": node.overruns - o0, "rss_mb": _rss_mb()}
         ex.shutdown()
         probe.destroy_node()
         node.destroy_node()
@@ -65,12 +70,25 @@ def measure(n: int, seconds: float, subscribe: bool, integrator: str, dt: float,
         rclpy.shutdown(context=ctx)
 
 
+def _rss_mb() -> float:
+    """This process's resident memory now (MB; the node and the probe share it, and the rows before
+    this one in the same run add theirs), from /proc, or its peak from getrusage where /proc is
+    missing."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2 ** 20
+    except OSError:
+        import resource
+
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
 def print_node_table(sizes, seconds: float, integrator: str, dt: float, rate: float) -> list[dict]:
     print(f"# cloth_sim_node, hanging scene resized to N×N, {integrator}, dt={dt:g} s, {rate:g} Hz, "
           f"{seconds:g} s per row after 2 s warm-up; {platform.machine()}, {os.cpu_count()} cores")
     print("| N | ~/points + ~/mesh subscribers | real-time factor | ms/step | tick wall ms | ticks/s | "
-          "meshes/s | overruns |")
-    print("|---|---|---|---|---|---|---|---|")
+          "meshes/s | overruns | resident MB |")
+    print("|---|---|---|---|---|---|---|---|---|")
     rows = []
     for n in sizes:
         for sub in (False, True):
@@ -78,7 +96,7 @@ def print_node_table(sizes, seconds: float, integrator: str, dt: float, rate: fl
             rows.append(r)
             print(f"| {n} | {'yes' if sub else 'no'} | {r['rtf']:.3f} | {r['ms_per_step']:.3f} | "
                   f"{r['tick_ms']:.2f} | {r['ticks_per_s']:.1f} | {r['meshes_per_s']:.1f} | "
-                  f"{r['overruns']} |", flush=True)
+                  f"{r['overruns']} | {r['rss_mb']:.0f} |", flush=True)
     return rows
 
 
