@@ -1,8 +1,9 @@
 """Real-time factor of cloth_sim_node: the node and a subscriber in one process, side by side sizes.
 
 ``cloth-sim bench node --sizes 32 64 --seconds 10`` prints, per size, the mean real-time factor
-reported on ~/stats, ms per step, tick wall time and overruns, with and without a ~/points
-subscriber (building and sending the cloud is skipped when nobody listens).
+reported on ~/stats, ms per step, tick wall time, meshes per second, overruns and resident memory,
+with and without ~/points and ~/mesh subscribers (building and sending them is skipped when nobody
+listens). ``cloth-sim bench params`` times what ``ros2 param load`` costs the ticking node.
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ from __future__ import annotations
 import os
 import platform
 import time
+from contextlib import contextmanager
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -19,20 +21,11 @@ from visualization_msgs.msg import Marker
 
 
 def measure(n: int, seconds: float, subscribe: bool, integrator: str, dt: float, rate: float) -> dict:
-    from cloth_sim.msg import Stats
-
-    from .node import ClothSimNode
-
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=int(os.environ.get("ROS_DOMAIN_ID", "0")))
-    try:
-        node = ClothSimNode(context=ctx, parameter_overrides=[
-            Parameter("rows", value=n), Parameter("cols", value=n), Parameter("spacing", value=1.0 / (n - 1)),
-            Parameter("integrator", value=integrator), Parameter("dt", value=dt),
-            Parameter("publish_rate", value=rate)])
-        probe = rclpy.create_node("bench_probe", context=ctx)
-        stats, clouds, meshes = [], [0], [0]
-        probe.create_subscription(Stats, "/cloth_sim/stats", stats.append, 100)
+    overrides = [Parameter("rows", value=n), Parameter("cols", value=n),
+                 Parameter("spacing", value=1.0 / (n - 1)), Parameter("integrator", value=integrator),
+                 Parameter("dt", value=dt), Parameter("publish_rate", value=rate)]
+    with _node_and_probe(overrides) as (node, probe, ex, stats):
+        clouds, meshes = [0], [0]
         if subscribe:  # what RViz's two displays ask for; raw: this probe shares the node's thread,
             # so it only counts the messages, without deserialising or keeping them (RViz does that in
             # its own process)
@@ -43,9 +36,6 @@ def measure(n: int, seconds: float, subscribe: bool, integrator: str, dt: float,
 
             probe.create_subscription(PointCloud2, "/cloth_sim/points", counter(clouds), 100, raw=True)
             probe.create_subscription(Marker, "/cloth_sim/mesh", counter(meshes), 100, raw=True)
-        ex = SingleThreadedExecutor(context=ctx)
-        ex.add_node(node)
-        ex.add_node(probe)
         end = time.monotonic() + 2.0  # warm-up: numba caches, discovery
         while time.monotonic() < end:
             ex.spin_once(timeout_sec=0.01)
@@ -62,10 +52,31 @@ def measure(n: int, seconds: float, subscribe: bool, integrator: str, dt: float,
                "tick_ms": 1e3 * sum(s.tick_wall_time for s in stats) / max(len(stats), 1),
                "ticks_per_s": len(stats) / wall, "clouds": clouds[0], "meshes_per_s": meshes[0] / wall,
                "overruns": node.overruns - o0, "rss_mb": _rss_mb()}
+        return out
+
+
+@contextmanager
+def _node_and_probe(overrides):
+    """A cloth_sim node with ``overrides`` and a probe node collecting ~/stats, both on one executor
+    in a context of their own; everything is shut down on the way out."""
+    from cloth_sim.msg import Stats
+
+    from .node import ClothSimNode
+
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ.get("ROS_DOMAIN_ID", "0")))
+    try:
+        node = ClothSimNode(context=ctx, parameter_overrides=overrides)
+        probe = rclpy.create_node("bench_probe", context=ctx)
+        stats = []
+        probe.create_subscription(Stats, "/cloth_sim/stats", stats.append, 1000)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        ex.add_node(probe)
+        yield node, probe, ex, stats
         ex.shutdown()
         probe.destroy_node()
         node.destroy_node()
-        return out
     finally:
         rclpy.shutdown(context=ctx)
 
@@ -109,28 +120,14 @@ def print_param_load_table(size: int = 32, rate: float = 60.0) -> list[dict]:
     from rcl_interfaces.msg import Parameter as ParameterMsg
     from rcl_interfaces.srv import GetParameters, ListParameters, SetParameters
 
-    from cloth_sim.msg import Stats
-
-    from .node import ClothSimNode
-
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=int(os.environ.get("ROS_DOMAIN_ID", "0")))
     print(f"# ros2 param load semantics on cloth_sim_node: hanging scene at {size}×{size}, "
           f"{rate:g} Hz; {platform.machine()}, {os.cpu_count()} cores")
     print("| file | parameters | material changes | request ms | largest ~/stats interval (ticks) |")
     print("|---|---|---|---|---|")
     rows = []
-    try:
-        node = ClothSimNode(context=ctx, parameter_overrides=[
-            Parameter("rows", value=size), Parameter("cols", value=size),
-            Parameter("spacing", value=1.0 / (size - 1)), Parameter("publish_rate", value=rate)])
-        probe = rclpy.create_node("bench_probe", context=ctx)
-        stats = []
-        probe.create_subscription(Stats, "/cloth_sim/stats", stats.append, 1000)
-        ex = SingleThreadedExecutor(context=ctx)
-        ex.add_node(node)
-        ex.add_node(probe)
-
+    overrides = [Parameter("rows", value=size), Parameter("cols", value=size),
+                 Parameter("spacing", value=1.0 / (size - 1)), Parameter("publish_rate", value=rate)]
+    with _node_and_probe(overrides) as (node, probe, ex, stats):
         def call(srv, name, req):
             cli = probe.create_client(srv, name)
             while not cli.service_is_ready():
@@ -164,9 +161,4 @@ def print_param_load_table(size: int = 32, rate: float = 60.0) -> list[dict]:
             rows.append({"file": label, "parameters": len(params), "changes": changes,
                          "request_ms": 1e3 * request, "gap_ticks": gap})
             print(f"| {label} | {len(params)} | {changes} | {1e3 * request:.1f} | {gap:.2f} |", flush=True)
-        ex.shutdown()
-        probe.destroy_node()
-        node.destroy_node()
-    finally:
-        rclpy.shutdown(context=ctx)
     return rows
