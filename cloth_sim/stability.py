@@ -173,13 +173,13 @@ def _lanczos_mode(model: ClothModel, k: np.ndarray, c: np.ndarray, drag: float) 
 _BOUND_THETA = 48
 
 
-def _plane_symbols(st: "GridStencil", weights: np.ndarray) -> np.ndarray:
+def _plane_symbols(st: "GridStencil", weights: np.ndarray, which=slice(None)) -> np.ndarray:
     """``Σ_g w_g (2 − 2cos θ·o_g) u_g u_gᵀ`` in the cloth's plane (:func:`_plane_basis`), per
-    wavenumber of the bounds' sampling: ``(θ, d, d)``."""
+    wavenumber of the bounds' sampling (those ``which`` selects): ``(θ, d, d)``."""
     uE = st.u @ _plane_basis(st)
     d = uE.shape[1]
     uu = np.einsum("gi,gj->gij", uE, uE).reshape(len(uE), d * d)
-    s = 2.0 - 2.0 * _cosines(st.offsets, _BOUND_THETA, _mirror_symmetric(st))
+    s = 2.0 - 2.0 * _cosines(st.offsets, _BOUND_THETA, _mirror_symmetric(st))[which]
     return (s @ (np.asarray(weights)[:, None] * uu)).reshape(-1, d, d)
 
 
@@ -193,7 +193,7 @@ def _stencil_mode(st: "GridStencil", drag: float) -> Mode:
         return Mode(0.0, 0.0)
     q = vec[t]
     omega = math.sqrt(float(lam[t]) / st.mass)
-    C = _plane_symbols(st, st.c)[t]
+    C = _plane_symbols(st, st.c, [t])[0]  # at that wavenumber only
     return Mode(omega, (float(q @ C @ q) + float(drag)) / (2.0 * st.mass * omega))
 
 
@@ -212,10 +212,11 @@ def damping_rate(model: ClothModel, c: np.ndarray, drag: float) -> float:
     drag_rate = float(drag) / float(model.masses[free].min())
     if model.n_springs == 0 or not np.any(c > 0):
         return drag_rate
-    st = grid_stencil(model, c, c)  # (``c`` for ``k`` too: only the damping is used)
-    if st is not None:
-        s = 2.0 - 2.0 * _cosines(st.offsets, _BOUND_THETA, _mirror_symmetric(st))
-        return (float(np.max(s @ st.c)) + float(drag)) / st.mass
+    layout = _layout(model)
+    groups = None if layout is None else _per_group(layout, c[:, None])
+    if groups is not None:  # the sup over all wavenumbers of Σ_g c_g (2 − 2cos θ·o_g)
+        s = 2.0 - 2.0 * _cosines(layout.offsets, _BOUND_THETA, False)
+        return (float(np.max(s @ groups[:, 0])) + float(drag)) / layout.mass
     n = model.n_particles
     i, j = model.springs[:, 0], model.springs[:, 1]
     L = sp.coo_matrix((np.r_[c, c, -c, -c], (np.r_[i, j, i, j], np.r_[i, j, j, i])), shape=(n, n)).tocsr()
@@ -432,15 +433,22 @@ def grid_stencil(model: ClothModel, k: np.ndarray, c: np.ndarray) -> GridStencil
         return None
     k = np.asarray(k, dtype=np.float64)
     c = np.asarray(c, dtype=np.float64)
-    k_eff = effective_stiffness(model, k)
-    values = np.stack([k, k_eff, c], axis=1)[layout.order]
+    first = _per_group(layout, np.stack([k, effective_stiffness(model, k), c], axis=1))
+    if first is None:
+        return None
+    return GridStencil(layout.offsets, layout.u, first[:, 0].copy(), first[:, 1].copy(),
+                       first[:, 2].copy(), layout.mass)
+
+
+def _per_group(layout: _Layout, values: np.ndarray) -> np.ndarray | None:
+    """Per-spring ``values`` (m, columns) as one row per offset group, ``None`` when some group's
+    springs differ (beyond the last bits)."""
+    values = values[layout.order]
     lo = np.minimum.reduceat(values, layout.starts, axis=0)
     hi = np.maximum.reduceat(values, layout.starts, axis=0)
     if np.any(hi - lo > 1e-9 * np.maximum(np.abs(hi), np.abs(lo))):
         return None
-    first = values[layout.starts]
-    return GridStencil(layout.offsets, layout.u, first[:, 0].copy(), first[:, 1].copy(),
-                       first[:, 2].copy(), layout.mass)
+    return values[layout.starts]
 
 
 def _mirror_symmetric(st: GridStencil) -> bool:
