@@ -9,12 +9,13 @@
 ``cloth-sim bench blowup [--size 32]``
     Print how long a step that diverges holds the caller (guard, restore, message), per integrator.
 ``cloth-sim bench params [--size 32] [--rate 60]``
-    Print the ~/stats gap while a 24-parameter file is loaded the way `ros2 param load` does (needs rclpy).
+    Print the ~/stats gap while a 26-parameter file is loaded the way `ros2 param load` does (needs rclpy).
 ``cloth-sim bench node [--sizes 32 64] [--seconds 10]``
 
 ``cloth-sim bench peers [--sizes 32 64 128] [--rounds 9]`` (NVIDIA Warp's CPU cloth kernel beside ours)
 
 ``cloth-sim bench strain [--sizes 32 64] [--seconds 3]`` (worst strain and cost of the strain limit)
+``cloth-sim bench contacts [--sizes 32 64] [--seconds 1.5]`` (cost of colliders and self-collision)
     Print the node's real-time factor with and without a ~/points subscriber (needs rclpy).
 ``cloth-sim record -o BAG [TOPIC ...]``, ``play BAG``, ``info BAG``, ``reindex BAG``
     rosbag2-compatible MCAP bags: record the ROS graph, replay it, inspect it, repair an unclosed bag.
@@ -89,6 +90,13 @@ def _bench_params(args) -> int:
 def _bench_node(args) -> int:
     from .ros.bench import print_node_table
     print_node_table(args.sizes, args.seconds, args.integrator, args.dt, args.rate)
+    return 0
+
+
+def _bench_contacts(args) -> int:
+    from .bench.steps import print_contacts_table
+
+    print_contacts_table(tuple(args.sizes), args.seconds)
     return 0
 
 
@@ -187,6 +195,10 @@ def build_parser() -> argparse.ArgumentParser:
     sl.add_argument("--sizes", type=int, nargs="+", default=[32, 64])
     sl.add_argument("--seconds", type=float, default=3.0, help="simulated time per run")
     sl.set_defaults(func=_bench_strain)
+    ct = bsub.add_parser("contacts", help="cost of colliders and self-collision on the hanging scene")
+    ct.add_argument("--sizes", type=int, nargs="+", default=[32, 64])
+    ct.add_argument("--seconds", type=float, default=1.5, help="simulated time per run")
+    ct.set_defaults(func=_bench_contacts)
     pp = bsub.add_parser("peers", help="NVIDIA Warp's CPU cloth kernel beside symplectic Euler and RK4 "
                                       "(needs the optional warp-lang: make bench-peers)")
     pp.add_argument("--sizes", type=int, nargs="+", default=[32, 64, 128])
@@ -195,7 +207,7 @@ def build_parser() -> argparse.ArgumentParser:
     bb = bsub.add_parser("blowup", help="how long a diverging step holds the caller, per integrator")
     bb.add_argument("--size", type=int, default=32, help="cloth N×N (default 32)")
     bb.set_defaults(func=_bench_blowup)
-    bp = bsub.add_parser("params", help="~/stats gaps while `ros2 param load` sets 24 parameters (needs rclpy)")
+    bp = bsub.add_parser("params", help="~/stats gaps while `ros2 param load` sets 26 parameters (needs rclpy)")
     bp.add_argument("--size", type=int, default=32, help="cloth N×N (default 32)")
     bp.add_argument("--rate", type=float, default=60.0, help="publish_rate (Hz, default 60)")
     bp.set_defaults(func=_bench_params)

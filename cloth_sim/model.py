@@ -99,14 +99,15 @@ class ClothModel:
     @classmethod
     def grid(cls, rows: int, cols: int, spacing: float, particle_mass: float,
              stiffness: dict | float, damping: dict | float | None = None,
-             pinned=(), model: str = "provot", orientation: str = "horizontal") -> "ClothModel":
+             pinned=(), model: str = "provot", orientation: str = "horizontal",
+             origin=(0.0, 0.0, 0.0)) -> "ClothModel":
         """A regular ``rows × cols`` grid after Provot (1995), or Choi & Ko (2002) with ``model="choi_ko"``.
 
         Springs: structural ``[i,j]–[i+1,j]``, ``[i,j]–[i,j+1]``; shear ``[i,j]–[i+1,j+1]``,
         ``[i+1,j]–[i,j+1]``; bend ``[i,j]–[i+2,j]``, ``[i,j]–[i,j+2]`` and, for ``choi_ko``, also
         ``[i,j]–[i+2,j+2]``, ``[i+2,j]–[i,j+2]``. Particle ``(row, col)`` has index ``row*cols + col``
         and starts at ``(col·s, row·s, 0)`` (``horizontal``) or ``(col·s, 0, −row·s)`` (``vertical``,
-        row 0 on top).
+        row 0 on top), plus ``origin`` (the position of particle ``(0, 0)``).
 
         In ``choi_ko`` the structural and shear springs resist stretching only (type 1) and the bend
         springs follow the immediate-buckling model (type 2), whose compressed branch reads the bend
@@ -157,6 +158,10 @@ class ClothModel:
             x = np.stack([c * spacing, np.zeros(r.size), -r * spacing], axis=1)
         x = x.astype(np.float64)
         rest = np.linalg.norm(x[springs[:, 1]] - x[springs[:, 0]], axis=1)
+        o = np.asarray(origin, dtype=np.float64)
+        if o.shape != (3,) or not np.all(np.isfinite(o)):
+            raise ValueError(f"grid: origin must be 3 finite numbers, got {origin!r}")
+        x = x + o
 
         kind = np.full(len(springs), LINEAR, dtype=np.int8)
         if model == "choi_ko":

@@ -181,6 +181,11 @@ def _schema() -> dict[str, Param]:
           apply="rebuild", scene_key="model"),
         P("frame_id", str, "", "frame_id of the published cloud, mesh and stats.", apply="node",
           nonempty=True),
+        P("thickness", float, "m", "Distance the cloth keeps from every collider and, with "
+          "self_collision, from its own non-adjacent triangles.", lo=0.0, lo_open=True, hi=1.0,
+          scene_key="thickness"),
+        P("self_collision", bool, "", "Keep the cloth from passing through itself (off: no "
+          "self-collision code runs).", scene_key="self_collision"),
     ]
     return {p.name: p for p in params}
 

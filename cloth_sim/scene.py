@@ -15,7 +15,15 @@ A scene is a YAML mapping (see ``config/scenes/*.yaml``)::
     strain_limit: 0.1              # or null
     integrator: symplectic_euler
     dt: 0.001
+    thickness: 0.005               # kept from colliders (and from itself with self_collision)
+    self_collision: false
+    colliders:                     # each with an optional name and friction (Coulomb's μ, default 0)
+      - {type: plane, normal: [0, 0, 1], offset: 0.0, friction: 0.5}
+      - {type: sphere, center: [0.5, 0.5, -0.3], radius: 0.2}
+      - {type: box, center: [0, 0, -0.5], half_extents: [0.5, 0.4, 0.02], orientation: [1, 0, 0, 0]}
+      - {type: capsule, a: [0, 0, 0], b: [0, 0.2, 0], radius: 0.01}
 
+``grid`` may also give ``origin: [x, y, z]``, where particle (0, 0) starts.
 Every field but ``grid`` has a default. A malformed file raises :class:`SceneError` naming the file,
 the field and what was expected.
 """
@@ -31,6 +39,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .colliders import KINDS
+from .self_collision import MAX_THICKNESS_FRACTION
 from .model import GRID_FAMILIES, ORIENTATIONS, ClothModel
 from .parameters import SCHEMA, ParameterError
 from .simulator import Simulator
@@ -63,7 +73,16 @@ class Scene:
     strain_limit: float | None = None
     integrator: str = "symplectic_euler"
     dt: float = 1e-3
+    origin: tuple = (0.0, 0.0, 0.0)
+    thickness: float = 0.005
+    self_collision: bool = False
+    #: validated collider specifications: (type, keyword arguments); see :meth:`make_colliders`
+    colliders: list = field(default_factory=list)
     source: str = "<dict>"
+
+    def make_colliders(self) -> list:
+        """Fresh collider objects (each simulator moves its own)."""
+        return [KINDS[kind](**kw) for kind, kw in self.colliders]
 
     @property
     def wind(self):
@@ -95,17 +114,19 @@ class Scene:
         return ClothModel.grid(p["rows"], p["cols"], p["spacing"], p["particle_mass"],
                                stiffness=p["stiffness"], damping=p["damping"],
                                pinned=self.pinned_cells(p["rows"], p["cols"]), model=p["model"],
-                               orientation=self.orientation)
+                               orientation=self.orientation, origin=self.origin)
 
     SIMULATOR_OPTIONS = ("integrator", "dt", "gravity", "wind", "strain_limit", "drag",
-                         "integrator_options")
+                         "integrator_options", "colliders", "thickness", "self_collision")
 
     def build_simulator(self, **override) -> Simulator:
         """A simulator of the scene; ``override`` takes :meth:`build_model`'s keys and the
         simulator's ``integrator``, ``dt``, ``gravity``, ``wind``, ``strain_limit``, ``drag`` and
         ``integrator_options``."""
         sim_kw = {"integrator": self.integrator, "dt": self.dt, "gravity": self.gravity,
-                  "wind": self.wind, "strain_limit": self.strain_limit, "drag": self.drag}
+                  "wind": self.wind, "strain_limit": self.strain_limit, "drag": self.drag,
+                  "colliders": self.make_colliders(), "thickness": self.thickness,
+                  "self_collision": self.self_collision}
         for key in self.SIMULATOR_OPTIONS:
             if key in override:
                 sim_kw[key] = override.pop(key)
@@ -229,12 +250,13 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
     if not isinstance(data, dict):
         v.fail("(top level)", "a mapping of scene fields", data)
     known = {"name", "grid", "model", "particle_mass", "stiffness", "damping", "pinned",
-             "pinned_edges", "gravity", "wind", "drag", "strain_limit", "integrator", "dt"}
+             "pinned_edges", "gravity", "wind", "drag", "strain_limit", "integrator", "dt",
+             "thickness", "self_collision", "colliders"}
     v.known("", data, known)
     grid = data.get("grid")
     if not isinstance(grid, dict):
         v.fail("grid", "a mapping with rows, cols, spacing", grid)
-    v.known("grid.", grid, {"rows", "cols", "spacing", "orientation"})
+    v.known("grid.", grid, {"rows", "cols", "spacing", "orientation", "origin"})
     s = Scene(name=str(data.get("name", name)), source=source,
               rows=v.param("rows", grid.get("rows")), cols=v.param("cols", grid.get("cols")),
               spacing=v.param("spacing", grid.get("spacing")),
@@ -271,7 +293,36 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
     s.strain_limit = None if sl is None else v.param("strain_limit", sl)
     s.integrator = v.param("integrator", data.get("integrator", s.integrator))
     s.dt = v.param("dt", data.get("dt", s.dt))
+    s.origin = tuple(v.vector("grid.origin", grid.get("origin", (0.0, 0.0, 0.0)), 3))
+    s.thickness = v.param("thickness", data.get("thickness", s.thickness))
+    s.self_collision = v.param("self_collision", data.get("self_collision", False))
+    if s.self_collision and s.thickness > MAX_THICKNESS_FRACTION * s.spacing:
+        v.fail("thickness", f"at most {MAX_THICKNESS_FRACTION:g} × grid.spacing = "
+               f"{MAX_THICKNESS_FRACTION * s.spacing:.4g} m with self_collision on", s.thickness)
+    cols_ = data.get("colliders", []) or []
+    if not isinstance(cols_, list):
+        v.fail("colliders", "a list of collider mappings", cols_)
+    if len(cols_) > MAX_COLLIDERS:
+        v.fail("colliders", f"at most {MAX_COLLIDERS} colliders", f"{len(cols_)} colliders")
+    s.colliders = [v.collider(i, c) for i, c in enumerate(cols_)]
+    names = [kw["name"] for _, kw in s.colliders]
+    for i, n in enumerate(names):
+        if n in names[:i]:
+            v.fail(f"colliders[{i}].name", "unique (it names the collider's pose topic)", n)
     return s
+
+
+#: colliders a scene may have (each costs a distance test per particle per step)
+MAX_COLLIDERS = 64
+#: the fields of each collider type, with their lengths (1 = a number) and whether required
+_COLLIDER_FIELDS = {
+    "plane": {"normal": 3, "offset": 1},
+    "sphere": {"center": 3, "radius": 1},
+    "box": {"center": 3, "half_extents": 3, "orientation": 4},
+    "capsule": {"a": 3, "b": 3, "radius": 1},
+}
+_COLLIDER_REQUIRED = {"plane": ("normal",), "sphere": ("center", "radius"),
+                      "box": ("center", "half_extents"), "capsule": ("a", "b", "radius")}
 
 
 class _Validator:
@@ -295,6 +346,52 @@ class _Validator:
             return spec.check(x, field=spec.scene_key)
         except ParameterError as e:
             self.fail(e.name, e.accepted, x)
+
+    def vector(self, fld, x, n):
+        if not (isinstance(x, (list, tuple)) and len(x) == n and all(
+                isinstance(q, (int, float)) and not isinstance(q, bool) and np.isfinite(q) for q in x)):
+            self.fail(fld, f"a list of {n} finite numbers", x)
+        return [float(q) for q in x]
+
+    def collider(self, i, c):
+        """One collider mapping, as ``(type, keyword arguments)`` for :data:`KINDS`."""
+        where = f"colliders[{i}]"
+        if not isinstance(c, dict):
+            self.fail(where, "a mapping with type (plane, sphere, box, capsule) and its fields", c)
+        kind = c.get("type")
+        if kind not in _COLLIDER_FIELDS:
+            self.fail(f"{where}.type", f"one of {', '.join(_COLLIDER_FIELDS)}", kind)
+        fields = _COLLIDER_FIELDS[kind]
+        self.known(f"{where}.", c, {"type", "name", "friction", *fields})
+        kw = {}
+        for name in _COLLIDER_REQUIRED[kind]:
+            if name not in c:
+                raise SceneError(f"{self.source}: field '{where}.{name}' is missing: a {kind} needs "
+                                 f"{', '.join(_COLLIDER_REQUIRED[kind])}")
+        for name, n in fields.items():
+            if name in c:
+                kw[name] = (self.vector(f"{where}.{name}", c[name], n) if n > 1
+                            else self.number(f"{where}.{name}", c[name]))
+        if "friction" in c:
+            kw["friction"] = self.number(f"{where}.friction", c["friction"], lo=0.0)
+        if "name" in c:
+            if not (isinstance(c["name"], str) and c["name"].isidentifier() and c["name"].isascii()
+                    and len(c["name"]) <= 64):
+                self.fail(f"{where}.name", "a name of ASCII letters, digits and _ (at most 64, "
+                          "not starting with a digit)", c["name"])
+        kw["name"] = c.get("name", f"{kind}_{i}")
+        try:
+            KINDS[kind](**kw)  # the shape's own checks (a positive radius, a nonzero normal, …)
+        except ValueError as e:  # "radius must be …": name the field in full
+            name, _, rest = str(e).partition(" ")
+            raise SceneError(f"{self.source}: field '{where}.{name}' {rest}") from None
+        return kind, kw
+
+    def number(self, fld, x, lo=None):
+        if not (isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x)
+                and (lo is None or x >= lo)):
+            self.fail(fld, "a finite number" + (f" >= {lo:g}" if lo is not None else ""), x)
+        return float(x)
 
     def choice(self, fld, x, options):
         if x not in options:

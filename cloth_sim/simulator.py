@@ -25,10 +25,12 @@ import scipy.sparse as sp
 
 from . import integrators
 from . import stability as stab
+from .colliders import Contacts, _positive
 from .constraints import DEFAULT_STRAIN_LIMIT_PASSES, StrainLimit
 from .forces import BUCKLE_TABLE, Forces, incidence, spring_forces_gather, spring_strains
 from .model import ClothModel
 from .parameters import SCHEMA, ParameterError
+from .self_collision import SelfCollision, check_thickness
 from .state import State
 
 
@@ -79,6 +81,11 @@ class Simulator:
             produces NaN or inf, is undone and raises :class:`SimulationDiverged`.
         integrator_options: keyword options of the integrator (e.g. ``{"solver": "direct"}`` for
             ``implicit_euler``, ``{"sweeps": 3}`` for ``kang``).
+        colliders: shapes from :mod:`cloth_sim.colliders` (plane, sphere, box, capsule) the cloth
+            cannot enter; :attr:`colliders` keeps them in this order.
+        thickness: distance (m) the cloth keeps from every collider and, with ``self_collision``,
+            from its own non-adjacent triangles.
+        self_collision: keep the cloth from passing through itself (:mod:`cloth_sim.self_collision`).
     """
 
     def __init__(self, model: ClothModel, integrator: str = "symplectic_euler", dt: float = 1e-3,
@@ -86,7 +93,8 @@ class Simulator:
                  strain_limit_passes: int = DEFAULT_STRAIN_LIMIT_PASSES,
                  strain_limit_long_range: bool = True, drag: float = 0.0,
                  max_speed: float = 1e3, max_coordinate: float = 1e6,
-                 integrator_options: dict | None = None):
+                 integrator_options: dict | None = None, colliders=None, thickness: float = 0.005,
+                 self_collision: bool = False):
         self.model = model
         self._k = np.array(model.stiffness, dtype=np.float64)
         self._c = np.array(model.damping, dtype=np.float64)
@@ -103,8 +111,12 @@ class Simulator:
         self._limited = (np.ascontiguousarray(model.springs[sel]),
                          np.ascontiguousarray(model.rest_lengths[sel]))
         self._strain = StrainLimit(model, None, strain_limit_passes, strain_limit_long_range)
-        #: the post-step stages, in order; only the active ones run
-        self.stages = [self._strain]
+        self._contacts = Contacts(model, colliders or (), thickness)
+        self._self_collision = SelfCollision(model, self._contacts.thickness, self_collision)
+        self._self_collision.held = self._contacts.touching
+        #: the post-step stages, in order; only the active ones run. Self-collision is last: its
+        #: no-crossing guarantee is about the motion every other stage has shaped.
+        self.stages = [self._strain, self._contacts, self._self_collision]
         self.strain_limit = strain_limit
         self._evaluations_before = 0
         self._analysis = None
@@ -264,6 +276,45 @@ class Simulator:
         self._active_stages = [s for s in self.stages if s.active]
 
     @property
+    def colliders(self) -> list:
+        """The colliders, in the order given (move one with :meth:`set_collider_pose`)."""
+        return list(self._contacts.colliders)
+
+    def set_collider_pose(self, i: int, position, orientation=(1.0, 0.0, 0.0, 0.0)) -> None:
+        """Move collider ``i`` to ``position`` with ``orientation`` (a unit quaternion ``(w, x, y,
+        z)``; see :mod:`cloth_sim.colliders` for what they mean per shape). The next step moves it
+        there: its velocity over that step is the pose change divided by ``dt``, so friction drags
+        what rests on it. A bad index or a non-finite pose raises ``ValueError`` and moves nothing."""
+        self._contacts.set_pose(i, position, orientation)
+
+    @property
+    def thickness(self) -> float:
+        """Distance (m) the cloth keeps from colliders and (with self-collision) from itself."""
+        return self._contacts.thickness
+
+    @thickness.setter
+    def thickness(self, value: float) -> None:
+        value = _positive("thickness", value)
+        if self._self_collision.enabled:
+            check_thickness(self.model, value)
+        self._contacts.thickness = self._self_collision.thickness = value
+
+    @property
+    def self_collision(self) -> bool:
+        return self._self_collision.enabled
+
+    @self_collision.setter
+    def self_collision(self, on: bool) -> None:
+        if not isinstance(on, (bool, np.bool_)):
+            raise ValueError(f"self_collision must be true or false, got {on!r}")
+        if on and len(self.model.triangles) == 0:
+            raise ValueError("self_collision needs the model's triangles")
+        if on:
+            check_thickness(self.model, self.thickness)
+        self._self_collision.enabled = bool(on)
+        self._active_stages = [s for s in self.stages if s.active]
+
+    @property
     def active_stages(self) -> tuple[str, ...]:
         """Names of the post-step stages that run after each step."""
         return tuple(s.name for s in self._active_stages)
@@ -390,7 +441,8 @@ __all__ = ["ParameterError", "SimulationDiverged", "Simulator"]
 
 def compile_kernels() -> float:
     """Run every compiled (numba) kernel once, on a 4×4 cloth: each integrator with both spring
-    models, wind, drag, the strain limit and the energy and strain reports; returns the seconds it
+    models, wind, drag, the strain limit, contacts with each collider shape, self-collision and the
+    energy and strain reports; returns the seconds it
     took. The kernels are compiled on first use and kept in numba's on-disk cache; a real-time loop
     calls this before it starts, so that no step compiles inside a tick (a fresh install's first
     ``kang`` step compiled for 6 s there). About 0.3 s when the cache is warm."""
@@ -406,6 +458,14 @@ def compile_kernels() -> float:
             sim.step(2)
             sim.energy()
             sim.max_strain()
+        # contacts with every collider shape, and self-collision
+        from . import colliders as col
+
+        sim = Simulator(model, dt=1e-4, self_collision=True, thickness=0.01, colliders=[
+            col.Plane(friction=0.5), col.Sphere(radius=0.1, friction=0.1),
+            col.Box(half_extents=(0.1, 0.1, 0.1)), col.Capsule(radius=0.05)])
+        sim.set_collider_pose(1, (0.0, 0.0, -0.5))
+        sim.step(2)
         # the parallel gather, which only cloths above forces.PARALLEL_MIN_SPRINGS use
         term = sim.forces.spring_term
         x, f = sim.positions, np.zeros_like(sim.positions)

@@ -7,7 +7,7 @@ parameters — valid values, NaN, ±inf, zeros, huge values, wrong types, wrong 
 names, dt near the method's limit, scenes good and bad — sent through ``~/set_parameters`` or
 ``~/set_parameters_atomically``. Every answer is checked against the schema
 (:data:`cloth_sim.parameters.SCHEMA`) and against what then runs; the figures printed at the end:
-crashes, hangs (a ~/stats interval over 3 ticks beyond the time the node spent in the request's
+crashes, hangs (a ~/stats interval over 2 ticks beyond the time the node spent in the request's
 parameter callbacks and beyond the longest single step, outside a rebuild), slow answers (over 0.1 s in those callbacks, outside a
 rebuild), invalid values accepted, valid
 values refused (a refusal by the stability limit counts as right when an independent simulator
@@ -46,7 +46,10 @@ from cloth_sim.scene import load_scene
 from cloth_sim.simulator import SimulationDiverged, Simulator
 
 RATE = 30.0
-SCENES = ["hanging", "flag", "free_fall", "curtain"]
+#: a ~/stats interval longer than this many periods (beyond the request's own callback time and a
+#: step longer than a period) is a hang: the issue's "no stats gap over 2 ticks"
+HANG_TICKS = 2.0
+SCENES = ["hanging", "flag", "free_fall", "curtain", "table", "drape", "fold"]
 BAD_SCENES = ["nowhere", "x" * 300, "/etc", "/nonexistent/s.yaml", ""]
 
 
@@ -90,6 +93,8 @@ class Generator:
                 return float(10 ** self.rng.uniform(-5, -2.5))
             if spec.name == "spacing":
                 return float(10 ** self.rng.uniform(-2, 0))
+            if spec.name == "thickness":
+                return float(10 ** self.rng.uniform(-4, -1))
             if spec.name == "publish_rate":
                 return float(self.pick([10.0, 30.0, 60.0, 100.0]))
             if spec.type is int:
@@ -180,7 +185,9 @@ def runaway_is_dt_independent(node: ClothSimNode) -> bool:
     method, until, dt = blew.group(1), float(blew.group(2)), float(blew.group(3))
     span = max(until - node_sim.time, dt)
     sim = Simulator(node_sim.model, integrator=method, dt=max(dt / 4, 1e-7),
-                    gravity=cfg["gravity"], wind=node_sim.wind, drag=cfg["drag"], strain_limit=cfg["strain_limit"] or None)
+                    gravity=cfg["gravity"], wind=node_sim.wind, drag=cfg["drag"], strain_limit=cfg["strain_limit"] or None,
+                    colliders=node.scene.make_colliders(), thickness=cfg["thickness"],
+                    self_collision=cfg["self_collision"])
     for f in GRID_FAMILIES:
         if (sim.model.family == sim.model.family_index(f)).any():
             sim.set_stiffness(f, cfg[f"stiffness.{f}"])
@@ -202,6 +209,7 @@ def mismatches(node: ClothSimNode) -> list[str]:
         if value != cfg[name]:
             out.append(f"parameter {name}={value!r} but the node runs {cfg[name]!r}")
     checks = {"integrator": sim.integrator, "dt": sim.dt, "drag": sim.drag,
+              "thickness": sim.thickness, "self_collision": sim.self_collision,
               "strain_limit": sim.strain_limit or 0.0, "gravity": list(sim.gravity),
               "rows": sim.model.rows, "cols": sim.model.cols, "model": sim.model.model}
     for f in GRID_FAMILIES:
@@ -223,7 +231,7 @@ def run(sets: int, seed: int, domain: int, quiet: bool = False) -> dict:
     figures = dict(sets=0, accepted=0, refused=0, crashes=0, hangs=0, slow_answers=0, invalid_accepted=0,
                    valid_refused=0, unnamed_refusals=0, nonfinite_clouds=0, clouds=0,
                    mismatches=0, unexpected_blowups=0, dt_independent_runaways=0, stability_refusals=0,
-                   rate_refusals=0)
+                   rate_refusals=0, thickness_refusals=0)
     examples: dict[str, list] = {}
 
     def note(kind, what):
@@ -333,7 +341,7 @@ def run(sets: int, seed: int, domain: int, quiet: bool = False) -> dict:
                 longest_step = max(s.step_time_max for s in window)
                 gap = (max(b - a for a, b in zip(stamps, stamps[1:])) - busy[0]
                        - max(0.0, longest_step - period)) / period
-                if gap > 3.0:
+                if gap > HANG_TICKS:
                     note("hangs", (params, f"{gap:.1f} ticks", node.cfg["integrator"],
                                    f"tick_wall max {max(s.tick_wall_time for s in window):.3f} s, "
                                    f"step_max {max(s.step_time_max for s in window):.3f} s, "
@@ -362,6 +370,15 @@ def run(sets: int, seed: int, domain: int, quiet: bool = False) -> dict:
                             note("valid_refused", (params, r.reason))
                     elif "cannot be met" in r.reason:
                         figures["rate_refusals"] += 1
+                    elif "too thick for self_collision" in r.reason:
+                        figures["thickness_refusals"] += 1
+                        cand = dict(before_cfg if atomic else running)
+                        for n, v in (params if atomic else [(name, value)]):
+                            if n in SCHEMA and n != "scene":
+                                cand[n] = SCHEMA[n].check(v)
+                        if "scene" not in names and not (cand["self_collision"] and cand["thickness"]
+                                                         > 0.5 * cand["spacing"] * (1 + 1e-9)):
+                            note("valid_refused", (params, r.reason))
                     elif name == "scene" or "scene" in names:
                         pass  # a scene that exists but whose values this batch contradicts, or unloadable
                     else:

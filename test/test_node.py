@@ -472,7 +472,7 @@ def test_loading_a_parameter_file_keeps_the_stats_flowing(ros):
     stats = ros.collect(Stats, "/cloth_sim/stats")
     assert ros.spin_until(lambda: len(stats) >= 10)
     names = ros.call(ListParameters, "/cloth_sim/list_parameters", ListParameters.Request()).result.names
-    assert len(names) == 24  # what `ros2 param dump` writes
+    assert len(names) == len(SCHEMA) + 2  # what `ros2 param dump` writes (+ rclpy's two)
     values = ros.call(GetParameters, "/cloth_sim/get_parameters", GetParameters.Request(names=names)).values
     dump = [Parameter.from_parameter_msg(ParameterMsg(name=n, value=v)) for n, v in zip(names, values)]
 
@@ -634,3 +634,49 @@ def test_the_venv_is_an_ament_prefix_of_the_generated_interfaces():
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split("\n")[:4] == ["['msg/Stats.idl', 'msg/Stats.msg']", "True", "True", "True"]
+
+
+# ------------------------------------------------------------------ contacts
+def test_colliders_are_shown_and_moved_through_their_topics(ros):
+    from geometry_msgs.msg import PoseStamped
+    from visualization_msgs.msg import MarkerArray
+
+    node = ros.start(scene="drape", publish_rate=30.0)
+    assert [c.name for c in node.sim.colliders] == ["ball", "floor"]
+    markers = ros.collect(MarkerArray, "/cloth_sim/colliders")
+    assert ros.spin_until(lambda: markers, 10)
+    ball = next(m for m in markers[-1].markers if m.ns == "ball")
+    assert ball.type == ball.SPHERE and ball.scale.x == pytest.approx(0.5)
+    assert ball.pose.position.z == pytest.approx(0.3)
+    pub = ros.node.create_publisher(PoseStamped, "/cloth_sim/colliders/ball/pose", 10)
+    msg = PoseStamped()
+    msg.header.frame_id = "cloth"
+    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = 0.5, 0.5, 0.1
+    msg.pose.orientation.w = 1.0
+    assert ros.spin_until(lambda: pub.get_subscription_count() > 0, 10)
+    pub.publish(msg)
+    assert ros.spin_until(lambda: node.sim.colliders[0].center[2] == pytest.approx(0.1), 10)
+    # a bad pose (wrong frame, not finite) is ignored: the ball stays
+    msg.header.frame_id = "map"
+    msg.pose.position.z = 0.4
+    pub.publish(msg)
+    msg.header.frame_id = ""
+    msg.pose.position.z = float("nan")
+    pub.publish(msg)
+    ros.spin_for(0.5)
+    assert node.sim.colliders[0].center[2] == pytest.approx(0.1)
+    assert np.all(np.isfinite(node.sim.positions))
+
+
+def test_thickness_and_self_collision_are_live_parameters(ros):
+    node = ros.start(scene="fold", rows=10, cols=10, spacing=1.0 / 9, publish_rate=30.0)
+    assert node.sim.self_collision and "self_collision" in node.sim.active_stages
+    r = ros.set_params("/cloth_sim", {"self_collision": False, "thickness": 0.01})
+    assert all(x.successful for x in r)
+    assert not node.sim.self_collision and node.sim.thickness == 0.01
+    for bad in ({"thickness": 0.0}, {"thickness": -1.0}, {"thickness": float("nan")},
+                {"self_collision": 1.0}):
+        r = ros.set_params("/cloth_sim", bad)[0]
+        name = next(iter(bad))
+        assert not r.successful and name in r.reason
+    assert node.sim.thickness == 0.01

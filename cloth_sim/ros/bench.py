@@ -112,7 +112,7 @@ def print_node_table(sizes, seconds: float, integrator: str, dt: float, rate: fl
 
 
 def print_param_load_table(size: int = 32, rate: float = 60.0) -> list[dict]:
-    """What `ros2 param load` costs the ticking node: its own 24 parameters sent in one
+    """What `ros2 param load` costs the ticking node: its own 26 parameters sent in one
     ``set_parameters`` request (rclpy sets them one at a time), unchanged and then with every
     stiffness and damping ×1.1 and a new drag, the node's default scene at N×N and ``rate``.
     Prints the largest interval between consecutive ~/stats stamps around the request, in ticks,

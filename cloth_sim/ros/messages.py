@@ -11,7 +11,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point
 from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import ColorRGBA
-from visualization_msgs.msg import Marker
+from visualization_msgs.msg import Marker, MarkerArray
 
 FIELDS = [PointField(name=n, offset=4 * i, datatype=PointField.FLOAT32, count=1)
           for i, n in enumerate("xyz")]
@@ -126,3 +126,62 @@ def diagnostic_array(status: DiagnosticStatus, stamp) -> DiagnosticArray:
     msg.header.stamp = stamp
     msg.status = [status]
     return msg
+
+
+def _quaternion_between(a, b):
+    """(w, x, y, z) turning unit vector ``a`` onto unit vector ``b``."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
+    c = float(a @ b)
+    if c < -1 + 1e-12:  # opposite: half a turn about any perpendicular axis
+        axis = np.cross(a, [1.0, 0.0, 0.0])
+        if np.linalg.norm(axis) < 1e-6:
+            axis = np.cross(a, [0.0, 1.0, 0.0])
+        axis /= np.linalg.norm(axis)
+        return (0.0, *axis)
+    axis = np.cross(a, b)
+    q = np.array([1.0 + c, *axis])
+    return tuple(q / np.linalg.norm(q))
+
+
+#: how far a plane's marker reaches either way (m): RViz draws no infinite planes
+PLANE_EXTENT = 5.0
+
+
+def collider_markers(colliders, frame_id: str, stamp) -> MarkerArray:
+    """One marker per collider (two more for a capsule's end caps), ``ns`` = the collider's name:
+    a plane as a thin square ``2·PLANE_EXTENT`` wide, a sphere, a box, a capsule as a cylinder and
+    two spheres."""
+    out = MarkerArray()
+    grey = ColorRGBA(r=0.6, g=0.6, b=0.6, a=0.6)
+
+    def marker(c, idx, kind, position, q, scale):
+        m = Marker()
+        m.header.stamp = stamp
+        m.header.frame_id = frame_id
+        m.ns, m.id = c.name, idx
+        m.type, m.action = kind, Marker.ADD
+        m.pose.position.x, m.pose.position.y, m.pose.position.z = (float(v) for v in position)
+        m.pose.orientation.w, m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z = (
+            float(v) for v in q)
+        m.scale.x, m.scale.y, m.scale.z = (float(v) for v in scale)
+        m.color = grey
+        out.markers.append(m)
+
+    for c in colliders:
+        kind = type(c).__name__
+        if kind == "Plane":
+            marker(c, 0, Marker.CUBE, c.position, _quaternion_between((0, 0, 1), c.normal),
+                   (2 * PLANE_EXTENT, 2 * PLANE_EXTENT, 1e-3))
+        elif kind == "Sphere":
+            marker(c, 0, Marker.SPHERE, c.position, (1, 0, 0, 0), [2 * c.radius] * 3)
+        elif kind == "Box":
+            marker(c, 0, Marker.CUBE, c.position, c.orientation, 2 * c.half_extents)
+        elif kind == "Capsule":
+            axis = c.b - c.a
+            length = float(np.linalg.norm(axis))
+            q = _quaternion_between((0, 0, 1), axis) if length > 0 else (1, 0, 0, 0)
+            marker(c, 0, Marker.CYLINDER, c.position, q, (2 * c.radius, 2 * c.radius, length))
+            marker(c, 1, Marker.SPHERE, c.a, (1, 0, 0, 0), [2 * c.radius] * 3)
+            marker(c, 2, Marker.SPHERE, c.b, (1, 0, 0, 0), [2 * c.radius] * 3)
+    return out

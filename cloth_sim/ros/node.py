@@ -19,6 +19,7 @@ loop to stop; the node is then destroyed and the process exits 0.
 from __future__ import annotations
 
 import collections
+import gc
 import math
 import sys
 import time
@@ -34,13 +35,15 @@ from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import SetBool, Trigger
-from visualization_msgs.msg import Marker
+from geometry_msgs.msg import PoseStamped
+from visualization_msgs.msg import Marker, MarkerArray
 
 from .. import integrators
 from .. import stability as stab
 from ..model import GRID_FAMILIES
 from ..parameters import REBUILD, SCHEMA
 from ..scene import SceneError, load_scene
+from ..self_collision import check_thickness
 from ..simulator import SimulationDiverged, Simulator, compile_kernels
 from . import messages
 from . import params as P
@@ -53,7 +56,10 @@ RTF_WARN = 0.95
 RTF_WINDOW = 2.0
 #: a tick steps for at most this fraction of its period, so parameters and services are answered
 #: in time whatever dt is; what does not fit waits for the next ticks, up to MAX_BACKLOG s of
-#: simulated time, and beyond that is dropped (the real-time factor falls below 1, /diagnostics warns)
+#: simulated time, and beyond that is dropped (the real-time factor falls below 1, /diagnostics warns).
+#: A tick that starts late (the executor was busy) steps that much less, so that it still ends by
+#: its own deadline: an overloaded node whose ticks each ran their full budget from a late start
+#: drifted past the timer's next period, which rcl then skips (gaps of 3–4 periods in the fuzz).
 TICK_BUDGET = 0.8
 MAX_BACKLOG = 0.25
 #: a publish_rate is refused only when the measured cost exceeds the time available this many times
@@ -67,6 +73,19 @@ MODEL_KEYS = tuple(name for name in REBUILD if name != "scene")
 
 class StartupError(ValueError):
     """A value the node cannot start with; one line naming it."""
+
+
+def _settle_garbage() -> None:
+    """Collect once and move every object alive now to the collector's permanent generation.
+
+    Python's full (generation-2) collection walks every tracked object: after start-up (rclpy,
+    numba, scipy, the model) that is ~140,000 objects and 30–75 ms, which, whenever the collector
+    chose to run it, stalled a tick by 2–4 periods at 60 Hz. Frozen objects are not walked, so a
+    later full collection only sees what was made since. Called at start-up and after a rebuild
+    (the objects a new simulation keeps); garbage is collected first, so nothing collectable is
+    frozen."""
+    gc.collect()
+    gc.freeze()
 
 
 def _stats_type():
@@ -130,7 +149,12 @@ class ClothSimNode(Node):
         reason, self._stable_dt = self._check_stability(self.cfg, model)
         if reason:
             raise StartupError(reason)
-        self.sim = self._build_simulator(self.cfg, model)
+        if self.cfg["self_collision"]:
+            try:
+                check_thickness(model, self.cfg["thickness"])
+            except ValueError as e:
+                raise StartupError(str(e)) from None
+        self.sim = self._build_simulator(self.cfg, model, self.scene)
         # every kernel compiled (or loaded from numba's cache) now, not in the tick that first
         # needs it: switching to kang live once stalled the node for 6 s
         kernels = compile_kernels()
@@ -139,6 +163,7 @@ class ClothSimNode(Node):
         self.error: str | None = None
         self.overruns = 0
         self._carry = 0.0
+        self._next_tick = None  # perf_counter time the next tick is due (the budget's deadline)
         self._history = collections.deque()  # (wall, sim time) over the last RTF_WINDOW s
         self._tick_costs = collections.deque(maxlen=120)  # (steps, step wall, publish wall)
         self._last_status = time.monotonic()
@@ -152,6 +177,10 @@ class ClothSimNode(Node):
         self.mesh_pub = self.create_publisher(Marker, "~/mesh", 10)
         self.stats_pub = self.create_publisher(self.Stats, "~/stats", 10)
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.colliders_pub = self.create_publisher(MarkerArray, "~/colliders", 10)
+        self._pose_subs = []
+        self._pose_targets = {}  # collider index -> (position, orientation) to reach this tick
+        self._subscribe_colliders()
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SetBool, "~/pause", self._on_pause)
         self.add_pre_set_parameters_callback(self._pre_set)
@@ -160,6 +189,7 @@ class ClothSimNode(Node):
         self.timer = self.create_timer(1.0 / self.cfg["publish_rate"], self._tick)
         self.diag_timer = self.create_timer(1.0, self._publish_diagnostics)
         self._ready = True
+        _settle_garbage()
         self.get_logger().info(
             f"scene {self.scene.name}: {self.cfg['rows']}×{self.cfg['cols']} {self.cfg['model']}, "
             f"{self.sim.integrator}, dt={self.sim.dt:g} s, {self.cfg['publish_rate']:g} Hz, "
@@ -188,9 +218,11 @@ class ClothSimNode(Node):
         return model
 
     @staticmethod
-    def _build_simulator(cfg: dict, model) -> Simulator:
+    def _build_simulator(cfg: dict, model, scene) -> Simulator:
         sim = Simulator(model, integrator=cfg["integrator"], dt=cfg["dt"], gravity=cfg["gravity"],
-                        wind=_wind(cfg), drag=cfg["drag"], strain_limit=cfg["strain_limit"] or None)
+                        wind=_wind(cfg), drag=cfg["drag"], strain_limit=cfg["strain_limit"] or None,
+                        colliders=scene.make_colliders(), thickness=cfg["thickness"],
+                        self_collision=cfg["self_collision"])
         k, c = _material(model, cfg)
         if not (np.array_equal(model.stiffness, k) and np.array_equal(model.damping, c)):
             for f in GRID_FAMILIES:  # a kept model built with other values: set them
@@ -292,6 +324,11 @@ class ClothSimNode(Node):
             reason = self._check_rate(cand)
             if reason:
                 return SetParametersResult(successful=False, reason=reason)
+        if cand["self_collision"]:
+            try:
+                check_thickness(model, cand["thickness"])
+            except ValueError as e:
+                return SetParametersResult(successful=False, reason=str(e))
         reason, limit = self._check_stability(cand, model)
         if reason:
             changed = [p.name for p in parameters if p.name in SCHEMA and p.name != "dt"
@@ -310,12 +347,14 @@ class ClothSimNode(Node):
         cand, scene, model, limit = self._validated
         self._validated = None
         if scene is not None:
-            self.sim = self._build_simulator(cand, model)
+            self.sim = self._build_simulator(cand, model, scene)
             self.scene = scene
+            self._subscribe_colliders()
             self._carry = 0.0
             self._history.clear()
             self._checkpoints.clear()
             self._change_checkpoint = None
+            _settle_garbage()
         else:
             if cand != self.cfg:
                 self._change_checkpoint = (self.sim.time, self.sim.save_state())
@@ -328,6 +367,7 @@ class ClothSimNode(Node):
             self.timer.cancel()
             self.destroy_timer(self.timer)
             self.timer = self.create_timer(1.0 / cand["publish_rate"], self._tick)
+            self._next_tick = None
 
     def _apply_live(self, cand: dict) -> None:
         sim, cur = self.sim, self.cfg
@@ -349,6 +389,10 @@ class ClothSimNode(Node):
             sim.drag = cand["drag"]
         if cand["strain_limit"] != cur["strain_limit"]:
             sim.strain_limit = cand["strain_limit"] or None
+        if cand["thickness"] != cur["thickness"]:
+            sim.thickness = cand["thickness"]
+        if cand["self_collision"] != cur["self_collision"]:
+            sim.self_collision = cand["self_collision"]
 
     def _check_rate(self, cand: dict) -> str | None:
         """A rate is refused only when the measured cost of stepping and publishing exceeds the
@@ -399,15 +443,26 @@ class ClothSimNode(Node):
     def _tick(self) -> None:
         t0 = time.perf_counter()
         period = 1.0 / self.cfg["publish_rate"]
+        # how late this tick starts against the period grid of the previous ones
+        expected = self._next_tick
+        late = t0 - expected if expected is not None and t0 > expected else 0.0
+        self._next_tick = (expected + period if expected is not None and late < period
+                           else t0 + period)
         sim = self.sim
         steps, step_max, step_wall = 0, 0.0, 0.0
         if not self.paused:
             self._carry += period
             n = int(math.floor(self._carry / sim.dt + 1e-9))
             self._carry -= n * sim.dt
-            budget = TICK_BUDGET * period
+            budget = max(0.25 * period, TICK_BUDGET * period - late)
+            moves = self._collider_moves() if self._pose_targets and n else None
             try:
-                for _ in range(n):
+                for k in range(n):
+                    if moves:  # a pose received since the last tick: reached over this tick's steps
+                        for i, (p0, q0, p1, q1) in moves.items():
+                            f = (k + 1) / n
+                            q = (1 - f) * q0 + f * q1
+                            sim.set_collider_pose(i, (1 - f) * p0 + f * p1, q / np.linalg.norm(q))
                     s0 = time.perf_counter()
                     sim.step()
                     el = time.perf_counter() - s0
@@ -430,6 +485,8 @@ class ClothSimNode(Node):
             self.points_pub.publish(self.point_cloud(stamp))
         if self.mesh_pub.get_subscription_count() > 0:
             self.mesh_pub.publish(messages.mesh_bytes(sim.positions, sim.model.triangles, frame, stamp))
+        if sim.colliders and self.colliders_pub.get_subscription_count() > 0:
+            self.colliders_pub.publish(messages.collider_markers(sim.colliders, frame, stamp))
         wall_now = time.monotonic()
         self._history.append((wall_now, sim.time))
         while self._history and wall_now - self._history[0][0] > RTF_WINDOW:
@@ -447,6 +504,54 @@ class ClothSimNode(Node):
         if wall_now - self._last_status >= STATUS_PERIOD:
             self._last_status = wall_now
             self.get_logger().info(self.status_line())
+
+    # ------------------------------------------------------------------ colliders
+    def _subscribe_colliders(self) -> None:
+        """``~/colliders/<name>/pose`` for each collider of the current scene (again after a
+        scene change)."""
+        for sub in self._pose_subs:
+            self.destroy_subscription(sub)
+        self._pose_subs, self._pose_targets = [], {}
+        for i, c in enumerate(self.sim.colliders):
+            self._pose_subs.append(self.create_subscription(
+                PoseStamped, f"~/colliders/{c.name}/pose",
+                lambda msg, i=i, name=c.name: self._on_collider_pose(i, name, msg), 10))
+
+    def _on_collider_pose(self, i: int, name: str, msg) -> None:
+        """A new pose for collider ``i``: checked here (a bad one is logged, naming the field, and
+        ignored), reached over the next tick's steps (its velocity is the pose change over them)."""
+        p, q = msg.pose.position, msg.pose.orientation
+        position = np.array([p.x, p.y, p.z])
+        orientation = np.array([q.w, q.x, q.y, q.z])
+        frame = msg.header.frame_id
+        problem = None
+        if frame not in ("", self.cfg["frame_id"]):
+            problem = (f"header.frame_id = {frame!r}: expected {self.cfg['frame_id']!r} (the node's "
+                       f"frame_id; the node does not transform poses)")
+        elif not np.all(np.isfinite(position)):
+            problem = f"pose.position = {position.tolist()}: expected 3 finite numbers"
+        elif not (np.all(np.isfinite(orientation)) and np.linalg.norm(orientation) > 1e-6):
+            problem = (f"pose.orientation = {orientation.tolist()} (w, x, y, z): expected a finite, "
+                       f"nonzero quaternion")
+        if problem:
+            self.get_logger().warning(f"~/colliders/{name}/pose ignored: {problem}",
+                                      throttle_duration_sec=1.0)
+            return
+        if i < len(self.sim.colliders) and self.sim.colliders[i].name == name:
+            self._pose_targets[i] = (position, orientation / np.linalg.norm(orientation))
+
+    def _collider_moves(self) -> dict:
+        """``{index: (p0, q0, p1, q1)}``: from where each moved collider is to its target (the
+        quaternion's sign chosen for the shorter way)."""
+        moves = {}
+        for i, (p1, q1) in self._pose_targets.items():
+            c = self.sim.colliders[i]
+            p0, q0 = c.position.copy(), c.orientation.copy()
+            if float(q0 @ q1) < 0:
+                q1 = -q1
+            moves[i] = (p0, q0, p1, q1)
+        self._pose_targets = {}
+        return moves
 
     def _keep_checkpoint(self) -> None:
         if not self._checkpoints or self.sim.time - self._checkpoints[-1][0] >= CHECKPOINT_EVERY:

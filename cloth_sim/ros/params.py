@@ -54,7 +54,8 @@ def scene_values(scene: Scene) -> dict:
         "wind.strength": float(scene.wind_strength), "drag": float(scene.drag),
         "strain_limit": float(scene.strain_limit or 0.0),
         "rows": int(scene.rows), "cols": int(scene.cols), "spacing": float(scene.spacing),
-        "model": scene.model,
+        "model": scene.model, "thickness": float(scene.thickness),
+        "self_collision": bool(scene.self_collision),
     }
     for f in GRID_FAMILIES:
         values[f"stiffness.{f}"] = float(scene.stiffness[f])

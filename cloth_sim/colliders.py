@@ -1,0 +1,437 @@
+"""Rigid colliders the cloth rests on, drapes over and is dragged by: plane, sphere, box, capsule.
+
+A collider is a shape with a pose and Coulomb friction ``μ`` (static = kinetic). The cloth keeps at
+least the simulator's ``thickness`` from every collider surface. Colliders are kinematic: the
+simulation never moves them, :meth:`cloth_sim.simulator.Simulator.set_collider_pose` does, and a
+moved collider's velocity is its pose change over the next step (so friction drags what rests on it).
+
+Poses. ``orientation`` is a unit quaternion ``(w, x, y, z)``. A Box's ``orientation`` is absolute
+(its half extents are along its own axes); a Plane's and a Capsule's orientation is relative to the
+normal and segment they were built with, so ``set_collider_pose(i, position)`` with the default
+orientation moves them without turning them. The pose's ``position`` is a Sphere's or Box's centre,
+a Capsule's midpoint, and for a Plane a point on it (it starts at ``offset·normal``).
+
+Contact response: :class:`Contacts`, a post-step stage (see :mod:`cloth_sim.constraints`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+PLANE, SPHERE, BOX, CAPSULE = 0, 1, 2, 3
+#: the fraction of ``thickness`` within which a particle counts as touching (its velocity is
+#: filtered) though not inside (its position is not moved)
+CONTACT_TOLERANCE = 0.02
+
+
+def _vector(name: str, value, length: int = 3) -> np.ndarray:
+    try:
+        a = np.array(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be {length} finite numbers, got {value!r}") from None
+    if a.shape != (length,) or not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} must be {length} finite numbers, got {value!r}")
+    return a
+
+
+def _positive(name: str, value) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a finite number > 0, got {value!r}") from None
+    if not (math.isfinite(v) and v > 0):
+        raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
+    return v
+
+
+def _friction(value) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"friction must be a finite number >= 0, got {value!r}") from None
+    if not (math.isfinite(v) and v >= 0):
+        raise ValueError(f"friction must be a finite number >= 0, got {value!r}")
+    return v
+
+
+def _unit_quaternion(q) -> np.ndarray:
+    q = _vector("orientation", q, 4)
+    n = float(np.linalg.norm(q))
+    if not n > 1e-12:
+        raise ValueError(f"orientation must be a nonzero quaternion (w, x, y, z), got {q.tolist()}")
+    return q / n
+
+
+def quaternion_matrix(q) -> np.ndarray:
+    """Rotation matrix of a unit quaternion ``(w, x, y, z)`` (normalised here; a zero or non-finite
+    quaternion is refused)."""
+    q = _vector("orientation", q, 4)
+    n = float(np.linalg.norm(q))
+    if not n > 1e-12:
+        raise ValueError(f"orientation must be a nonzero quaternion (w, x, y, z), got {q.tolist()}")
+    w, x, y, z = q / n
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+class Collider:
+    """Base class: ``kind``, ``friction``, ``name``, a pose (``position``, ``rotation``) and the
+    shape's local parameters ``geometry`` (4 numbers)."""
+
+    kind = -1
+
+    def __init__(self, position, rotation, geometry, friction, name, orientation=(1.0, 0.0, 0.0, 0.0)):
+        self.position = np.array(position, dtype=np.float64)
+        self.rotation = np.array(rotation, dtype=np.float64)
+        #: the pose's unit quaternion (w, x, y, z); ``rotation`` is its matrix
+        self.orientation = _unit_quaternion(orientation)
+        self.geometry = np.array(geometry, dtype=np.float64)
+        self.friction = _friction(friction)
+        self.name = str(name) if name is not None else type(self).__name__.lower()
+
+    def set_pose(self, position, orientation=(1.0, 0.0, 0.0, 0.0)) -> None:
+        """Place the collider (see the module docstring for what ``position`` and ``orientation``
+        mean for each shape)."""
+        p = _vector("position", position)
+        r = quaternion_matrix(orientation)
+        self.position, self.rotation = p, r
+        self.orientation = _unit_quaternion(orientation)
+
+    def signed_distance(self, points) -> np.ndarray:
+        """Signed distance of ``(k, 3)`` points from the surface (negative inside)."""
+        pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+        out = np.empty(len(pts))
+        for i, p in enumerate(pts):
+            out[i] = _sdf(self.kind, self.position, self.rotation, self.geometry, p[0], p[1], p[2])[0]
+        return out
+
+    def __repr__(self):
+        return f"{type(self).__name__}(name={self.name!r}, position={self.position.tolist()})"
+
+
+class Plane(Collider):
+    """The half-space boundary ``{x : normal·x = offset}``; the cloth lives where ``normal·x > offset``."""
+
+    kind = PLANE
+
+    def __init__(self, normal=(0.0, 0.0, 1.0), offset: float = 0.0, friction: float = 0.0, name=None):
+        n = _vector("normal", normal)
+        norm = float(np.linalg.norm(n))
+        if not norm > 1e-12:
+            raise ValueError(f"normal must be a nonzero vector, got {n.tolist()}")
+        n = n / norm
+        try:
+            offset = float(offset)
+        except (TypeError, ValueError):
+            raise ValueError(f"offset must be a finite number, got {offset!r}") from None
+        if not math.isfinite(offset):
+            raise ValueError(f"offset must be a finite number, got {offset!r}")
+        super().__init__(offset * n, np.eye(3), [n[0], n[1], n[2], 0.0], friction, name)
+
+    @property
+    def normal(self) -> np.ndarray:
+        return self.rotation @ self.geometry[:3]
+
+    @property
+    def offset(self) -> float:
+        return float(self.normal @ self.position)
+
+
+class Sphere(Collider):
+    """A solid ball."""
+
+    kind = SPHERE
+
+    def __init__(self, center=(0.0, 0.0, 0.0), radius: float = 0.1, friction: float = 0.0, name=None):
+        super().__init__(_vector("center", center), np.eye(3), [_positive("radius", radius), 0, 0, 0],
+                         friction, name)
+
+    @property
+    def center(self) -> np.ndarray:
+        return self.position.copy()
+
+    @property
+    def radius(self) -> float:
+        return float(self.geometry[0])
+
+
+class Box(Collider):
+    """A solid oriented box: ``center``, ``half_extents`` along its own axes, ``orientation``."""
+
+    kind = BOX
+
+    def __init__(self, center=(0.0, 0.0, 0.0), half_extents=(0.5, 0.5, 0.5),
+                 orientation=(1.0, 0.0, 0.0, 0.0), friction: float = 0.0, name=None):
+        h = _vector("half_extents", half_extents)
+        if not np.all(h > 0):
+            raise ValueError(f"half_extents must be 3 finite numbers > 0, got {h.tolist()}")
+        super().__init__(_vector("center", center), quaternion_matrix(orientation),
+                         [h[0], h[1], h[2], 0.0], friction, name, orientation)
+
+    @property
+    def center(self) -> np.ndarray:
+        return self.position.copy()
+
+    @property
+    def half_extents(self) -> np.ndarray:
+        return self.geometry[:3].copy()
+
+
+class Capsule(Collider):
+    """A solid capsule: the points within ``radius`` of the segment ``a``–``b``."""
+
+    kind = CAPSULE
+
+    def __init__(self, a=(0.0, 0.0, 0.0), b=(0.0, 0.0, 1.0), radius: float = 0.05,
+                 friction: float = 0.0, name=None):
+        a, b = _vector("a", a), _vector("b", b)
+        half = 0.5 * (b - a)
+        super().__init__(0.5 * (a + b), np.eye(3), [half[0], half[1], half[2],
+                                                     _positive("radius", radius)], friction, name)
+
+    @property
+    def a(self) -> np.ndarray:
+        return self.position - self.rotation @ self.geometry[:3]
+
+    @property
+    def b(self) -> np.ndarray:
+        return self.position + self.rotation @ self.geometry[:3]
+
+    @property
+    def radius(self) -> float:
+        return float(self.geometry[3])
+
+
+KINDS = {"plane": Plane, "sphere": Sphere, "box": Box, "capsule": Capsule}
+
+
+# ---------------------------------------------------------------------------- kernels
+@numba.njit(cache=True, inline="always")
+def _sdf(kind, p, R, g, x, y, z):
+    """Signed distance of the point ``(x, y, z)`` from a collider and the outward unit normal
+    there (the distance's gradient)."""
+    dx, dy, dz = x - p[0], y - p[1], z - p[2]
+    if kind == PLANE:
+        nx = R[0, 0] * g[0] + R[0, 1] * g[1] + R[0, 2] * g[2]
+        ny = R[1, 0] * g[0] + R[1, 1] * g[1] + R[1, 2] * g[2]
+        nz = R[2, 0] * g[0] + R[2, 1] * g[1] + R[2, 2] * g[2]
+        return nx * dx + ny * dy + nz * dz, nx, ny, nz
+    if kind == SPHERE:
+        r = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if r < 1e-300:
+            return -g[0], 0.0, 0.0, 1.0
+        return r - g[0], dx / r, dy / r, dz / r
+    if kind == CAPSULE:
+        hx = R[0, 0] * g[0] + R[0, 1] * g[1] + R[0, 2] * g[2]
+        hy = R[1, 0] * g[0] + R[1, 1] * g[1] + R[1, 2] * g[2]
+        hz = R[2, 0] * g[0] + R[2, 1] * g[1] + R[2, 2] * g[2]
+        hh = hx * hx + hy * hy + hz * hz
+        s = 0.0
+        if hh > 0.0:
+            s = (dx * hx + dy * hy + dz * hz) / hh
+            s = min(1.0, max(-1.0, s))
+        ex, ey, ez = dx - s * hx, dy - s * hy, dz - s * hz
+        r = math.sqrt(ex * ex + ey * ey + ez * ez)
+        if r < 1e-300:  # on the axis: any perpendicular direction
+            if abs(hx) < 0.9 * math.sqrt(hh) or hh == 0.0:
+                ux, uy, uz = 0.0, hz, -hy
+            else:
+                ux, uy, uz = -hz, 0.0, hx
+            u = math.sqrt(ux * ux + uy * uy + uz * uz)
+            if u == 0.0:
+                return -g[3], 0.0, 0.0, 1.0
+            return -g[3], ux / u, uy / u, uz / u
+        return r - g[3], ex / r, ey / r, ez / r
+    # BOX: the point in the box's frame
+    qx = R[0, 0] * dx + R[1, 0] * dy + R[2, 0] * dz
+    qy = R[0, 1] * dx + R[1, 1] * dy + R[2, 1] * dz
+    qz = R[0, 2] * dx + R[1, 2] * dy + R[2, 2] * dz
+    ax, ay, az = abs(qx) - g[0], abs(qy) - g[1], abs(qz) - g[2]
+    if ax > 0.0 or ay > 0.0 or az > 0.0:
+        ox, oy, oz = max(ax, 0.0), max(ay, 0.0), max(az, 0.0)
+        d = math.sqrt(ox * ox + oy * oy + oz * oz)
+        lx = math.copysign(ox, qx) / d
+        ly = math.copysign(oy, qy) / d
+        lz = math.copysign(oz, qz) / d
+    else:  # inside: out through the nearest face
+        lx = ly = lz = 0.0
+        if ax >= ay and ax >= az:
+            d = ax
+            lx = math.copysign(1.0, qx)
+        elif ay >= az:
+            d = ay
+            ly = math.copysign(1.0, qy)
+        else:
+            d = az
+            lz = math.copysign(1.0, qz)
+    return (d, R[0, 0] * lx + R[0, 1] * ly + R[0, 2] * lz, R[1, 0] * lx + R[1, 1] * ly + R[1, 2] * lz,
+            R[2, 0] * lx + R[2, 1] * ly + R[2, 2] * lz)
+
+
+@numba.njit(cache=True, inline="always")
+def _carried(p_old, R_old, p_new, R_new, x, y, z):
+    """Where the point ``(x, y, z)`` attached to the collider's new pose was at its old pose."""
+    dx, dy, dz = x - p_new[0], y - p_new[1], z - p_new[2]
+    lx = R_new[0, 0] * dx + R_new[1, 0] * dy + R_new[2, 0] * dz
+    ly = R_new[0, 1] * dx + R_new[1, 1] * dy + R_new[2, 1] * dz
+    lz = R_new[0, 2] * dx + R_new[1, 2] * dy + R_new[2, 2] * dz
+    return (p_old[0] + R_old[0, 0] * lx + R_old[0, 1] * ly + R_old[0, 2] * lz,
+            p_old[1] + R_old[1, 0] * lx + R_old[1, 1] * ly + R_old[1, 2] * lz,
+            p_old[2] + R_old[2, 0] * lx + R_old[2, 1] * ly + R_old[2, 2] * lz)
+
+
+#: sphere-tracing steps along a particle's path before the hit is taken where the march stands
+_MARCH_STEPS = 64
+
+
+@numba.njit(cache=True)
+def resolve_contacts(x, v, x0, pinned, kinds, pos, rot, pos0, rot0, geo, mu, h, dt, touching):
+    """The contact stage's kernel, per particle in index order (each particle is independent).
+
+    For each collider, in order: (1) continuous detection: the particle's path over the step, seen
+    from the collider (its start carried by the collider's motion), is marched by sphere tracing on
+    the distance minus ``h``; a path that reaches the surface stops there, so no particle crosses a
+    collider however thin or fast. (2) Projection: a particle closer than ``h`` moves out along the
+    normal by the depth ``δ``; its tangential motion relative to the collider over the step shrinks
+    by ``μ·δ`` (to zero when it is smaller: static friction). (3) Velocity filter, for a particle
+    within ``h·(1 + CONTACT_TOLERANCE)``: an approaching normal velocity relative to the collider
+    is removed and the tangential one shrinks by ``μ`` times what was removed (Coulomb's cone on
+    the impulse). Returns the number of particles touching; ``touching[p]`` says which."""
+    n = x.shape[0]
+    count = 0
+    for p in range(n):
+        touching[p] = False
+        if pinned[p]:
+            continue
+        for c in range(kinds.shape[0]):
+            k = kinds[c]
+            # the start, carried with the collider to its new pose (equal to x0 for a static one)
+            sx, sy, sz = _carried(pos[c], rot[c], pos0[c], rot0[c], x0[p, 0], x0[p, 1], x0[p, 2])
+            # where the collider's point under x[p] was at the start: its displacement over the step
+            cx, cy, cz = _carried(pos0[c], rot0[c], pos[c], rot[c], x[p, 0], x[p, 1], x[p, 2])
+            ux, uy, uz = x[p, 0] - cx, x[p, 1] - cy, x[p, 2] - cz
+            # (1) continuous detection from a start outside the skin
+            d0, mx, my, mz = _sdf(k, pos[c], rot[c], geo[c], sx, sy, sz)
+            d0 -= h
+            ex, ey, ez = x[p, 0] - sx, x[p, 1] - sy, x[p, 2] - sz
+            length = math.sqrt(ex * ex + ey * ey + ez * ez)
+            if d0 <= CONTACT_TOLERANCE * h:
+                # a start touching the surface: the end is projected below, unless the path went
+                # past the middle of the solid or through it (the normal at the end points the
+                # other way: a straight path between opposite sides crosses the solid): stay
+                de, fx, fy, fz = _sdf(k, pos[c], rot[c], geo[c], x[p, 0], x[p, 1], x[p, 2])
+                if fx * mx + fy * my + fz * mz < 0.0:
+                    x[p, 0], x[p, 1], x[p, 2] = sx, sy, sz
+            elif length > d0:
+                t = 0.0
+                hit = False
+                for _ in range(_MARCH_STEPS):
+                    d = _sdf(k, pos[c], rot[c], geo[c], sx + t * ex, sy + t * ey, sz + t * ez)[0] - h
+                    if d <= 1e-3 * h:
+                        hit = True
+                        break
+                    t += d / length
+                    if t >= 1.0:
+                        break
+                if not hit and t < 1.0:
+                    hit = True  # the march did not settle: stop where it stands (conservative)
+                if hit:
+                    x[p, 0], x[p, 1], x[p, 2] = sx + t * ex, sy + t * ey, sz + t * ez
+            # (2) projection with friction on the motion relative to the collider
+            d, nx, ny, nz = _sdf(k, pos[c], rot[c], geo[c], x[p, 0], x[p, 1], x[p, 2])
+            if d >= h * (1.0 + CONTACT_TOLERANCE):
+                continue
+            touching[p] = True
+            if d < h:
+                depth = h - d
+                x[p, 0] += depth * nx
+                x[p, 1] += depth * ny
+                x[p, 2] += depth * nz
+                rx, ry, rz = x[p, 0] - sx, x[p, 1] - sy, x[p, 2] - sz
+                rn = rx * nx + ry * ny + rz * nz
+                tx, ty, tz = rx - rn * nx, ry - rn * ny, rz - rn * nz
+                tl = math.sqrt(tx * tx + ty * ty + tz * tz)
+                budget = mu[c] * depth
+                if tl > 0.0:
+                    f = 1.0 if tl <= budget else budget / tl
+                    x[p, 0] -= f * tx
+                    x[p, 1] -= f * ty
+                    x[p, 2] -= f * tz
+            # (3) velocity filter relative to the collider's velocity at the point
+            wx, wy, wz = ux / dt, uy / dt, uz / dt
+            rx, ry, rz = v[p, 0] - wx, v[p, 1] - wy, v[p, 2] - wz
+            vn = rx * nx + ry * ny + rz * nz
+            if vn < 0.0:
+                tx, ty, tz = rx - vn * nx, ry - vn * ny, rz - vn * nz
+                tl = math.sqrt(tx * tx + ty * ty + tz * tz)
+                keep = 0.0
+                if tl > 0.0:
+                    keep = max(0.0, 1.0 - mu[c] * (-vn) / tl)
+                v[p, 0] = wx + keep * tx
+                v[p, 1] = wy + keep * ty
+                v[p, 2] = wz + keep * tz
+        if touching[p]:
+            count += 1
+    return count
+
+
+class Contacts:
+    """The post-step stage that keeps the cloth ``thickness`` away from its colliders (see
+    :func:`resolve_contacts` for the method). Active when there is at least one collider.
+
+    It works with every integrator because it acts on the step's result: positions are projected
+    and the velocity is filtered after the step, as a collision impulse applied at its end (explicit
+    and Runge–Kutta methods, the implicit ones, whose solve does not see the contacts, and Verlet,
+    whose next step reads the corrected positions as its velocity). Friction acts on both the
+    position change and the velocity, so a particle on an incline under static friction does not
+    creep, and a sliding one accelerates by ``g (sin θ − μ cos θ)``.
+    """
+
+    name = "contacts"
+
+    def __init__(self, model, colliders=(), thickness: float = 0.005):
+        self.model = model
+        self.colliders = list(colliders)
+        for i, c in enumerate(self.colliders):
+            if not isinstance(c, Collider):
+                raise ValueError(f"colliders[{i}] must be a cloth_sim.colliders shape (Plane, Sphere, "
+                                 f"Box, Capsule), got {type(c).__name__}")
+        self.thickness = _positive("thickness", thickness)
+        self.touching = np.zeros(model.n_particles, dtype=np.bool_)
+        self.last_touching = 0
+        self._pinned = np.ascontiguousarray(model.pinned)
+        self._pack()
+        self._pos0, self._rot0 = self._pos.copy(), self._rot.copy()
+
+    def _pack(self):
+        cs = self.colliders
+        self._kinds = np.array([c.kind for c in cs], dtype=np.int64)
+        self._pos = np.array([c.position for c in cs], dtype=np.float64).reshape(-1, 3)
+        self._rot = np.array([c.rotation for c in cs], dtype=np.float64).reshape(-1, 3, 3)
+        self._geo = np.array([c.geometry for c in cs], dtype=np.float64).reshape(-1, 4)
+        self._mu = np.array([c.friction for c in cs], dtype=np.float64)
+
+    @property
+    def active(self) -> bool:
+        return len(self.colliders) > 0
+
+    def set_pose(self, i: int, position, orientation=(1.0, 0.0, 0.0, 0.0)) -> None:
+        n = len(self.colliders)
+        if isinstance(i, bool) or not isinstance(i, (int, np.integer)) or not -n <= i < n:
+            raise ValueError(f"collider index must be an integer in [0, {n - 1}], got {i!r}"
+                             if n else "there are no colliders to move")
+        self.colliders[i].set_pose(position, orientation)
+        self._pos[i] = self.colliders[i].position
+        self._rot[i] = self.colliders[i].rotation
+
+    def apply(self, state, start, dt, velocity_follow):
+        self.last_touching = resolve_contacts(state.x, state.v, start.x, self._pinned, self._kinds,
+                                              self._pos, self._rot, self._pos0, self._rot0,
+                                              self._geo, self._mu, self.thickness, dt, self.touching)
+        # the poses this step ended at are where the next one starts
+        np.copyto(self._pos0, self._pos)
+        np.copyto(self._rot0, self._rot)

@@ -1,0 +1,349 @@
+"""Contacts: colliders with Coulomb friction, thickness, continuous detection, self-collision.
+
+Checked against closed forms (a particle on an incline), rest states (a cloth on the ground) and an
+independent crossing test (a particle against a triangle between consecutive steps, solved here from
+the coplanarity cubic, not with the simulator's code).
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from cloth_sim import ClothModel, Simulator, colliders, integrators
+from cloth_sim.scene import SceneError, load_scene, scene_from_dict
+
+G = 9.81
+H = 0.005
+
+
+def _particle_on(plane_normal, friction, integrator, dt=1e-3):
+    """One free particle resting on a plane through the origin (and a far-away partner: a model
+    needs a spring, of zero stiffness here)."""
+    n = np.asarray(plane_normal, float) / np.linalg.norm(plane_normal)
+    model = ClothModel.from_springs([H * n, [50.0, 50.0, 50.0]], [1.0, 1.0], [[0, 1]], [0.0], [0.0])
+    sim = Simulator(model, integrator=integrator, dt=dt, thickness=H,
+                    colliders=[colliders.Plane(normal=n, offset=0.0, friction=friction)])
+    return sim, n
+
+
+@pytest.mark.parametrize("integrator", integrators.available())
+@pytest.mark.parametrize("theta,mu", [(0.5, 0.3), (0.5, 0.0), (0.3, 0.5), (0.5, 0.6)])
+def test_particle_on_an_incline_obeys_coulomb(integrator, theta, mu):
+    """Stays put when tan θ < μ; slides with g (sin θ − μ cos θ) when tan θ > μ (g sin θ without
+    friction), at the contact distance all the way."""
+    sim, n = _particle_on((-math.sin(theta), 0.0, math.cos(theta)), mu, integrator)
+    downhill = np.array([-math.cos(theta), 0.0, -math.sin(theta)])
+    x0 = sim.positions[0].copy()
+    T = 1.0
+    sim.advance(T)
+    s = float((sim.positions[0] - x0) @ downhill)
+    assert abs(float(n @ sim.positions[0]) - H) < 1e-9
+    if math.tan(theta) < mu:
+        assert abs(s) < 1e-12
+        assert np.linalg.norm(sim.velocities[0]) < 1e-12
+    else:
+        a = G * (math.sin(theta) - mu * math.cos(theta))
+        assert s == pytest.approx(0.5 * a * T * T, rel=5e-3)  # first order in dt = 1e-3
+        assert float(sim.velocities[0] @ downhill) == pytest.approx(a * T, rel=5e-3)
+
+
+def _ground_cloth(integrator, dt, n=8):
+    model = ClothModel.grid(n, n, 0.05, 0.01, stiffness={"structural": 500, "shear": 500, "bend": 50},
+                            damping={"structural": 0.05, "shear": 0.05, "bend": 0.01},
+                            origin=(0.0, 0.0, 0.03))
+    return Simulator(model, integrator=integrator, dt=dt, thickness=H,
+                     colliders=[colliders.Plane(friction=0.5)])
+
+
+@pytest.mark.parametrize("integrator", integrators.available())
+def test_cloth_dropped_on_the_ground_settles_at_the_contact_distance(integrator):
+    probe = _ground_cloth(integrator, 1e-3)
+    limit = probe.stable_dt()
+    dt = 1.0 / 60.0 if math.isinf(limit) else min(1e-3, 0.5 * limit)
+    sim = _ground_cloth(integrator, dt)
+    sim.advance(2.0)
+    z = sim.positions[:, 2]
+    assert np.all(np.abs(z - H) <= 0.03 * H), (z.min(), z.max())
+    assert np.abs(sim.velocities).max() < 1e-3
+
+
+def test_cloth_drapes_over_a_sphere():
+    scene = load_scene("drape")
+    sim = scene.build_simulator()
+    ball = sim.colliders[0]
+    r, c = ball.radius, ball.center
+    sim.advance(2.0)
+    d = np.linalg.norm(sim.positions - c, axis=1) - r
+    assert d.min() >= sim.thickness * (1 - 0.03)  # nothing inside r + thickness
+    assert d.min() <= sim.thickness * 1.03  # it touches
+    below = sim.positions[:, 2] < c[2]
+    x = sim.positions[below]
+    # it hangs on both sides of the ball, in both directions
+    assert x[:, 0].min() < c[0] - r and x[:, 0].max() > c[0] + r
+    assert x[:, 1].min() < c[1] - r and x[:, 1].max() > c[1] + r
+
+
+@pytest.mark.parametrize("integrator", ["symplectic_euler", "explicit_euler", "rk4", "verlet",
+                                        "implicit_euler"])
+@pytest.mark.parametrize("speed", [30.0, 300.0])
+def test_a_fast_particle_does_not_tunnel_through_a_thin_box(integrator, speed):
+    model = ClothModel.from_springs([[0.0, 0.0, 0.1], [50.0, 50.0, 50.0]], [1.0, 1.0], [[0, 1]], [0.0],
+                                    [0.0])
+    box = colliders.Box(center=(0.0, 0.0, 0.0), half_extents=(0.5, 0.5, 0.001), friction=0.2)
+    sim = Simulator(model, integrator=integrator, dt=1e-3, gravity=(0, 0, 0), thickness=H,
+                    colliders=[box], max_speed=1e4)
+    v = np.zeros((2, 3))
+    v[0] = (0.0, 0.0, -speed)
+    sim.velocities = v
+    for _ in range(20):
+        sim.step()
+        assert sim.positions[0, 2] >= 0.001 + H * (1 - 0.03)
+
+
+def test_a_moving_box_carries_a_resting_particle_at_its_speed():
+    model = ClothModel.from_springs([[0.0, 0.0, 0.1 + H], [50.0, 50.0, 50.0]], [1.0, 1.0], [[0, 1]],
+                                    [0.0], [0.0])
+    box = colliders.Box(center=(0.0, 0.0, 0.05), half_extents=(1.0, 1.0, 0.05), friction=1.0)
+    dt, u = 1e-3, 0.5
+    sim = Simulator(model, integrator="symplectic_euler", dt=dt, colliders=[box], thickness=H)
+    for k in range(1, 1001):
+        sim.set_collider_pose(0, (u * k * dt, 0.0, 0.05))
+        sim.step()
+    # it reaches the box's speed after u / (μ g) = 51 ms and then rides along
+    assert sim.velocities[0, 0] == pytest.approx(u, rel=1e-9)
+    assert sim.positions[0, 2] == pytest.approx(0.1 + H, abs=1e-9)
+    slip = u * u / (2 * G)  # distance lost while it caught up
+    assert sim.positions[0, 0] == pytest.approx(u * 1.0 - slip, rel=0.02)
+
+
+def test_without_colliders_no_contact_code_runs_and_trajectories_are_unchanged():
+    model = ClothModel.grid(8, 8, 0.05, 0.01, stiffness=300.0, damping=0.02, pinned=[(0, 0)])
+    plain = Simulator(model, integrator="rk4", dt=1e-3, strain_limit=0.1)
+    with_none = Simulator(model, integrator="rk4", dt=1e-3, strain_limit=0.1, colliders=[],
+                          self_collision=False)
+    assert "contacts" not in with_none.active_stages
+    assert "self_collision" not in with_none.active_stages
+    plain.step(300)
+    with_none.step(300)
+    assert np.array_equal(plain.positions, with_none.positions)
+
+
+def test_bad_collider_arguments_name_the_field():
+    with pytest.raises(ValueError, match="radius"):
+        colliders.Sphere(center=(0, 0, 0), radius=-1.0)
+    with pytest.raises(ValueError, match="normal"):
+        colliders.Plane(normal=(0, 0, 0))
+    with pytest.raises(ValueError, match="half_extents"):
+        colliders.Box(half_extents=(1, 1, 0))
+    with pytest.raises(ValueError, match="friction"):
+        colliders.Capsule(friction=float("nan"))
+    model = ClothModel.grid(4, 4, 0.1, 0.01, stiffness=100.0)
+    sim = Simulator(model, colliders=[colliders.Sphere(radius=0.1)])
+    with pytest.raises(ValueError, match="index"):
+        sim.set_collider_pose(3, (0, 0, 0))
+    with pytest.raises(ValueError, match="position"):
+        sim.set_collider_pose(0, (0, float("inf"), 0))
+    with pytest.raises(ValueError, match="orientation"):
+        sim.set_collider_pose(0, (0, 0, 0), (0, 0, 0, 0))
+    assert np.array_equal(sim.colliders[0].center, (0, 0, 0))
+
+
+def test_collider_distances_match_their_closed_forms():
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(-1, 1, (200, 3))
+    s = colliders.Sphere(center=(0.1, 0.2, 0.3), radius=0.4)
+    assert np.allclose(s.signed_distance(pts), np.linalg.norm(pts - (0.1, 0.2, 0.3), axis=1) - 0.4)
+    c = colliders.Capsule(a=(0, 0, -0.3), b=(0, 0, 0.3), radius=0.1)
+    zc = np.clip(pts[:, 2], -0.3, 0.3)
+    ref = np.linalg.norm(pts - np.stack([0 * zc, 0 * zc, zc], 1), axis=1) - 0.1
+    assert np.allclose(c.signed_distance(pts), ref)
+    # a box turned 90° about z swaps its x and y extents
+    b = colliders.Box(center=(0, 0, 0), half_extents=(0.5, 0.1, 0.2),
+                      orientation=(math.cos(math.pi / 4), 0, 0, math.sin(math.pi / 4)))
+    q = np.abs(pts) - (0.1, 0.5, 0.2)
+    ref = np.linalg.norm(np.maximum(q, 0), axis=1) + np.minimum(q.max(axis=1), 0)
+    assert np.allclose(b.signed_distance(pts), ref)
+    p = colliders.Plane(normal=(0, 0, 2), offset=0.25)
+    assert np.allclose(p.signed_distance(pts), pts[:, 2] - 0.25)
+    # moving: a plane lifted by set_pose keeps its normal
+    p.set_pose((0, 0, 1.0))
+    assert np.allclose(p.signed_distance(pts), pts[:, 2] - 1.0)
+
+
+# --------------------------------------------------------------------------- self-collision
+def crossings(x0, x1, tris):
+    """Pairs (particle, triangle), the particle not a corner, where the particle passes through
+    the triangle between positions ``x0`` and ``x1`` (every point on a straight path): a root in
+    [0, 1] of the coplanarity cubic ``f(s) = (p − a)·((b − a) × (c − a))`` at which the particle lies
+    inside the triangle. Independent of the simulator's code: the cubic's coefficients come from
+    four samples, its real roots from monotone brackets (split at the roots of f') and bisection."""
+    d = x1 - x0
+    lo_p, hi_p = np.minimum(x0, x1), np.maximum(x0, x1)
+    lo_t, hi_t = lo_p[tris].min(axis=1), hi_p[tris].max(axis=1)
+    overlap = np.all(lo_t[None] <= hi_p[:, None], axis=2) & np.all(hi_t[None] >= lo_p[:, None], axis=2)
+    P, T = np.nonzero(overlap)
+    keep = np.all(tris[T] != P[:, None], axis=1)
+    P, T = P[keep], T[keep]
+    if len(P) == 0:
+        return []
+    A, B, C = (tris[T, k] for k in range(3))
+
+    def pos(i, s):
+        return x0[i] + s[:, None] * d[i]
+
+    def f(s):
+        p, a, b, c = pos(P, s), pos(A, s), pos(B, s), pos(C, s)
+        return np.einsum("ij,ij->i", p - a, np.cross(b - a, c - a))
+
+    ones = np.ones(len(P))
+    ss = np.array([0.0, 1 / 3, 2 / 3, 1.0])
+    coef = np.linalg.solve(np.vander(ss, 4), np.stack([f(s * ones) for s in ss]))  # c3, c2, c1, c0
+    c3, c2, c1 = coef[0], coef[1], coef[2]
+    # critical points: 3 c3 s² + 2 c2 s + c1 = 0, clipped into [0, 1]
+    qa, qb, qc = 3 * c3, 2 * c2, c1
+    disc = qb * qb - 4 * qa * qc
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sq = np.sqrt(np.maximum(disc, 0))
+        r1 = np.where(qa != 0, (-qb - sq) / (2 * qa), np.where(qb != 0, -qc / qb, 0.0))
+        r2 = np.where(qa != 0, (-qb + sq) / (2 * qa), r1)
+    r1 = np.where(np.isfinite(r1) & (disc >= 0), r1, 0.0)
+    r2 = np.where(np.isfinite(r2) & (disc >= 0), r2, 0.0)
+    k1, k2 = np.clip(np.minimum(r1, r2), 0, 1), np.clip(np.maximum(r1, r2), 0, 1)
+    found = set()
+    all_P, all_A, all_B, all_C, all_T = P, A, B, C, T
+    c0 = coef[3]
+
+    def cubic(s, k):
+        return ((c3[k] * s + c2[k]) * s + c1[k]) * s + c0[k]
+
+    every = np.arange(len(P))
+    for lo, hi in ((0 * ones, k1), (k1, k2), (k2, ones)):
+        bracket = np.flatnonzero((cubic(lo, every) * cubic(hi, every) <= 0) & (hi >= lo))
+        P, A, B, C, T = all_P[bracket], all_A[bracket], all_B[bracket], all_C[bracket], all_T[bracket]
+        lo, hi = lo[bracket], hi[bracket]
+        if len(P) == 0:
+            continue
+        flo = cubic(lo, bracket)
+        for _ in range(50):  # bisection on each monotone bracket
+            mid = 0.5 * (lo + hi)
+            fm = cubic(mid, bracket)
+            left = flo * fm <= 0
+            hi = np.where(left, mid, hi)
+            lo = np.where(left, lo, mid)
+            flo = np.where(left, flo, fm)
+        s = 0.5 * (lo + hi)
+        p, a, b, c = pos(P, s), pos(A, s), pos(B, s), pos(C, s)
+        v0, v1, v2 = b - a, c - a, p - a
+        d00, d01, d11 = (v0 * v0).sum(1), (v0 * v1).sum(1), (v1 * v1).sum(1)
+        d20, d21 = (v2 * v0).sum(1), (v2 * v1).sum(1)
+        den = d00 * d11 - d01 * d01
+        with np.errstate(divide="ignore", invalid="ignore"):
+            bv = (d11 * d20 - d01 * d21) / den
+            bw = (d00 * d21 - d01 * d20) / den
+        inside = (den > 0) & (bv >= 0) & (bw >= 0) & (bv + bw <= 1)
+        found.update(zip(P[inside].tolist(), T[inside].tolist()))
+    return sorted(found)
+
+
+def _fold(self_collision: bool):
+    scene = load_scene("fold")
+    return scene.build_simulator(rows=12, cols=12, spacing=1.0 / 11, particle_mass=0.04,
+                                 self_collision=self_collision)
+
+
+def _count_crossings(sim, seconds, stop_at_first=False):
+    tris = sim.model.triangles
+    total = 0
+    for _ in range(int(round(seconds / sim.dt))):
+        x0 = sim.positions.copy()
+        sim.step()
+        total += len(crossings(x0, sim.positions, tris))
+        if total and stop_at_first:
+            break
+    return total
+
+
+def test_crossing_check_finds_a_particle_passing_through_a_triangle():
+    x0 = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.2, 0.2, 0.5]], float)
+    x1 = x0.copy()
+    x1[3, 2] = -0.5
+    assert crossings(x0, x1, np.array([[0, 1, 2]])) == [(3, 0)]
+    x1[3, 0] = 2.0  # passes beside it
+    assert crossings(x0, x1, np.array([[0, 1, 2]])) == []
+
+
+def test_fold_without_self_collision_crosses_itself():
+    assert _count_crossings(_fold(False), 1.5, stop_at_first=True) > 0
+
+
+def test_fold_with_self_collision_never_crosses_itself():
+    sim = _fold(True)
+    assert _count_crossings(sim, 1.5) == 0
+    # and it did fold: layers over each other (cloth above cloth in the same place)
+    assert sim.positions[:, 2].max() > 2 * sim.thickness
+
+
+# --------------------------------------------------------------------------- scenes
+@pytest.mark.parametrize("name", ["table", "drape", "fold"])
+def test_contact_scenes_load_and_keep_the_thickness(name):
+    sim = load_scene(name).build_simulator()
+    assert "contacts" in sim.active_stages
+    sim.advance(0.5)
+    for c in sim.colliders:
+        assert c.signed_distance(sim.positions).min() >= sim.thickness * (1 - 0.03)
+
+
+def test_table_scene_half_hangs_over_the_edge():
+    sim = load_scene("table").build_simulator()
+    sim.advance(2.0)
+    table = sim.colliders[0]
+    edge = table.center[0] + table.half_extents[0]
+    top = table.center[2] + table.half_extents[2]
+    on = sim.positions[:, 0] < edge
+    assert np.all(np.abs(sim.positions[on & (sim.positions[:, 0] < edge - 0.1), 2] - top - sim.thickness)
+                  < 0.03 * sim.thickness)
+    assert sim.positions[~on, 2].min() < top - 0.2  # the rest hangs down
+
+
+@pytest.mark.parametrize("bad,field", [
+    ({"colliders": {"type": "plane"}}, "colliders"),
+    ({"colliders": [{"type": "cone"}]}, "colliders[0].type"),
+    ({"colliders": [{"type": "sphere", "center": [0, 0, 0]}]}, "colliders[0].radius"),
+    ({"colliders": [{"type": "sphere", "center": [0, 0], "radius": 1}]}, "colliders[0].center"),
+    ({"colliders": [{"type": "sphere", "center": [0, 0, 0], "radius": -1}]}, "colliders[0].radius"),
+    ({"colliders": [{"type": "box", "center": [0, 0, 0], "half_extents": [1, 1, 1],
+                     "orientation": [0, 0, 0, 0]}]}, "colliders[0].orientation"),
+    ({"colliders": [{"type": "plane", "normal": [0, 0, 1], "friction": -0.1}]}, "colliders[0].friction"),
+    ({"colliders": [{"type": "plane", "normal": [0, 0, 1], "size": 3}]}, "colliders[0].size"),
+    ({"colliders": [{"type": "capsule", "a": [0, 0, 0], "b": [1, 0, 0], "radius": "x"}]},
+     "colliders[0].radius"),
+    ({"thickness": 0.0}, "thickness"),
+    ({"thickness": "thin"}, "thickness"),
+    ({"self_collision": "yes"}, "self_collision"),
+    ({"grid": {"rows": 4, "cols": 4, "spacing": 0.1, "origin": [0, 0]}}, "grid.origin"),
+])
+def test_scene_collider_fields_are_validated(bad, field):
+    data = {"grid": {"rows": 4, "cols": 4, "spacing": 0.1}}
+    data.update(bad)
+    with pytest.raises(SceneError) as e:
+        scene_from_dict(data, source="bad.yaml")
+    assert field in str(e.value) and "bad.yaml" in str(e.value)
+
+
+def test_self_collision_refuses_a_thickness_beyond_half_an_edge():
+    model = ClothModel.grid(8, 8, 0.02, 0.01, stiffness=100.0)
+    with pytest.raises(ValueError, match="thickness"):
+        Simulator(model, thickness=0.011, self_collision=True)
+    sim = Simulator(model, thickness=0.011)
+    with pytest.raises(ValueError, match="thickness"):
+        sim.self_collision = True
+    assert not sim.self_collision
+    sim.thickness = 0.01
+    sim.self_collision = True
+    with pytest.raises(ValueError, match="thickness"):
+        sim.thickness = 0.02
+    assert sim.thickness == 0.01
+    with pytest.raises(SceneError, match="thickness"):
+        scene_from_dict({"grid": {"rows": 4, "cols": 4, "spacing": 0.02}, "thickness": 0.011,
+                         "self_collision": True})
