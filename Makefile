@@ -25,7 +25,7 @@ $(STAMP): requirements.txt setup.py pyproject.toml
 	$(PY) -c "from cloth_sim.simulator import compile_kernels as c; print(f'kernels compiled in {c():.1f} s')"
 	@touch $@
 
-$(MSGS): $(STAMP) msg/Stats.msg CMakeLists.txt package.xml tools/build_interfaces.py \
+$(MSGS): $(STAMP) msg/Stats.msg $(wildcard srv/*.srv) CMakeLists.txt package.xml tools/build_interfaces.py \
 		$(wildcard launch/* config/*.yaml config/scenes/*.yaml)
 	$(PY) tools/build_interfaces.py
 	@touch $@

@@ -16,6 +16,7 @@
 
 ``cloth-sim bench strain [--sizes 32 64] [--seconds 3]`` (worst strain and cost of the strain limit)
 ``cloth-sim bench contacts [--sizes 32 64] [--seconds 1.5]`` (cost of colliders and self-collision)
+``cloth-sim bench lockstep [--size 32]`` (steps per second through ~/step from another process)
     Print the node's real-time factor with and without a ~/points subscriber (needs rclpy).
 ``cloth-sim record -o BAG [TOPIC ...]``, ``play BAG``, ``info BAG``, ``reindex BAG``
     rosbag2-compatible MCAP bags: record the ROS graph, replay it, inspect it, repair an unclosed bag.
@@ -90,6 +91,13 @@ def _bench_params(args) -> int:
 def _bench_node(args) -> int:
     from .ros.bench import print_node_table
     print_node_table(args.sizes, args.seconds, args.integrator, args.dt, args.rate)
+    return 0
+
+
+def _bench_lockstep(args) -> int:
+    from .ros.bench import print_lockstep_table
+
+    print_lockstep_table(args.size, args.calls)
     return 0
 
 
@@ -218,6 +226,10 @@ def build_parser() -> argparse.ArgumentParser:
     nb.add_argument("--dt", type=float, default=1e-3)
     nb.add_argument("--rate", type=float, default=60.0, help="publish_rate (Hz)")
     nb.set_defaults(func=_bench_node)
+    ls = bsub.add_parser("lockstep", help="steps per second through ~/step from another process (needs rclpy)")
+    ls.add_argument("--size", type=int, default=32, help="cloth N×N (default 32)")
+    ls.add_argument("--calls", type=int, default=300, help="~/step calls per row")
+    ls.set_defaults(func=_bench_lockstep)
     for name, text in [("work-precision", "wall time against error on hang16, reference DOP853; table, CSV, plot"),
                        ("stability", "largest stable dt by bisection vs linear theory; stress scenarios"),
                        ("scaling", "ms/step against N, fitted exponents; what skipping unused terms buys")]:

@@ -419,6 +419,10 @@ class Contacts:
     def active(self) -> bool:
         return len(self.colliders) > 0
 
+    def set_pinned(self, pinned) -> None:
+        """Particles the stage leaves alone (pins and held particles)."""
+        self._pinned = np.ascontiguousarray(pinned)
+
     def set_pose(self, i: int, position, orientation=(1.0, 0.0, 0.0, 0.0)) -> None:
         n = len(self.colliders)
         if isinstance(i, bool) or not isinstance(i, (int, np.integer)) or not -n <= i < n:

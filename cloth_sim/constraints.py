@@ -211,8 +211,33 @@ class StrainLimit(Stage):
         np.copyto(before, state.x)
         if self.correct(state.x):
             _follow_corrections(state.x, before, start.x, state.v, velocity_follow / dt)
+        if self.track_reaction:
+            self._react((state.x - before) / dt, dt)
 
     _before = None
+    #: keep :attr:`reaction` (grippers ask for it): the force the limit's corrections put on the pins
+    track_reaction = False
+    #: ``(n, 3)``: per pinned particle, the force (N) the last step's corrections exerted on it
+    reaction = None
+
+    def _react(self, dv, dt):
+        """The momentum the corrections imply for each free particle (``Δv = Δx/dt``: the whole
+        correction, whether or not the velocity was let follow all of it) came from the
+        constraints holding the cloth up; each particle's share is put on its nearest pin (by rest
+        distance along the springs, as the long-range attachments use), as the reaction
+        ``−m·Δv/dt``."""
+        model = self.model
+        if self._nearest is None:
+            anchor = self._anchor if self._anchor is not None else nearest_attachments(model)[0]
+            self._nearest = anchor[:, 0]
+        if self.reaction is None:
+            self.reaction = np.zeros((model.n_particles, 3))
+        self.reaction[:] = 0.0
+        near = self._nearest
+        ok = near >= 0
+        np.add.at(self.reaction, near[ok], -(model.masses[ok, None] * dv[ok]) / dt)
+
+    _nearest = None
 
 
 @numba.njit(cache=True)

@@ -181,6 +181,10 @@ def _schema() -> dict[str, Param]:
           apply="rebuild", scene_key="model"),
         P("frame_id", str, "", "frame_id of the published cloud, mesh and stats.", apply="node",
           nonempty=True),
+        P("publish_clock", bool, "", "Publish /clock with the simulated time and stamp every message "
+          "with it (for use_sim_time nodes, lockstep tests, data generation).", apply="node"),
+        P("real_time_factor", float, "", "Simulated seconds per wall-clock second the node aims at; "
+          "0 runs as fast as the CPU allows.", lo=0.0, hi=1000.0, apply="node"),
         P("thickness", float, "m", "Distance the cloth keeps from every collider and, with "
           "self_collision, from its own non-adjacent triangles.", lo=0.0, lo_open=True, hi=1.0,
           scene_key="thickness"),

@@ -17,6 +17,7 @@ Every value a user sets is checked against :data:`cloth_sim.parameters.SCHEMA`.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numba
@@ -30,6 +31,7 @@ from .constraints import DEFAULT_STRAIN_LIMIT_PASSES, StrainLimit
 from .forces import BUCKLE_TABLE, Forces, incidence, spring_forces_gather, spring_strains
 from .model import ClothModel
 from .parameters import SCHEMA, ParameterError
+from .grippers import Gripper, check_grasp, check_name, check_pose
 from .self_collision import SelfCollision, check_thickness
 from .state import State
 
@@ -96,6 +98,11 @@ class Simulator:
                  integrator_options: dict | None = None, colliders=None, thickness: float = 0.005,
                  self_collision: bool = False):
         self.model = model
+        #: the model as given; ``model`` is it with the held particles pinned while grippers hold some
+        self.base_model = model
+        self._grippers: dict[str, Gripper] = {}
+        self._integrator_options = dict(integrator_options or {})
+        self._strain_options = (strain_limit_passes, strain_limit_long_range)
         self._k = np.array(model.stiffness, dtype=np.float64)
         self._c = np.array(model.damping, dtype=np.float64)
         self._gravity = np.array(SCHEMA["gravity"].check(gravity), dtype=np.float64)
@@ -172,7 +179,11 @@ class Simulator:
         return self.state.time(self._dt)
 
     def reset(self) -> None:
-        """Back to the model's initial positions, at rest, at time 0; parameters are kept."""
+        """Back to the model's initial positions, at rest, at time 0; parameters are kept, every
+        gripper is released."""
+        if self._grippers:
+            self._grippers.clear()
+            self._set_held()
         self.state.x[:] = self.model.positions
         self.state.v[:] = 0.0
         self.state.t_base, self.state.steps = 0.0, 0
@@ -193,7 +204,11 @@ class Simulator:
             raise ValueError(f"restore_state: a state of {len(saved.x)} particles for a cloth of "
                              f"{len(self.state.x)}")
         saved.copy_to(self.state)
-        if saved.method != self.integrator:
+        for g in self._grippers.values():  # held particles stay where their grippers are
+            self.state.x[g.indices] = g.places(g.position, g.rotation)
+            self.state.v[g.indices] = 0.0
+            g.moving, g.target = False, None
+        if saved.method != self.integrator or self._grippers:
             self._integrator.reset(self.state, self.forces, self._dt)
 
     # ------------------------------------------------------------------ parameters
@@ -219,6 +234,7 @@ class Simulator:
         new = integrators.get(name)(self.model, **options)
         new.reset(self.state, self.forces, self._dt)
         self._integrator = new
+        self._integrator_options = dict(options)
 
     @property
     def integrator_stats(self) -> dict:
@@ -336,13 +352,23 @@ class Simulator:
         integ, forces, stages = self._integrator, self.forces, self._active_stages
         follow = integ.velocity_follow
         vmax2, xmax = self.max_speed ** 2, self.max_coordinate
+        grippers = self._grippers
         for _ in range(int(n)):
             state.copy_to(checkpoint)
+            if grippers:
+                self._grippers_before_step()
             integ.step(state, forces, dt)
+            if grippers:  # the step's own end, before any correction (for the wrench)
+                np.copyto(self._prestage.x, state.x)
+                np.copyto(self._prestage.v, state.v)
             for stage in stages:
                 stage.apply(state, checkpoint, dt, follow)
+            if grippers:
+                self._grippers_after_step()
             if not _state_ok(state.x, state.v, vmax2, xmax):
                 self._diverged()
+            if grippers:
+                self._grippers_commit()
             state.steps += 1
             self.steps_taken += 1
 
@@ -397,6 +423,143 @@ class Simulator:
     def rest_matrices(self) -> tuple[sp.csr_matrix, sp.csr_matrix]:
         """``(K, C)`` linearised about the rest shape (:func:`cloth_sim.stability.rest_matrices`)."""
         return stab.rest_matrices(self.model, self._k, self._c)
+
+    # ------------------------------------------------------------------ grippers
+    @property
+    def grippers(self) -> dict:
+        """``{name: indices}`` of the particles each gripper holds (see :mod:`cloth_sim.grippers`)."""
+        return {name: g.indices.copy() for name, g in self._grippers.items()}
+
+    def grasp(self, name: str, point, radius: float) -> np.ndarray:
+        """Hold every free particle within ``radius`` of ``point`` with a gripper called ``name``,
+        placed at ``point`` with the identity orientation; returns their indices. A name in use,
+        a bad point or radius, or no particle in reach raises ``ValueError`` and changes nothing."""
+        name = check_name(name)
+        point, radius = check_grasp(point, radius)
+        if name in self._grippers:
+            raise ValueError(f"gripper {name!r} already holds {len(self._grippers[name].indices)} "
+                             f"particles: release it first")
+        held = self.model.pinned
+        d = np.linalg.norm(self.state.x - point, axis=1)
+        idx = np.flatnonzero((d <= radius) & ~held)
+        if len(idx) == 0:
+            near = float(d[~held].min()) if (~held).any() else float("nan")
+            raise ValueError(f"grasp {name!r}: no free particle within radius {radius:g} m of point "
+                             f"{point.tolist()} (the nearest is {near:.4g} m away)")
+        self._grippers[name] = Gripper(name, idx, self.state.x[idx] - point, point)
+        self._prestage = self.state.copy()
+        self._wrench_ready = False
+        self.state.v[idx] = 0.0  # the gripper is at rest until it is moved
+        self._set_held()
+        return idx.copy()
+
+    def set_gripper_pose(self, name: str, position, orientation=(1.0, 0.0, 0.0, 0.0)) -> None:
+        """Move gripper ``name`` to ``position`` with ``orientation`` (a unit quaternion ``(w, x,
+        y, z)``) over the next step. An unknown name or a non-finite pose raises ``ValueError``."""
+        g = self._gripper(name)
+        g.target = check_pose(position, orientation)
+
+    def gripper_pose(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """``(position, orientation)`` of gripper ``name`` now."""
+        g = self._gripper(name)
+        return g.position.copy(), g.orientation.copy()
+
+    def gripper_wrench(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """``(force, torque)`` the cloth exerts on gripper ``name`` at the end of the last step: the
+        springs' pull on the particles it holds, plus the strain limit's constraint force on them
+        when it is on (N), and its moment about the gripper's position (N·m), world frame (see
+        :mod:`cloth_sim.grippers`)."""
+        g = self._gripper(name)
+        term = self.forces.spring_term
+        f = np.zeros_like(self.state.x)
+        if term is not None and term.active:
+            # the springs where the step evaluated them: at its start (the checkpoint), at its end
+            # before the corrections, or between (integrators' force_point); the current state
+            # before any step
+            theta = self._integrator.force_point if self._wrench_ready else 1.0
+            ends = ((1.0 - theta, self._checkpoint), (theta, self._prestage if self._wrench_ready
+                                                       else self.state))
+            for weight, st in ends:
+                if weight:
+                    part = np.zeros_like(f)
+                    term.add_force(st.x, st.v, part)
+                    f += weight * part
+        fi = f[g.indices]
+        if self._strain.active and self._strain.reaction is not None:
+            fi = fi + self._strain.reaction[g.indices]
+        return fi.sum(axis=0), np.cross(self.state.x[g.indices] - g.position, fi).sum(axis=0)
+
+    def release(self, name: str) -> np.ndarray:
+        """Let go: the particles of gripper ``name`` move freely again, with the velocity the
+        gripper gave them over the last step. Returns their indices."""
+        g = self._gripper(name)
+        del self._grippers[name]
+        self._set_held()
+        return g.indices.copy()
+
+    def _gripper(self, name) -> Gripper:
+        g = self._grippers.get(name) if isinstance(name, str) else None
+        if g is None:
+            raise ValueError(f"unknown gripper {name!r}; grippers: "
+                             f"{', '.join(self._grippers) if self._grippers else 'none (grasp first)'}")
+        return g
+
+    def _set_held(self) -> None:
+        """The model with the scene's pins and every held particle pinned; everything built from the
+        model is rebuilt around the same state and parameters."""
+        mask = np.array(self.base_model.pinned)
+        for g in self._grippers.values():
+            mask[g.indices] = True
+        if np.array_equal(mask, self.model.pinned):
+            return
+        model = self.base_model if np.array_equal(mask, self.base_model.pinned) else \
+            dataclasses.replace(self.base_model, pinned=mask)
+        self.model = model
+        self._evaluations_before += self.forces.evaluations
+        self.forces = self._build_forces()
+        tau = self._strain.tau
+        self._strain = StrainLimit(model, tau, *self._strain_options)
+        self._strain.track_reaction = bool(self._grippers)
+        self._contacts.set_pinned(model.pinned)
+        self._self_collision = SelfCollision(model, self._contacts.thickness,
+                                             self._self_collision.enabled)
+        self._self_collision.held = self._contacts.touching
+        self.stages = [self._strain, self._contacts, self._self_collision]
+        self._active_stages = [s for s in self.stages if s.active]
+        self._analysis = None
+        self._integrator = integrators.get(self.integrator)(model, **self._integrator_options)
+        self._integrator.reset(self.state, self.forces, self._dt)
+
+    def _grippers_before_step(self) -> None:
+        """Held particles get the velocity that takes them to their places at the gripper's target
+        (zero when it stays)."""
+        x, v, dt = self.state.x, self.state.v, self._dt
+        for g in self._grippers.values():
+            if g.target is not None:
+                v[g.indices] = (g.places(g.target[0], g.target[2]) - x[g.indices]) / dt
+                self._integrator.kinematic_velocities(self.state, g.indices, dt)
+            elif g.moving:
+                v[g.indices] = 0.0
+                self._integrator.kinematic_velocities(self.state, g.indices, dt)
+
+    def _grippers_after_step(self) -> None:
+        """Held particles exactly at their places (the integrators' ``x + dt·v`` rounds)."""
+        x = self.state.x
+        for g in self._grippers.values():
+            if g.target is not None:
+                x[g.indices] = g.places(g.target[0], g.target[2])
+
+    _prestage = None
+    #: whether a step was taken since the grippers changed (the wrench reads its states)
+    _wrench_ready = False
+
+    def _grippers_commit(self) -> None:
+        self._wrench_ready = True
+        for g in self._grippers.values():
+            g.moving = g.target is not None
+            if g.target is not None:
+                g.position, g.orientation, g.rotation = g.target
+                g.target = None
 
     # ------------------------------------------------------------------ internals
     def _build_forces(self) -> Forces:

@@ -633,7 +633,9 @@ def test_the_venv_is_an_ament_prefix_of_the_generated_interfaces():
     env = dict(os.environ, AMENT_PREFIX_PATH=sys.prefix)
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
-    assert out.stdout.split("\n")[:4] == ["['msg/Stats.idl', 'msg/Stats.msg']", "True", "True", "True"]
+    assert out.stdout.split("\n")[:4] == [
+        "['msg/Stats.idl', 'msg/Stats.msg', 'srv/Grasp.idl', 'srv/Grasp.srv', 'srv/Release.idl', "
+        "'srv/Release.srv', 'srv/Step.idl', 'srv/Step.srv']", "True", "True", "True"]
 
 
 # ------------------------------------------------------------------ contacts
@@ -680,3 +682,88 @@ def test_thickness_and_self_collision_are_live_parameters(ros):
         name = next(iter(bad))
         assert not r.successful and name in r.reason
     assert node.sim.thickness == 0.01
+
+
+# ------------------------------------------------------------------ manipulation and time
+def _pose(x, y, z, frame="cloth"):
+    from geometry_msgs.msg import PoseStamped
+
+    msg = PoseStamped()
+    msg.header.frame_id = frame
+    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = x, y, z
+    msg.pose.orientation.w = 1.0
+    return msg
+
+
+def test_grasp_lift_feel_and_release_through_the_node(ros):
+    from geometry_msgs.msg import Point, PoseStamped, WrenchStamped
+
+    from cloth_sim.srv import Grasp, Release
+
+    node = ros.start(publish_rate=30.0)
+    grasp = Grasp.Request(gripper="left", point=Point(x=0.5, y=0.0, z=0.0), radius=0.05)
+    res = ros.call(Grasp, "/cloth_sim/grasp", grasp)
+    assert res.success and res.count >= 1, res.message
+    idx = node.sim.grippers["left"]
+    start = node.sim.positions[idx].copy()
+    wrenches = ros.collect(WrenchStamped, "/cloth_sim/grippers/left/wrench")
+    pub = ros.node.create_publisher(PoseStamped, "/cloth_sim/grippers/left/pose", 10)
+    assert ros.spin_until(lambda: pub.get_subscription_count() > 0 and wrenches, 10)
+    pub.publish(_pose(0.5, 0.0, 0.2))
+    assert ros.spin_until(lambda: abs(node.sim.gripper_pose("left")[0][2] - 0.2) < 1e-12, 10)
+    assert np.abs(node.sim.positions[idx] - (start + [0, 0, 0.2])).max() < 1e-9
+    assert wrenches[-1].header.frame_id == "cloth"
+    # refusals: a name in use, nothing in reach, a bad name; unknown release
+    again = ros.call(Grasp, "/cloth_sim/grasp", grasp)
+    assert not again.success and "already" in again.message
+    far = ros.call(Grasp, "/cloth_sim/grasp", Grasp.Request(gripper="far", point=Point(x=9.0), radius=0.01))
+    assert not far.success and "radius" in far.message and "point" in far.message
+    bad = ros.call(Grasp, "/cloth_sim/grasp", Grasp.Request(gripper="no/slash", radius=0.1))
+    assert not bad.success and "gripper" in bad.message
+    nan = ros.call(Grasp, "/cloth_sim/grasp", Grasp.Request(gripper="n", point=Point(x=float("nan")),
+                                                            radius=0.1))
+    assert not nan.success and "point" in nan.message
+    unknown = ros.call(Release, "/cloth_sim/release", Release.Request(gripper="right"))
+    assert not unknown.success and "left" in unknown.message
+    # a pose in another frame or not finite is ignored
+    pub.publish(_pose(0.5, 0.0, 0.5, frame="map"))
+    pub.publish(_pose(0.5, float("inf"), 0.5))
+    ros.spin_for(0.4)
+    assert node.sim.gripper_pose("left")[0][2] == pytest.approx(0.2)
+    assert ros.call(Release, "/cloth_sim/release", Release.Request(gripper="left")).success
+    assert node.sim.grippers == {}
+    assert np.all(np.isfinite(node.sim.positions))
+
+
+def test_clock_real_time_factor_and_step(ros):
+    from rosgraph_msgs.msg import Clock
+    from std_srvs.srv import SetBool
+
+    from cloth_sim.srv import Step
+
+    node = ros.start(publish_rate=30.0, publish_clock=True)
+    clocks = ros.collect(Clock, "/clock")
+    stats = ros.collect(Stats, "/cloth_sim/stats")
+    assert ros.spin_until(lambda: len(clocks) >= 10 and len(stats) >= 10, 15)
+    t = [c.clock.sec + 1e-9 * c.clock.nanosec for c in clocks]
+    assert all(b >= a for a, b in zip(t, t[1:]))
+    s = stats[-1]
+    assert s.header.stamp.sec + 1e-9 * s.header.stamp.nanosec == pytest.approx(s.sim_time, abs=1e-9)
+    # running: ~/step is refused
+    refused = ros.call(Step, "/cloth_sim/step", Step.Request(steps=5))
+    assert not refused.success and "paused" in refused.message
+    assert ros.call(SetBool, "/cloth_sim/pause", SetBool.Request(data=True)).success
+    before = node.sim.time
+    res = ros.call(Step, "/cloth_sim/step", Step.Request(steps=250))
+    assert res.success and res.sim_time == pytest.approx(before + 250 * node.sim.dt, abs=1e-12)
+    assert node.sim.time == pytest.approx(before + 250 * node.sim.dt, abs=1e-12)
+    too_many = ros.call(Step, "/cloth_sim/step", Step.Request(steps=10**9))
+    assert not too_many.success and "steps" in too_many.message
+    # real_time_factor 0: as fast as the CPU allows, ahead of the wall clock
+    assert ros.call(SetBool, "/cloth_sim/pause", SetBool.Request(data=False)).success
+    assert all(r.successful for r in ros.set_params("/cloth_sim", {"real_time_factor": 0.0}))
+    sim0, wall0 = node.sim.time, time.monotonic()
+    ros.spin_for(1.0)
+    assert node.sim.time - sim0 > 1.5 * (time.monotonic() - wall0)
+    r = ros.set_params("/cloth_sim", {"real_time_factor": -1.0})[0]
+    assert not r.successful and "real_time_factor" in r.reason

@@ -1,4 +1,4 @@
-"""Generate and build the package's own messages (msg/) with rosidl from the PyPI wheels.
+"""Generate and build the package's own interfaces (msg/, srv/) with rosidl from the PyPI wheels.
 
 Run by `make` with the project's venv Python. It applies the fix the wheels need (their exported
 CMake files name the wheel build host's Python and numpy include directories), configures this
@@ -100,6 +100,7 @@ def main() -> int:
     for name in ("CMakeLists.txt", "package.xml"):
         shutil.copy2(ROOT / name, src / name)
     shutil.copytree(ROOT / "msg", src / "msg")
+    shutil.copytree(ROOT / "srv", src / "srv")
     work = BUILD / "cmake"
     work.mkdir(parents=True, exist_ok=True)
     configure = [cmake, "-S", str(src), "-B", str(work), "-DCLOTH_SIM_INTERFACES_ONLY=ON",
@@ -125,7 +126,7 @@ def main() -> int:
     site = next(PREFIX.glob("lib/python3*/site-packages"))
     pth = Path(sysconfig.get_paths()["purelib"]) / "cloth_sim_interfaces.pth"
     pth.write_text(f"{site}\n")
-    print(f"build_interfaces: msg/ generated into {site}")
+    print(f"build_interfaces: msg/ and srv/ generated into {site}")
     return 0
 
 

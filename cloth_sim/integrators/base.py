@@ -9,6 +9,8 @@ one place. A method is constructed for one model (``cls(model, **options)``) and
   forces only through ``forces`` (a :class:`~cloth_sim.forces.Forces`, rebuilt by the simulator
   when parameters change, so a method never holds stale forces);
 * ``pins_moved(state)`` — pinned particles were placed; keep them at rest;
+* ``kinematic_velocities(state, indices, dt)`` — pinned particles move with ``state.v`` over the
+  next step (grippers);
 * ``parameters_changed(changed)`` — a set of names from :data:`CHANGES` saying what changed, so a
   method refactorises only when it must;
 * ``stable_dt(analysis)`` — the largest stable ``dt`` by its :class:`Stability` class, from a
@@ -58,6 +60,11 @@ class Integrator:
     #: After a position correction ``Δx`` (strain limiting), the velocity moves by
     #: ``velocity_follow · Δx / dt``.
     velocity_follow: float = 1.0
+    #: where, between the step's start (0) and its end before any correction (1), the forces that
+    #: move the step are evaluated, as an average: 0 for explicit Euler, symplectic Euler and
+    #: Verlet, ½ for midpoint and RK4, 1 for the implicit methods (a gripper's wrench reads the
+    #: springs there, so it balances the momentum the step gave the cloth)
+    force_point: float = 0.0
     #: True for methods whose stability region misses the imaginary axis near 0 (explicit Euler,
     #: midpoint): an undamped oscillator grows at every dt.
     needs_damping: bool = False
@@ -79,6 +86,11 @@ class Integrator:
 
     def pins_moved(self, state) -> None:
         """Pinned particles were placed (no-op for methods without position history)."""
+
+    def kinematic_velocities(self, state, indices, dt: float) -> None:
+        """The pinned particles ``indices`` were given velocities ``state.v[indices]`` to move with
+        over the next step (a gripper's motion): a method whose position update is not
+        ``x += dt·v`` for a particle without acceleration makes its history agree (no-op here)."""
 
     def parameters_changed(self, changed: frozenset) -> None:
         """Some of :data:`CHANGES` changed (no-op by default)."""

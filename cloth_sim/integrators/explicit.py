@@ -85,14 +85,16 @@ class ExplicitRungeKutta(Integrator):
 
 @numba.njit(cache=True)
 def _verlet_update(x, v, prev, a, dt, pinned):
-    """``x' = 2x − x_prev + dt²·a``, ``v' = (3x' − 4x + x_prev)/(2dt)`` (0 on pins, exactly), then
+    """``x' = 2x − x_prev + dt²·a``, ``v' = (3x' − 4x + x_prev)/(2dt)`` (``(x' − x)/dt`` on pins:
+    exactly 0 for one at rest), then
     ``x_prev = x``, ``x = x'``: one pass, no temporaries, the same operations in the same order as
     the array expressions."""
     h2, inv = dt * dt, 2.0 * dt
     for p in range(x.shape[0]):
         for d in range(3):
             new = 2.0 * x[p, d] - prev[p, d] + h2 * a[p, d]
-            v[p, d] = 0.0 if pinned[p] else (3.0 * new - 4.0 * x[p, d] + prev[p, d]) / inv
+            # a pinned particle moves at constant velocity (0 for a pin, a gripper's otherwise)
+            v[p, d] = (new - x[p, d]) / dt if pinned[p] else (3.0 * new - 4.0 * x[p, d] + prev[p, d]) / inv
             prev[p, d] = x[p, d]
             x[p, d] = new
 
@@ -138,6 +140,7 @@ class Midpoint(ExplicitRungeKutta):
     is unstable on an undamped oscillator (weakly: |R(iωh)|² = 1 + (ωh)⁴/4)."""
 
     name = "midpoint"
+    force_point = 0.5
     order = 2
     needs_damping = True
     A = np.array([[0.0, 0.0], [0.5, 0.0]])
@@ -149,6 +152,7 @@ class RK4(ExplicitRungeKutta):
     """Classical fourth-order Runge–Kutta (review eq. 1.14); stable for ``ω·dt < 2√2`` undamped."""
 
     name = "rk4"
+    force_point = 0.5
     order = 4
     A = np.array([[0.0, 0.0, 0.0, 0.0],
                   [0.5, 0.0, 0.0, 0.0],
@@ -181,6 +185,10 @@ class Verlet(Integrator):
         """Pinned particles were placed: keep them at rest (history equal to the new position)."""
         pinned = self.model.pinned
         state.history["x_prev"][pinned] = state.x[pinned]
+
+    def kinematic_velocities(self, state, indices, dt):
+        """``x_prev = x − dt·v`` for those particles: with no acceleration ``x⁺ = x + dt·v``."""
+        state.history["x_prev"][indices] = state.x[indices] - dt * state.v[indices]
 
     def step(self, state, forces, dt):
         x, v, prev = state.x, state.v, state.history["x_prev"]

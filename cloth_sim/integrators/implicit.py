@@ -148,6 +148,7 @@ def _kang_sweeps(f, v, dv, springs, k, h, sweeps, inv_den, acc, new):
 # --------------------------------------------------------------------------- base
 class _LinearisedImplicitEuler(Integrator):
     order = 1
+    force_point = 1.0
     implicit = True
     stability = Stability.UNCONDITIONAL
     counter_names = ("solves",)
@@ -422,6 +423,8 @@ class Kang(_LinearisedImplicitEuler):
     """
 
     name = "kang"
+    # f(xₙ) plus a stiffness correction from neighbours' Δv lagged by a step: between the two
+    force_point = 0.5
     stability = Stability.ANALYSIS
     conserves_momentum = False
 

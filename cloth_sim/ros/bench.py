@@ -162,3 +162,72 @@ def print_param_load_table(size: int = 32, rate: float = 60.0) -> list[dict]:
                          "request_ms": 1e3 * request, "gap_ticks": gap})
             print(f"| {label} | {len(params)} | {changes} | {1e3 * request:.1f} | {gap:.2f} |", flush=True)
     return rows
+
+
+def print_lockstep_table(size: int = 32, calls: int = 300, chunks=(1, 10, 100)) -> list[dict]:
+    """Lockstep throughput: ``cloth_sim_node`` in its own process (N×N hanging scene, paused),
+    this process calling ``~/step`` with ``steps`` = each of ``chunks``, one call after the other;
+    prints steps per second and calls per second, beside the node's own stepping speed (the same
+    cloth stepped in this process without ROS)."""
+    import subprocess
+    import sys
+
+    from std_srvs.srv import SetBool
+
+    from ..scene import load_scene
+    from cloth_sim.srv import Step
+
+    domain = 50 + os.getpid() % 40
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    exe = os.path.join(sys.prefix, "bin", "cloth_sim_node")
+    node = subprocess.Popen([exe, "--ros-args", "-p", f"rows:={size}",
+                             "-p", f"cols:={size}", "-p", f"spacing:={1.0 / (size - 1)}"],
+                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    print(f"# lockstep: ~/step from another process to cloth_sim_node ({size}×{size} hanging scene, "
+          f"symplectic Euler, dt = 1 ms); {platform.machine()}, {os.cpu_count()} cores")
+    print("| steps per call | calls/s | steps/s | × stepping in-process without ROS |")
+    print("|---|---|---|---|")
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    rows = []
+    try:
+        client = rclpy.create_node("lockstep_bench", context=ctx)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(client)
+
+        def call(srv, name, req, timeout=60.0):
+            cli = clients.setdefault(name, client.create_client(srv, name))
+            end = time.monotonic() + timeout
+            while not cli.service_is_ready():
+                ex.spin_once(timeout_sec=0.01)
+                if time.monotonic() > end:
+                    raise RuntimeError(f"{name} not available")
+            fut = cli.call_async(req)
+            while not fut.done():
+                ex.spin_once(timeout_sec=0.001)
+            return fut.result()
+
+        clients = {}
+        call(SetBool, "/cloth_sim/pause", SetBool.Request(data=True))
+        sim = load_scene("hanging").build_simulator(rows=size, cols=size, spacing=1.0 / (size - 1))
+        sim.step(100)
+        t = time.perf_counter()
+        sim.step(1000)
+        local = 1000 / (time.perf_counter() - t)
+        for chunk in chunks:
+            call(Step, "/cloth_sim/step", Step.Request(steps=chunk))  # warm-up
+            t = time.perf_counter()
+            for _ in range(calls):
+                res = call(Step, "/cloth_sim/step", Step.Request(steps=chunk))
+                assert res.success, res.message
+            wall = time.perf_counter() - t
+            rows.append({"steps": chunk, "calls_per_s": calls / wall, "steps_per_s": calls * chunk / wall})
+            print(f"| {chunk} | {calls / wall:.0f} | {calls * chunk / wall:.0f} | "
+                  f"{calls * chunk / wall / local:.2f} |", flush=True)
+        client.destroy_node()
+        ex.shutdown()
+    finally:
+        rclpy.shutdown(context=ctx)
+        node.terminate()
+        node.wait(timeout=20)
+    return rows

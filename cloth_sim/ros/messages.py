@@ -102,14 +102,14 @@ def diagnostic_status(*, error: str | None, paused: bool, rtf: float, rtf_known:
                       rtf_warn: float, dt: float, stable_dt: float | None, warn_margin: float,
                       values: dict) -> DiagnosticStatus:
     """``cloth_sim: simulation``: ERROR after a blow-up, WARN when the real-time factor is below
-    ``rtf_warn`` (while running) or dt is above ``warn_margin`` of stable_dt, OK otherwise."""
+    ``rtf_warn`` (while running; 0 when the node runs as fast as it can) or dt is above ``warn_margin`` of stable_dt, OK otherwise."""
     level, message = DiagnosticStatus.OK, "running"
     if error:
         level, message = DiagnosticStatus.ERROR, f"simulation diverged and is paused: {error}"
     else:
         problems = []
         if not paused and rtf_known and rtf < rtf_warn:
-            problems.append(f"real-time factor {rtf:.2f} < 1")
+            problems.append(f"real-time factor {rtf:.2f} below the target")
         if stable_dt is not None and math.isfinite(stable_dt) and dt > warn_margin * stable_dt:
             problems.append(f"dt={dt:g} s is above {warn_margin:.0%} of stable_dt={stable_dt:.4g} s")
         if problems:
@@ -148,18 +148,19 @@ def _quaternion_between(a, b):
 PLANE_EXTENT = 5.0
 
 
-def collider_markers(colliders, frame_id: str, stamp) -> MarkerArray:
+def collider_markers(colliders, frame_id: str, stamp, grippers=None) -> MarkerArray:
     """One marker per collider (two more for a capsule's end caps), ``ns`` = the collider's name:
     a plane as a thin square ``2·PLANE_EXTENT`` wide, a sphere, a box, a capsule as a cylinder and
-    two spheres."""
+    two spheres; and a small orange sphere per gripper (``grippers``: name -> position),
+    ``ns`` = ``gripper/<name>``."""
     out = MarkerArray()
     grey = ColorRGBA(r=0.6, g=0.6, b=0.6, a=0.6)
 
-    def marker(c, idx, kind, position, q, scale):
+    def marker(ns, idx, kind, position, q, scale):
         m = Marker()
         m.header.stamp = stamp
         m.header.frame_id = frame_id
-        m.ns, m.id = c.name, idx
+        m.ns, m.id = ns, idx
         m.type, m.action = kind, Marker.ADD
         m.pose.position.x, m.pose.position.y, m.pose.position.z = (float(v) for v in position)
         m.pose.orientation.w, m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z = (
@@ -171,17 +172,32 @@ def collider_markers(colliders, frame_id: str, stamp) -> MarkerArray:
     for c in colliders:
         kind = type(c).__name__
         if kind == "Plane":
-            marker(c, 0, Marker.CUBE, c.position, _quaternion_between((0, 0, 1), c.normal),
+            marker(c.name, 0, Marker.CUBE, c.position, _quaternion_between((0, 0, 1), c.normal),
                    (2 * PLANE_EXTENT, 2 * PLANE_EXTENT, 1e-3))
         elif kind == "Sphere":
-            marker(c, 0, Marker.SPHERE, c.position, (1, 0, 0, 0), [2 * c.radius] * 3)
+            marker(c.name, 0, Marker.SPHERE, c.position, (1, 0, 0, 0), [2 * c.radius] * 3)
         elif kind == "Box":
-            marker(c, 0, Marker.CUBE, c.position, c.orientation, 2 * c.half_extents)
+            marker(c.name, 0, Marker.CUBE, c.position, c.orientation, 2 * c.half_extents)
         elif kind == "Capsule":
             axis = c.b - c.a
             length = float(np.linalg.norm(axis))
             q = _quaternion_between((0, 0, 1), axis) if length > 0 else (1, 0, 0, 0)
-            marker(c, 0, Marker.CYLINDER, c.position, q, (2 * c.radius, 2 * c.radius, length))
-            marker(c, 1, Marker.SPHERE, c.a, (1, 0, 0, 0), [2 * c.radius] * 3)
-            marker(c, 2, Marker.SPHERE, c.b, (1, 0, 0, 0), [2 * c.radius] * 3)
+            marker(c.name, 0, Marker.CYLINDER, c.position, q, (2 * c.radius, 2 * c.radius, length))
+            marker(c.name, 1, Marker.SPHERE, c.a, (1, 0, 0, 0), [2 * c.radius] * 3)
+            marker(c.name, 2, Marker.SPHERE, c.b, (1, 0, 0, 0), [2 * c.radius] * 3)
+    for name, position in (grippers or {}).items():
+        marker(f"gripper/{name}", 0, Marker.SPHERE, position, (1, 0, 0, 0), [0.03] * 3)
+        out.markers[-1].color = ColorRGBA(r=1.0, g=0.5, b=0.0, a=0.9)
     return out
+
+
+def wrench(force, torque, frame_id: str, stamp):
+    """``geometry_msgs/WrenchStamped``: what the cloth exerts on a gripper."""
+    from geometry_msgs.msg import WrenchStamped
+
+    m = WrenchStamped()
+    m.header.stamp = stamp
+    m.header.frame_id = frame_id
+    m.wrench.force.x, m.wrench.force.y, m.wrench.force.z = (float(v) for v in force)
+    m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z = (float(v) for v in torque)
+    return m

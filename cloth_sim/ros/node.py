@@ -19,6 +19,7 @@ loop to stop; the node is then destroyed and the process exits 0.
 from __future__ import annotations
 
 import collections
+import re
 import gc
 import math
 import sys
@@ -35,7 +36,9 @@ from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import SetBool, Trigger
-from geometry_msgs.msg import PoseStamped
+from builtin_interfaces.msg import Time as TimeMsg
+from geometry_msgs.msg import PoseStamped, WrenchStamped
+from rosgraph_msgs.msg import Clock
 from visualization_msgs.msg import Marker, MarkerArray
 
 from .. import integrators
@@ -62,6 +65,12 @@ RTF_WINDOW = 2.0
 #: drifted past the timer's next period, which rcl then skips (gaps of 3–4 periods in the fuzz).
 TICK_BUDGET = 0.8
 MAX_BACKLOG = 0.25
+#: with real_time_factor 0 a tick steps until its budget is spent, at most this many steps
+MAX_STEPS_PER_TICK = 1_000_000
+#: the most steps one ~/step request may ask for (the node answers nothing else meanwhile)
+MAX_STEP_REQUEST = 100_000
+#: a gripper's name: it names its topics
+GRIPPER_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,63}")
 #: a publish_rate is refused only when the measured cost exceeds the time available this many times
 RATE_REFUSAL_LOAD = 10.0
 #: recovery checkpoints: one every CHECKPOINT_EVERY s of simulated time, the last CHECKPOINTS kept
@@ -92,6 +101,12 @@ def _stats_type():
     from cloth_sim.msg import Stats  # generated from msg/Stats.msg by rosidl
 
     return Stats
+
+
+def _srv_types():
+    from cloth_sim.srv import Grasp, Release, Step  # generated from srv/ by rosidl
+
+    return Grasp, Release, Step
 
 
 def _material(model, cfg: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -179,10 +194,18 @@ class ClothSimNode(Node):
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.colliders_pub = self.create_publisher(MarkerArray, "~/colliders", 10)
         self._pose_subs = []
-        self._pose_targets = {}  # collider index -> (position, orientation) to reach this tick
+        #: (kind, key) -> (position, orientation) to reach over the next tick: kind "collider"
+        #: (key: its index) or "gripper" (key: its name)
+        self._pose_targets = {}
         self._subscribe_colliders()
+        self._grippers = {}  # name -> (its pose subscription, its wrench publisher)
+        self.clock_pub = None
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SetBool, "~/pause", self._on_pause)
+        Grasp, Release, Step = _srv_types()
+        self.create_service(Grasp, "~/grasp", self._on_grasp)
+        self.create_service(Release, "~/release", self._on_release)
+        self.create_service(Step, "~/step", self._on_step)
         self.add_pre_set_parameters_callback(self._pre_set)
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._post_set)
@@ -349,6 +372,7 @@ class ClothSimNode(Node):
         if scene is not None:
             self.sim = self._build_simulator(cand, model, scene)
             self.scene = scene
+            self._drop_grippers()
             self._subscribe_colliders()
             self._carry = 0.0
             self._history.clear()
@@ -359,6 +383,9 @@ class ClothSimNode(Node):
             if cand != self.cfg:
                 self._change_checkpoint = (self.sim.time, self.sim.save_state())
             self._apply_live(cand)
+        if cand["real_time_factor"] != self.cfg["real_time_factor"]:
+            self._carry = 0.0  # a backlog owed at the old pace is not owed at the new one
+            self._history.clear()
         self._rates_run.add(cand["publish_rate"])
         rate_changed = cand["publish_rate"] != self.cfg["publish_rate"]
         self.cfg = cand
@@ -419,7 +446,8 @@ class ClothSimNode(Node):
 
     # ------------------------------------------------------------------ services
     def _on_reset(self, request, response):
-        self.sim.reset()
+        self.sim.reset()  # releases every gripper
+        self._drop_grippers()
         self._checkpoints.clear()
         self._change_checkpoint = None
         self._carry = 0.0
@@ -451,42 +479,93 @@ class ClothSimNode(Node):
         sim = self.sim
         steps, step_max, step_wall = 0, 0.0, 0.0
         if not self.paused:
-            self._carry += period
-            n = int(math.floor(self._carry / sim.dt + 1e-9))
-            self._carry -= n * sim.dt
+            target = self.cfg["real_time_factor"]
             budget = max(0.25 * period, TICK_BUDGET * period - late)
-            moves = self._collider_moves() if self._pose_targets and n else None
+            if target > 0:
+                self._carry += period * target
+                n = int(math.floor(self._carry / sim.dt + 1e-9))
+                self._carry -= n * sim.dt
+            else:  # as fast as the CPU allows: steps until the tick's budget is spent
+                n, self._carry = MAX_STEPS_PER_TICK, 0.0
             try:
-                for k in range(n):
-                    if moves:  # a pose received since the last tick: reached over this tick's steps
-                        for i, (p0, q0, p1, q1) in moves.items():
-                            f = (k + 1) / n
-                            q = (1 - f) * q0 + f * q1
-                            sim.set_collider_pose(i, (1 - f) * p0 + f * p1, q / np.linalg.norm(q))
-                    s0 = time.perf_counter()
-                    sim.step()
-                    el = time.perf_counter() - s0
-                    step_wall += el
-                    step_max = max(step_max, el)
-                    steps += 1
-                    if s0 + el - t0 > budget and steps < n:  # the rest waits for the next ticks
-                        self._carry += (n - steps) * sim.dt
-                        break
-                if self._carry > MAX_BACKLOG:
-                    self.dropped += self._carry - MAX_BACKLOG
-                    self._carry = MAX_BACKLOG
+                steps, step_wall, step_max = self._advance(n, t0, budget)
+                if target > 0:
+                    self._carry += (n - steps) * sim.dt  # what did not fit waits for the next ticks
+                    if self._carry > MAX_BACKLOG * max(target, 1.0):
+                        self.dropped += self._carry - MAX_BACKLOG * max(target, 1.0)
+                        self._carry = MAX_BACKLOG * max(target, 1.0)
                 self._keep_checkpoint()
             except SimulationDiverged as e:
                 self._recover(e)
+        self._publish(t0, steps, step_wall, step_max)
+        if time.perf_counter() - t0 > period:
+            self.overruns += 1
+
+    def _advance(self, n: int, t0: float, budget: float) -> tuple[int, float, float]:
+        """Up to ``n`` steps, stopping once ``budget`` s have passed since ``t0``; poses received
+        for colliders and grippers are reached over them. Returns ``(steps, step wall, longest)``."""
+        sim = self.sim
+        moves = self._pose_moves() if self._pose_targets and n else None
+        steps, step_wall, step_max = 0, 0.0, 0.0
+        span = n if n < MAX_STEPS_PER_TICK else max(1, int(budget / max(self._step_cost(), 1e-6)))
+        for k in range(n):
+            if moves:  # a pose received since the last tick: reached over this tick's steps
+                f = min(1.0, (k + 1) / span)
+                for (kind, key), (p0, q0, p1, q1) in moves.items():
+                    q = (1 - f) * q0 + f * q1
+                    q /= np.linalg.norm(q)
+                    if kind == "collider":
+                        sim.set_collider_pose(key, (1 - f) * p0 + f * p1, q)
+                    elif key in sim.grippers:
+                        sim.set_gripper_pose(key, (1 - f) * p0 + f * p1, q)
+                if f >= 1.0:
+                    moves = None
+            s0 = time.perf_counter()
+            sim.step()
+            el = time.perf_counter() - s0
+            step_wall += el
+            step_max = max(step_max, el)
+            steps += 1
+            if s0 + el - t0 > budget:
+                break
+        if moves:  # the tick ended before the poses were reached: the rest next tick
+            for (kind, key), (_, _, p1, q1) in moves.items():
+                self._pose_targets.setdefault((kind, key), (p1, q1))
+        return steps, step_wall, step_max
+
+    def _step_cost(self) -> float:
+        costs = [w / s for s, w, _ in self._tick_costs if s]
+        return float(np.median(costs)) if costs else 1e-4
+
+    def _stamp(self):
+        """The messages' stamp: the simulated time with ``publish_clock``, else the node's clock."""
+        if self.cfg["publish_clock"]:
+            t = self.sim.time
+            sec = math.floor(t)
+            return TimeMsg(sec=int(sec), nanosec=min(int(round((t - sec) * 1e9)), 999_999_999))
+        return self.get_clock().now().to_msg()
+
+    def _publish(self, t0: float, steps: int, step_wall: float, step_max: float) -> None:
+        """Everything a tick (or ``~/step``) publishes: /clock, the cloud, mesh, markers, wrenches,
+        stats."""
+        sim = self.sim
         t1 = time.perf_counter()
-        stamp = self.get_clock().now().to_msg()
+        stamp = self._stamp()
         frame = self.cfg["frame_id"]
+        if self.cfg["publish_clock"]:
+            if self.clock_pub is None:
+                self.clock_pub = self.create_publisher(Clock, "/clock", 10)
+            self.clock_pub.publish(Clock(clock=stamp))
         if self.points_pub.get_subscription_count() > 0:
             self.points_pub.publish(self.point_cloud(stamp))
         if self.mesh_pub.get_subscription_count() > 0:
             self.mesh_pub.publish(messages.mesh_bytes(sim.positions, sim.model.triangles, frame, stamp))
-        if sim.colliders and self.colliders_pub.get_subscription_count() > 0:
-            self.colliders_pub.publish(messages.collider_markers(sim.colliders, frame, stamp))
+        if (sim.colliders or self._grippers) and self.colliders_pub.get_subscription_count() > 0:
+            grippers = {name: sim.gripper_pose(name)[0] for name in self._grippers}
+            self.colliders_pub.publish(messages.collider_markers(sim.colliders, frame, stamp, grippers))
+        for name, (_, pub) in self._grippers.items():
+            force, torque = sim.gripper_wrench(name)
+            pub.publish(messages.wrench(force, torque, frame, stamp))
         wall_now = time.monotonic()
         self._history.append((wall_now, sim.time))
         while self._history and wall_now - self._history[0][0] > RTF_WINDOW:
@@ -497,13 +576,79 @@ class ClothSimNode(Node):
             tick_wall=time.perf_counter() - t0, rtf=self.real_time_factor(), sim_time=sim.time,
             energy=sim.energy(), max_strain=sim.max_strain(), overruns=self.overruns,
             stable_dt=self._stable_dt, paused=self.paused))
-        tick_wall = time.perf_counter() - t0
-        if tick_wall > period:
-            self.overruns += 1
         self._tick_costs.append((steps, step_wall, time.perf_counter() - t1))
         if wall_now - self._last_status >= STATUS_PERIOD:
             self._last_status = wall_now
             self.get_logger().info(self.status_line())
+
+    # ------------------------------------------------------------------ manipulation
+    def _on_grasp(self, request, response):
+        p = request.point
+        name = request.gripper
+        response.success, response.count = False, 0
+        if not GRIPPER_NAME.fullmatch(name or ""):
+            response.message = (f"gripper = {name!r}: expected a name of ASCII letters, digits and _ "
+                                f"(not starting with a digit, at most 64); it names its topics")
+            return response
+        try:
+            idx = self.sim.grasp(name, (p.x, p.y, p.z), request.radius)
+        except ValueError as e:
+            response.message = str(e)
+            return response
+        pose_sub = self.create_subscription(
+            PoseStamped, f"~/grippers/{name}/pose",
+            lambda msg, name=name: self._on_pose(("gripper", name), f"~/grippers/{name}/pose", msg), 10)
+        wrench_pub = self.create_publisher(WrenchStamped, f"~/grippers/{name}/wrench", 10)
+        self._grippers[name] = (pose_sub, wrench_pub)
+        response.success, response.count = True, len(idx)
+        response.message = f"gripper {name!r} holds {len(idx)} particles"
+        return response
+
+    def _on_release(self, request, response):
+        name = request.gripper
+        try:
+            self.sim.release(name)
+        except ValueError as e:
+            response.success, response.message = False, str(e)
+            return response
+        sub, pub = self._grippers.pop(name)
+        self.destroy_subscription(sub)
+        self.destroy_publisher(pub)
+        self._pose_targets.pop(("gripper", name), None)
+        response.success, response.message = True, f"gripper {name!r} released"
+        return response
+
+    def _drop_grippers(self) -> None:
+        """A rebuild or a reset: the grippers' particles are gone or back in place; so are they."""
+        for sub, pub in self._grippers.values():
+            self.destroy_subscription(sub)
+            self.destroy_publisher(pub)
+        self._grippers = {}
+        self._pose_targets = {k: v for k, v in self._pose_targets.items() if k[0] != "gripper"}
+
+    def _on_step(self, request, response):
+        response.sim_time = self.sim.time
+        if not self.paused:
+            response.success = False
+            response.message = "~/step runs only while paused: call ~/pause with data: true first"
+            return response
+        if request.steps > MAX_STEP_REQUEST:
+            response.success = False
+            response.message = (f"steps = {request.steps} is not accepted: expected an integer in "
+                                f"[0, {MAX_STEP_REQUEST}] (the node answers nothing else while it steps)")
+            return response
+        t0 = time.perf_counter()
+        try:
+            steps, wall, longest = self._advance(int(request.steps), t0, math.inf)
+        except SimulationDiverged as e:
+            self._recover(e)
+            response.success, response.message = False, self.error or str(e)
+            response.sim_time = self.sim.time
+            return response
+        self._publish(t0, steps, wall, longest)
+        response.success, response.message = True, f"{steps} steps"
+        response.sim_time = self.sim.time
+        return response
 
     # ------------------------------------------------------------------ colliders
     def _subscribe_colliders(self) -> None:
@@ -511,15 +656,18 @@ class ClothSimNode(Node):
         scene change)."""
         for sub in self._pose_subs:
             self.destroy_subscription(sub)
-        self._pose_subs, self._pose_targets = [], {}
+        self._pose_subs = []
+        self._pose_targets = {k: v for k, v in self._pose_targets.items() if k[0] != "collider"}
         for i, c in enumerate(self.sim.colliders):
+            topic = f"~/colliders/{c.name}/pose"
             self._pose_subs.append(self.create_subscription(
-                PoseStamped, f"~/colliders/{c.name}/pose",
-                lambda msg, i=i, name=c.name: self._on_collider_pose(i, name, msg), 10))
+                PoseStamped, topic, lambda msg, i=i, topic=topic: self._on_pose(("collider", i), topic, msg),
+                10))
 
-    def _on_collider_pose(self, i: int, name: str, msg) -> None:
-        """A new pose for collider ``i``: checked here (a bad one is logged, naming the field, and
-        ignored), reached over the next tick's steps (its velocity is the pose change over them)."""
+    def _on_pose(self, key, topic: str, msg) -> None:
+        """A new pose for a collider or a gripper: checked here (a bad one is logged, naming the
+        field, and ignored), reached over the next tick's steps (its velocity is the pose change
+        over them)."""
         p, q = msg.pose.position, msg.pose.orientation
         position = np.array([p.x, p.y, p.z])
         orientation = np.array([q.w, q.x, q.y, q.z])
@@ -534,22 +682,25 @@ class ClothSimNode(Node):
             problem = (f"pose.orientation = {orientation.tolist()} (w, x, y, z): expected a finite, "
                        f"nonzero quaternion")
         if problem:
-            self.get_logger().warning(f"~/colliders/{name}/pose ignored: {problem}",
-                                      throttle_duration_sec=1.0)
+            self.get_logger().warning(f"{topic} ignored: {problem}", throttle_duration_sec=1.0)
             return
-        if i < len(self.sim.colliders) and self.sim.colliders[i].name == name:
-            self._pose_targets[i] = (position, orientation / np.linalg.norm(orientation))
+        self._pose_targets[key] = (position, orientation / np.linalg.norm(orientation))
 
-    def _collider_moves(self) -> dict:
-        """``{index: (p0, q0, p1, q1)}``: from where each moved collider is to its target (the
-        quaternion's sign chosen for the shorter way)."""
-        moves = {}
-        for i, (p1, q1) in self._pose_targets.items():
-            c = self.sim.colliders[i]
-            p0, q0 = c.position.copy(), c.orientation.copy()
+    def _pose_moves(self) -> dict:
+        """``{key: (p0, q0, p1, q1)}``: from where each moved collider or gripper is to its target
+        (the quaternion's sign chosen for the shorter way)."""
+        moves, sim = {}, self.sim
+        for (kind, key), (p1, q1) in self._pose_targets.items():
+            if kind == "collider":
+                c = sim.colliders[key]
+                p0, q0 = c.position.copy(), c.orientation.copy()
+            elif key in sim.grippers:
+                p0, q0 = sim.gripper_pose(key)
+            else:
+                continue
             if float(q0 @ q1) < 0:
                 q1 = -q1
-            moves[i] = (p0, q0, p1, q1)
+            moves[(kind, key)] = (p0, q0, p1, q1)
         self._pose_targets = {}
         return moves
 
@@ -604,10 +755,12 @@ class ClothSimNode(Node):
             "overruns": self.overruns, "paused": str(self.paused).lower(),
             "publish_rate": f"{self.cfg['publish_rate']:g}", "scene": self.scene.name,
             "dropped_sim_time": f"{self.dropped:.4f}",
+            "target_real_time_factor": f"{self.cfg['real_time_factor']:g}",
+            "grippers": ", ".join(self._grippers) or "none",
         }
         return messages.diagnostic_status(
             error=self.error, paused=self.paused, rtf=rtf, rtf_known=len(self._history) >= 2,
-            rtf_warn=RTF_WARN, dt=sim.dt, stable_dt=self._stable_dt, warn_margin=WARN_MARGIN,
+            rtf_warn=RTF_WARN * self.cfg["real_time_factor"], dt=sim.dt, stable_dt=self._stable_dt, warn_margin=WARN_MARGIN,
             values=values)
 
     def _publish_diagnostics(self) -> None:

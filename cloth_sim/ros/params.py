@@ -64,6 +64,7 @@ def scene_values(scene: Scene) -> dict:
 
 
 def defaults(scene: Scene) -> dict:
-    values = {"scene": scene.name, "allow_unstable": False, "publish_rate": 60.0, "frame_id": "cloth"}
+    values = {"scene": scene.name, "allow_unstable": False, "publish_rate": 60.0, "frame_id": "cloth",
+              "publish_clock": False, "real_time_factor": 1.0}
     values.update(scene_values(scene))
     return values
