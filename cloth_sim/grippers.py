@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .colliders import _unit_quaternion, _vector, quaternion_matrix
+from .colliders import _positive, _unit_quaternion, _vector, quaternion_matrix
 
 
 class Gripper:
@@ -57,11 +57,4 @@ def check_name(name) -> str:
 
 
 def check_grasp(point, radius) -> tuple[np.ndarray, float]:
-    p = _vector("point", point)
-    try:
-        r = float(radius)
-    except (TypeError, ValueError):
-        raise ValueError(f"radius must be a finite number > 0, got {radius!r}") from None
-    if not (np.isfinite(r) and r > 0):
-        raise ValueError(f"radius must be a finite number > 0, got {radius!r}")
-    return p, r
+    return _vector("point", point), _positive("radius", radius)

@@ -17,6 +17,8 @@ A scene is a YAML mapping (see ``config/scenes/*.yaml``)::
     dt: 0.001
     thickness: 0.005               # kept from colliders (and from itself with self_collision)
     self_collision: false
+    grippers:                      # holding the cloth from the start (moved by ~/grippers/<name>/pose)
+      - {name: left, point: [0, 0, 0], radius: 0.02}
     colliders:                     # each with an optional name and friction (Coulomb's μ, default 0)
       - {type: plane, normal: [0, 0, 1], offset: 0.0, friction: 0.5}
       - {type: sphere, center: [0.5, 0.5, -0.3], radius: 0.2}
@@ -31,6 +33,7 @@ the field and what was expected.
 from __future__ import annotations
 
 import os
+import re
 import reprlib
 import sys
 from dataclasses import dataclass, field
@@ -78,7 +81,21 @@ class Scene:
     self_collision: bool = False
     #: validated collider specifications: (type, keyword arguments); see :meth:`make_colliders`
     colliders: list = field(default_factory=list)
+    #: grippers holding the cloth from the start: (name, point, radius)
+    grippers: list = field(default_factory=list)
     source: str = "<dict>"
+
+    def apply_grippers(self, sim) -> None:
+        """Grasp with the scene's grippers; one whose radius reaches no particle (a coarser grid
+        than the scene's) holds the particle nearest its point."""
+        for name, point, radius in self.grippers:
+            try:
+                sim.grasp(name, point, radius)
+            except ValueError:
+                free = ~sim.model.pinned
+                d = np.linalg.norm(sim.positions - np.asarray(point), axis=1)
+                d[~free] = np.inf
+                sim.grasp(name, point, float(d.min()) * (1 + 1e-9) + 1e-12)
 
     def make_colliders(self) -> list:
         """Fresh collider objects (each simulator moves its own)."""
@@ -130,7 +147,9 @@ class Scene:
         for key in self.SIMULATOR_OPTIONS:
             if key in override:
                 sim_kw[key] = override.pop(key)
-        return Simulator(self.build_model(**override), **sim_kw)
+        sim = Simulator(self.build_model(**override), **sim_kw)
+        self.apply_grippers(sim)
+        return sim
 
 
 # --------------------------------------------------------------------------- loading
@@ -251,7 +270,7 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
         v.fail("(top level)", "a mapping of scene fields", data)
     known = {"name", "grid", "model", "particle_mass", "stiffness", "damping", "pinned",
              "pinned_edges", "gravity", "wind", "drag", "strain_limit", "integrator", "dt",
-             "thickness", "self_collision", "colliders"}
+             "thickness", "self_collision", "colliders", "grippers"}
     v.known("", data, known)
     grid = data.get("grid")
     if not isinstance(grid, dict):
@@ -309,7 +328,32 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
     for i, n in enumerate(names):
         if n in names[:i]:
             v.fail(f"colliders[{i}].name", "unique (it names the collider's pose topic)", n)
+    grips = data.get("grippers", []) or []
+    if not isinstance(grips, list) or len(grips) > MAX_GRIPPERS:
+        v.fail("grippers", f"a list of at most {MAX_GRIPPERS} {{name, point, radius}} mappings", grips)
+    for i, g in enumerate(grips):
+        where = f"grippers[{i}]"
+        if not isinstance(g, dict):
+            v.fail(where, "a mapping with name, point and radius", g)
+        v.known(f"{where}.", g, {"name", "point", "radius"})
+        name = g.get("name")
+        if not (isinstance(name, str) and GRIPPER_NAME.fullmatch(name)):
+            v.fail(f"{where}.name", "a name of ASCII letters, digits and _ (at most 64, not starting "
+                   "with a digit)", name)
+        if name in [n for n, _, _ in s.grippers]:
+            v.fail(f"{where}.name", "unique (it names the gripper's topics)", name)
+        point = v.vector(f"{where}.point", g.get("point"), 3)
+        radius = v.number(f"{where}.radius", g.get("radius"), lo=0.0)
+        if radius <= 0:
+            v.fail(f"{where}.radius", "a finite number > 0", radius)
+        s.grippers.append((name, point, radius))
     return s
+
+
+#: grippers a scene may declare
+MAX_GRIPPERS = 16
+#: a gripper's name: it names its topics
+GRIPPER_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,63}")
 
 
 #: colliders a scene may have (each costs a distance test per particle per step)

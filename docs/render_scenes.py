@@ -1,7 +1,7 @@
 """Render the contact scenes (table, drape, fold) after a few seconds of simulation into
 docs/img/<scene>.png, as shown in the README.
 
-    .venv/bin/python docs/render_scenes.py [--seconds 3] [--out docs/img]
+    .venv/bin/python docs/render_scenes.py [--seconds 3] [--out docs/img] [scene[:seconds] ...]
 """
 
 from __future__ import annotations
@@ -72,10 +72,12 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=3.0)
     ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parent / "img")
-    ap.add_argument("scenes", nargs="*", default=["table", "drape", "fold"])
+    ap.add_argument("scenes", nargs="*", default=["table", "drape", "fold:0.8"],
+                    help="scene names, each optionally :seconds (default --seconds)")
     args = ap.parse_args(argv)
-    for name in args.scenes:
-        print(render(name, args.seconds, args.out))
+    for item in args.scenes:
+        name, _, seconds = item.partition(":")
+        print(render(name, float(seconds) if seconds else args.seconds, args.out))
     return 0
 
 

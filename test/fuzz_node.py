@@ -8,7 +8,7 @@ names, dt near the method's limit, scenes good and bad — sent through ``~/set_
 ``~/set_parameters_atomically``. Every answer is checked against the schema
 (:data:`cloth_sim.parameters.SCHEMA`) and against what then runs; the figures printed at the end:
 crashes, hangs (a ~/stats interval over 2 ticks beyond the time the node spent in the request's
-parameter callbacks and beyond the longest single step, outside a rebuild), slow answers (over 0.1 s in those callbacks, outside a
+parameter callbacks and beyond the longest single step or one-step tick, outside a rebuild), slow answers (over 0.1 s in those callbacks, outside a
 rebuild), invalid values accepted, valid
 values refused (a refusal by the stability limit counts as right when an independent simulator
 agrees that dt is above it), refusals not naming a parameter of the set, non-finite points
@@ -344,9 +344,11 @@ def run(sets: int, seed: int, domain: int, quiet: bool = False) -> dict:
                 stamps = [arrived[id(s)] for s in stats[n_stats - 1:]]
                 period = 1.0 / min(node.cfg["publish_rate"], before_cfg["publish_rate"])
                 window = stats[n_stats - 1:]
-                # a tick takes at least one step: a step longer than the period stretches the
-                # interval by its own length (reported as overruns and a real-time factor below 1)
-                longest_step = max(s.step_time_max for s in window)
+                # a tick takes at least one step and publishes: a step longer than the period, or
+                # a one-step tick longer than it, stretches the interval by its own length (reported
+                # as overruns and a real-time factor below 1)
+                longest_step = max([s.step_time_max for s in window]
+                                   + [s.tick_wall_time for s in window if s.steps <= 1])
                 gap = (max(b - a for a, b in zip(stamps, stamps[1:])) - busy[0]
                        - max(0.0, longest_step - period)) / period
                 if gap > HANG_TICKS:

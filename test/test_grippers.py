@@ -128,3 +128,24 @@ def test_a_grasp_with_no_grippers_costs_nothing_and_release_restores_the_model()
     assert sim.model is not model and sim.model.pinned.sum() == 1
     sim.release("g")
     assert sim.model is model
+
+
+def test_a_scene_declares_grippers_and_checks_them():
+    from cloth_sim.scene import SceneError, scene_from_dict
+
+    grid = {"rows": 6, "cols": 6, "spacing": 0.1}
+    scene = scene_from_dict({"grid": grid, "grippers": [{"name": "left", "point": [0, 0, 0], "radius": 0.01},
+                                                        {"name": "right", "point": [0.5, 0, 0], "radius": 0.01}]})
+    sim = scene.build_simulator()
+    assert {k: v.tolist() for k, v in sim.grippers.items()} == {"left": [0], "right": [5]}
+    # a coarser grid than the radius allows: the nearest particle is held
+    sim = scene.build_simulator(rows=3, cols=3, spacing=0.2)
+    assert {k: v.tolist() for k, v in sim.grippers.items()} == {"left": [0], "right": [2]}
+    for bad, field in [({"name": "a/b", "point": [0, 0, 0], "radius": 0.1}, "grippers[0].name"),
+                       ({"name": "a", "point": [0, 0], "radius": 0.1}, "grippers[0].point"),
+                       ({"name": "a", "point": [0, 0, 0], "radius": 0.0}, "grippers[0].radius"),
+                       ({"name": "a", "point": [0, 0, 0], "radius": 0.1, "grip": 1}, "grippers[0].grip")]:
+        with pytest.raises(SceneError, match=field.replace("[", r"\[").replace("]", r"\]")):
+            scene_from_dict({"grid": grid, "grippers": [bad]}, source="s.yaml")
+    with pytest.raises(SceneError, match="unique"):
+        scene_from_dict({"grid": grid, "grippers": [{"name": "a", "point": [0, 0, 0], "radius": 0.1}] * 2})

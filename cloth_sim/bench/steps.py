@@ -148,6 +148,26 @@ def print_blowup_table(size: int = 32) -> list[dict]:
     return rows
 
 
+def _hanging(n: int, **kw):
+    """The hanging scene at N×N: the same 1 m, 10.24 kg cloth (spacing 1/(N−1), mass 10.24/N²)."""
+    return load_scene("hanging").build_simulator(rows=n, cols=n, spacing=1 / (n - 1),
+                                                 particle_mass=10.24 / n ** 2, **kw)
+
+
+def _ms_per_step(sim, seconds: float, every_10=None) -> float:
+    """ms per step over ``seconds`` of simulated time, in bursts of 10 (``every_10`` runs after
+    each, outside the timing)."""
+    wall, steps = 0.0, 0
+    while sim.time < seconds - 1e-9:
+        t = time.perf_counter()
+        sim.step(10)
+        wall += time.perf_counter() - t
+        steps += 10
+        if every_10:
+            every_10()
+    return 1e3 * wall / steps
+
+
 def print_strain_limit_table(sizes=(32, 64), seconds: float = 3.0, tau: float = 0.1) -> list[dict]:
     """The hanging scene at N×N (the 1 m, 10.24 kg cloth: spacing 1/(N−1), mass 10.24/N²) over
     ``seconds``: worst structural/shear strain (sampled every 10 steps) and ms/step without the strain
@@ -163,16 +183,11 @@ def print_strain_limit_table(sizes=(32, 64), seconds: float = 3.0, tau: float = 
         for label, kw in (("off", dict(strain_limit=None)),
                           ("provot", dict(strain_limit=tau, strain_limit_long_range=False)),
                           ("provot + long-range attachments", dict(strain_limit=tau))):
-            sim = load_scene("hanging").build_simulator(rows=n, cols=n, spacing=1 / (n - 1),
-                                                        particle_mass=10.24 / n ** 2, **kw)
-            worst, wall, steps = 0.0, 0.0, 0
-            while sim.time < seconds - 1e-9:
-                t = time.perf_counter()
-                sim.step(10)
-                wall += time.perf_counter() - t
-                steps += 10
-                worst = max(worst, float(sim.strains(limited_only=True).max()))
-            ms = 1e3 * wall / steps
+            sim = _hanging(n, **kw)
+            samples = []
+            ms = _ms_per_step(sim, seconds,
+                              lambda: samples.append(float(sim.strains(limited_only=True).max())))
+            worst = max(samples)
             base = base or ms
             rows.append({"N": n, "method": label, "worst": worst, "ms": ms})
             print(f"| {n} | {label} | {worst:.4f} | {ms:.3f} | {ms / base:.2f} |", flush=True)
@@ -198,16 +213,8 @@ def print_contacts_table(sizes=(32, 64), seconds: float = 1.5) -> list[dict]:
                           ("plane + sphere + self-collision", dict(colliders=True, self_collision=True))):
             cols = [Plane(normal=(0, 0, 1), offset=-0.7, friction=0.5),
                     Sphere(center=(0.5, 0.25, -0.5), radius=0.2, friction=0.3)] if kw.get("colliders") else []
-            sim = load_scene("hanging").build_simulator(
-                rows=n, cols=n, spacing=1 / (n - 1), particle_mass=10.24 / n ** 2, colliders=cols,
-                self_collision=kw.get("self_collision", False))
-            wall, steps = 0.0, 0
-            while sim.time < seconds - 1e-9:
-                t = time.perf_counter()
-                sim.step(10)
-                wall += time.perf_counter() - t
-                steps += 10
-            ms = 1e3 * wall / steps
+            sim = _hanging(n, colliders=cols, self_collision=kw.get("self_collision", False))
+            ms = _ms_per_step(sim, seconds)
             base = base or ms
             touching = sim._contacts.last_touching if cols else 0
             pairs = sim._self_collision.last_pairs if sim.self_collision else 0

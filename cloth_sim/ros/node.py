@@ -19,7 +19,6 @@ loop to stop; the node is then destroyed and the process exits 0.
 from __future__ import annotations
 
 import collections
-import re
 import gc
 import math
 import sys
@@ -45,7 +44,7 @@ from .. import integrators
 from .. import stability as stab
 from ..model import GRID_FAMILIES
 from ..parameters import REBUILD, SCHEMA
-from ..scene import SceneError, load_scene
+from ..scene import GRIPPER_NAME, SceneError, load_scene
 from ..self_collision import check_thickness
 from ..simulator import SimulationDiverged, Simulator, compile_kernels
 from . import messages
@@ -69,8 +68,6 @@ MAX_BACKLOG = 0.25
 MAX_STEPS_PER_TICK = 1_000_000
 #: the most steps one ~/step request may ask for (the node answers nothing else meanwhile)
 MAX_STEP_REQUEST = 100_000
-#: a gripper's name: it names its topics
-GRIPPER_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,63}")
 #: a publish_rate is refused only when the measured cost exceeds the time available this many times
 RATE_REFUSAL_LOAD = 10.0
 #: recovery checkpoints: one every CHECKPOINT_EVERY s of simulated time, the last CHECKPOINTS kept
@@ -199,6 +196,7 @@ class ClothSimNode(Node):
         self._pose_targets = {}
         self._subscribe_colliders()
         self._grippers = {}  # name -> (its pose subscription, its wrench publisher)
+        self._adopt_grippers()
         self.clock_pub = None
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SetBool, "~/pause", self._on_pause)
@@ -246,6 +244,7 @@ class ClothSimNode(Node):
                         wind=_wind(cfg), drag=cfg["drag"], strain_limit=cfg["strain_limit"] or None,
                         colliders=scene.make_colliders(), thickness=cfg["thickness"],
                         self_collision=cfg["self_collision"])
+        scene.apply_grippers(sim)
         k, c = _material(model, cfg)
         if not (np.array_equal(model.stiffness, k) and np.array_equal(model.damping, c)):
             for f in GRID_FAMILIES:  # a kept model built with other values: set them
@@ -351,7 +350,14 @@ class ClothSimNode(Node):
             try:
                 check_thickness(model, cand["thickness"])
             except ValueError as e:
-                return SetParametersResult(successful=False, reason=str(e))
+                changed = [p.name for p in parameters if p.name in SCHEMA
+                           and p.name not in ("thickness", "self_collision")
+                           and cand[p.name] != self.cfg[p.name]]
+                reason = str(e)
+                if changed:  # a finer cloth (rows, spacing, a scene) made the thickness too much
+                    reason = (f"{', '.join(f'{n} = {cand[n]!r}' for n in changed)}: with "
+                              f"{'this value' if len(changed) == 1 else 'these values'}, {reason}")
+                return SetParametersResult(successful=False, reason=reason)
         reason, limit = self._check_stability(cand, model)
         if reason:
             changed = [p.name for p in parameters if p.name in SCHEMA and p.name != "dt"
@@ -373,6 +379,7 @@ class ClothSimNode(Node):
             self.sim = self._build_simulator(cand, model, scene)
             self.scene = scene
             self._drop_grippers()
+            self._adopt_grippers()
             self._subscribe_colliders()
             self._carry = 0.0
             self._history.clear()
@@ -448,6 +455,8 @@ class ClothSimNode(Node):
     def _on_reset(self, request, response):
         self.sim.reset()  # releases every gripper
         self._drop_grippers()
+        self.scene.apply_grippers(self.sim)  # the scene's own grippers hold again
+        self._adopt_grippers()
         self._checkpoints.clear()
         self._change_checkpoint = None
         self._carry = 0.0
@@ -586,7 +595,7 @@ class ClothSimNode(Node):
         p = request.point
         name = request.gripper
         response.success, response.count = False, 0
-        if not GRIPPER_NAME.fullmatch(name or ""):
+        if not GRIPPER_NAME.fullmatch(name or ""):  # the same rule as a scene's gripper names
             response.message = (f"gripper = {name!r}: expected a name of ASCII letters, digits and _ "
                                 f"(not starting with a digit, at most 64); it names its topics")
             return response
@@ -595,14 +604,23 @@ class ClothSimNode(Node):
         except ValueError as e:
             response.message = str(e)
             return response
+        self._gripper_topics(name)
+        response.success, response.count = True, len(idx)
+        response.message = f"gripper {name!r} holds {len(idx)} particles"
+        return response
+
+    def _gripper_topics(self, name: str) -> None:
         pose_sub = self.create_subscription(
             PoseStamped, f"~/grippers/{name}/pose",
             lambda msg, name=name: self._on_pose(("gripper", name), f"~/grippers/{name}/pose", msg), 10)
         wrench_pub = self.create_publisher(WrenchStamped, f"~/grippers/{name}/wrench", 10)
         self._grippers[name] = (pose_sub, wrench_pub)
-        response.success, response.count = True, len(idx)
-        response.message = f"gripper {name!r} holds {len(idx)} particles"
-        return response
+
+    def _adopt_grippers(self) -> None:
+        """Topics for the grippers the scene declares (the simulator holds with them already)."""
+        for name in self.sim.grippers:
+            if name not in self._grippers:
+                self._gripper_topics(name)
 
     def _on_release(self, request, response):
         name = request.gripper
