@@ -68,11 +68,7 @@ def _unit_quaternion(q) -> np.ndarray:
 def quaternion_matrix(q) -> np.ndarray:
     """Rotation matrix of a unit quaternion ``(w, x, y, z)`` (normalised here; a zero or non-finite
     quaternion is refused)."""
-    q = _vector("orientation", q, 4)
-    n = float(np.linalg.norm(q))
-    if not n > 1e-12:
-        raise ValueError(f"orientation must be a nonzero quaternion (w, x, y, z), got {q.tolist()}")
-    w, x, y, z = q / n
+    w, x, y, z = _unit_quaternion(q)
     return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
                      [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
                      [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
@@ -84,11 +80,8 @@ class Collider:
 
     kind = -1
 
-    def __init__(self, position, rotation, geometry, friction, name, orientation=(1.0, 0.0, 0.0, 0.0)):
-        self.position = np.array(position, dtype=np.float64)
-        self.rotation = np.array(rotation, dtype=np.float64)
-        #: the pose's unit quaternion (w, x, y, z); ``rotation`` is its matrix
-        self.orientation = _unit_quaternion(orientation)
+    def __init__(self, position, geometry, friction, name, orientation=(1.0, 0.0, 0.0, 0.0)):
+        self.set_pose(position, orientation)
         self.geometry = np.array(geometry, dtype=np.float64)
         self.friction = _friction(friction)
         self.name = str(name) if name is not None else type(self).__name__.lower()
@@ -97,9 +90,9 @@ class Collider:
         """Place the collider (see the module docstring for what ``position`` and ``orientation``
         mean for each shape)."""
         p = _vector("position", position)
-        r = quaternion_matrix(orientation)
-        self.position, self.rotation = p, r
-        self.orientation = _unit_quaternion(orientation)
+        q = _unit_quaternion(orientation)
+        #: the pose: ``position``, the unit quaternion ``orientation`` (w, x, y, z) and its matrix
+        self.position, self.orientation, self.rotation = p, q, quaternion_matrix(q)
 
     def signed_distance(self, points) -> np.ndarray:
         """Signed distance of ``(k, 3)`` points from the surface (negative inside)."""
@@ -130,7 +123,7 @@ class Plane(Collider):
             raise ValueError(f"offset must be a finite number, got {offset!r}") from None
         if not math.isfinite(offset):
             raise ValueError(f"offset must be a finite number, got {offset!r}")
-        super().__init__(offset * n, np.eye(3), [n[0], n[1], n[2], 0.0], friction, name)
+        super().__init__(offset * n, [n[0], n[1], n[2], 0.0], friction, name)
 
     @property
     def normal(self) -> np.ndarray:
@@ -147,7 +140,7 @@ class Sphere(Collider):
     kind = SPHERE
 
     def __init__(self, center=(0.0, 0.0, 0.0), radius: float = 0.1, friction: float = 0.0, name=None):
-        super().__init__(_vector("center", center), np.eye(3), [_positive("radius", radius), 0, 0, 0],
+        super().__init__(_vector("center", center), [_positive("radius", radius), 0, 0, 0],
                          friction, name)
 
     @property
@@ -169,8 +162,8 @@ class Box(Collider):
         h = _vector("half_extents", half_extents)
         if not np.all(h > 0):
             raise ValueError(f"half_extents must be 3 finite numbers > 0, got {h.tolist()}")
-        super().__init__(_vector("center", center), quaternion_matrix(orientation),
-                         [h[0], h[1], h[2], 0.0], friction, name, orientation)
+        super().__init__(_vector("center", center), [h[0], h[1], h[2], 0.0], friction, name,
+                         orientation)
 
     @property
     def center(self) -> np.ndarray:
@@ -190,7 +183,7 @@ class Capsule(Collider):
                  friction: float = 0.0, name=None):
         a, b = _vector("a", a), _vector("b", b)
         half = 0.5 * (b - a)
-        super().__init__(0.5 * (a + b), np.eye(3), [half[0], half[1], half[2],
+        super().__init__(0.5 * (a + b), [half[0], half[1], half[2],
                                                      _positive("radius", radius)], friction, name)
 
     @property

@@ -35,6 +35,8 @@ class Gripper:
         self.rotation = np.eye(3)
         #: ``(position, orientation, rotation)`` to reach over the next step, or None
         self.target = None
+        #: the held particles' places at ``target`` (set when the step towards it begins)
+        self.goal = None
         #: whether the held particles have a velocity (the gripper moved over the last step)
         self.moving = False
 

@@ -14,10 +14,10 @@ containing the particle. Each step:
    spacing); hashing the particles and querying per triangle, 3.4 ms and 53 ms. A bounding-volume
    hierarchy would be refitted and traversed every step for the same answer; for cloth of
    near-uniform triangles the hash is the usual choice.
-   A triangle is adjacent to a particle, and never paired with it, when one of its corners is the
-   particle or shares a triangle edge with it: in a flat cloth those lie within one triangle of
-   the particle, closer than any thickness worth having, and a fold tighter than one triangle is
-   not something the bend springs let a cloth make.
+   A particle is paired with every triangle it is not a corner of (Bridson et al.): excluding the
+   triangles of its neighbours too was tried and lets the ``fold`` scene cross itself where a crease
+   is one triangle wide. Neighbours in a flat or compressed cloth are never pushed out of its plane
+   (step 2), and the no-crossing bound (step 3) slows them only when they move by most of an edge.
 2. **Proximity** (Bridson, Fedkiw & Anderson 2002): a pair closer than ``thickness`` at the end of
    the step, the particle in front of the face (its nearest point inside the triangle, not on an
    edge: so neighbours in a flat or compressed cloth are never pushed out of its plane), is pushed
@@ -115,11 +115,10 @@ CELL = 1.0
 
 
 @numba.njit(cache=True)
-def candidate_pairs(x0, tris, radius, ring_ptr, ring):
+def candidate_pairs(x0, tris, radius):
     """``(pairs, distances)``: every (particle, triangle) pair whose start positions lie within
-    ``radius``, and that distance; the triangle not
-    adjacent to the particle (none of its corners is the particle or one of its neighbours
-    ``ring[ring_ptr[p]:ring_ptr[p + 1]]``), in a fixed order (by triangle, then by the hash's).
+    ``radius``, and that distance; the particle not a corner of the triangle; in a fixed order (by
+    triangle, then by the hash's).
 
     The particles go into a spatial hash (one cell each, a counting sort); each triangle visits the
     cells its box, grown by ``radius``, overlaps."""
@@ -147,18 +146,14 @@ def candidate_pairs(x0, tris, radius, ring_ptr, ring):
     for p in range(n):
         members[fill[cell_of[p]]] = p
         fill[cell_of[p]] += 1
-    seen = np.full(n, -1, np.int64)
-    near = np.full(n, -1, np.int64)  # near[q] == i: q is a corner of triangle i or a neighbour of one
+    seen = np.full(n, -1, np.int64)  # seen[p] == i: p was looked at for triangle i
     cap = 4 * n + 16
     pairs = np.empty((cap, 2), np.int64)
     dist = np.empty(cap)
     m = 0
     for i in range(t):
         a, b, c = tris[i, 0], tris[i, 1], tris[i, 2]
-        for v in (a, b, c):
-            near[v] = i
-            for r in range(ring_ptr[v], ring_ptr[v + 1]):
-                near[ring[r]] = i
+        seen[a] = seen[b] = seen[c] = i  # its corners are not paired with it
         lo0 = min(x0[a, 0], x0[b, 0], x0[c, 0]) - radius
         lo1 = min(x0[a, 1], x0[b, 1], x0[c, 1]) - radius
         lo2 = min(x0[a, 2], x0[b, 2], x0[c, 2]) - radius
@@ -171,7 +166,7 @@ def candidate_pairs(x0, tris, radius, ring_ptr, ring):
                     bucket = _hash(ci, cj, ck, size)
                     for e in range(start[bucket], start[bucket + 1]):
                         p = members[e]
-                        if seen[p] == i or near[p] == i:
+                        if seen[p] == i:
                             continue
                         seen[p] = i
                         if not (lo0 <= x0[p, 0] <= hi0 and lo1 <= x0[p, 1] <= hi1
@@ -330,20 +325,9 @@ class SelfCollision:
     def __init__(self, model, thickness: float = 0.005, enabled: bool = False):
         self.model = model
         self.thickness = float(thickness)
-        self.enabled = bool(enabled)
+        self.enabled = False
         self._tris = np.ascontiguousarray(model.triangles, dtype=np.int64)
-        if self.enabled and len(self._tris) == 0:
-            raise ValueError("self_collision needs the model's triangles (a grid has them; "
-                             "ClothModel.from_springs takes triangles=...)")
-        if self.enabled:
-            check_thickness(model, self.thickness)
-        # adjacency: a particle's neighbours along the triangles' edges
-        e = np.concatenate([self._tris[:, [0, 1]], self._tris[:, [1, 2]], self._tris[:, [2, 0]]])
-        e = np.unique(np.sort(np.concatenate([e, e[:, ::-1]]), axis=0) if len(e) else e, axis=0)
-        e = np.concatenate([e, e[:, ::-1]]) if len(e) else np.zeros((0, 2), np.int64)
-        e = np.unique(e, axis=0)
-        self._ring_ptr = np.searchsorted(e[:, 0], np.arange(model.n_particles + 1)).astype(np.int64)
-        self._ring = np.ascontiguousarray(e[:, 1], dtype=np.int64)
+        self.set_enabled(enabled)
         inv = np.where(model.pinned, 0.0, 1.0 / model.masses)
         self._inv_mass = np.ascontiguousarray(inv)
         self._factor = np.ones(model.n_particles)
@@ -352,6 +336,16 @@ class SelfCollision:
     @property
     def active(self) -> bool:
         return self.enabled
+
+    def set_enabled(self, on: bool) -> None:
+        """Turn it on or off; on needs the model's triangles and a thickness it can use
+        (``ValueError`` otherwise, and nothing changes)."""
+        if on and len(self._tris) == 0:
+            raise ValueError("self_collision needs the model's triangles (a grid has them; "
+                             "ClothModel.from_springs takes triangles=...)")
+        if on:
+            check_thickness(self.model, self.thickness)
+        self.enabled = bool(on)
 
     #: per particle, True where a collider holds it (set by the simulator from the contact stage):
     #: self-collision moves those as if pinned, so it never pushes the cloth into a collider
@@ -364,14 +358,14 @@ class SelfCollision:
         if self.held is not None and self.held.any():
             inv_mass = np.where(self.held, 0.0, inv_mass)
         radius = h + 2.0 * max_displacement(x, x0)
-        pairs, dist = candidate_pairs(x0, self._tris, radius, self._ring_ptr, self._ring)
+        pairs, dist = candidate_pairs(x0, self._tris, radius)
         self.last_pushed = proximity(x, x0, v, self._tris, pairs, inv_mass, h)
         # a pair the no-crossing pass must see is closer at the start than the two motions
         # together, at most twice the longest: the search covered that unless the pushes made
         # some motion longer than radius / 2
         grown = 2.0 * max_displacement(x, x0)
         if grown > radius:
-            pairs, dist = candidate_pairs(x0, self._tris, grown, self._ring_ptr, self._ring)
+            pairs, dist = candidate_pairs(x0, self._tris, grown)
         self.last_pairs = len(pairs)
         self.last_slowed = displacement_factors(x, x0, self._tris, pairs, dist, self._factor)
         if self.last_slowed:

@@ -117,13 +117,8 @@ class Simulator:
         sel = model.strain_limited
         self._limited = (np.ascontiguousarray(model.springs[sel]),
                          np.ascontiguousarray(model.rest_lengths[sel]))
-        self._strain = StrainLimit(model, None, strain_limit_passes, strain_limit_long_range)
         self._contacts = Contacts(model, colliders or (), thickness)
-        self._self_collision = SelfCollision(model, self._contacts.thickness, self_collision)
-        self._self_collision.held = self._contacts.touching
-        #: the post-step stages, in order; only the active ones run. Self-collision is last: its
-        #: no-crossing guarantee is about the motion every other stage has shaped.
-        self.stages = [self._strain, self._contacts, self._self_collision]
+        self._build_stages(model, None, self_collision)
         self.strain_limit = strain_limit
         self._evaluations_before = 0
         self._analysis = None
@@ -323,11 +318,7 @@ class Simulator:
     def self_collision(self, on: bool) -> None:
         if not isinstance(on, (bool, np.bool_)):
             raise ValueError(f"self_collision must be true or false, got {on!r}")
-        if on and len(self.model.triangles) == 0:
-            raise ValueError("self_collision needs the model's triangles")
-        if on:
-            check_thickness(self.model, self.thickness)
-        self._self_collision.enabled = bool(on)
+        self._self_collision.set_enabled(on)
         self._active_stages = [s for s in self.stages if s.active]
 
     @property
@@ -353,12 +344,14 @@ class Simulator:
         follow = integ.velocity_follow
         vmax2, xmax = self.max_speed ** 2, self.max_coordinate
         grippers = self._grippers
+        # the wrench reads the step's own end only for methods that evaluate forces past its start
+        keep_end = bool(grippers) and integ.force_point > 0
         for _ in range(int(n)):
             state.copy_to(checkpoint)
             if grippers:
                 self._grippers_before_step()
             integ.step(state, forces, dt)
-            if grippers:  # the step's own end, before any correction (for the wrench)
+            if keep_end:  # the step's own end, before any correction (for the wrench)
                 np.copyto(self._prestage.x, state.x)
                 np.copyto(self._prestage.v, state.v)
             for stage in stages:
@@ -517,15 +510,9 @@ class Simulator:
         self.model = model
         self._evaluations_before += self.forces.evaluations
         self.forces = self._build_forces()
-        tau = self._strain.tau
-        self._strain = StrainLimit(model, tau, *self._strain_options)
-        self._strain.track_reaction = bool(self._grippers)
         self._contacts.set_pinned(model.pinned)
-        self._self_collision = SelfCollision(model, self._contacts.thickness,
-                                             self._self_collision.enabled)
-        self._self_collision.held = self._contacts.touching
-        self.stages = [self._strain, self._contacts, self._self_collision]
-        self._active_stages = [s for s in self.stages if s.active]
+        self._build_stages(model, self._strain.tau, self._self_collision.enabled)
+        self._strain.track_reaction = bool(self._grippers)
         self._analysis = None
         self._integrator = integrators.get(self.integrator)(model, **self._integrator_options)
         self._integrator.reset(self.state, self.forces, self._dt)
@@ -536,7 +523,8 @@ class Simulator:
         x, v, dt = self.state.x, self.state.v, self._dt
         for g in self._grippers.values():
             if g.target is not None:
-                v[g.indices] = (g.places(g.target[0], g.target[2]) - x[g.indices]) / dt
+                g.goal = g.places(g.target[0], g.target[2])
+                v[g.indices] = (g.goal - x[g.indices]) / dt
                 self._integrator.kinematic_velocities(self.state, g.indices, dt)
             elif g.moving:
                 v[g.indices] = 0.0
@@ -547,7 +535,7 @@ class Simulator:
         x = self.state.x
         for g in self._grippers.values():
             if g.target is not None:
-                x[g.indices] = g.places(g.target[0], g.target[2])
+                x[g.indices] = g.goal
 
     _prestage = None
     #: whether a step was taken since the grippers changed (the wrench reads its states)
@@ -562,6 +550,17 @@ class Simulator:
                 g.target = None
 
     # ------------------------------------------------------------------ internals
+    def _build_stages(self, model, tau, self_collision: bool) -> None:
+        """The post-step stages for ``model`` (the contact stage, which holds the colliders' poses,
+        is kept and only told the pins)."""
+        self._strain = StrainLimit(model, tau, *self._strain_options)
+        self._self_collision = SelfCollision(model, self._contacts.thickness, self_collision)
+        self._self_collision.held = self._contacts.touching
+        #: the post-step stages, in order; only the active ones run. Self-collision is last: its
+        #: no-crossing guarantee is about the motion every other stage has shaped.
+        self.stages = [self._strain, self._contacts, self._self_collision]
+        self._active_stages = [s for s in self.stages if s.active]
+
     def _build_forces(self) -> Forces:
         return Forces(self.model, self._k, self._c, self._gravity, self._wind, self._drag)
 

@@ -349,25 +349,25 @@ class ClothSimNode(Node):
         if cand["self_collision"]:
             try:
                 check_thickness(model, cand["thickness"])
-            except ValueError as e:
-                changed = [p.name for p in parameters if p.name in SCHEMA
-                           and p.name not in ("thickness", "self_collision")
-                           and cand[p.name] != self.cfg[p.name]]
-                reason = str(e)
-                if changed:  # a finer cloth (rows, spacing, a scene) made the thickness too much
-                    reason = (f"{', '.join(f'{n} = {cand[n]!r}' for n in changed)}: with "
-                              f"{'this value' if len(changed) == 1 else 'these values'}, {reason}")
+            except ValueError as e:  # a finer cloth (rows, spacing, a scene) can be the cause
+                reason = self._blame(parameters, cand, str(e), ("thickness", "self_collision"))
                 return SetParametersResult(successful=False, reason=reason)
         reason, limit = self._check_stability(cand, model)
-        if reason:
-            changed = [p.name for p in parameters if p.name in SCHEMA and p.name != "dt"
-                       and cand[p.name] != self.cfg[p.name]]
-            if changed:  # the refusal names what made the limit fall, as well as dt
-                reason = (f"{', '.join(f'{n} = {cand[n]!r}' for n in changed)}: with "
-                          f"{'this value' if len(changed) == 1 else 'these values'}, {reason}")
-            return SetParametersResult(successful=False, reason=reason)
+        if reason:  # the refusal names what made the limit fall, as well as dt
+            return SetParametersResult(successful=False,
+                                       reason=self._blame(parameters, cand, reason, ("dt",)))
         self._validated = (cand, scene if rebuild else None, model if rebuild else None, limit)
         return SetParametersResult(successful=True)
+
+    def _blame(self, parameters, cand: dict, reason: str, named: tuple) -> str:
+        """``reason`` for a refusal of a combination, prefixed with the other values of the
+        request that changed (``reason`` names ``named`` itself)."""
+        changed = [p.name for p in parameters if p.name in SCHEMA and p.name not in named
+                   and cand[p.name] != self.cfg[p.name]]
+        if not changed:
+            return reason
+        return (f"{', '.join(f'{n} = {cand[n]!r}' for n in changed)}: with "
+                f"{'this value' if len(changed) == 1 else 'these values'}, {reason}")
 
     def _post_set(self, parameters: list[Parameter]) -> None:
         """Apply what :meth:`_on_set` accepted."""
@@ -525,7 +525,7 @@ class ClothSimNode(Node):
                     q /= np.linalg.norm(q)
                     if kind == "collider":
                         sim.set_collider_pose(key, (1 - f) * p0 + f * p1, q)
-                    elif key in sim.grippers:
+                    else:  # _pose_moves kept only grippers that hold; none is released mid-tick
                         sim.set_gripper_pose(key, (1 - f) * p0 + f * p1, q)
                 if f >= 1.0:
                     moves = None
