@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from cloth_sim import SimulationDiverged
@@ -191,7 +191,7 @@ def valid(spec, value) -> bool:
     """The schema's rule, written out independently of Param.check."""
     def number(x):
         return (isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-                and spec.lo <= x <= spec.hi)
+                and (spec.lo < x if spec.lo_open else spec.lo <= x) and x <= spec.hi)
 
     if spec.type is bool:
         return isinstance(value, bool)
@@ -214,6 +214,9 @@ values = st.one_of(st.none(), st.booleans(), st.integers(-10**6, 10**6),
 
 @settings(max_examples=400, deadline=None)
 @given(name=st.sampled_from(sorted(SCHEMA)), value=values)
+@example(name="thickness", value=0)  # an open lower bound: 0 itself is refused
+@example(name="thickness", value=0.0)
+@example(name="thickness", value=1e-9)
 def test_a_value_is_accepted_iff_the_schema_says_it_is_valid(name, value):
     spec = SCHEMA[name]
     try:
