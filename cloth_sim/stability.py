@@ -64,6 +64,43 @@ def springs_effective_stiffness(kind: np.ndarray, rest: np.ndarray, k: np.ndarra
     return k_eff
 
 
+#: How far, as a fraction of its rest length, and how fast (m/s) one step may kick a buckling pair
+#: at its onset (:func:`buckling_onset_limit`).
+ONSET_CHATTER = 0.01
+ONSET_SPEED = 10.0
+
+
+def buckling_onset_limit(model: ClothModel, k: np.ndarray) -> float:
+    """The largest ``dt`` at which Choi & Ko's buckling onset does not throw the cloth about.
+
+    A compressed type-2 pair pushes with ``12 k_b/L²`` from the first rounding-level compression
+    (the immediate-buckling load: the force jumps there from 0), and no linearisation sees a jump,
+    so :func:`fastest_mode` misses it. In a step that does not solve with the pair's stiffness, a
+    particle whose pairs' onset forces add to ``F_i`` moves by ``F_i·dt²/m_i`` from it, and the
+    pair's tension branch pulls it back the next step: a chatter of that amplitude and of speed
+    ``F_i·dt/m_i``, which on a stiff bend family (``stiffness.bend`` is then a flexural rigidity,
+    N·m²) trips the divergence guard (1000 m/s) at steps the modes allow. The limit keeps the kick
+    each pair can get from its two ends, with ``a = F/m``, within :data:`ONSET_CHATTER` of its rest
+    length, ``(a_i + a_j)·dt² ≤ 0.01·L``, and its speed below :data:`ONSET_SPEED`,
+    ``(a_i + a_j)·dt ≤ 10 m/s``; ``inf`` without buckling pairs. A bend rigidity of real cloth
+    (1e-6–1e-4 N·m² per pair) leaves it far above any other limit. It bounds a chatter, not a
+    stability boundary: above it the step does not diverge at once, it chatters faster."""
+    k = np.asarray(k, dtype=np.float64)
+    buck = (model.kind == BUCKLING) & (k > 0)
+    if not buck.any():
+        return math.inf
+    pairs, L = model.springs[buck], model.rest_lengths[buck]
+    load = 12.0 * k[buck] / (L * L)
+    a = spring_sums(pairs, load, model.n_particles) / model.masses
+    a[model.pinned] = 0.0
+    reach = a[pairs[:, 0]] + a[pairs[:, 1]]
+    moved = reach > 0
+    if not moved.any():
+        return math.inf
+    reach, L = reach[moved], L[moved]
+    return float(min(np.min(np.sqrt(ONSET_CHATTER * L / reach)), ONSET_SPEED / np.max(reach)))
+
+
 @lru_cache(maxsize=1)
 def _buckling_curvature_max() -> float:
     return float(np.max(np.abs([buckling_h(r)[2] for r in np.linspace(0, 1, len(BUCKLE_TABLE))])))
@@ -562,13 +599,16 @@ def kang_fourier_radii(st: GridStencil, drag: float, dt: float, sweeps: int, sym
     return rho
 
 
-def _bisect_stable(stable, omega: float, rel_tol: float, guess: float = 1.0) -> float:
+def _bisect_stable(stable, omega: float, rel_tol: float, guess: float = 1.0,
+                   ceiling: bool = False) -> float:
     """Largest ``dt`` with ``stable(dt)`` on the grid ``dt_j = (1 + rel_tol)^j / ω``: bracketed from
     the point nearest ``guess/ω`` (the last material's ``ω·dt`` limit: a material change moves it
     little, and a good guess is bracketed by 10 grid steps in two evaluations) by widening steps,
     then bisected over ``j``. The answer is a grid point, so it does not depend on the guess
     (stability being monotone near the limit), only the number of evaluations does. ``inf`` when
-    still stable at ``1000/ω``, 0 when unstable at ``1e-6/ω``."""
+    still stable at ``1000/ω``, 0 when unstable at ``1e-6/ω``. ``ceiling``: ``guess/ω`` is a grid
+    point above which every point is known to be unstable (an analysis of a subset of the modes
+    found it), so the search only goes down from it."""
     r = math.log1p(rel_tol)
 
     def at(j):
@@ -576,7 +616,9 @@ def _bisect_stable(stable, omega: float, rel_tol: float, guess: float = 1.0) -> 
 
     j_max, j_min = math.ceil(math.log(1e3) / r), math.floor(math.log(1e-6) / r)
     j = min(max(round(math.log(guess) / r), j_min), j_max)
-    if stable(at(j)):
+    if ceiling and stable(at(j)):
+        return at(j)
+    if not ceiling and stable(at(j)):
         lo, hi = j, j + 10
         while stable(at(hi)):
             if hi >= j_max:
@@ -618,18 +660,39 @@ def kang_stable_dt(model: ClothModel, k: np.ndarray, c: np.ndarray, drag: float,
         # the grid's own wavenumbers πj/N up to N = 24 (the finite grid has none finer; the
         # instability sits at long wavelengths, so the limit falls slowly as the sampling gets finer:
         # 24 per axis is within 1.5 % of 48)
-        symbols = _fourier_symbols(st, min(24, max(model.rows, model.cols)))
+        n_theta = min(24, max(model.rows, model.cols))
+        symbols = _fourier_symbols(st, n_theta)
+        # a coarse search first, on the wavenumbers πj/n_coarse with n_coarse dividing n_theta:
+        # they are some of the fine set's, so its limit bounds the fine one from above, and the
+        # fine search (over ten times the matrices) starts there and only goes down: a material far from the
+        # last one once cost 15 fine evaluations (0.1–0.2 s inside a parameter callback), now 1–5
+        n_coarse = max(d for d in range(1, 7) if n_theta % d == 0)
+        coarse = _fourier_symbols(st, n_coarse)
         watch = [None]  # the wavenumbers that were worst last time: checked first, alone
 
-        def stable(h):
-            # an instability found on the watched few is one of the whole set: most unstable
-            # evaluations of the search cost a tenth of a full one
-            if watch[0] is not None and np.max(
-                    kang_fourier_radii(st, drag, h, sweeps, symbols, watch[0])) > 1.0 + 1e-9:
-                return False
-            rho = kang_fourier_radii(st, drag, h, sweeps, symbols)
-            watch[0] = np.argsort(rho)[-8:]
-            return float(np.max(rho)) <= 1.0 + 1e-9
+        def stable_on(symbols):
+            def stable(h):
+                # an instability found on the watched few is one of the whole set: most unstable
+                # evaluations of the search cost a tenth of a full one
+                if watch[0] is not None and np.max(
+                        kang_fourier_radii(st, drag, h, sweeps, symbols, watch[0])) > 1.0 + 1e-9:
+                    return False
+                rho = kang_fourier_radii(st, drag, h, sweeps, symbols)
+                watch[0] = np.argsort(rho)[-8:]
+                return float(np.max(rho)) <= 1.0 + 1e-9
+            return stable
+
+        upper = _bisect_stable(stable_on(coarse), omega, rel_tol, _KANG_GUESS.get(int(sweeps), 1.0))
+        watch[0] = None  # indices into the coarse set
+        if upper == 0.0:
+            return 0.0
+        if upper < math.inf:
+            limit = _bisect_stable(stable_on(symbols), omega, rel_tol, upper * omega, ceiling=True)
+        else:
+            limit = _bisect_stable(stable_on(symbols), omega, rel_tol, _KANG_GUESS.get(int(sweeps), 1.0))
+        if 0.0 < limit < math.inf:
+            _KANG_GUESS[int(sweeps)] = limit * omega
+        return limit
     else:
         def stable(h):
             return spectral_radius(kang_step_matrix(model, k, c, drag, h, sweeps)) <= 1.0 + 1e-7
@@ -651,6 +714,7 @@ class Analysis:
         self.drag = float(drag)
         self._mode: Mode | None = None
         self._damping_rate: float | None = None
+        self._onset_limit: float | None = None
         self._limits: dict = {}
 
     @property
@@ -664,6 +728,13 @@ class Analysis:
         if self._damping_rate is None:
             self._damping_rate = damping_rate(self.model, self.c, self.drag)
         return self._damping_rate
+
+    @property
+    def onset_limit(self) -> float:
+        """:func:`buckling_onset_limit` of the material (cheap: one pass over the springs)."""
+        if self._onset_limit is None:
+            self._onset_limit = buckling_onset_limit(self.model, self.k)
+        return self._onset_limit
 
     def limit(self, key, compute) -> float:
         """``compute(self)`` the first time ``key`` is asked for, the kept value after."""

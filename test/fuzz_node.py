@@ -225,7 +225,7 @@ def mismatches(node: ClothSimNode) -> list[str]:
     return out
 
 
-def run(sets: int, seed: int, domain: int, quiet: bool = False) -> dict:
+def run(sets: int, seed: int, domain: int, quiet: bool = False, keep: int = 3) -> dict:
     rng = np.random.default_rng(seed)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     ctx = rclpy.Context()
@@ -239,7 +239,7 @@ def run(sets: int, seed: int, domain: int, quiet: bool = False) -> dict:
     def note(kind, what):
         figures[kind] += 1
         examples.setdefault(kind, [])
-        if len(examples[kind]) < 3:
+        if len(examples[kind]) < keep:
             examples[kind].append(what)
 
     try:
@@ -436,10 +436,11 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--sets", type=int, default=5000)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--examples", type=int, default=3, help="examples kept of each kind (default 3)")
     ap.add_argument("--domain", type=int, default=int(os.environ.get("ROS_DOMAIN_ID", "97")))
     args = ap.parse_args(argv)
     t = time.monotonic()
-    figures = run(args.sets, args.seed, args.domain)
+    figures = run(args.sets, args.seed, args.domain, keep=args.examples)
     examples = figures.pop("examples")
     print(f"# cloth_sim_node fuzz: {figures['sets']} parameter sets, seed {args.seed}, "
           f"{time.monotonic() - t:.0f} s")

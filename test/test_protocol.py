@@ -342,3 +342,57 @@ def test_every_node_cloth_has_kangs_fast_analysis(scene, model):
     k, c = np.array(m.stiffness), np.array(m.damping)
     assert stab.grid_stencil(m, k, c) is not None
     assert 0 < stab.kang_stable_dt(m, k, c, 0.01, method="fourier") < 1
+
+
+def test_choi_ko_stable_dt_accounts_for_the_buckling_onset_load():
+    """Choi–Ko's compressed pair pushes with 12·k_b/L² from the first rounding-level compression: a
+    jump no mode analysis sees. With a stiff bend family the modes' limit let symplectic Euler
+    chatter at 36 m/s in a cloth that should barely move (and the fuzz found blow-ups in the first
+    step); stable_dt() now also bounds the onset kick, and at 0.97× it the cloth stays calm."""
+    from cloth_sim.integrators.explicit import SymplecticEuler
+
+    model = ClothModel.grid(8, 8, 0.05, 0.01, stiffness={"structural": 1000, "shear": 1000, "bend": 0.1},
+                            damping=0.02, pinned=[(0, 0), (0, -1)], model="choi_ko")
+    sim = Simulator(model, integrator="symplectic_euler", dt=1e-4)
+    modes_only = stab.one_step_limit(SymplecticEuler, sim.analysis)
+    limit = sim.stable_dt()
+    assert limit == sim.analysis.onset_limit < 0.2 * modes_only
+    # the kick of the most loaded pair: 12·k/L² from each of its ends' buckling pairs, per mass
+    bend = model.kind == 2
+    load = np.bincount(model.springs[bend].ravel(), np.repeat(12 * 0.1 / model.rest_lengths[bend] ** 2, 2),
+                       minlength=model.n_particles) / 0.01
+    load[model.pinned] = 0.0
+    reach = load[model.springs[bend, 0]] + load[model.springs[bend, 1]]
+    assert limit == pytest.approx(min(np.min(np.sqrt(0.01 * model.rest_lengths[bend] / reach)),
+                                      10.0 / reach.max()), rel=1e-12)
+
+    def fastest(dt):
+        s = Simulator(model, integrator="symplectic_euler", dt=dt)
+        s.advance(0.2)
+        return np.max(np.abs(s.velocities))
+
+    assert fastest(0.97 * limit) < 10.0
+    assert fastest(0.97 * modes_only) > 20.0
+    # a Provot cloth has no buckling pairs: no such limit
+    provot = ClothModel.grid(8, 8, 0.05, 0.01, stiffness=1000.0, pinned=[(0, 0)])
+    assert Simulator(provot, dt=1e-4).analysis.onset_limit == math.inf
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_kang_limit_from_the_coarse_search_is_the_fine_limit(seed):
+    """kang_stable_dt brackets on a coarse subset of the wavenumbers first (its limit bounds the
+    fine one from above), then searches the fine set down from there: the answer is still the fine
+    set's own limit, on the 1 % grid: stable there, unstable one grid step above."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(6, 30))
+    model = ClothModel.grid(n, n, 1 / (n - 1), 0.01,
+                            stiffness={f: float(10 ** rng.uniform(1, 7)) for f in ("structural", "shear", "bend")},
+                            damping={f: float(10 ** rng.uniform(-3, 3)) for f in ("structural", "shear", "bend")},
+                            pinned=[(0, 0), (0, -1)])
+    k, c, drag = np.array(model.stiffness, float), np.array(model.damping, float), 0.01
+    stab._KANG_GUESS.clear()
+    limit = stab.kang_stable_dt(model, k, c, drag)
+    st = stab.grid_stencil(model, k, c)
+    symbols = stab._fourier_symbols(st, min(24, n))
+    assert stab.kang_fourier_radius(st, drag, limit, 1, symbols) <= 1.0 + 1e-9
+    assert stab.kang_fourier_radius(st, drag, limit * 1.01, 1, symbols) > 1.0 + 1e-9

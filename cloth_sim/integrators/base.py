@@ -121,13 +121,18 @@ class Integrator:
     def stable_dt(self, analysis: "stab.Analysis") -> float:
         """Largest ``dt`` expected to be stable on this material: ``inf`` for unconditionally
         stable methods, the amplification matrix's limit on the fastest mode, or the method's own
-        analysis; each computed once per material and kept in ``analysis``."""
+        analysis; each computed once per material and kept in ``analysis``; at most
+        :func:`~cloth_sim.stability.buckling_onset_limit` (Choi–Ko's onset load, a jump that no
+        mode analysis sees)."""
         if self.stability is Stability.UNCONDITIONAL:
             return math.inf
         if self.stability is Stability.AMPLIFICATION:
-            return analysis.limit(("amplification", type(self)),
-                                  lambda a: stab.one_step_limit(type(self), a))
-        return analysis.limit(("analysis", type(self), self.analysis_key()), self.analyse)
+            limit = analysis.limit(("amplification", type(self)),
+                                   lambda a: stab.one_step_limit(type(self), a))
+        else:
+            limit = analysis.limit(("analysis", type(self), self.analysis_key()), self.analyse)
+        # Choi–Ko's buckling load jumps in at the onset of compression: no mode analysis sees it
+        return min(limit, analysis.onset_limit)
 
     def known_stable_dt(self, analysis: "stab.Analysis") -> float | None:
         """:meth:`stable_dt` if it costs nothing now (computed before, or unconditional), else
@@ -135,8 +140,10 @@ class Integrator:
         if self.stability is Stability.UNCONDITIONAL:
             return math.inf
         if self.stability is Stability.AMPLIFICATION:
-            return analysis.known(("amplification", type(self)))
-        return analysis.known(("analysis", type(self), self.analysis_key()))
+            known = analysis.known(("amplification", type(self)))
+        else:
+            known = analysis.known(("analysis", type(self), self.analysis_key()))
+        return None if known is None else min(known, analysis.onset_limit)
 
     # ------------------------------------------------------------------ helpers
     def _buffer(self, name: str, like: np.ndarray) -> np.ndarray:
