@@ -20,7 +20,7 @@ IDS = ["bw-cg", "bw-direct", "prefactored"]
 
 def test_registry_has_the_implicit_methods_and_their_stability_claims():
     names = integrators.available()
-    assert names[-3:] == ["implicit_euler", "implicit_euler_prefactored", "kang"]
+    assert names[5:8] == ["implicit_euler", "implicit_euler_prefactored", "kang"]
     for name in ("implicit_euler", "implicit_euler_prefactored"):
         assert Simulator(cloth16(), integrator=name, dt=1.0).stable_dt() == math.inf
     with pytest.raises(ValueError, match="solver must be one of cg, direct"):

@@ -24,7 +24,9 @@ from ._out import fmt, machine, markdown_table, progress, pyplot, write_rows
 from .steps import time_steps
 
 METHODS = ["explicit_euler", "symplectic_euler", "midpoint", "rk4", "verlet", "implicit_euler",
-           "implicit_euler_prefactored", "kang"]
+           "implicit_euler_prefactored", "kang", "liu2013", "xpbd"]
+#: methods without a step limit, timed at a frame-rate step
+FRAME_RATE = ("implicit_euler", "implicit_euler_prefactored", "liu2013", "xpbd")
 
 
 def build(n: int, integrator: str, *, wind=None, bend=True, strain_limit=None, damping=True) -> Simulator:
@@ -33,7 +35,7 @@ def build(n: int, integrator: str, *, wind=None, bend=True, strain_limit=None, d
     c = dict(scene.damping) if damping else {f: 0.0 for f in scene.damping}
     if not bend:
         k["bend"], c["bend"] = 0.0, 0.0
-    dt = 1.0 / 60 if integrator in ("implicit_euler", "implicit_euler_prefactored") else 1e-3
+    dt = 1.0 / 60 if integrator in FRAME_RATE else 1e-3
     return scene.build_simulator(rows=n, cols=n, spacing=1.0 / (n - 1), stiffness=k, damping=c,
                                  integrator=integrator, dt=dt, wind=wind, strain_limit=strain_limit)
 

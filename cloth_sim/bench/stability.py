@@ -23,7 +23,7 @@ from ..simulator import SimulationDiverged, Simulator
 from ._out import G, fmt, hang16, machine, markdown_table, progress, pyplot, write_rows
 
 METHODS = ["explicit_euler", "symplectic_euler", "midpoint", "rk4", "verlet", "kang"]
-UNCONDITIONAL = ["implicit_euler", "implicit_euler_prefactored"]
+UNCONDITIONAL = ["implicit_euler", "implicit_euler_prefactored", "liu2013", "xpbd"]
 MASS, WIDTH = 0.01, 1.0
 CAP_DT = 0.05
 

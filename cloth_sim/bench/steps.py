@@ -60,6 +60,9 @@ IMPLICIT_VARIANTS = (
     ("implicit_euler", {"solver": "direct"}, "implicit_euler (direct)"),
     ("implicit_euler_prefactored", {}, "implicit_euler_prefactored"),
     ("kang", {}, "kang"),
+    ("liu2013", {}, "liu2013 (10 iterations)"),
+    ("liu2013", {"iterations": 10, "chebyshev": True}, "liu2013 (10, Chebyshev)"),
+    ("xpbd", {}, "xpbd (10 substeps)"),
 )
 
 

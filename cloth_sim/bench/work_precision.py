@@ -26,9 +26,9 @@ from ..simulator import SimulationDiverged, Simulator
 from ._out import G, fmt, hang16, machine, markdown_table, progress, pyplot, write_rows
 
 EXPLICIT = ["explicit_euler", "symplectic_euler", "midpoint", "rk4", "verlet"]
-IMPLICIT = ["implicit_euler", "implicit_euler_prefactored", "kang"]
+IMPLICIT = ["implicit_euler", "implicit_euler_prefactored", "kang", "liu2013", "xpbd"]
 ORDER_EXPECTED = {"explicit_euler": 1, "symplectic_euler": 1, "midpoint": 2, "rk4": 4, "verlet": 2,
-                  "implicit_euler": 1}
+                  "implicit_euler": 1, "liu2013": 1, "xpbd": 1}
 REF_RTOL, REF_ATOL = 1e-10, 1e-12
 
 

@@ -34,6 +34,6 @@ def get(name: str) -> type[Integrator]:
                          f"{', '.join(available())}") from None
 
 
-from . import explicit, implicit  # noqa: E402,F401  (registers the methods, in this order)
+from . import explicit, implicit, local_global, xpbd  # noqa: E402,F401  (registers the methods, in this order)
 
 __all__ = ["Integrator", "available", "get", "register"]
