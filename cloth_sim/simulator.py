@@ -413,6 +413,13 @@ class Simulator:
         (``kang``); 0 for a method with no stable step. Computed once per material and method."""
         return self._integrator.stable_dt(self.analysis)
 
+    def step_is_stable(self, dt: float | None = None) -> bool:
+        """Whether ``dt`` (the current one by default) is a step the current method is expected to
+        survive: at most :meth:`stable_dt`, or, for a method without a step limit, above the band of
+        steps where Choi–Ko's onset load throws the cloth about
+        (:func:`cloth_sim.stability.buckling_onset_band`)."""
+        return self._integrator.step_is_stable(self.analysis, self._dt if dt is None else float(dt))
+
     def rest_matrices(self) -> tuple[sp.csr_matrix, sp.csr_matrix]:
         """``(K, C)`` linearised about the rest shape (:func:`cloth_sim.stability.rest_matrices`)."""
         return stab.rest_matrices(self.model, self._k, self._c)

@@ -70,35 +70,68 @@ ONSET_CHATTER = 0.01
 ONSET_SPEED = 10.0
 
 
-def buckling_onset_limit(model: ClothModel, k: np.ndarray) -> float:
-    """The largest ``dt`` at which Choi & Ko's buckling onset does not throw the cloth about.
-
-    A compressed type-2 pair pushes with ``12 k_b/L²`` from the first rounding-level compression
-    (the immediate-buckling load: the force jumps there from 0), and no linearisation sees a jump,
-    so :func:`fastest_mode` misses it. In a step that does not solve with the pair's stiffness, a
-    particle whose pairs' onset forces add to ``F_i`` moves by ``F_i·dt²/m_i`` from it, and the
-    pair's tension branch pulls it back the next step: a chatter of that amplitude and of speed
-    ``F_i·dt/m_i``, which on a stiff bend family (``stiffness.bend`` is then a flexural rigidity,
-    N·m²) trips the divergence guard (1000 m/s) at steps the modes allow. The limit keeps the kick
-    each pair can get from its two ends, with ``a = F/m``, within :data:`ONSET_CHATTER` of its rest
-    length, ``(a_i + a_j)·dt² ≤ 0.01·L``, and its speed below :data:`ONSET_SPEED`,
-    ``(a_i + a_j)·dt ≤ 10 m/s``; ``inf`` without buckling pairs. A bend rigidity of real cloth
-    (1e-6–1e-4 N·m² per pair) leaves it far above any other limit. It bounds a chatter, not a
-    stability boundary: above it the step does not diverge at once, it chatters faster."""
+def _onset_pairs(model: ClothModel, k: np.ndarray):
+    """The buckling pairs that a step can kick: their rest lengths, ``a_i + a_j`` (the onset loads
+    on their ends per mass) and ``w·(1/m_i + 1/m_j)`` (their linearised stiffness per mass); ``None``
+    without any."""
     k = np.asarray(k, dtype=np.float64)
     buck = (model.kind == BUCKLING) & (k > 0)
     if not buck.any():
-        return math.inf
+        return None
     pairs, L = model.springs[buck], model.rest_lengths[buck]
-    load = 12.0 * k[buck] / (L * L)
-    a = spring_sums(pairs, load, model.n_particles) / model.masses
+    a = spring_sums(pairs, 12.0 * k[buck] / (L * L), model.n_particles) / model.masses
     a[model.pinned] = 0.0
     reach = a[pairs[:, 0]] + a[pairs[:, 1]]
     moved = reach > 0
     if not moved.any():
+        return None
+    inv = np.where(model.pinned, 0.0, 1.0 / model.masses)
+    stiff = springs_effective_stiffness(model.kind[buck], L, k[buck]) * (inv[pairs[:, 0]] + inv[pairs[:, 1]])
+    return L[moved], reach[moved], stiff[moved]
+
+
+def buckling_onset_limit(model: ClothModel, k: np.ndarray) -> float:
+    """The largest ``dt`` at which Choi & Ko's buckling onset does not throw the cloth about, for a
+    method that does not solve with the pairs' stiffness (the explicit ones, Kang's).
+
+    A compressed type-2 pair pushes with ``12 k_b/L²`` from the first rounding-level compression
+    (the immediate-buckling load: the force jumps there from 0), and no linearisation sees a jump,
+    so :func:`fastest_mode` misses it. A particle whose pairs' onset loads add to ``F_i`` moves by
+    ``F_i·dt²/m_i`` from it in one step, and the pair's tension branch pulls it back the next: a
+    chatter of that amplitude and of speed ``F_i·dt/m_i``, which on a stiff bend family
+    (``stiffness.bend`` is then a flexural rigidity, N·m²) trips the divergence guard (1000 m/s) at
+    steps the modes allow. The limit keeps the kick each pair can get from its two ends, with
+    ``a = F/m``, within :data:`ONSET_CHATTER` of its rest length, ``(a_i + a_j)·dt² ≤ 0.01·L``, and
+    its speed below :data:`ONSET_SPEED`, ``(a_i + a_j)·dt ≤ 10 m/s``; ``inf`` without buckling
+    pairs. A bend rigidity of real cloth (1e-6–1e-4 N·m² per pair) leaves it far above any other
+    limit. It bounds a chatter, not a stability boundary: above it the step does not diverge at
+    once, it chatters faster."""
+    found = _onset_pairs(model, k)
+    if found is None:
         return math.inf
-    reach, L = reach[moved], L[moved]
+    L, reach, _ = found
     return float(min(np.min(np.sqrt(ONSET_CHATTER * L / reach)), ONSET_SPEED / np.max(reach)))
+
+
+def buckling_onset_band(model: ClothModel, k: np.ndarray) -> tuple[float, float]:
+    """The steps ``(lo, hi)`` at which a method that solves with the pairs' linearised stiffness
+    ``w`` (the unconditionally stable ones) is thrown about by Choi–Ko's onset load: there the
+    kick's speed ``a·dt/(1 + dt²·s)``, ``s = w·(1/m_i + 1/m_j)``, exceeds :data:`ONSET_SPEED` for
+    some pair (between the roots of ``V·s·dt² − a·dt + V = 0``). Small steps kick little, large ones
+    are absorbed by the stiffness (``choi_ko`` with the prefactored method at 1 ms is calm while
+    1e-5 s is not). ``(inf, inf)`` when no step is: always for a real cloth's bend rigidity."""
+    found = _onset_pairs(model, k)
+    if found is None:
+        return math.inf, math.inf
+    _, reach, stiff = found
+    disc = reach * reach - 4.0 * ONSET_SPEED ** 2 * stiff
+    fast = disc > 0
+    if not fast.any():
+        return math.inf, math.inf
+    root = np.sqrt(disc[fast])
+    lo = (reach[fast] - root) / (2.0 * ONSET_SPEED * stiff[fast])
+    hi = (reach[fast] + root) / (2.0 * ONSET_SPEED * stiff[fast])
+    return float(lo.min()), float(hi.max())
 
 
 @lru_cache(maxsize=1)
@@ -715,6 +748,7 @@ class Analysis:
         self._mode: Mode | None = None
         self._damping_rate: float | None = None
         self._onset_limit: float | None = None
+        self._onset_band: tuple[float, float] | None = None
         self._limits: dict = {}
 
     @property
@@ -735,6 +769,13 @@ class Analysis:
         if self._onset_limit is None:
             self._onset_limit = buckling_onset_limit(self.model, self.k)
         return self._onset_limit
+
+    @property
+    def onset_band(self) -> tuple[float, float]:
+        """:func:`buckling_onset_band`: the steps at which the methods without a step limit chatter."""
+        if self._onset_band is None:
+            self._onset_band = buckling_onset_band(self.model, self.k)
+        return self._onset_band
 
     def limit(self, key, compute) -> float:
         """``compute(self)`` the first time ``key`` is asked for, the kept value after."""

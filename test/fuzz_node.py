@@ -168,7 +168,7 @@ def limit_refusal_is_right(cfg: dict, params) -> bool:
         particle_mass=cand["particle_mass"], integrator=cand["integrator"], dt=cand["dt"],
         drag=cand["drag"], stiffness={f: cand[f"stiffness.{f}"] for f in GRID_FAMILIES},
         damping={f: cand[f"damping.{f}"] for f in GRID_FAMILIES}, self_collision=False)
-    return cand["dt"] > sim.stable_dt()
+    return not sim.step_is_stable()
 
 
 def runaway_is_dt_independent(node: ClothSimNode) -> bool:
@@ -372,7 +372,7 @@ def run(sets: int, seed: int, domain: int, quiet: bool = False, keep: int = 3) -
                     note("unnamed_refusals", (name, value, r.reason))
                 everything_valid = all(schema_valid(n, v) for n, v in (params if atomic else [(name, value)]))
                 if everything_valid and name in SCHEMA:
-                    if "above the stable limit" in r.reason:
+                    if "above the stable limit" in r.reason or "buckling onset load" in r.reason:
                         figures["stability_refusals"] += 1
                         batch = [(n, v) for n, v in params if n != "scene"] if atomic else [(name, value)]
                         if "scene" not in names and not limit_refusal_is_right(

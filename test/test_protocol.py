@@ -366,7 +366,7 @@ def test_choi_ko_stable_dt_accounts_for_the_buckling_onset_load():
     assert limit == pytest.approx(min(np.min(np.sqrt(0.01 * model.rest_lengths[bend] / reach)),
                                       10.0 / reach.max()), rel=1e-12)
 
-    def fastest(dt):
+    def fastest(dt, t=0.05):
         s = Simulator(model, integrator="symplectic_euler", dt=dt)
         s.advance(0.2)
         return np.max(np.abs(s.velocities))
@@ -396,3 +396,31 @@ def test_kang_limit_from_the_coarse_search_is_the_fine_limit(seed):
     symbols = stab._fourier_symbols(st, min(24, n))
     assert stab.kang_fourier_radius(st, drag, limit, 1, symbols) <= 1.0 + 1e-9
     assert stab.kang_fourier_radius(st, drag, limit * 1.01, 1, symbols) > 1.0 + 1e-9
+
+
+def test_choi_ko_onset_band_of_the_methods_without_a_step_limit():
+    """A method that solves with the pairs' stiffness absorbs the onset load at large steps and
+    kicks little at tiny ones; between, a stiff bend rigidity throws the cloth about (Baraff–Witkin
+    at 1e-5 s on the hanging scene with bend 100 N·m²: the guard trips at 1.5 ms). The
+    band is refused in the node; the steps outside it run calmly."""
+    from cloth_sim.scene import load_scene
+
+    def fastest(dt, t=0.05):
+        sim = load_scene("hanging").build_simulator(model="choi_ko", integrator="implicit_euler", dt=dt,
+                                                    strain_limit=None)
+        try:
+            sim.advance(t)
+        except SimulationDiverged:  # the guard tripped (1000 m/s)
+            return math.inf, sim
+        return np.max(np.abs(sim.velocities)), sim
+
+    v, sim = fastest(1e-5)
+    lo, hi = sim.analysis.onset_band
+    assert lo < 1e-5 < hi and not sim.step_is_stable() and sim.stable_dt() == lo
+    assert v > 100.0
+    v, sim = fastest(1.0 / 60, 1.0)  # above the band: the kicks stay near the bound's 10 m/s
+    assert sim.step_is_stable() and v < 20.0
+    # a cloth's bend rigidity: no band at all
+    calm = load_scene("hanging").build_simulator(model="choi_ko", integrator="implicit_euler",
+                                                 stiffness={"bend": 1e-4})
+    assert calm.analysis.onset_band == (math.inf, math.inf) and calm.stable_dt() == math.inf

@@ -120,12 +120,13 @@ class Integrator:
 
     def stable_dt(self, analysis: "stab.Analysis") -> float:
         """Largest ``dt`` expected to be stable on this material: ``inf`` for unconditionally
-        stable methods, the amplification matrix's limit on the fastest mode, or the method's own
-        analysis; each computed once per material and kept in ``analysis``; at most
+        stable methods (unless Choi–Ko's onset load would throw the cloth about at some step), the
+        amplification matrix's limit on the fastest mode, or the method's own analysis; each
+        computed once per material and kept in ``analysis``; at most
         :func:`~cloth_sim.stability.buckling_onset_limit` (Choi–Ko's onset load, a jump that no
         mode analysis sees)."""
         if self.stability is Stability.UNCONDITIONAL:
-            return math.inf
+            return analysis.onset_band[0]
         if self.stability is Stability.AMPLIFICATION:
             limit = analysis.limit(("amplification", type(self)),
                                    lambda a: stab.one_step_limit(type(self), a))
@@ -134,11 +135,23 @@ class Integrator:
         # Choi–Ko's buckling load jumps in at the onset of compression: no mode analysis sees it
         return min(limit, analysis.onset_limit)
 
+    def stable_again_above(self, analysis: "stab.Analysis") -> float:
+        """The step above which a method without a step limit is fine again although
+        :meth:`stable_dt` is finite (the top of Choi–Ko's onset band,
+        :func:`~cloth_sim.stability.buckling_onset_band`); ``inf`` for the other methods."""
+        if self.stability is Stability.UNCONDITIONAL:
+            return analysis.onset_band[1]
+        return math.inf
+
+    def step_is_stable(self, analysis: "stab.Analysis", dt: float) -> bool:
+        """``dt ≤ stable_dt`` or ``dt ≥ stable_again_above``."""
+        return dt <= self.stable_dt(analysis) or dt >= self.stable_again_above(analysis)
+
     def known_stable_dt(self, analysis: "stab.Analysis") -> float | None:
         """:meth:`stable_dt` if it costs nothing now (computed before, or unconditional), else
         ``None``: what an error path may report."""
         if self.stability is Stability.UNCONDITIONAL:
-            return math.inf
+            return analysis.onset_band[0]
         if self.stability is Stability.AMPLIFICATION:
             known = analysis.known(("amplification", type(self)))
         else:

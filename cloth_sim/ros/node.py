@@ -41,6 +41,7 @@ from rosgraph_msgs.msg import Clock
 from visualization_msgs.msg import Marker, MarkerArray
 
 from .. import integrators
+from ..integrators.base import Stability
 from .. import stability as stab
 from ..model import GRID_FAMILIES
 from ..parameters import REBUILD, SCHEMA
@@ -259,12 +260,24 @@ class ClothSimNode(Node):
         reason to refuse ``cfg["dt"]`` above it (``None`` when fine or ``allow_unstable``)."""
         k, c = _material(model, cfg)
         analysis = stab.analysis_for(model, k, c, cfg["drag"])
-        limit = integrators.get(cfg["integrator"])(model).stable_dt(analysis)
-        if cfg["dt"] > limit and not cfg["allow_unstable"]:
+        integ = integrators.get(cfg["integrator"])(model)
+        limit = integ.stable_dt(analysis)
+        if not integ.step_is_stable(analysis, cfg["dt"]) and not cfg["allow_unstable"]:
+            above = integ.stable_again_above(analysis)
+            if above < math.inf:  # Choi–Ko's onset band of an unconditionally stable method
+                return (f"dt={cfg['dt']:g} s is inside the band of steps where Choi–Ko's buckling onset "
+                        f"load 12·k_b/L² throws this cloth about with {cfg['integrator']} "
+                        f"({limit:.4g} s < dt < {above:.4g} s; stiffness.bend is a flexural rigidity "
+                        f"in N·m² in this model): choose dt <= {limit:.4g} or dt >= {above:.4g}, a "
+                        f"smaller stiffness.bend, or set allow_unstable to true"), limit
+            unconditional = ", ".join(n for n in integrators.available()
+                                      if integrators.get(n).stability is Stability.UNCONDITIONAL)
+            onset = (" (set by Choi–Ko's buckling onset load 12·k_b/L²: stiffness.bend is a flexural "
+                     "rigidity in N·m² in this model)" if limit == analysis.onset_limit else "")
             return (f"dt={cfg['dt']:g} s is above the stable limit of {cfg['integrator']} for this "
-                    f"cloth, stable_dt={limit:.4g} s: choose dt <= {limit:.4g}, an unconditionally "
-                    f"stable integrator (implicit_euler, implicit_euler_prefactored), or set "
-                    f"allow_unstable to true"), limit
+                    f"cloth, stable_dt={limit:.4g} s{onset}: choose dt <= {limit:.4g}, an "
+                    f"unconditionally stable integrator ({unconditional}), or set allow_unstable to "
+                    f"true"), limit
         return None, limit
 
     # ------------------------------------------------------------------ parameters
