@@ -177,6 +177,8 @@ class Liu2013(Integrator):
         self._key = (dt, forces.drag, springs.copy(), forces.k.copy(), forces.c.copy())
         self._b = np.empty((n_free, 3))
         self._sol = np.empty((n_free, 3))
+        self._free_index = np.flatnonzero(free)
+        self._cheb = tuple(np.empty((n_free, 3)) for _ in range(3))
 
     # ------------------------------------------------------------------ the step
     def step(self, state, forces, dt):
@@ -205,28 +207,34 @@ class Liu2013(Integrator):
         rhs = self._buffer("_rhs", x)
         cur = self._buffer("_cur", x)
         np.copyto(cur, y)
-        prev = self._buffer("_prev", x) if self.chebyshev else None
-        if prev is not None:
-            np.copyto(prev, y)
-        b, sol = self._b, self._sol
+        idx, b, sol = self._free_index, self._b, self._sol
+        if self.chebyshev:  # the iterates in the free particles' space, three buffers rotated
+            cur_f, prev_f, new_f = self._cheb
+            np.take(y, idx, axis=0, out=cur_f)
+            np.copyto(prev_f, cur_f)
         omega = 1.0
         for it in range(self.iterations):
             _local_global_rhs(cur, forces.springs, forces.rest, forces.k, self._w, forces.kind,
                               BUCKLE_TABLE, h2, base, rhs)
-            np.copyto(b, rhs[free])
+            np.take(rhs, idx, axis=0, out=b)
             if pins is not None:
                 b += pins
             if self._solver is not None:
                 self._solver.solve(b, sol)
-            if prev is None:
-                cur[free] = sol
+            if not self.chebyshev:
+                cur[idx] = sol
                 continue
             # Wang (2015): x⁺ = ω·(γ·(x̂ − x) + x − x⁻) + x⁻, ω from the Chebyshev recurrence
             omega = 1.0 if it == 0 else (2.0 / (2.0 - self.rho ** 2) if it == 1
                                          else 4.0 / (4.0 - self.rho ** 2 * omega))
-            new = omega * (self.GAMMA * (sol - cur[free]) + cur[free] - prev[free]) + prev[free]
-            prev[free] = cur[free]
-            cur[free] = new
+            np.subtract(sol, cur_f, out=new_f)
+            new_f *= self.GAMMA
+            new_f += cur_f
+            new_f -= prev_f
+            new_f *= omega
+            new_f += prev_f
+            prev_f, cur_f, new_f = cur_f, new_f, prev_f
+            cur[idx] = cur_f
         self.counters["iterations"] += self.iterations
         self.counters["solves"] += 1
         # the new velocity from the displacement (pins keep theirs: they are at y, xₙ + h·vₙ)
