@@ -40,16 +40,16 @@ at ``xₙ + h·vₙ`` in the step's constraint.
 
 from __future__ import annotations
 
-import math
 
 import numba
 import numpy as np
 import scipy.sparse as sp
 
 from .. import stability as stab
-from ..forces import BUCKLE_TABLE, GravityTerm, WindTerm, _axial
+from ..forces import BUCKLE_TABLE, GravityTerm, WindTerm, _axial, spring_vector
 from . import register
 from .base import Integrator, Stability
+from .implicit import _graph_product
 
 
 @numba.njit(cache=True)
@@ -64,10 +64,7 @@ def _local_global_rhs(x, springs, rest, k, w, kind, tab, h2, base, rhs):
             continue
         i = springs[s, 0]
         j = springs[s, 1]
-        dx = x[j, 0] - x[i, 0]
-        dy = x[j, 1] - x[i, 1]
-        dz = x[j, 2] - x[i, 2]
-        l = math.sqrt(dx * dx + dy * dy + dz * dz)
+        dx, dy, dz, l = spring_vector(x, i, j)
         if l < 1e-300:
             continue
         _, de, _ = _axial(l, rest[s], k[s], kind[s], tab)
@@ -79,19 +76,6 @@ def _local_global_rhs(x, springs, rest, k, w, kind, tab, h2, base, rhs):
         rhs[j, 0] += scale * dx
         rhs[j, 1] += scale * dy
         rhs[j, 2] += scale * dz
-
-
-@numba.njit(cache=True)
-def _graph_apply(springs, w, x, out):
-    """``out += W x`` with ``W`` the graph Laplacian of the weights ``w``: ``Σ_j w_ij (x_i − x_j)``."""
-    for s in range(springs.shape[0]):
-        i = springs[s, 0]
-        j = springs[s, 1]
-        ws = w[s]
-        for a in range(3):
-            d = ws * (x[i, a] - x[j, a])
-            out[i, a] += d
-            out[j, a] -= d
 
 
 @register
@@ -201,8 +185,8 @@ class Liu2013(Integrator):
         base = self._buffer("_base", x)
         np.multiply(y, self.model.masses[:, None], out=base)
         base += (dt * forces.drag) * x0
-        if forces.with_damping:
-            _graph_apply(forces.springs, dt * forces.c, x0, base)
+        if forces.with_damping:  # + h·C·xₙ, Σ_j h·c_ij·(x_i − x_j): the graph product with −h·c
+            _graph_product(forces.springs, -dt * forces.c, x0, base)
         pins = self._pin_coupling @ y if self._pin_coupling.nnz else None
         rhs = self._buffer("_rhs", x)
         cur = self._buffer("_cur", x)

@@ -29,13 +29,12 @@ residual left after the sweeps, which falls with more substeps).
 
 from __future__ import annotations
 
-import math
 
 import numba
 import numpy as np
 
 from .. import stability as stab
-from ..forces import BUCKLE_TABLE, GravityTerm, WindTerm, _axial
+from ..forces import BUCKLE_TABLE, GravityTerm, WindTerm, _axial, spring_vector
 from . import register
 from .base import Integrator, Stability
 
@@ -53,10 +52,7 @@ def _project(p, x, springs, rest, k, w, c, kind, tab, inv_mass, h, lam):
         wsum = wi + wj
         if wsum == 0.0:
             continue
-        dx = p[j, 0] - p[i, 0]
-        dy = p[j, 1] - p[i, 1]
-        dz = p[j, 2] - p[i, 2]
-        l = math.sqrt(dx * dx + dy * dy + dz * dz)
+        dx, dy, dz, l = spring_vector(p, i, j)
         if l < 1e-300:
             continue
         ux, uy, uz = dx / l, dy / l, dz / l
