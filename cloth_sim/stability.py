@@ -649,9 +649,10 @@ def _bisect_stable(stable, omega: float, rel_tol: float, guess: float = 1.0,
 
     j_max, j_min = math.ceil(math.log(1e3) / r), math.floor(math.log(1e-6) / r)
     j = min(max(round(math.log(guess) / r), j_min), j_max)
-    if ceiling and stable(at(j)):
+    here = stable(at(j))
+    if here and ceiling:
         return at(j)
-    if not ceiling and stable(at(j)):
+    if here:
         lo, hi = j, j + 10
         while stable(at(hi)):
             if hi >= j_max:
@@ -689,6 +690,7 @@ def kang_stable_dt(model: ClothModel, k: np.ndarray, c: np.ndarray, drag: float,
     st = grid_stencil(model, k, c) if method in ("auto", "fourier") else None
     if st is None and method == "fourier":
         raise ValueError("the Fourier analysis needs a regular grid with uniform spring families")
+    guess = _KANG_GUESS.get(int(sweeps), 1.0)  # the last material's ω·dt limit: where to start
     if st is not None:
         # the grid's own wavenumbers πj/N up to N = 24 (the finite grid has none finer; the
         # instability sits at long wavelengths, so the limit falls slowly as the sampling gets finer:
@@ -697,8 +699,8 @@ def kang_stable_dt(model: ClothModel, k: np.ndarray, c: np.ndarray, drag: float,
         symbols = _fourier_symbols(st, n_theta)
         # a coarse search first, on the wavenumbers πj/n_coarse with n_coarse dividing n_theta:
         # they are some of the fine set's, so its limit bounds the fine one from above, and the
-        # fine search (over ten times the matrices) starts there and only goes down: a material far from the
-        # last one once cost 15 fine evaluations (0.1–0.2 s inside a parameter callback), now 1–5
+        # fine search (over ten times the matrices) starts there and only goes down: a material far
+        # from the last one once cost 15 fine evaluations (0.1–0.2 s inside a parameter callback)
         n_coarse = max(d for d in range(1, 7) if n_theta % d == 0)
         coarse = _fourier_symbols(st, n_coarse)
         watch = [None]  # the wavenumbers that were worst last time: checked first, alone
@@ -715,21 +717,18 @@ def kang_stable_dt(model: ClothModel, k: np.ndarray, c: np.ndarray, drag: float,
                 return float(np.max(rho)) <= 1.0 + 1e-9
             return stable
 
-        upper = _bisect_stable(stable_on(coarse), omega, rel_tol, _KANG_GUESS.get(int(sweeps), 1.0))
+        upper = _bisect_stable(stable_on(coarse), omega, rel_tol, guess)
         watch[0] = None  # indices into the coarse set
         if upper == 0.0:
             return 0.0
         if upper < math.inf:
             limit = _bisect_stable(stable_on(symbols), omega, rel_tol, upper * omega, ceiling=True)
         else:
-            limit = _bisect_stable(stable_on(symbols), omega, rel_tol, _KANG_GUESS.get(int(sweeps), 1.0))
-        if 0.0 < limit < math.inf:
-            _KANG_GUESS[int(sweeps)] = limit * omega
-        return limit
+            limit = _bisect_stable(stable_on(symbols), omega, rel_tol, guess)
     else:
         def stable(h):
             return spectral_radius(kang_step_matrix(model, k, c, drag, h, sweeps)) <= 1.0 + 1e-7
-    limit = _bisect_stable(stable, omega, rel_tol, _KANG_GUESS.get(int(sweeps), 1.0))
+        limit = _bisect_stable(stable, omega, rel_tol, guess)
     if 0.0 < limit < math.inf:
         _KANG_GUESS[int(sweeps)] = limit * omega
     return limit

@@ -145,6 +145,55 @@ def _kang_sweeps(f, v, dv, springs, k, h, sweeps, inv_den, acc, new):
         dv[:] = new
 
 
+# --------------------------------------------------------------------------- the constant matrix
+def cholesky(A: sp.spmatrix):
+    """A sparse Cholesky factorisation (``cholespy``) of the symmetric positive definite ``A``;
+    ``None`` for an empty matrix. Its ``solve(b, x)`` takes one or several right-hand sides."""
+    from cholespy import CholeskySolverD, MatrixType
+
+    A = A.tocsc()
+    if A.shape[0] == 0:
+        return None
+    return CholeskySolverD(A.shape[0], A.indptr.astype(np.int32), A.indices.astype(np.int32),
+                           np.ascontiguousarray(A.data), MatrixType.CSC)
+
+
+def constant_system(model, forces, dt: float):
+    """``M + dt·c_d·I + dt·C + dt²·H`` over the free particles: one ``n_free×n_free`` matrix (CSC)
+    for the three coordinates, with ``H`` the graph Laplacian of the springs' linearised stiffness
+    (a Choi–Ko buckling pair resists compression with ``k·max|h''|/L³``, far above ``k``: with ``k``
+    the prefactored matrix was too soft and the step diverged) and ``C`` that of their damping
+    coefficients. Returns ``(A, h, w, index)``: ``h`` those stiffnesses, ``w = dt·c + dt²·h`` the
+    Laplacian's weights and ``index`` each particle's row (−1 on pins, which are eliminated)."""
+    free = ~model.pinned
+    index = np.full(model.n_particles, -1, dtype=np.int64)
+    n_free = int(free.sum())
+    index[free] = np.arange(n_free)
+    h = stab.springs_effective_stiffness(forces.kind, forces.rest, forces.k)
+    w = dt * forces.c + dt * dt * h  # −(dt·C + dt²·H) off the diagonal, negated
+    diag = spring_sums(forces.springs, w, model.n_particles) + model.masses + dt * forces.drag
+    fi, fj = index[forces.springs[:, 0]], index[forces.springs[:, 1]]
+    both = (fi >= 0) & (fj >= 0)
+    rows = np.concatenate([fi[both], fj[both], np.arange(n_free)])
+    cols = np.concatenate([fj[both], fi[both], np.arange(n_free)])
+    vals = np.concatenate([-w[both], -w[both], diag[free]])
+    A = sp.csc_matrix((vals, (rows, cols)), shape=(n_free, n_free))
+    A.sum_duplicates()
+    return A, h, w, index
+
+
+def system_key(forces, dt: float) -> tuple:
+    """What :func:`constant_system` depends on besides the model (a new model, a new integrator)."""
+    return (dt, forces.drag, forces.springs.copy(), forces.k.copy(), forces.c.copy())
+
+
+def same_system(key, forces, dt: float) -> bool:
+    """Whether ``key`` (:func:`system_key`) still describes ``forces`` and ``dt``."""
+    return (key is not None and key[0] == dt and key[1] == forces.drag
+            and np.array_equal(key[2], forces.springs) and np.array_equal(key[3], forces.k)
+            and np.array_equal(key[4], forces.c))
+
+
 # --------------------------------------------------------------------------- base
 class _LinearisedImplicitEuler(Integrator):
     order = 1
@@ -274,12 +323,8 @@ class ImplicitEuler(_LinearisedImplicitEuler):
         otherwise."""
         A = A.tocsc()
         if self.clamp_compression:
-            from cholespy import CholeskySolverD, MatrixType
-
-            solver = CholeskySolverD(A.shape[0], A.indptr.astype(np.int32), A.indices.astype(np.int32),
-                                     np.ascontiguousarray(A.data), MatrixType.CSC)
             dv = np.zeros_like(b)
-            solver.solve(np.ascontiguousarray(b), dv)
+            cholesky(A).solve(np.ascontiguousarray(b), dv)
             return dv
         # symmetric: a symmetric ordering and diagonal pivots halve SuperLU's time
         return splu(A, permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True}).solve(b)
@@ -345,46 +390,20 @@ class ImplicitEulerPrefactored(_LinearisedImplicitEuler):
             self._stale = True
 
     def _ensure_factor(self, forces, dt):
-        old = self._key
-        if (old is not None and old[0] == dt and old[1] == forces.drag
-                and np.array_equal(old[2], forces.springs) and np.array_equal(old[3], forces.k)
-                and np.array_equal(old[4], forces.c)):
+        if same_system(self._key, forces, dt):
             self._stale = False
             return
-        model = self.model
-        free, index = self._free()
-        n_free = int(free.sum())
-        i, j = forces.springs[:, 0], forces.springs[:, 1]
-        # H from the springs' linearised stiffness: a Choi–Ko buckling pair resists compression
-        # with k·max|h''|/L³, far above k (with k the matrix was too soft and the step diverged)
-        self._h = stab.springs_effective_stiffness(forces.kind, forces.rest, forces.k)
-        w = dt * forces.c + dt * dt * self._h  # −(dt·C + dt²·H) off the diagonal, negated
-        diag = spring_sums(forces.springs, w, model.n_particles) + model.masses + dt * forces.drag
-        fi, fj = index[i], index[j]
-        both = (fi >= 0) & (fj >= 0)
-        rows = np.concatenate([fi[both], fj[both], np.arange(n_free)])
-        cols = np.concatenate([fj[both], fi[both], np.arange(n_free)])
-        vals = np.concatenate([-w[both], -w[both], diag[free]])
-        A = sp.csc_matrix((vals, (rows, cols)), shape=(n_free, n_free))
-        A.sum_duplicates()
+        A, self._h, _, index = constant_system(self.model, forces, dt)
+        n_free = A.shape[0]
         self._matrix = A
-        self._factor(A, n_free)
+        self._solver = cholesky(A)
         self.counters["factorizations"] += 1
-        self._key = (dt, forces.drag, forces.springs.copy(), forces.k.copy(), forces.c.copy())
-        self._free_mask = free
-        self._rhs_full = np.empty((model.n_particles, 3))
+        self._key = system_key(forces, dt)
+        self._free_mask = index >= 0
+        self._rhs_full = np.empty((self.model.n_particles, 3))
         self._b = np.empty((n_free, 3))
         self._dv = np.empty((n_free, 3))
         self._stale = False
-
-    def _factor(self, A, n):
-        from cholespy import CholeskySolverD, MatrixType
-
-        if n == 0:
-            self._solver = None
-            return
-        self._solver = CholeskySolverD(n, A.indptr.astype(np.int32), A.indices.astype(np.int32),
-                                       np.ascontiguousarray(A.data), MatrixType.CSC)
 
     def step(self, state, forces, dt):
         if self._stale:

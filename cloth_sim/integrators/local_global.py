@@ -40,16 +40,14 @@ at ``xₙ + h·vₙ`` in the step's constraint.
 
 from __future__ import annotations
 
-
 import numba
 import numpy as np
 import scipy.sparse as sp
 
-from .. import stability as stab
 from ..forces import BUCKLE_TABLE, GravityTerm, WindTerm, _axial, spring_vector
 from . import register
 from .base import Integrator, Stability
-from .implicit import _graph_product
+from .implicit import _graph_product, cholesky, constant_system, same_system, system_key
 
 
 @numba.njit(cache=True)
@@ -123,45 +121,26 @@ class Liu2013(Integrator):
 
     # ------------------------------------------------------------------ the matrix
     def _ensure_factor(self, forces, dt):
-        key = self._key
-        if (key is not None and key[0] == dt and key[1] == forces.drag
-                and np.array_equal(key[2], forces.springs) and np.array_equal(key[3], forces.k)
-                and np.array_equal(key[4], forces.c)):
+        if same_system(self._key, forces, dt):
             return
-        from cholespy import CholeskySolverD, MatrixType
-
-        model = self.model
-        free = ~model.pinned
-        index = np.full(model.n_particles, -1, dtype=np.int64)
-        index[free] = np.arange(int(free.sum()))
-        n_free = int(free.sum())
-        springs = forces.springs
-        self._w = stab.springs_effective_stiffness(forces.kind, forces.rest, forces.k)
-        off = dt * forces.c + dt * dt * self._w  # the Laplacian's weights, h·c + h²·w
-        i, j = springs[:, 0], springs[:, 1]
+        # the prefactored implicit Euler's matrix: M + h·c_d + h·C + h²·L with L of the
+        # linearised stiffnesses w
+        A, self._w, off, index = constant_system(self.model, forces, dt)
+        n_free = A.shape[0]
+        i, j = forces.springs[:, 0], forces.springs[:, 1]
         fi, fj = index[i], index[j]
-        both = (fi >= 0) & (fj >= 0)
-        diag = (np.bincount(springs.ravel(), weights=np.repeat(off, 2), minlength=model.n_particles)
-                + model.masses + dt * forces.drag)
-        A = sp.csc_matrix((np.concatenate([-off[both], -off[both], diag[free]]),
-                           (np.concatenate([fi[both], fj[both], np.arange(n_free)]),
-                            np.concatenate([fj[both], fi[both], np.arange(n_free)]))),
-                          shape=(n_free, n_free))
-        A.sum_duplicates()
         # a free particle's springs to pinned ones: their Laplacian entries move to the right-hand side
         cross = (fi >= 0) != (fj >= 0)
         rows = np.where(fi[cross] >= 0, fi[cross], fj[cross])
         cols = np.where(fi[cross] >= 0, j[cross], i[cross])
-        self._pin_coupling = sp.csr_matrix((off[cross], (rows, cols)), shape=(n_free, model.n_particles))
-        self._solver = (CholeskySolverD(n_free, A.indptr.astype(np.int32), A.indices.astype(np.int32),
-                                        np.ascontiguousarray(A.data), MatrixType.CSC) if n_free else None)
-        self._free = free
-        self._n_free = n_free
+        self._pin_coupling = sp.csr_matrix((off[cross], (rows, cols)), shape=(n_free, self.model.n_particles))
+        self._solver = cholesky(A)
+        self._free = index >= 0
+        self._free_index = np.flatnonzero(self._free)
         self.counters["factorizations"] += 1
-        self._key = (dt, forces.drag, springs.copy(), forces.k.copy(), forces.c.copy())
+        self._key = system_key(forces, dt)
         self._b = np.empty((n_free, 3))
         self._sol = np.empty((n_free, 3))
-        self._free_index = np.flatnonzero(free)
         self._cheb = tuple(np.empty((n_free, 3)) for _ in range(3))
 
     # ------------------------------------------------------------------ the step

@@ -29,7 +29,6 @@ residual left after the sweeps, which falls with more substeps).
 
 from __future__ import annotations
 
-
 import numba
 import numpy as np
 
@@ -42,7 +41,8 @@ from .base import Integrator, Stability
 @numba.njit(cache=True)
 def _project(p, x, springs, rest, k, w, c, kind, tab, inv_mass, h, lam):
     """One Gauss–Seidel sweep over the springs in their order, in place on ``p``; ``lam`` holds each
-    spring's multiplier (scaled by ``1/h²``: a force times... see the module) over the substep."""
+    spring's multiplier accumulated over the substep's sweeps (an impulse times ``h``: the force is
+    ``lam/h²``)."""
     h2 = h * h
     for s in range(springs.shape[0]):
         i = springs[s, 0]
