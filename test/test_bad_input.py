@@ -348,6 +348,54 @@ def test_a_tiny_dt_slows_the_node_but_never_stalls_it(ros):
     assert ros.spin_until(lambda: stats[-1].dt == 1e-3)
 
 
+def test_a_tick_stops_before_a_step_that_would_overrun_its_budget(ros, monkeypatch):
+    """A tick stepped until a step had ended past its budget, so with 25 ms steps at 10 Hz it ran
+    0.124 s of a 0.1 s period (a 2.3-period ~/stats gap in the fuzz): it now stops before a step
+    its predecessor says will end past the budget. On a fake clock that each step moves by 30 ms,
+    an 80 ms budget takes 2 steps (60 ms), not 3 (90 ms)."""
+    import types
+
+    import cloth_sim.ros.node as node_module
+
+    node = ros.start()
+    clock = [100.0]
+
+    def step(n=1):
+        clock[0] += 0.030
+
+    monkeypatch.setattr(node.sim, "step", step)
+    monkeypatch.setattr(node_module, "time", types.SimpleNamespace(perf_counter=lambda: clock[0]))
+    steps, wall, longest = node._advance(1000, clock[0], 0.080)
+    assert (steps, round(wall, 9), round(longest, 9)) == (2, 0.060, 0.030)
+    steps, _, _ = node._advance(1000, clock[0], 0.010)  # a budget below one step: one step still
+    assert steps == 1
+
+
+def test_the_first_tick_at_a_new_rate_is_due_a_period_after_the_last(ros, monkeypatch):
+    """A new publish_rate recreates the timer, whose first tick comes a full new period after the
+    request; with a full budget it then ended 1.8 periods after the request and ~/stats went 2.0
+    periods (30 Hz) without a message. The first tick is now due one new period after the last
+    tick started, so it steps only what is left of its budget (here 15 ms late: 26.7 − 15 ms), and the ticks after it are on the new timer's grid again."""
+    import types
+
+    import cloth_sim.ros.node as node_module
+
+    node = ros.start(publish_rate=60.0)
+    ros.spin_until(lambda: node._last_tick is not None)
+    assert ros.set_params("/cloth_sim", {"publish_rate": 30.0})[0].successful
+    last = node._last_tick
+    assert node._next_tick == pytest.approx(last + 1 / 30)
+    clock = [last + 1 / 30 + 0.015]  # the new timer fires 15 ms after the tick was due
+    budgets = []
+    monkeypatch.setattr(node_module, "time", types.SimpleNamespace(perf_counter=lambda: clock[0]))
+    monkeypatch.setattr(node, "_advance", lambda n, t0, budget: budgets.append(budget) or (0, 0.0, 0.0))
+    monkeypatch.setattr(node, "_publish", lambda *a: None)
+    node._tick()
+    clock[0] += 1 / 30  # the next one on the new timer's grid: on time, the full budget
+    node._tick()
+    assert budgets == pytest.approx([0.8 / 30 - 0.015, 0.8 / 30])
+
+
 def test_the_start_up_rate_is_never_refused(ros):
     node = ros.start()
     ros.spin_until(lambda: len(node._tick_costs) >= 20)
