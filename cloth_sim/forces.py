@@ -252,13 +252,12 @@ def wind_forces(x, tris, wind, normals, f):
 
 
 # --------------------------------------------------------------------------- terms
-#: From this many springs (a 210×210 grid) the spring forces run on every core. With the OpenMP
-#: workers sleeping between regions (as they must in a node, see ``cloth_sim/__init__.py``), waking
-#: them costs what a smaller cloth gains: at 128×128 the gather on 2 cores ties the serial loop
-#: (1.17 vs 1.13 ms), at 256×256 it gains 15 % (2× with spinning workers, which take a core from
-#: everything else); on a loaded 2-core machine one region waited 14 ms for a busy core. Both give
-#: the same bits.
-PARALLEL_MIN_SPRINGS = 262144
+#: From this many springs (a 46×46 grid) the spring forces run on every core. With the OpenMP
+#: workers spinning briefly between regions (see ``cloth_sim/__init__.py``), the gather on 2 cores
+#: against the serial loop: 0.74× at 16×16, 0.99× at 32×32, 1.58× at 48×48, 1.67× at 64×64, 1.65× at
+#: 128×128 (``cloth-sim bench peers`` shows it on Warp's scene). Below this the region's fork and join
+#: cost more than they save. Both give the same bits at any thread count.
+PARALLEL_MIN_SPRINGS = 12000
 
 _INCIDENCE: dict = {}
 
@@ -295,7 +294,8 @@ class SpringTerm:
         self.c = np.ascontiguousarray(damping[live])
         self.kind = np.ascontiguousarray(model.kind[live])
         self.with_damping = bool(np.any(self.c > 0))
-        if len(self.springs) >= PARALLEL_MIN_SPRINGS:
+        self.parallel = len(self.springs) >= PARALLEL_MIN_SPRINGS  # decided once, per term
+        if self.parallel:
             self._incidence = _incidence_of(model, live)
             self._fs = np.empty((len(self.springs), 3))
 
@@ -304,7 +304,7 @@ class SpringTerm:
         return len(self.springs) > 0
 
     def add_force(self, x, v, f):
-        if len(self.springs) >= PARALLEL_MIN_SPRINGS:
+        if self.parallel:
             spring_forces_gather(x, v, self.springs, self.rest, self.k, self.c, self.kind,
                                  BUCKLE_TABLE, self.with_damping, *self._incidence, self._fs, f)
         else:  # the same bits on one core
