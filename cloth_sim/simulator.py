@@ -635,10 +635,14 @@ def compile_kernels() -> float:
             col.Box(half_extents=(0.1, 0.1, 0.1)), col.Capsule(radius=0.05)])
         sim.set_collider_pose(1, (0.0, 0.0, -0.5))
         sim.step(2)
-        # the parallel gather, which only cloths above forces.PARALLEL_MIN_SPRINGS use
+        # the parallel gather, which only cloths above forces.PARALLEL_MIN_SPRINGS use: with the
+        # state's own (writable) arrays, updating them or not, and with read-only views (reports)
         term = sim.forces.spring_term
-        x, f = sim.positions, np.zeros_like(sim.positions)
-        spring_forces_gather(x, sim.velocities, term.springs, term.rest, term.k, term.c, term.kind,
-                             BUCKLE_TABLE, True, *incidence(term.springs, model.n_particles),
-                             np.empty((len(term.springs), 3)), f)
+        gather = (term.springs, term.rest, term.k, term.c, term.kind, BUCKLE_TABLE, True,
+                  *incidence(term.springs, model.n_particles), np.empty((len(term.springs), 3)),
+                  np.zeros_like(sim.positions), sim.forces.inv_mass, 1e-4)
+        x, v = sim.positions.copy(), sim.velocities.copy()
+        spring_forces_gather(x, v, *gather, True, x, v)
+        spring_forces_gather(sim.positions, sim.velocities, *gather, False, np.zeros((1, 3)),
+                             np.zeros((1, 3)))
     return time.perf_counter() - t0

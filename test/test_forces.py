@@ -226,18 +226,27 @@ def test_spring_forces_are_bit_identical_at_any_thread_count(model_name, monkeyp
     v0 = rng.normal(scale=0.01, size=x.shape)
     provot = ClothModel.grid(n, n, 1.0 / n, 0.01, stiffness=300.0, damping=0.05, pinned=[(0, 0)])
 
-    def run(threads):
+    def run(threads, wind=(0.0, 0.01, 0.02)):
         before = numba.get_num_threads()
         numba.set_num_threads(threads)
         try:  # a Provot run (Choi–Ko's onset force, 12k/L², throws a grid this fine apart)
-            s = Simulator(provot, dt=2e-5, wind=(0.0, 0.01, 0.02), strain_limit=0.1)
+            s = Simulator(provot, dt=2e-5, wind=wind, strain_limit=0.1)
             s.velocities = v0
+            term = s.forces.spring_term
+            if wind is None:  # the fused path runs exactly when the gather does
+                assert s.forces.terms[-1] is term and term.parallel == (forces.PARALLEL_MIN_SPRINGS < 10**9)
             s.step(200)
-            return s.positions
+            return s.positions, s.velocities
         finally:
             numba.set_num_threads(before)
 
-    assert np.array_equal(run(1), run(min(2, numba.config.NUMBA_NUM_THREADS)))
+    two = min(2, numba.config.NUMBA_NUM_THREADS)
+    assert all(np.array_equal(a, b) for a, b in zip(run(1), run(two)))
+    # gravity and springs only: symplectic Euler's update runs inside the gather (Forces.kick_drift)
+    fused_1, fused_2 = run(1, wind=None), run(two, wind=None)
+    monkeypatch.setattr(forces, "PARALLEL_MIN_SPRINGS", 10**9)  # the serial loop and update pass
+    serial = run(1, wind=None)
+    assert all(np.array_equal(a, b) and np.array_equal(a, c) for a, b, c in zip(fused_1, fused_2, serial))
 
 
 def test_long_range_attachments_reach_is_the_rest_geodesic_and_never_over_constrains():

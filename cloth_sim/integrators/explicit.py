@@ -84,19 +84,6 @@ class ExplicitRungeKutta(Integrator):
 
 
 @numba.njit(cache=True)
-def _kick_drift(x, v, f, inv_mass, dt):
-    """Symplectic Euler's update in one pass: ``v += (f·m⁻¹)·dt``, then ``x += v·dt`` with the new
-    velocity, each particle once (``inv_mass`` is 0 on pins, which keep their velocity). The same
-    operations in the same order as the array expressions it replaces (``a = f·m⁻¹; a *= dt;
-    v += a; x += v·dt``), so the same bits, in one pass over the arrays instead of five."""
-    for p in range(x.shape[0]):
-        w = inv_mass[p, 0]
-        for d in range(3):
-            v[p, d] += (f[p, d] * w) * dt
-            x[p, d] += v[p, d] * dt
-
-
-@numba.njit(cache=True)
 def _verlet_update(x, v, prev, a, dt, pinned):
     """``x' = 2x − x_prev + dt²·a``, ``v' = (3x' − 4x + x_prev)/(2dt)`` (``(x' − x)/dt`` on pins:
     exactly 0 for one at rest), then
@@ -134,8 +121,7 @@ class SymplecticEuler(Integrator):
     order = 1
 
     def step(self, state, forces, dt):
-        f = forces.force(state.x, state.v, out=self._buffer("_a", state.x))
-        _kick_drift(state.x, state.v, f, forces.inv_mass, dt)
+        forces.kick_drift(state.x, state.v, dt, self._buffer("_a", state.x))
 
     @classmethod
     def amplification(cls, h, omega, zeta):
