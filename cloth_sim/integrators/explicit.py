@@ -22,28 +22,23 @@ class ExplicitRungeKutta(Integrator):
     def step(self, state, forces, dt):
         x, v = state.x, state.v
         stages = len(self.b)
-        kx = [self._buffer(f"_kx{i}", x) for i in range(stages)]
-        kv = [self._buffer(f"_kv{i}", x) for i in range(stages)]
-        xs, tmp = self._buffer("_xs", x), self._buffer("_tmp", x)
+        k = self.__dict__.get("_k")
+        if k is None or k.shape[1:] != (stages, *x.shape):
+            k = self._k = np.empty((2, stages, *x.shape))  # the stages' (dx/dt, dv/dt)
+            self._coef = np.empty(stages)
+        kx, kv, coef = k[0], k[1], self._coef
+        xs = self._buffer("_xs", x)
         for i in range(stages):
             if i == 0:  # the first stage is the current state itself; no copy needed
-                kx[0][:] = v
+                np.copyto(kx[0], v)
                 forces.acceleration(x, v, out=kv[0])
                 continue
-            # the stage's velocity is kx[i] itself; no temporaries (each product goes through tmp)
-            vs = kx[i]
-            np.copyto(xs, x)
-            np.copyto(vs, v)
-            for j in range(i):
-                a = self.A[i, j]
-                if a != 0.0:
-                    xs += np.multiply(kx[j], dt * a, out=tmp)
-                    vs += np.multiply(kv[j], dt * a, out=tmp)
-            forces.acceleration(xs, vs, out=kv[i])
-        for i in range(stages):
-            if self.b[i] != 0.0:
-                x += np.multiply(kx[i], dt * self.b[i], out=tmp)
-                v += np.multiply(kv[i], dt * self.b[i], out=tmp)
+            # the stage's state: its velocity goes straight into kx[i] (combine reads kx[:i] only)
+            np.multiply(self.A[i, :i], dt, out=coef[:i])
+            _combine(xs, kx[i], x, v, kx, kv, coef[:i])
+            forces.acceleration(xs, kx[i], out=kv[i])
+        np.multiply(self.b, dt, out=coef)
+        _combine(x, v, x, v, kx, kv, coef)
 
     @classmethod
     def spectral_radii(cls, h, omega, zeta):
@@ -81,6 +76,25 @@ class ExplicitRungeKutta(Integrator):
         for i in range(1, len(cls.b)):
             K.append(J @ (eye + h * sum(cls.A[i, j] * K[j] for j in range(i))))
         return eye + h * sum(cls.b[i] * K[i] for i in range(len(cls.b)))
+
+
+@numba.njit(cache=True)
+def _combine(xo, vo, x, v, kx, kv, coef):
+    """``xo = x + Σ_j kx[j]·coef[j]`` and ``vo = v + Σ_j kv[j]·coef[j]`` over the non-zero
+    coefficients, in one pass (a stage's state, or the step's update in place with ``xo is x``):
+    per element the operations, and their order, of the array expressions they replace (a copy,
+    then ``+= kx[j]·(dt·a)`` term by term), so the same bits."""
+    for p in range(x.shape[0]):
+        for d in range(3):
+            xa = x[p, d]
+            va = v[p, d]
+            for j in range(coef.shape[0]):
+                c = coef[j]
+                if c != 0.0:
+                    xa += kx[j, p, d] * c
+                    va += kv[j, p, d] * c
+            xo[p, d] = xa
+            vo[p, d] = va
 
 
 @numba.njit(cache=True)
