@@ -17,6 +17,7 @@
 ``cloth-sim bench strain [--sizes 32 64] [--seconds 3]`` (worst strain and cost of the strain limit)
 ``cloth-sim bench contacts [--sizes 32 64] [--seconds 1.5]`` (cost of colliders and self-collision)
 ``cloth-sim bench lockstep [--size 32]`` (steps per second through ~/step from another process)
+``cloth-sim bench startup [--sizes 32 64] [--trials 4]`` (process start to the first cloud)
     Print the node's real-time factor with and without a ~/points subscriber (needs rclpy).
 ``cloth-sim record -o BAG [TOPIC ...]``, ``play BAG``, ``info BAG``, ``reindex BAG``
     rosbag2-compatible MCAP bags: record the ROS graph, replay it, inspect it, repair an unclosed bag.
@@ -98,6 +99,13 @@ def _bench_lockstep(args) -> int:
     from .ros.bench import print_lockstep_table
 
     print_lockstep_table(args.size, args.calls)
+    return 0
+
+
+def _bench_startup(args) -> int:
+    from .ros.bench import print_startup_table
+
+    print_startup_table(args.trials, tuple(args.sizes))
     return 0
 
 
@@ -230,6 +238,10 @@ def build_parser() -> argparse.ArgumentParser:
     ls.add_argument("--size", type=int, default=32, help="cloth N×N (default 32)")
     ls.add_argument("--calls", type=int, default=300, help="~/step calls per row")
     ls.set_defaults(func=_bench_lockstep)
+    su = bsub.add_parser("startup", help="seconds from starting cloth_sim_node to its first cloud (needs rclpy)")
+    su.add_argument("--sizes", type=int, nargs="+", default=[32, 64])
+    su.add_argument("--trials", type=int, default=4, help="node starts per size (the first warms up)")
+    su.set_defaults(func=_bench_startup)
     for name, text in [("work-precision", "wall time against error on hang16, reference DOP853; table, CSV, plot"),
                        ("stability", "largest stable dt by bisection vs linear theory; stress scenarios"),
                        ("scaling", "ms/step against N, fitted exponents; what skipping unused terms buys")]:

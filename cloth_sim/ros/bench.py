@@ -231,3 +231,54 @@ def print_lockstep_table(size: int = 32, calls: int = 300, chunks=(1, 10, 100)) 
         node.terminate()
         node.wait(timeout=20)
     return rows
+
+
+def print_startup_table(trials: int = 4, sizes=(32, 64)) -> list[dict]:
+    """Seconds from starting ``cloth_sim_node`` (a new process, the default scene resized to N×N) to
+    the first ``~/points`` cloud a subscriber in this process receives: interpreter, rclpy, numba's
+    cached kernels (:func:`~cloth_sim.simulator.compile_kernels`), the stability analysis, DDS
+    discovery. The first trial also warms the OS's file cache; the median of the rest is printed."""
+    import statistics
+    import subprocess
+    import sys
+
+    domain = 50 + os.getpid() % 40
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    exe = os.path.join(sys.prefix, "bin", "cloth_sim_node")
+    print(f"# start-up: process start to the first ~/points cloud; {platform.machine()}, "
+          f"{os.cpu_count()} cores; median of {max(1, trials - 1)} after one warm-up")
+    print("| N | seconds to first cloud (median) | all trials |")
+    print("|---|---|---|")
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    rows = []
+    try:
+        probe = rclpy.create_node("startup_bench", context=ctx)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(probe)
+        got: list[float] = []
+        probe.create_subscription(PointCloud2, "/cloth_sim/points", lambda _: got.append(time.monotonic()), 10)
+        for n in sizes:
+            times = []
+            for _ in range(trials):
+                t0 = time.monotonic()
+                node = subprocess.Popen([exe, "--ros-args", "-p", f"rows:={n}", "-p", f"cols:={n}",
+                                         "-p", f"spacing:={1.0 / (n - 1)}"],
+                                        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                got.clear()
+                while not got and time.monotonic() - t0 < 60:
+                    ex.spin_once(timeout_sec=0.01)
+                times.append(got[0] - t0 if got else float("nan"))
+                node.terminate()
+                node.wait()
+                drain = time.monotonic() + 1.0  # a cloud still in flight from this node
+                while time.monotonic() < drain:
+                    ex.spin_once(timeout_sec=0.05)
+            kept = times[1:] or times
+            rows.append({"n": n, "median_s": statistics.median(kept), "trials_s": times})
+            print(f"| {n} | {statistics.median(kept):.2f} | {', '.join(f'{t:.2f}' for t in times)} |")
+        ex.shutdown()
+        probe.destroy_node()
+    finally:
+        rclpy.shutdown(context=ctx)
+    return rows
