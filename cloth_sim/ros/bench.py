@@ -164,72 +164,97 @@ def print_param_load_table(size: int = 32, rate: float = 60.0) -> list[dict]:
     return rows
 
 
+def _bench_domain() -> int:
+    """A ROS domain for a benchmark that talks to a node in another process (not another run's)."""
+    return 50 + os.getpid() % 40
+
+
+def _start_node(domain: int, size: int):
+    """``cloth_sim_node`` in its own process on ``domain`` (localhost only), its default scene
+    resized to ``size``×``size`` over the same 1 m."""
+    import subprocess
+    import sys
+
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    exe = os.path.join(sys.prefix, "bin", "cloth_sim_node")
+    return subprocess.Popen([exe, "--ros-args", "-p", f"rows:={size}", "-p", f"cols:={size}",
+                             "-p", f"spacing:={1.0 / (size - 1)}"],
+                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+@contextmanager
+def _remote_client(domain: int, name: str):
+    """A node of this process on ``domain`` with its executor, for talking to a node in another
+    process; shut down on leaving."""
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    try:
+        client = rclpy.create_node(name, context=ctx)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(client)
+        yield client, ex
+        ex.shutdown()
+        client.destroy_node()
+    finally:
+        rclpy.shutdown(context=ctx)
+
+
 def print_lockstep_table(size: int = 32, calls: int = 300, chunks=(1, 10, 100)) -> list[dict]:
     """Lockstep throughput: ``cloth_sim_node`` in its own process (N×N hanging scene, paused),
     this process calling ``~/step`` with ``steps`` = each of ``chunks``, one call after the other;
     prints steps per second and calls per second, beside the node's own stepping speed (the same
     cloth stepped in this process without ROS)."""
-    import subprocess
-    import sys
+    domain = _bench_domain()
+    node = _start_node(domain, size)
+    print(f"# lockstep: ~/step from another process to cloth_sim_node ({size}×{size} hanging scene, "
+          f"symplectic Euler, dt = 1 ms); {platform.machine()}, {os.cpu_count()} cores")
+    print("| steps per call | calls/s | steps/s | × stepping in-process without ROS |")
+    print("|---|---|---|---|")
+    try:
+        with _remote_client(domain, "lockstep_bench") as (client, ex):
+            return _lockstep_rows(client, ex, size, calls, chunks)
+    finally:
+        node.terminate()
+        node.wait(timeout=20)
 
+
+def _lockstep_rows(client, ex, size, calls, chunks) -> list[dict]:
+    """The lockstep table's rows: ``~/step`` calls from ``client`` to the paused node."""
     from std_srvs.srv import SetBool
 
     from ..scene import load_scene
     from cloth_sim.srv import Step
 
-    domain = 50 + os.getpid() % 40
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    exe = os.path.join(sys.prefix, "bin", "cloth_sim_node")
-    node = subprocess.Popen([exe, "--ros-args", "-p", f"rows:={size}",
-                             "-p", f"cols:={size}", "-p", f"spacing:={1.0 / (size - 1)}"],
-                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    print(f"# lockstep: ~/step from another process to cloth_sim_node ({size}×{size} hanging scene, "
-          f"symplectic Euler, dt = 1 ms); {platform.machine()}, {os.cpu_count()} cores")
-    print("| steps per call | calls/s | steps/s | × stepping in-process without ROS |")
-    print("|---|---|---|---|")
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=domain)
     rows = []
-    try:
-        client = rclpy.create_node("lockstep_bench", context=ctx)
-        ex = SingleThreadedExecutor(context=ctx)
-        ex.add_node(client)
+    def call(srv, name, req, timeout=60.0):
+        cli = clients.setdefault(name, client.create_client(srv, name))
+        end = time.monotonic() + timeout
+        while not cli.service_is_ready():
+            ex.spin_once(timeout_sec=0.01)
+            if time.monotonic() > end:
+                raise RuntimeError(f"{name} not available")
+        fut = cli.call_async(req)
+        while not fut.done():
+            ex.spin_once(timeout_sec=0.001)
+        return fut.result()
 
-        def call(srv, name, req, timeout=60.0):
-            cli = clients.setdefault(name, client.create_client(srv, name))
-            end = time.monotonic() + timeout
-            while not cli.service_is_ready():
-                ex.spin_once(timeout_sec=0.01)
-                if time.monotonic() > end:
-                    raise RuntimeError(f"{name} not available")
-            fut = cli.call_async(req)
-            while not fut.done():
-                ex.spin_once(timeout_sec=0.001)
-            return fut.result()
-
-        clients = {}
-        call(SetBool, "/cloth_sim/pause", SetBool.Request(data=True))
-        sim = load_scene("hanging").build_simulator(rows=size, cols=size, spacing=1.0 / (size - 1))
-        sim.step(100)
+    clients = {}
+    call(SetBool, "/cloth_sim/pause", SetBool.Request(data=True))
+    sim = load_scene("hanging").build_simulator(rows=size, cols=size, spacing=1.0 / (size - 1))
+    sim.step(100)
+    t = time.perf_counter()
+    sim.step(1000)
+    local = 1000 / (time.perf_counter() - t)
+    for chunk in chunks:
+        call(Step, "/cloth_sim/step", Step.Request(steps=chunk))  # warm-up
         t = time.perf_counter()
-        sim.step(1000)
-        local = 1000 / (time.perf_counter() - t)
-        for chunk in chunks:
-            call(Step, "/cloth_sim/step", Step.Request(steps=chunk))  # warm-up
-            t = time.perf_counter()
-            for _ in range(calls):
-                res = call(Step, "/cloth_sim/step", Step.Request(steps=chunk))
-                assert res.success, res.message
-            wall = time.perf_counter() - t
-            rows.append({"steps": chunk, "calls_per_s": calls / wall, "steps_per_s": calls * chunk / wall})
-            print(f"| {chunk} | {calls / wall:.0f} | {calls * chunk / wall:.0f} | "
-                  f"{calls * chunk / wall / local:.2f} |", flush=True)
-        client.destroy_node()
-        ex.shutdown()
-    finally:
-        rclpy.shutdown(context=ctx)
-        node.terminate()
-        node.wait(timeout=20)
+        for _ in range(calls):
+            res = call(Step, "/cloth_sim/step", Step.Request(steps=chunk))
+            assert res.success, res.message
+        wall = time.perf_counter() - t
+        rows.append({"steps": chunk, "calls_per_s": calls / wall, "steps_per_s": calls * chunk / wall})
+        print(f"| {chunk} | {calls / wall:.0f} | {calls * chunk / wall:.0f} | "
+              f"{calls * chunk / wall / local:.2f} |", flush=True)
     return rows
 
 
@@ -239,32 +264,21 @@ def print_startup_table(trials: int = 4, sizes=(32, 64)) -> list[dict]:
     cached kernels (:func:`~cloth_sim.simulator.compile_kernels`), the stability analysis, DDS
     discovery. The first trial also warms the OS's file cache; the median of the rest is printed."""
     import statistics
-    import subprocess
-    import sys
 
-    domain = 50 + os.getpid() % 40
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    exe = os.path.join(sys.prefix, "bin", "cloth_sim_node")
+    domain = _bench_domain()
     print(f"# start-up: process start to the first ~/points cloud; {platform.machine()}, "
           f"{os.cpu_count()} cores; median of {max(1, trials - 1)} after one warm-up")
     print("| N | seconds to first cloud (median) | all trials |")
     print("|---|---|---|")
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=domain)
     rows = []
-    try:
-        probe = rclpy.create_node("startup_bench", context=ctx)
-        ex = SingleThreadedExecutor(context=ctx)
-        ex.add_node(probe)
+    with _remote_client(domain, "startup_bench") as (probe, ex):
         got: list[float] = []
         probe.create_subscription(PointCloud2, "/cloth_sim/points", lambda _: got.append(time.monotonic()), 10)
         for n in sizes:
             times = []
             for _ in range(trials):
                 t0 = time.monotonic()
-                node = subprocess.Popen([exe, "--ros-args", "-p", f"rows:={n}", "-p", f"cols:={n}",
-                                         "-p", f"spacing:={1.0 / (n - 1)}"],
-                                        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                node = _start_node(domain, n)
                 got.clear()
                 while not got and time.monotonic() - t0 < 60:
                     ex.spin_once(timeout_sec=0.01)
@@ -277,8 +291,4 @@ def print_startup_table(trials: int = 4, sizes=(32, 64)) -> list[dict]:
             kept = times[1:] or times
             rows.append({"n": n, "median_s": statistics.median(kept), "trials_s": times})
             print(f"| {n} | {statistics.median(kept):.2f} | {', '.join(f'{t:.2f}' for t in times)} |")
-        ex.shutdown()
-        probe.destroy_node()
-    finally:
-        rclpy.shutdown(context=ctx)
     return rows
