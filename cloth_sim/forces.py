@@ -157,7 +157,7 @@ def spring_forces_gather(x, v, springs, rest, k, c, kind, tab, with_damping, ptr
     ``v += (f·m⁻¹)·dt; x += v·dt`` into ``xo``, ``vo`` (``x`` and ``v`` themselves: separate
     arguments so that read-only ``x``, ``v`` type-check when there is no update, and ``xo``, ``vo``
     are then :data:`_NO_STATE`; ``inv_mass``: (n, 1), 0 on pins), the operations of
-    :func:`~cloth_sim.integrators.explicit._kick_drift` in its order: no particle's position is read
+    :func:`kick_drift` in its order: no particle's position is read
     after the first loop, and each core updates the particles whose forces it summed, while they are
     in its cache (a separate serial pass cost a 128×128 step 0.06 ms and most of what the second
     core saved). The per-spring lines
@@ -460,16 +460,20 @@ class Forces:
     def force(self, x: np.ndarray, v: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Total force on each particle (pins included: their force is reported, not applied)."""
         f = np.empty_like(x) if out is None else out
-        terms = self.terms
-        if terms and isinstance(terms[0], GravityTerm):  # it initialises the sum: 0 + m·g is m·g
-            np.copyto(f, terms[0].force)
-            terms = terms[1:]
-        else:
-            f[:] = 0.0
-        for term in terms:
+        for term in self._start_sum(f):
             term.add_force(x, v, f)
         self.evaluations += 1
         return f
+
+    def _start_sum(self, f: np.ndarray) -> tuple:
+        """Set ``f`` to the sum's start — gravity when it is on (it initialises the sum: 0 + m·g
+        is m·g), else 0 — and return the terms still to add."""
+        terms = self.terms
+        if terms and isinstance(terms[0], GravityTerm):
+            np.copyto(f, terms[0].force)
+            return terms[1:]
+        f[:] = 0.0
+        return terms
 
     def kick_drift(self, x: np.ndarray, v: np.ndarray, dt: float, f: np.ndarray) -> None:
         """Symplectic Euler's step in place: ``f`` = the total force, ``v += (f·m⁻¹)·dt``, then
@@ -477,11 +481,7 @@ class Forces:
         runs inside their gather (one parallel pass); otherwise after :meth:`force`. The same bits
         either way."""
         st = self.spring_term
-        if st.parallel and self.terms and self.terms[-1] is st:
-            if isinstance(self.terms[0], GravityTerm):
-                np.copyto(f, self.terms[0].force)
-            else:
-                f[:] = 0.0
+        if st.parallel and self._start_sum(f) == (st,):  # the springs are all that is left to add
             spring_forces_gather(x, v, st.springs, st.rest, st.k, st.c, st.kind, BUCKLE_TABLE,
                                  st.with_damping, *st._incidence, st._fs, f, self.inv_mass, dt, True,
                                  x, v)

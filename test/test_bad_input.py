@@ -375,7 +375,8 @@ def test_the_first_tick_at_a_new_rate_is_due_a_period_after_the_last(ros, monkey
     """A new publish_rate recreates the timer, whose first tick comes a full new period after the
     request; with a full budget it then ended 1.8 periods after the request and ~/stats went 2.0
     periods (30 Hz) without a message. The first tick is now due one new period after the last
-    tick started, so it steps only what is left of its budget (here 15 ms late: 26.7 − 15 ms), and the ticks after it are on the new timer's grid again."""
+    tick started, so it steps only what is left of its budget (here 15 ms late: 26.7 − 15 ms),
+    and the ticks after it are on the new timer's grid again."""
     import types
 
     import cloth_sim.ros.node as node_module

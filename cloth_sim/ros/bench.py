@@ -225,7 +225,6 @@ def _lockstep_rows(client, ex, size, calls, chunks) -> list[dict]:
     from ..scene import load_scene
     from cloth_sim.srv import Step
 
-    rows = []
     def call(srv, name, req, timeout=60.0):
         cli = clients.setdefault(name, client.create_client(srv, name))
         end = time.monotonic() + timeout
@@ -238,7 +237,7 @@ def _lockstep_rows(client, ex, size, calls, chunks) -> list[dict]:
             ex.spin_once(timeout_sec=0.001)
         return fut.result()
 
-    clients = {}
+    clients, rows = {}, []
     call(SetBool, "/cloth_sim/pause", SetBool.Request(data=True))
     sim = load_scene("hanging").build_simulator(rows=size, cols=size, spacing=1.0 / (size - 1))
     sim.step(100)
