@@ -145,15 +145,40 @@ def spring_forces(x, v, springs, rest, k, c, kind, tab, with_damping, f):
         f[j, 2] -= fz
 
 
+#: what :func:`spring_forces_gather` does with each particle's summed force
+GATHER_FORCE, GATHER_KICK_DRIFT, GATHER_ACCELERATION, GATHER_RK_STAGE = 0, 1, 2, 3
+
+
+@numba.njit(cache=True, inline="always")
+def combine_particle(xo, vo, x, v, kx, kv, coef, p):
+    """Particle ``p``'s ``xo = x + Σ_j kx[j]·coef[j]``, ``vo = v + Σ_j kv[j]·coef[j]`` over the
+    non-zero coefficients, ``j`` in increasing order (a Runge–Kutta stage's state or update; see
+    :func:`cloth_sim.integrators.explicit._combine`)."""
+    for d in range(3):
+        xa = x[p, d]
+        va = v[p, d]
+        for j in range(coef.shape[0]):
+            cj = coef[j]
+            if cj != 0.0:
+                xa += kx[j, p, d] * cj
+                va += kv[j, p, d] * cj
+        xo[p, d] = xa
+        vo[p, d] = va
+
+
 @numba.njit(cache=True, parallel=True)
-def spring_forces_gather(x, v, springs, rest, k, c, kind, tab, with_damping, ptr, adj, sign, fs, f,
-                         inv_mass, dt, kick, xo, vo):
+def spring_forces_gather(x, v, springs, rest, k, c, kind, tab, with_damping, ptr, adj, sign, fs, base,
+                         f, inv_mass, dt, mode, xo, vo, stage):
     """:func:`spring_forces` on every core, deterministically: each spring's force into ``fs`` (one
     spring per iteration), then each particle gathers its springs' forces in increasing spring
     order (``ptr``/``adj``/``sign``: :func:`incidence`) — the order the serial loop adds them in, so
-    the result is bit-identical to it at any thread count (no racy scatter).
+    the result is bit-identical to it at any thread count (no racy scatter). Each particle's sum
+    starts from ``base`` (``f`` itself to add to it, or gravity's force: no pass to copy it first).
 
-    With ``kick``, each particle then takes symplectic Euler's update in the same pass,
+    ``mode`` says what each particle does with its summed force ``f`` in the same pass:
+    :data:`GATHER_FORCE` keeps it; :data:`GATHER_ACCELERATION` turns it into ``f·m⁻¹`` (the product
+    :meth:`Forces.acceleration` takes afterwards otherwise: the same bits, one pass over ``f`` fewer,
+    for the Runge–Kutta stages); with :data:`GATHER_KICK_DRIFT` it takes symplectic Euler's update,
     ``v += (f·m⁻¹)·dt; x += v·dt`` into ``xo``, ``vo`` (``x`` and ``v`` themselves: separate
     arguments so that read-only ``x``, ``v`` type-check when there is no update, and ``xo``, ``vo``
     are then :data:`_NO_STATE`; ``inv_mass``: (n, 1), 0 on pins), the operations of
@@ -182,7 +207,7 @@ def spring_forces_gather(x, v, springs, rest, k, c, kind, tab, with_damping, ptr
         fs[s, 1] = mag * uy
         fs[s, 2] = mag * uz
     for p in numba.prange(f.shape[0]):
-        ax, ay, az = f[p, 0], f[p, 1], f[p, 2]
+        ax, ay, az = base[p, 0], base[p, 1], base[p, 2]
         for e in range(ptr[p], ptr[p + 1]):
             s = adj[e]
             if sign[e] > 0:
@@ -193,10 +218,19 @@ def spring_forces_gather(x, v, springs, rest, k, c, kind, tab, with_damping, ptr
                 ax -= fs[s, 0]
                 ay -= fs[s, 1]
                 az -= fs[s, 2]
+        if mode == GATHER_ACCELERATION or mode == GATHER_RK_STAGE:
+            w = inv_mass[p, 0]
+            f[p, 0] = ax * w
+            f[p, 1] = ay * w
+            f[p, 2] = az * w
+            if mode == GATHER_RK_STAGE:
+                xb, vb, kx, kv, coef = stage
+                combine_particle(xo, vo, xb, vb, kx, kv, coef, p)
+            continue
         f[p, 0] = ax
         f[p, 1] = ay
         f[p, 2] = az
-        if kick:
+        if mode == GATHER_KICK_DRIFT:
             w = inv_mass[p, 0]
             vo[p, 0] += (ax * w) * dt
             vo[p, 1] += (ay * w) * dt
@@ -292,6 +326,7 @@ PARALLEL_MIN_SPRINGS = 12000
 # the gather's inverse masses and state outputs when it does not update the state
 _NO_MASS = np.zeros((1, 1))
 _NO_STATE = np.zeros((1, 3))
+_NO_STAGE = (_NO_STATE, _NO_STATE, np.zeros((1, 1, 3)), np.zeros((1, 1, 3)), np.zeros(0))
 
 _INCIDENCE: dict = {}
 
@@ -340,8 +375,8 @@ class SpringTerm:
     def add_force(self, x, v, f):
         if self.parallel:
             spring_forces_gather(x, v, self.springs, self.rest, self.k, self.c, self.kind,
-                                 BUCKLE_TABLE, self.with_damping, *self._incidence, self._fs, f,
-                                 _NO_MASS, 0.0, False, _NO_STATE, _NO_STATE)
+                                 BUCKLE_TABLE, self.with_damping, *self._incidence, self._fs, f, f,
+                                 _NO_MASS, 0.0, GATHER_FORCE, _NO_STATE, _NO_STATE, _NO_STAGE)
         else:  # the same bits on one core
             spring_forces(x, v, self.springs, self.rest, self.k, self.c, self.kind, BUCKLE_TABLE,
                           self.with_damping, f)
@@ -443,6 +478,15 @@ class Forces:
         # allocate a temporary of the whole array on every evaluation
         self._inv_mass3 = np.repeat(self.inv_mass, 3, axis=1)
         self.evaluations = 0
+        # where the springs run on every core and are the last term, their gather takes the whole
+        # sum from here (gravity's force, or zeros) and the update after it (kick_drift, acceleration)
+        self._gather_base = None
+        st = self.spring_term
+        if st.parallel and self.terms[-1] is st:
+            if len(self.terms) == 2 and isinstance(self.terms[0], GravityTerm):
+                self._gather_base = self.terms[0].force
+            elif len(self.terms) == 1:
+                self._gather_base = np.zeros((model.n_particles, 3))
 
     # the spring term's arrays, which the implicit integrators assemble from
     springs = property(lambda self: self.spring_term.springs)
@@ -480,20 +524,46 @@ class Forces:
         ``x += v·dt``. Where the springs are summed on every core and are the last term, the update
         runs inside their gather (one parallel pass); otherwise after :meth:`force`. The same bits
         either way."""
-        st = self.spring_term
-        if st.parallel and self._start_sum(f) == (st,):  # the springs are all that is left to add
+        base = self._gather_base
+        if base is not None:
+            st = self.spring_term
             spring_forces_gather(x, v, st.springs, st.rest, st.k, st.c, st.kind, BUCKLE_TABLE,
-                                 st.with_damping, *st._incidence, st._fs, f, self.inv_mass, dt, True,
-                                 x, v)
+                                 st.with_damping, *st._incidence, st._fs, base, f, self.inv_mass, dt,
+                                 GATHER_KICK_DRIFT, x, v, _NO_STAGE)
             self.evaluations += 1
         else:
             kick_drift(x, v, self.force(x, v, out=f), self.inv_mass, dt)
 
     def acceleration(self, x: np.ndarray, v: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        """``M⁻¹ f``, zero on pinned particles."""
-        a = self.force(x, v, out)
+        """``M⁻¹ f``, zero on pinned particles. Where the springs are summed on every core and are
+        the last term, the division by the mass runs inside their gather (the same bits)."""
+        a = np.empty_like(x) if out is None else out
+        base = self._gather_base
+        if base is not None:
+            st = self.spring_term
+            spring_forces_gather(x, v, st.springs, st.rest, st.k, st.c, st.kind, BUCKLE_TABLE,
+                                 st.with_damping, *st._incidence, st._fs, base, a, self.inv_mass, 0.0,
+                                 GATHER_ACCELERATION, _NO_STATE, _NO_STATE, _NO_STAGE)
+            self.evaluations += 1
+            return a
+        self.force(x, v, a)
         a *= self._inv_mass3
         return a
+
+    @property
+    def fuses_stages(self) -> bool:
+        """Whether :meth:`acceleration_stage` runs as one pass (the springs on every core, last)."""
+        return self._gather_base is not None
+
+    def acceleration_stage(self, x, v, a, xo, vo, x0, v0, kx, kv, coef) -> None:
+        """``a = M⁻¹ f(x, v)``, then each particle's ``xo = x0 + Σ_j kx[j]·coef[j]``, ``vo = v0 +
+        Σ_j kv[j]·coef[j]`` (``a`` is one of ``kv``'s stages) in the same parallel pass: a
+        Runge–Kutta stage and the next stage's state. Only where :attr:`fuses_stages`."""
+        st = self.spring_term
+        spring_forces_gather(x, v, st.springs, st.rest, st.k, st.c, st.kind, BUCKLE_TABLE,
+                             st.with_damping, *st._incidence, st._fs, self._gather_base, a,
+                             self.inv_mass, 0.0, GATHER_RK_STAGE, xo, vo, (x0, v0, kx, kv, coef))
+        self.evaluations += 1
 
     def spring_energy(self, x: np.ndarray) -> float:
         return self.spring_term.energy(x)

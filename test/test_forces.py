@@ -204,7 +204,8 @@ def test_pins_stay_put_and_can_be_moved():
 def test_spring_forces_are_bit_identical_at_any_thread_count(model_name, monkeypatch):
     """The spring forces run on every core as a gather (each particle sums its springs' forces in
     spring order): the same bits as the serial scatter loop, and a whole run is the same bits at 1
-    and at 2 threads."""
+    and at 2 threads, with the updates fused into the gather (symplectic Euler, Runge–Kutta stages)
+    or not."""
     import numba
 
     rng = np.random.default_rng(5)
@@ -226,16 +227,17 @@ def test_spring_forces_are_bit_identical_at_any_thread_count(model_name, monkeyp
     v0 = rng.normal(scale=0.01, size=x.shape)
     provot = ClothModel.grid(n, n, 1.0 / n, 0.01, stiffness=300.0, damping=0.05, pinned=[(0, 0)])
 
-    def run(threads, wind=(0.0, 0.01, 0.02)):
+    def run(threads, wind=(0.0, 0.01, 0.02), integrator="symplectic_euler", steps=200):
         before = numba.get_num_threads()
         numba.set_num_threads(threads)
         try:  # a Provot run (Choi–Ko's onset force, 12k/L², throws a grid this fine apart)
-            s = Simulator(provot, dt=2e-5, wind=wind, strain_limit=0.1)
+            s = Simulator(provot, dt=2e-5, wind=wind, strain_limit=0.1, integrator=integrator)
             s.velocities = v0
             term = s.forces.spring_term
             if wind is None:  # the fused path runs exactly when the gather does
                 assert s.forces.terms[-1] is term and term.parallel == (forces.PARALLEL_MIN_SPRINGS < 10**9)
-            s.step(200)
+                assert s.forces.fuses_stages == term.parallel
+            s.step(steps)
             return s.positions, s.velocities
         finally:
             numba.set_num_threads(before)
@@ -243,10 +245,15 @@ def test_spring_forces_are_bit_identical_at_any_thread_count(model_name, monkeyp
     two = min(2, numba.config.NUMBA_NUM_THREADS)
     assert all(np.array_equal(a, b) for a, b in zip(run(1), run(two)))
     # gravity and springs only: symplectic Euler's update runs inside the gather (Forces.kick_drift)
-    fused_1, fused_2 = run(1, wind=None), run(two, wind=None)
+    # and the Runge–Kutta stages' forces, mass division and next state in one pass
+    # (Forces.acceleration_stage); with wind after the springs, the stages' update alone on every core
+    kinds = [dict(wind=None), dict(wind=None, integrator="rk4", steps=60),
+             dict(wind=None, integrator="midpoint", steps=60), dict(integrator="rk4", steps=60)]
+    fused = [(run(1, **kw), run(two, **kw)) for kw in kinds]
     monkeypatch.setattr(forces, "PARALLEL_MIN_SPRINGS", 10**9)  # the serial loop and update pass
-    serial = run(1, wind=None)
-    assert all(np.array_equal(a, b) and np.array_equal(a, c) for a, b, c in zip(fused_1, fused_2, serial))
+    for kw, (one, both) in zip(kinds, fused):
+        serial = run(1, **kw)
+        assert all(np.array_equal(a, b) and np.array_equal(a, c) for a, b, c in zip(one, both, serial)), kw
 
 
 def test_long_range_attachments_reach_is_the_rest_geodesic_and_never_over_constrains():
