@@ -204,6 +204,67 @@ def test_cg_and_direct_solves_agree_and_cg_reports_its_iterations():
     assert stats["solves"] == 20 and stats["cg_iterations"] > 20 and stats["direct_fallbacks"] == 0
 
 
+def test_block_preconditioned_cg_meets_its_tolerance_the_same_bits_at_any_thread_count():
+    """The compiled solve (:func:`~cloth_sim.integrators.implicit._pcg`) on a step's own matrix:
+    the true residual |b − A·x| is within the tolerance of |b| (checked with scipy's product, not
+    the solver's recurrence), the block preconditioner needs fewer iterations than none would, and
+    the products on every core give the same bits at 1 and 2 threads."""
+    import numba
+
+    from cloth_sim.integrators import implicit as imp
+
+    sim = Simulator(cloth16(damping=0.02), integrator="implicit_euler", dt=1 / 60)
+    sim.step(5)
+    integ = sim._integrator
+    A = integ._matrix
+    b = integ._rhs.ravel()[integ._free_dofs].copy()
+    inv = np.empty((A.shape[0] // 3, 3, 3))
+    imp._block_jacobi(A.indptr, A.indices, A.data, inv)
+    blocks = sp.block_diag([np.linalg.inv(inv[k]) for k in range(len(inv))])
+    np.testing.assert_allclose((blocks - A.multiply(blocks != 0)).toarray(), 0.0, atol=1e-12)
+
+    def solve(threads, inv=inv):
+        before = numba.get_num_threads()
+        numba.set_num_threads(threads)
+        try:
+            x = np.zeros_like(b)
+            its = imp._pcg(A.indptr, A.indices, A.data, inv, b, x, 1e-10, 5000, *np.empty((4, len(b))))
+            return its, x
+        finally:
+            numba.set_num_threads(before)
+
+    its, x = solve(1)
+    assert 0 < its < 5000
+    assert np.linalg.norm(b - A @ x) <= 1.5e-10 * np.linalg.norm(b)
+    its2, x2 = solve(min(2, numba.config.NUMBA_NUM_THREADS))
+    assert its2 == its and np.array_equal(x, x2)
+    identity = np.broadcast_to(np.eye(3), inv.shape).copy()  # no preconditioner at all
+    assert solve(1, identity)[0] > its
+
+
+def test_cg_that_does_not_converge_hands_the_step_to_the_direct_solve_and_comes_back():
+    """A cap of 2 iterations: CG gives up, the step and the next ``DIRECT_AFTER_FALLBACK`` are
+    solved directly (the same states as the direct solver's), then CG is tried again."""
+    from cloth_sim.integrators.implicit import ImplicitEuler
+
+    capped = Simulator(cloth16(damping=0.02), integrator="implicit_euler", dt=1 / 60,
+                       integrator_options={"cg_max_iterations": 2})
+    direct = Simulator(cloth16(damping=0.02), integrator="implicit_euler", dt=1 / 60,
+                       integrator_options={"solver": "direct"})
+    while capped.integrator_stats["direct_fallbacks"] == 0 and capped.steps_taken < 5:
+        capped.step()  # (the first step, from rest, converges at once: Δv = dt·g)
+    stats = capped.integrator_stats
+    assert stats["direct_fallbacks"] == 1
+    its = stats["cg_iterations"]
+    capped.step(ImplicitEuler.DIRECT_AFTER_FALLBACK)
+    assert capped.integrator_stats["cg_iterations"] == its  # all direct
+    direct.step(capped.steps_taken)
+    np.testing.assert_allclose(capped.positions, direct.positions, rtol=0, atol=1e-9)
+    capped.step()  # CG again, and it gives up again
+    stats = capped.integrator_stats
+    assert stats["cg_iterations"] == its + 2 and stats["direct_fallbacks"] == 2
+
+
 def test_unclamped_jacobian_runs_with_the_direct_solver():
     sim = Simulator(cloth16(damping=0.02), integrator="implicit_euler", dt=1 / 60,
                     integrator_options={"solver": "direct", "clamp_compression": False})

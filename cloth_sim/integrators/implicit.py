@@ -8,7 +8,7 @@ and differ in the matrix they use and how they solve with it:
 
 * ``implicit_euler`` (Baraff & Witkin 1998): the analytic Jacobians of the springs (Hooke and the
   Choi–Ko interactions), their damping and drag, refilled every step into a sparsity pattern built
-  once; solved by Jacobi-preconditioned conjugate gradients or a direct sparse solve.
+  once; solved by block-Jacobi-preconditioned conjugate gradients or a direct sparse solve.
 * ``implicit_euler_prefactored`` (eqs. 1.19–1.20): ∂f/∂x replaced by the constant graph matrix
   ``H`` (``H_ij = k_ij``, ``H_ii = −Σ_j k_ij``, the same for each coordinate) and ∂f/∂v by ``C`` built
   the same way from the damping coefficients, so the matrix is constant: one sparse Cholesky
@@ -28,7 +28,7 @@ import math
 import numba
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.linalg import cg, splu
+from scipy.sparse.linalg import splu
 
 from .. import stability as stab
 from ..forces import spring_sums
@@ -106,6 +106,99 @@ def _assemble_baraff_witkin(springs, kx, cv, f, v, h, diag, slot, dslot, data, r
                     e = slot[s, b, p, q]
                     if e >= 0:
                         data[e] += sign * (h * cv[s, p, q] + h2 * kx[s, p, q])
+
+
+@numba.njit(cache=True, parallel=True)
+def _csr_product(indptr, indices, data, x, out):
+    """``out = A·x`` for the CSR matrix ``(data, indices, indptr)``, rows on every core (each row's
+    sum in its own order: the same bits at any thread count)."""
+    for r in numba.prange(indptr.shape[0] - 1):
+        acc = 0.0
+        for e in range(indptr[r], indptr[r + 1]):
+            acc += data[e] * x[indices[e]]
+        out[r] = acc
+
+
+@numba.njit(cache=True)
+def _block_jacobi(indptr, indices, data, inv):
+    """``inv[k]``: the inverse of the 3×3 diagonal block of rows ``3k … 3k+2`` (symmetric positive
+    definite: the matrix is), by its adjugate."""
+    for k in range(inv.shape[0]):
+        b = np.zeros((3, 3))
+        for p in range(3):
+            r = 3 * k + p
+            for e in range(indptr[r], indptr[r + 1]):
+                c = indices[e] - 3 * k
+                if 0 <= c < 3:
+                    b[p, c] = data[e]
+        c00 = b[1, 1] * b[2, 2] - b[1, 2] * b[2, 1]
+        c01 = b[1, 2] * b[2, 0] - b[1, 0] * b[2, 2]
+        c02 = b[1, 0] * b[2, 1] - b[1, 1] * b[2, 0]
+        det = b[0, 0] * c00 + b[0, 1] * c01 + b[0, 2] * c02
+        inv[k, 0, 0] = c00 / det
+        inv[k, 1, 0] = c01 / det
+        inv[k, 2, 0] = c02 / det
+        inv[k, 0, 1] = (b[0, 2] * b[2, 1] - b[0, 1] * b[2, 2]) / det
+        inv[k, 1, 1] = (b[0, 0] * b[2, 2] - b[0, 2] * b[2, 0]) / det
+        inv[k, 2, 1] = (b[0, 1] * b[2, 0] - b[0, 0] * b[2, 1]) / det
+        inv[k, 0, 2] = (b[0, 1] * b[1, 2] - b[0, 2] * b[1, 1]) / det
+        inv[k, 1, 2] = (b[0, 2] * b[1, 0] - b[0, 0] * b[1, 2]) / det
+        inv[k, 2, 2] = (b[0, 0] * b[1, 1] - b[0, 1] * b[1, 0]) / det
+
+
+@numba.njit(cache=True)
+def _apply_blocks(inv, r, z):
+    """``z = P⁻¹·r`` with the 3×3 block-diagonal ``P⁻¹`` in ``inv``."""
+    for k in range(inv.shape[0]):
+        r0, r1, r2 = r[3 * k], r[3 * k + 1], r[3 * k + 2]
+        for p in range(3):
+            z[3 * k + p] = inv[k, p, 0] * r0 + inv[k, p, 1] * r1 + inv[k, p, 2] * r2
+
+
+@numba.njit(cache=True)
+def _dot(a, b):
+    """``a·b`` summed in index order (one core: the same bits at any thread count)."""
+    acc = 0.0
+    for i in range(a.shape[0]):
+        acc += a[i] * b[i]
+    return acc
+
+
+@numba.njit(cache=True)
+def _pcg(indptr, indices, data, inv, b, x, rtol, maxiter, r, z, p, q):
+    """Conjugate gradients on ``A·x = b`` (``x`` holds the start and receives the solution),
+    preconditioned with the 3×3 diagonal blocks' inverses ``inv``; stops when
+    ``|b − A·x| ≤ rtol·|b|`` (the recurrence's residual, as ``scipy.sparse.linalg.cg``). Returns the
+    iterations taken, or −1 when ``maxiter`` did not reach the tolerance. ``r``, ``z``, ``p``, ``q``
+    are scratch of ``b``'s length."""
+    n = b.shape[0]
+    _csr_product(indptr, indices, data, x, q)
+    for i in range(n):
+        r[i] = b[i] - q[i]
+    stop = rtol * rtol * _dot(b, b)
+    rr = _dot(r, r)
+    if rr <= stop:
+        return 0
+    _apply_blocks(inv, r, z)
+    rz = _dot(r, z)
+    for i in range(n):
+        p[i] = z[i]
+    for it in range(1, maxiter + 1):
+        _csr_product(indptr, indices, data, p, q)
+        alpha = rz / _dot(p, q)
+        for i in range(n):
+            x[i] += alpha * p[i]
+            r[i] -= alpha * q[i]
+        rr = _dot(r, r)
+        if rr <= stop:
+            return it
+        _apply_blocks(inv, r, z)
+        rz_new = _dot(r, z)
+        beta = rz_new / rz
+        rz = rz_new
+        for i in range(n):
+            p[i] = z[i] + beta * p[i]
+    return -1
 
 
 @numba.njit(cache=True)
@@ -223,12 +316,15 @@ class ImplicitEuler(_LinearisedImplicitEuler):
 
     Options (keyword arguments of the constructor, or attributes):
 
-    * ``solver`` — ``"cg"``: conjugate gradients preconditioned with the diagonal (Jacobi),
-      warm-started from the last ``Δv``, stopping at ``cg_tolerance`` (relative residual); when it
-      has not converged after ``cg_max_iterations`` (200) the step is solved directly instead, and
-      so are the next 16 (the counter ``direct_fallbacks``): a stiff or heavily damped material
-      makes the Jacobi-preconditioned system ill-conditioned (1,000 CG iterations at 24×24 took
-      0.1 s, a direct solve 19 ms); ``"direct"``: a direct solve every step, sparse Cholesky
+    * ``solver`` — ``"cg"``: conjugate gradients preconditioned with each particle's 3×3 diagonal
+      block, compiled (:func:`_pcg`), warm-started from the last ``Δv``, stopping at
+      ``cg_tolerance`` (relative residual); when it has not converged after ``cg_max_iterations``
+      (1000) the step is solved directly instead, and so are the next 16 (the counter
+      ``direct_fallbacks``): a stiff or heavily damped material makes the system ill-conditioned.
+      The cap is about what a direct solve costs: at 64×64 an iteration takes 0.29 ms and a
+      direct solve 220 ms (750 iterations), at 81×81 0.47 and 500 ms; the hanging scene at
+      dt = 1/60 needs 160–210 iterations there (200, the cap until the solve was compiled, sent
+      81×81 to the direct solve at 0.5 s a step); ``"direct"``: a direct solve every step, sparse Cholesky
       (``cholespy``) of the symmetric positive definite matrix, or SuperLU's LU when
       ``clamp_compression`` is off and the matrix may be indefinite.
     * ``clamp_compression`` (default on) — drop the compressive, indefinite part of each spring's
@@ -249,7 +345,7 @@ class ImplicitEuler(_LinearisedImplicitEuler):
     counter_names = ("solves", "cg_iterations", "last_cg_iterations", "direct_fallbacks")
 
     def __init__(self, model, solver: str = "cg", cg_tolerance: float = 1e-6,
-                 cg_max_iterations: int = 200, clamp_compression: bool = True):
+                 cg_max_iterations: int = 1000, clamp_compression: bool = True):
         super().__init__(model)
         if solver not in SOLVERS:
             raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
@@ -330,28 +426,34 @@ class ImplicitEuler(_LinearisedImplicitEuler):
         return splu(A, permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True}).solve(b)
 
     def _cg(self, A, b, x0):
-        """CG on ``A·dv = b``, solved as ``A·y = b/s`` with ``s`` the power of two nearest ``|b|``
-        (exact, so the iterates are those of the unscaled solve) so that a right-hand side near zero
-        (a cloth coming to rest: its velocities decay into subnormal numbers) cannot make CG divide
-        0 by 0; ``b = 0`` gives ``dv = 0``. ``None`` when it has not converged: the caller solves
-        directly."""
-        norm = float(np.linalg.norm(b))
+        """CG on ``A·dv = b`` preconditioned with the inverses of ``A``'s 3×3 diagonal blocks (a
+        particle's own coupling, which the plain diagonal leaves out), compiled (:func:`_pcg`:
+        the products on every core, the sums of the dot products in a fixed order, so the same bits
+        at any thread count), warm-started from ``x0``; solved as ``A·y = b/s`` with ``s`` the power
+        of two nearest ``|b|`` (exact, so the iterates are those of the unscaled solve) so that a
+        right-hand side near zero (a cloth coming to rest: its velocities decay into subnormal
+        numbers) cannot make CG divide 0 by 0; ``b = 0`` gives ``dv = 0``. ``None`` when it has not
+        converged: the caller solves directly."""
+        # not np.linalg.norm: its BLAS threads spin on the cores for milliseconds after the call,
+        # which slowed every product of the solve after it 2.4× on two cores
+        norm = math.sqrt(_dot(b, b))
         self.counters["last_cg_iterations"] = 0
         if norm == 0.0:
             return np.zeros_like(b)
         scale = math.ldexp(1.0, math.frexp(norm)[1])  # a power of two: scaling by it is exact
-        pre = sp.diags(1.0 / A.data[self._diag_entries])
-        count = [0]
-
-        def counter(_):
-            count[0] += 1
-
-        x0 = x0 / scale if x0 is not None and len(x0) == len(b) else None
-        y, info = cg(A, b / scale, x0=x0, rtol=self.cg_tolerance, atol=0.0,
-                     maxiter=self.cg_max_iterations, M=pre, callback=counter)
-        self.counters["last_cg_iterations"] = count[0]
-        self.counters["cg_iterations"] += count[0]
-        if info != 0:
+        n = len(b)
+        work = self.__dict__.get("_cg_work")
+        if work is None or work.shape[1] != n:
+            work = self._cg_work = np.empty((4, n))
+            self._block_inv = np.empty((n // 3, 3, 3))
+        _block_jacobi(A.indptr, A.indices, A.data, self._block_inv)
+        y = x0 / scale if x0 is not None and len(x0) == n else np.zeros(n)
+        its = _pcg(A.indptr, A.indices, A.data, self._block_inv, b / scale, y, self.cg_tolerance,
+                   self.cg_max_iterations, *work)
+        count = self.cg_max_iterations if its < 0 else its
+        self.counters["last_cg_iterations"] = count
+        self.counters["cg_iterations"] += count
+        if its < 0:
             self.counters["direct_fallbacks"] += 1
             return None
         return scale * y
