@@ -31,7 +31,7 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 from .. import stability as stab
-from ..forces import spring_sums
+from ..forces import incidence, spring_sums
 from . import register
 from .base import Integrator, Stability, matrices
 
@@ -108,29 +108,69 @@ def _assemble_baraff_witkin(springs, kx, cv, f, v, h, diag, slot, dslot, data, r
                         data[e] += sign * (h * cv[s, p, q] + h2 * kx[s, p, q])
 
 
+@numba.njit(cache=True)
+def _system_blocks(springs, kx, cv, f, v, h, diag, rhs, blocks, D):
+    """The Baraff–Witkin system without its matrix: ``rhs`` as :func:`_assemble_baraff_witkin`
+    fills it, each spring's coupling block ``B_s = h·cv + h²·kx`` (symmetric) into ``blocks`` and
+    each particle's diagonal block ``m_i + h·drag + Σ_{s∋i} B_s`` into ``D``: ``A`` is then
+    ``(A·x)_i = D_i·x_i − Σ_{s∋i} B_s·x_j`` over the free ``j``."""
+    n = f.shape[0]
+    h2 = h * h
+    for p in range(n):
+        for a in range(3):
+            rhs[p, a] = h * f[p, a]
+            for c in range(3):
+                D[p, a, c] = diag[p] if a == c else 0.0
+    for s in range(springs.shape[0]):
+        i = springs[s, 0]
+        j = springs[s, 1]
+        for p in range(3):
+            kr = 0.0
+            for q in range(3):
+                kr += kx[s, p, q] * (v[j, q] - v[i, q])
+            rhs[i, p] += h2 * kr
+            rhs[j, p] -= h2 * kr
+        for p in range(3):
+            for q in range(3):
+                e = h * cv[s, p, q] + h2 * kx[s, p, q]
+                blocks[s, p, q] = e
+                D[i, p, q] += e
+                D[j, p, q] += e
+
+
 @numba.njit(cache=True, parallel=True)
-def _csr_product(indptr, indices, data, x, out):
-    """``out = A·x`` for the CSR matrix ``(data, indices, indptr)``, rows on every core (each row's
-    sum in its own order: the same bits at any thread count)."""
-    for r in numba.prange(indptr.shape[0] - 1):
-        acc = 0.0
-        for e in range(indptr[r], indptr[r + 1]):
-            acc += data[e] * x[indices[e]]
-        out[r] = acc
+def _system_product(particles, ptr, adj, other, blocks, D, x, out):
+    """``out = A·x`` over the free particles (``particles[k]``: the particle of free index ``k``;
+    ``other[e]``: the free index of the far end of incidence ``e``'s spring, −1 for a pin), one
+    particle per iteration on every core, each summing its springs in incidence order (the same
+    bits at any thread count). Reads 9 numbers per spring and particle where the assembled CSR
+    matrix streams 9 per coupling and index (5.6 MB at 64×64, 0.22 ms a product)."""
+    for k in numba.prange(particles.shape[0]):
+        p = particles[k]
+        x0, x1, x2 = x[3 * k], x[3 * k + 1], x[3 * k + 2]
+        a0 = D[p, 0, 0] * x0 + D[p, 0, 1] * x1 + D[p, 0, 2] * x2
+        a1 = D[p, 1, 0] * x0 + D[p, 1, 1] * x1 + D[p, 1, 2] * x2
+        a2 = D[p, 2, 0] * x0 + D[p, 2, 1] * x1 + D[p, 2, 2] * x2
+        for e in range(ptr[p], ptr[p + 1]):
+            o = other[e]
+            if o < 0:
+                continue
+            s = adj[e]
+            y0, y1, y2 = x[3 * o], x[3 * o + 1], x[3 * o + 2]
+            a0 -= blocks[s, 0, 0] * y0 + blocks[s, 0, 1] * y1 + blocks[s, 0, 2] * y2
+            a1 -= blocks[s, 1, 0] * y0 + blocks[s, 1, 1] * y1 + blocks[s, 1, 2] * y2
+            a2 -= blocks[s, 2, 0] * y0 + blocks[s, 2, 1] * y1 + blocks[s, 2, 2] * y2
+        out[3 * k] = a0
+        out[3 * k + 1] = a1
+        out[3 * k + 2] = a2
 
 
 @numba.njit(cache=True)
-def _block_jacobi(indptr, indices, data, inv):
-    """``inv[k]``: the inverse of the 3×3 diagonal block of rows ``3k … 3k+2`` (symmetric positive
-    definite: the matrix is), by its adjugate."""
-    for k in range(inv.shape[0]):
-        b = np.zeros((3, 3))
-        for p in range(3):
-            r = 3 * k + p
-            for e in range(indptr[r], indptr[r + 1]):
-                c = indices[e] - 3 * k
-                if 0 <= c < 3:
-                    b[p, c] = data[e]
+def _block_inverses(particles, D, inv):
+    """``inv[k]``: the inverse of free particle ``k``'s 3×3 diagonal block (symmetric positive
+    definite, as the matrix is), by its adjugate."""
+    for k in range(particles.shape[0]):
+        b = D[particles[k]]
         c00 = b[1, 1] * b[2, 2] - b[1, 2] * b[2, 1]
         c01 = b[1, 2] * b[2, 0] - b[1, 0] * b[2, 2]
         c02 = b[1, 0] * b[2, 1] - b[1, 1] * b[2, 0]
@@ -165,14 +205,16 @@ def _dot(a, b):
 
 
 @numba.njit(cache=True)
-def _pcg(indptr, indices, data, inv, b, x, rtol, maxiter, r, z, p, q):
-    """Conjugate gradients on ``A·x = b`` (``x`` holds the start and receives the solution),
+def _pcg(system, inv, b, x, rtol, maxiter, r, z, p, q):
+    """Conjugate gradients on ``A·x = b`` (``x`` holds the start and receives the solution), ``A``
+    applied by :func:`_system_product` from ``system = (particles, ptr, adj, other, blocks, D)``,
     preconditioned with the 3×3 diagonal blocks' inverses ``inv``; stops when
     ``|b − A·x| ≤ rtol·|b|`` (the recurrence's residual, as ``scipy.sparse.linalg.cg``). Returns the
     iterations taken, or −1 when ``maxiter`` did not reach the tolerance. ``r``, ``z``, ``p``, ``q``
     are scratch of ``b``'s length."""
+    particles, ptr, adj, other, blocks, D = system
     n = b.shape[0]
-    _csr_product(indptr, indices, data, x, q)
+    _system_product(particles, ptr, adj, other, blocks, D, x, q)
     for i in range(n):
         r[i] = b[i] - q[i]
     stop = rtol * rtol * _dot(b, b)
@@ -184,7 +226,7 @@ def _pcg(indptr, indices, data, inv, b, x, rtol, maxiter, r, z, p, q):
     for i in range(n):
         p[i] = z[i]
     for it in range(1, maxiter + 1):
-        _csr_product(indptr, indices, data, p, q)
+        _system_product(particles, ptr, adj, other, blocks, D, p, q)
         alpha = rz / _dot(p, q)
         for i in range(n):
             x[i] += alpha * p[i]
@@ -321,10 +363,10 @@ class ImplicitEuler(_LinearisedImplicitEuler):
       ``cg_tolerance`` (relative residual); when it has not converged after ``cg_max_iterations``
       (1000) the step is solved directly instead, and so are the next 16 (the counter
       ``direct_fallbacks``): a stiff or heavily damped material makes the system ill-conditioned.
-      The cap is about what a direct solve costs: at 64×64 an iteration takes 0.29 ms and a
-      direct solve 220 ms (750 iterations), at 81×81 0.47 and 500 ms; the hanging scene at
-      dt = 1/60 needs 160–210 iterations there (200, the cap until the solve was compiled, sent
-      81×81 to the direct solve at 0.5 s a step); ``"direct"``: a direct solve every step, sparse Cholesky
+      The cap is well below what a direct solve costs: at 64×64 an iteration takes ~0.13 ms and
+      a direct solve 220 ms, at 81×81 ~0.2 and 500 ms; the hanging scene at dt = 1/60 with its
+      mass spread over the finer grid needs 160–210 iterations there (200, the cap until the solve
+      was compiled, sent it to the direct solve at 0.2–0.5 s a step); ``"direct"``: a direct solve every step, sparse Cholesky
       (``cholespy``) of the symmetric positive definite matrix, or SuperLU's LU when
       ``clamp_compression`` is off and the matrix may be indefinite.
     * ``clamp_compression`` (default on) — drop the compressive, indefinite part of each spring's
@@ -377,9 +419,15 @@ class ImplicitEuler(_LinearisedImplicitEuler):
         self._matrix = sp.csr_matrix((np.zeros(len(indices)), indices, indptr),
                                      shape=(self._n, self._n))
         self._matrix.has_sorted_indices = True
-        self._diag_entries = dslot[free].ravel()
         self._rhs = np.empty((self.model.n_particles, 3))
         self._pattern_springs = springs
+        # CG's matrix-free operator: each free particle's springs and their far ends' free indices
+        ptr, adj, sign = incidence(springs, len(index))
+        far = np.where(sign > 0, springs[adj, 1], springs[adj, 0])
+        self._system = (np.flatnonzero(free), ptr, adj, index[far], np.empty((len(springs), 3, 3)),
+                        np.empty((len(index), 3, 3)))
+        self._block_inv = np.empty((n_free, 3, 3))
+        self._cg_work = np.empty((4, 3 * n_free))
 
     def step(self, state, forces, dt):
         x, v = state.x, state.v
@@ -392,21 +440,22 @@ class ImplicitEuler(_LinearisedImplicitEuler):
         f = forces.force(x, v, out=self._buffer("_f", x))
         kx, _, cv = forces.spring_term.jacobian_blocks(x, v, self.clamp_compression,
                                                        position_damping=False)
-        A = self._matrix
-        _assemble_baraff_witkin(springs, kx, cv, f, v, dt, self.model.masses + dt * forces.drag,
-                                self._slot, self._dslot, A.data, self._rhs)
         if self._n == 0:
             return
-        b = self._rhs.ravel()[self._free_dofs]
+        diag = self.model.masses + dt * forces.drag
         dv = None
         if self.solver == "cg" and self._direct_steps == 0:
-            dv = self._cg(A, b, state.history.get("dv"))
+            _system_blocks(springs, kx, cv, f, v, dt, diag, self._rhs, *self._system[4:])
+            dv = self._cg(self._rhs.ravel()[self._free_dofs], state.history.get("dv"))
             if dv is None:  # the next steps go straight to the direct solve, then CG again
                 self._direct_steps = self.DIRECT_AFTER_FALLBACK
         elif self._direct_steps:
             self._direct_steps -= 1
-        if dv is None:
-            dv = self._direct(A, b)
+        if dv is None:  # the matrix itself, assembled
+            A = self._matrix
+            _assemble_baraff_witkin(springs, kx, cv, f, v, dt, diag, self._slot, self._dslot, A.data,
+                                    self._rhs)
+            dv = self._direct(A, self._rhs.ravel()[self._free_dofs])
         state.history["dv"] = dv
         self.counters["solves"] += 1
         v.reshape(-1)[self._free_dofs] += dv
@@ -425,15 +474,16 @@ class ImplicitEuler(_LinearisedImplicitEuler):
         # symmetric: a symmetric ordering and diagonal pivots halve SuperLU's time
         return splu(A, permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True}).solve(b)
 
-    def _cg(self, A, b, x0):
-        """CG on ``A·dv = b`` preconditioned with the inverses of ``A``'s 3×3 diagonal blocks (a
-        particle's own coupling, which the plain diagonal leaves out), compiled (:func:`_pcg`:
-        the products on every core, the sums of the dot products in a fixed order, so the same bits
-        at any thread count), warm-started from ``x0``; solved as ``A·y = b/s`` with ``s`` the power
-        of two nearest ``|b|`` (exact, so the iterates are those of the unscaled solve) so that a
-        right-hand side near zero (a cloth coming to rest: its velocities decay into subnormal
-        numbers) cannot make CG divide 0 by 0; ``b = 0`` gives ``dv = 0``. ``None`` when it has not
-        converged: the caller solves directly."""
+    def _cg(self, b, x0):
+        """CG on ``A·dv = b`` with ``A`` applied without assembling it (:func:`_system_product`,
+        from each spring's 3×3 block), preconditioned with the inverses of the particles' 3×3
+        diagonal blocks (a particle's own coupling, which the plain diagonal leaves out), compiled
+        (:func:`_pcg`: the products on every core, the sums of the dot products in a fixed order, so
+        the same bits at any thread count), warm-started from ``x0``; solved as ``A·y = b/s`` with
+        ``s`` the power of two nearest ``|b|`` (exact, so the iterates are those of the unscaled
+        solve) so that a right-hand side near zero (a cloth coming to rest: its velocities decay into
+        subnormal numbers) cannot make CG divide 0 by 0; ``b = 0`` gives ``dv = 0``. ``None`` when
+        it has not converged: the caller solves directly."""
         # not np.linalg.norm: its BLAS threads spin on the cores for milliseconds after the call,
         # which slowed every product of the solve after it 2.4× on two cores
         norm = math.sqrt(_dot(b, b))
@@ -441,15 +491,10 @@ class ImplicitEuler(_LinearisedImplicitEuler):
         if norm == 0.0:
             return np.zeros_like(b)
         scale = math.ldexp(1.0, math.frexp(norm)[1])  # a power of two: scaling by it is exact
-        n = len(b)
-        work = self.__dict__.get("_cg_work")
-        if work is None or work.shape[1] != n:
-            work = self._cg_work = np.empty((4, n))
-            self._block_inv = np.empty((n // 3, 3, 3))
-        _block_jacobi(A.indptr, A.indices, A.data, self._block_inv)
-        y = x0 / scale if x0 is not None and len(x0) == n else np.zeros(n)
-        its = _pcg(A.indptr, A.indices, A.data, self._block_inv, b / scale, y, self.cg_tolerance,
-                   self.cg_max_iterations, *work)
+        _block_inverses(self._system[0], self._system[5], self._block_inv)
+        y = x0 / scale if x0 is not None and len(x0) == len(b) else np.zeros(len(b))
+        its = _pcg(self._system, self._block_inv, b / scale, y, self.cg_tolerance,
+                   self.cg_max_iterations, *self._cg_work)
         count = self.cg_max_iterations if its < 0 else its
         self.counters["last_cg_iterations"] = count
         self.counters["cg_iterations"] += count
