@@ -384,11 +384,13 @@ class SpringTerm:
     def energy(self, x) -> float:
         return float(spring_energy(x, self.springs, self.rest, self.k, self.kind, BUCKLE_TABLE))
 
-    def jacobian_blocks(self, x, v, clamp: bool = False, position_damping: bool = True):
+    def jacobian_blocks(self, x, v, clamp: bool = False, position_damping: bool = True, out=None):
         """Per-spring ``(kx, dx, cv)`` 3×3 blocks (see :func:`spring_jacobian_blocks`); ``dx`` is
-        left zero without ``position_damping``."""
+        left zero without ``position_damping``. ``out``: three ``(m, 3, 3)`` arrays to fill."""
         m = len(self.springs)
-        kx, dx, cv = np.empty((m, 3, 3)), np.empty((m, 3, 3)), np.empty((m, 3, 3))
+        if out is None:
+            out = np.empty((m, 3, 3)), np.empty((m, 3, 3)), np.empty((m, 3, 3))
+        kx, dx, cv = out
         spring_jacobian_blocks(np.ascontiguousarray(x, dtype=np.float64),
                                np.ascontiguousarray(v, dtype=np.float64), self.springs, self.rest,
                                self.k, self.c, self.kind, BUCKLE_TABLE, clamp, position_damping,

@@ -427,7 +427,10 @@ class ImplicitEuler(_LinearisedImplicitEuler):
         self._system = (np.flatnonzero(free), ptr, adj, index[far], np.empty((len(springs), 3, 3)),
                         np.empty((len(index), 3, 3)))
         self._block_inv = np.empty((n_free, 3, 3))
-        self._cg_work = np.empty((4, 3 * n_free))
+        self._cg_work = np.empty((6, 3 * n_free))  # b, b/s, and CG's r, z, p, q
+        self._y = np.empty(3 * n_free)
+        self._jacobian = tuple(np.empty((len(springs), 3, 3)) for _ in range(3))
+        self._diag = np.empty(len(index))
 
     def step(self, state, forces, dt):
         x, v = state.x, state.v
@@ -439,14 +442,16 @@ class ImplicitEuler(_LinearisedImplicitEuler):
         self._pattern_springs = springs
         f = forces.force(x, v, out=self._buffer("_f", x))
         kx, _, cv = forces.spring_term.jacobian_blocks(x, v, self.clamp_compression,
-                                                       position_damping=False)
+                                                       position_damping=False, out=self._jacobian)
         if self._n == 0:
             return
-        diag = self.model.masses + dt * forces.drag
+        diag = np.add(self.model.masses, dt * forces.drag, out=self._diag)
         dv = None
         if self.solver == "cg" and self._direct_steps == 0:
             _system_blocks(springs, kx, cv, f, v, dt, diag, self._rhs, *self._system[4:])
-            dv = self._cg(self._rhs.ravel()[self._free_dofs], state.history.get("dv"))
+            # (mode="clip": with "raise" numpy buffers the output, a temporary of its size)
+            b = np.take(self._rhs.reshape(-1), self._free_dofs, out=self._cg_work[0], mode="clip")
+            dv = self._cg(b, state)
             if dv is None:  # the next steps go straight to the direct solve, then CG again
                 self._direct_steps = self.DIRECT_AFTER_FALLBACK
         elif self._direct_steps:
@@ -455,11 +460,9 @@ class ImplicitEuler(_LinearisedImplicitEuler):
             A = self._matrix
             _assemble_baraff_witkin(springs, kx, cv, f, v, dt, diag, self._slot, self._dslot, A.data,
                                     self._rhs)
-            dv = self._direct(A, self._rhs.ravel()[self._free_dofs])
-        state.history["dv"] = dv
+            dv = state.history["dv"] = self._direct(A, self._rhs.ravel()[self._free_dofs])
         self.counters["solves"] += 1
-        v.reshape(-1)[self._free_dofs] += dv
-        x += dt * v
+        _update(x, v, self._system[0], dv, dt)
 
     def _direct(self, A, b):
         """A direct solve: sparse Cholesky (``cholespy``) when the matrix is symmetric positive
@@ -474,34 +477,54 @@ class ImplicitEuler(_LinearisedImplicitEuler):
         # symmetric: a symmetric ordering and diagonal pivots halve SuperLU's time
         return splu(A, permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True}).solve(b)
 
-    def _cg(self, b, x0):
+    def _cg(self, b, state):
         """CG on ``A·dv = b`` with ``A`` applied without assembling it (:func:`_system_product`,
         from each spring's 3×3 block), preconditioned with the inverses of the particles' 3×3
         diagonal blocks (a particle's own coupling, which the plain diagonal leaves out), compiled
         (:func:`_pcg`: the products on every core, the sums of the dot products in a fixed order, so
-        the same bits at any thread count), warm-started from ``x0``; solved as ``A·y = b/s`` with
-        ``s`` the power of two nearest ``|b|`` (exact, so the iterates are those of the unscaled
-        solve) so that a right-hand side near zero (a cloth coming to rest: its velocities decay into
-        subnormal numbers) cannot make CG divide 0 by 0; ``b = 0`` gives ``dv = 0``. ``None`` when
-        it has not converged: the caller solves directly."""
+        the same bits at any thread count), warm-started from the last step's ``Δv`` (the state's
+        ``history["dv"]``, which receives the solution); solved as ``A·y = b/s`` with ``s`` the
+        power of two nearest ``|b|`` (exact, so the iterates are those of the unscaled solve) so
+        that a right-hand side near zero (a cloth coming to rest: its velocities decay into subnormal
+        numbers) cannot make CG divide 0 by 0; ``b = 0`` gives ``dv = 0``. ``None`` when it has not
+        converged: the caller solves directly. Every array is the integrator's or the state's own:
+        a step allocates none."""
+        n = len(b)
+        dv = state.history.get("dv")
+        if dv is None or len(dv) != n:
+            dv = state.history["dv"] = np.zeros(n)  # no warm start
         # not np.linalg.norm: its BLAS threads spin on the cores for milliseconds after the call,
         # which slowed every product of the solve after it 2.4× on two cores
         norm = math.sqrt(_dot(b, b))
         self.counters["last_cg_iterations"] = 0
         if norm == 0.0:
-            return np.zeros_like(b)
-        scale = math.ldexp(1.0, math.frexp(norm)[1])  # a power of two: scaling by it is exact
+            dv[:] = 0.0
+            return dv
+        inv_scale = math.ldexp(1.0, -math.frexp(norm)[1])  # a power of two: scaling by it is exact
         _block_inverses(self._system[0], self._system[5], self._block_inv)
-        y = x0 / scale if x0 is not None and len(x0) == len(b) else np.zeros(len(b))
-        its = _pcg(self._system, self._block_inv, b / scale, y, self.cg_tolerance,
-                   self.cg_max_iterations, *self._cg_work)
+        y = np.multiply(dv, inv_scale, out=self._y)
+        its = _pcg(self._system, self._block_inv, np.multiply(b, inv_scale, out=self._cg_work[1]), y,
+                   self.cg_tolerance, self.cg_max_iterations, *self._cg_work[2:])
         count = self.cg_max_iterations if its < 0 else its
         self.counters["last_cg_iterations"] = count
         self.counters["cg_iterations"] += count
         if its < 0:
             self.counters["direct_fallbacks"] += 1
             return None
-        return scale * y
+        return np.divide(y, inv_scale, out=dv)
+
+
+@numba.njit(cache=True)
+def _update(x, v, particles, dv, h):
+    """``v += Δv`` on the free particles (``particles[k]`` takes ``dv[3k:3k+3]``), then ``x += h·v``:
+    the array expressions' operations, in one pass and without temporaries."""
+    for k in range(particles.shape[0]):
+        p = particles[k]
+        for a in range(3):
+            v[p, a] += dv[3 * k + a]
+    for p in range(x.shape[0]):
+        for a in range(3):
+            x[p, a] += h * v[p, a]
 
 
 @register
