@@ -630,7 +630,7 @@ def _stiffness_coefficients(l, L, k, kind, tab, clamp):
     return a, t
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, parallel=True)
 def spring_jacobian_blocks(x, v, springs, rest, k, c, kind, tab, clamp, position_damping,
                            kx, dx, cv):
     """Per-spring 3×3 blocks of the force Jacobians, as ``∂f_i/∂x_j`` and ``∂f_i/∂v_j``:
@@ -642,8 +642,9 @@ def spring_jacobian_blocks(x, v, springs, rest, k, c, kind, tab, clamp, position
 
     The other blocks follow: ``∂f_i/∂x_i = ∂f_j/∂x_j = −block``, ``∂f_j/∂x_i = blockᵀ`` (the
     damping blocks ``dx`` change sign with ``r``: ``∂f_j/∂x_i = dx``, as ``f_j = −f_i``).
-    Without ``position_damping`` ``dx`` stays zero (Baraff–Witkin leave it out of their matrix)."""
-    for s in range(springs.shape[0]):
+    Without ``position_damping`` ``dx`` stays zero (Baraff–Witkin leave it out of their matrix).
+    Springs on every core (each writes only its own blocks)."""
+    for s in numba.prange(springs.shape[0]):
         i = springs[s, 0]
         j = springs[s, 1]
         ddx, ddy, ddz, l = spring_vector(x, i, j)
@@ -652,11 +653,12 @@ def spring_jacobian_blocks(x, v, springs, rest, k, c, kind, tab, clamp, position
         cv[s] = 0.0
         if l < 1e-300:
             continue
-        u = np.array((ddx / l, ddy / l, ddz / l))
+        # tuples, not arrays: an array per spring was a heap allocation (68 ns a spring)
+        u = (ddx / l, ddy / l, ddz / l)
         a, t = _stiffness_coefficients(l, rest[s], k[s], kind[s], tab, clamp)
-        r = np.array((v[j, 0] - v[i, 0], v[j, 1] - v[i, 1], v[j, 2] - v[i, 2]))
+        r = (v[j, 0] - v[i, 0], v[j, 1] - v[i, 1], v[j, 2] - v[i, 2])
         ru = r[0] * u[0] + r[1] * u[1] + r[2] * u[2]
-        pr = r - ru * u
+        pr = (r[0] - ru * u[0], r[1] - ru * u[1], r[2] - ru * u[2])
         cl = c[s] / l
         for p in range(3):
             for q in range(3):

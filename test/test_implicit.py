@@ -229,12 +229,14 @@ def test_matrix_free_cg_is_the_assembled_system_and_meets_its_tolerance_at_any_t
                                 A.data, integ._rhs)
     np.testing.assert_array_equal(integ._rhs.ravel()[integ._free_dofs], b)
     probe = np.random.default_rng(3).normal(size=len(b))
-    product = np.empty_like(b)
-    imp._system_product(*integ._system, probe, product)
+    product, partial = np.empty_like(b), np.empty((imp._SLICES, 3))
+    imp._system_product(*integ._system, probe, product, partial)
     np.testing.assert_allclose(product, A @ probe, rtol=1e-12, atol=1e-12 * np.abs(A @ probe).max())
-    inv = np.empty((len(b) // 3, 3, 3))
+    assert partial[:, 0].sum() == pytest.approx(probe @ (A @ probe), rel=1e-12)
+    inv = np.empty((len(b) // 3, 6))  # upper triangles
     imp._block_inverses(integ._system[0], integ._system[5], inv)
-    blocks = sp.block_diag([np.linalg.inv(inv[k]) for k in range(len(inv))])
+    full = inv[:, [[0, 1, 2], [1, 3, 4], [2, 4, 5]]]
+    blocks = sp.block_diag([np.linalg.inv(full[k]) for k in range(len(full))])
     np.testing.assert_allclose((blocks - A.multiply(blocks != 0)).toarray(), 0.0,
                                atol=1e-9 * np.abs(A.diagonal()).max())
 
@@ -243,7 +245,8 @@ def test_matrix_free_cg_is_the_assembled_system_and_meets_its_tolerance_at_any_t
         numba.set_num_threads(threads)
         try:
             y = np.zeros_like(b)
-            its = imp._pcg(integ._system, inv, b, y, 1e-10, 5000, *np.empty((4, len(b))))
+            its = imp._pcg(integ._system, inv, b, y, 1e-10, 5000, *np.empty((4, len(b))),
+                           np.empty((imp._SLICES, 3)))
             return its, y
         finally:
             numba.set_num_threads(before)
@@ -253,7 +256,7 @@ def test_matrix_free_cg_is_the_assembled_system_and_meets_its_tolerance_at_any_t
     assert np.linalg.norm(b - A @ y) <= 1.5e-10 * np.linalg.norm(b)
     its2, y2 = solve(min(2, numba.config.NUMBA_NUM_THREADS))
     assert its2 == its and np.array_equal(y, y2)
-    identity = np.broadcast_to(np.eye(3), inv.shape).copy()  # no preconditioner at all
+    identity = np.tile([1.0, 0.0, 0.0, 1.0, 0.0, 1.0], (len(inv), 1))  # no preconditioner at all
     assert solve(1, identity)[0] > its
 
 

@@ -108,19 +108,31 @@ def _assemble_baraff_witkin(springs, kx, cv, f, v, h, diag, slot, dslot, data, r
                         data[e] += sign * (h * cv[s, p, q] + h2 * kx[s, p, q])
 
 
+#: a symmetric 3×3 block stored as its upper triangle: (0,0) (0,1) (0,2) (1,1) (1,2) (2,2)
+_SYM = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+#: CG's sums run over this many fixed slices of the particles, each summed on one core and the slices'
+#: sums added in order: the same bits at any thread count
+_SLICES = 64
+
+
 @numba.njit(cache=True)
 def _system_blocks(springs, kx, cv, f, v, h, diag, rhs, blocks, D):
     """The Baraff–Witkin system without its matrix: ``rhs`` as :func:`_assemble_baraff_witkin`
-    fills it, each spring's coupling block ``B_s = h·cv + h²·kx`` (symmetric) into ``blocks`` and
-    each particle's diagonal block ``m_i + h·drag + Σ_{s∋i} B_s`` into ``D``: ``A`` is then
-    ``(A·x)_i = D_i·x_i − Σ_{s∋i} B_s·x_j`` over the free ``j``."""
+    fills it, each spring's coupling block ``B_s = h·cv + h²·kx`` into ``blocks`` and each particle's
+    diagonal block ``m_i + h·drag + Σ_{s∋i} B_s`` into ``D``, both symmetric and kept as their upper
+    triangles (:data:`_SYM`): ``A`` is then ``(A·x)_i = D_i·x_i − Σ_{s∋i} B_s·x_j`` over the free
+    ``j``."""
     n = f.shape[0]
     h2 = h * h
     for p in range(n):
         for a in range(3):
             rhs[p, a] = h * f[p, a]
-            for c in range(3):
-                D[p, a, c] = diag[p] if a == c else 0.0
+        D[p, 0] = diag[p]
+        D[p, 1] = 0.0
+        D[p, 2] = 0.0
+        D[p, 3] = diag[p]
+        D[p, 4] = 0.0
+        D[p, 5] = diag[p]
     for s in range(springs.shape[0]):
         i = springs[s, 0]
         j = springs[s, 1]
@@ -130,69 +142,108 @@ def _system_blocks(springs, kx, cv, f, v, h, diag, rhs, blocks, D):
                 kr += kx[s, p, q] * (v[j, q] - v[i, q])
             rhs[i, p] += h2 * kr
             rhs[j, p] -= h2 * kr
-        for p in range(3):
-            for q in range(3):
-                e = h * cv[s, p, q] + h2 * kx[s, p, q]
-                blocks[s, p, q] = e
-                D[i, p, q] += e
-                D[j, p, q] += e
+        for u in range(6):
+            p, q = _SYM[u]
+            e = h * cv[s, p, q] + h2 * kx[s, p, q]
+            blocks[s, u] = e
+            D[i, u] += e
+            D[j, u] += e
+
+
+@numba.njit(cache=True, inline="always")
+def _sym_product(b, k, x, o):
+    """``b[k]`` (a symmetric block's upper triangle) times ``x[3o:3o+3]``."""
+    x0, x1, x2 = x[3 * o], x[3 * o + 1], x[3 * o + 2]
+    return (b[k, 0] * x0 + b[k, 1] * x1 + b[k, 2] * x2,
+            b[k, 1] * x0 + b[k, 3] * x1 + b[k, 4] * x2,
+            b[k, 2] * x0 + b[k, 4] * x1 + b[k, 5] * x2)
 
 
 @numba.njit(cache=True, parallel=True)
-def _system_product(particles, ptr, adj, other, blocks, D, x, out):
+def _system_product(particles, ptr, adj, other, blocks, D, x, out, partial):
     """``out = A·x`` over the free particles (``particles[k]``: the particle of free index ``k``;
-    ``other[e]``: the free index of the far end of incidence ``e``'s spring, −1 for a pin), one
-    particle per iteration on every core, each summing its springs in incidence order (the same
-    bits at any thread count). Reads 9 numbers per spring and particle where the assembled CSR
-    matrix streams 9 per coupling and index (5.6 MB at 64×64, 0.22 ms a product)."""
-    for k in numba.prange(particles.shape[0]):
-        p = particles[k]
-        x0, x1, x2 = x[3 * k], x[3 * k + 1], x[3 * k + 2]
-        a0 = D[p, 0, 0] * x0 + D[p, 0, 1] * x1 + D[p, 0, 2] * x2
-        a1 = D[p, 1, 0] * x0 + D[p, 1, 1] * x1 + D[p, 1, 2] * x2
-        a2 = D[p, 2, 0] * x0 + D[p, 2, 1] * x1 + D[p, 2, 2] * x2
-        for e in range(ptr[p], ptr[p + 1]):
-            o = other[e]
-            if o < 0:
-                continue
-            s = adj[e]
-            y0, y1, y2 = x[3 * o], x[3 * o + 1], x[3 * o + 2]
-            a0 -= blocks[s, 0, 0] * y0 + blocks[s, 0, 1] * y1 + blocks[s, 0, 2] * y2
-            a1 -= blocks[s, 1, 0] * y0 + blocks[s, 1, 1] * y1 + blocks[s, 1, 2] * y2
-            a2 -= blocks[s, 2, 0] * y0 + blocks[s, 2, 1] * y1 + blocks[s, 2, 2] * y2
-        out[3 * k] = a0
-        out[3 * k + 1] = a1
-        out[3 * k + 2] = a2
+    ``other[e]``: the free index of the far end of incidence ``e``'s spring, −1 for a pin), each
+    particle summing its springs in incidence order, and ``partial[c, 0]`` the sum of ``x·out`` over
+    slice ``c`` of the particles; the slices on every core (the same bits at any thread count).
+    Reads 6 numbers per spring and particle where the assembled CSR matrix streamed 9 per coupling
+    and index (5.6 MB at 64×64, 0.22 ms a product)."""
+    nf = particles.shape[0]
+    for c in numba.prange(_SLICES):
+        acc = 0.0
+        for k in range(c * nf // _SLICES, (c + 1) * nf // _SLICES):
+            p = particles[k]
+            a0, a1, a2 = _sym_product(D, p, x, k)
+            for e in range(ptr[p], ptr[p + 1]):
+                o = other[e]
+                if o < 0:
+                    continue
+                b0, b1, b2 = _sym_product(blocks, adj[e], x, o)
+                a0 -= b0
+                a1 -= b1
+                a2 -= b2
+            out[3 * k] = a0
+            out[3 * k + 1] = a1
+            out[3 * k + 2] = a2
+            acc += x[3 * k] * a0 + x[3 * k + 1] * a1 + x[3 * k + 2] * a2
+        partial[c, 0] = acc
 
 
 @numba.njit(cache=True)
 def _block_inverses(particles, D, inv):
     """``inv[k]``: the inverse of free particle ``k``'s 3×3 diagonal block (symmetric positive
-    definite, as the matrix is), by its adjugate."""
+    definite, as the matrix is; so is its inverse, kept as its upper triangle), by its adjugate."""
     for k in range(particles.shape[0]):
-        b = D[particles[k]]
-        c00 = b[1, 1] * b[2, 2] - b[1, 2] * b[2, 1]
-        c01 = b[1, 2] * b[2, 0] - b[1, 0] * b[2, 2]
-        c02 = b[1, 0] * b[2, 1] - b[1, 1] * b[2, 0]
-        det = b[0, 0] * c00 + b[0, 1] * c01 + b[0, 2] * c02
-        inv[k, 0, 0] = c00 / det
-        inv[k, 1, 0] = c01 / det
-        inv[k, 2, 0] = c02 / det
-        inv[k, 0, 1] = (b[0, 2] * b[2, 1] - b[0, 1] * b[2, 2]) / det
-        inv[k, 1, 1] = (b[0, 0] * b[2, 2] - b[0, 2] * b[2, 0]) / det
-        inv[k, 2, 1] = (b[0, 1] * b[2, 0] - b[0, 0] * b[2, 1]) / det
-        inv[k, 0, 2] = (b[0, 1] * b[1, 2] - b[0, 2] * b[1, 1]) / det
-        inv[k, 1, 2] = (b[0, 2] * b[1, 0] - b[0, 0] * b[1, 2]) / det
-        inv[k, 2, 2] = (b[0, 0] * b[1, 1] - b[0, 1] * b[1, 0]) / det
+        p = particles[k]
+        a, b, c, d, e, f = D[p, 0], D[p, 1], D[p, 2], D[p, 3], D[p, 4], D[p, 5]
+        c00 = d * f - e * e
+        c01 = c * e - b * f
+        c02 = b * e - c * d
+        det = a * c00 + b * c01 + c * c02
+        inv[k, 0] = c00 / det
+        inv[k, 1] = c01 / det
+        inv[k, 2] = c02 / det
+        inv[k, 3] = (a * f - c * c) / det
+        inv[k, 4] = (b * c - a * e) / det
+        inv[k, 5] = (a * d - b * b) / det
+
+
+@numba.njit(cache=True, parallel=True)
+def _cg_update(alpha, x, r, p, q, inv, z, partial):
+    """``x += α·p``, ``r −= α·q``, ``z = P⁻¹·r`` (the blocks' inverses), and per slice the sums of
+    ``r·r`` and ``r·z`` into ``partial[c, 1:3]``, in one pass on every core."""
+    nf = inv.shape[0]
+    for c in numba.prange(_SLICES):
+        rr = 0.0
+        rz = 0.0
+        for k in range(c * nf // _SLICES, (c + 1) * nf // _SLICES):
+            for a in range(3):
+                x[3 * k + a] += alpha * p[3 * k + a]
+                r[3 * k + a] -= alpha * q[3 * k + a]
+            z0, z1, z2 = _sym_product(inv, k, r, k)
+            z[3 * k] = z0
+            z[3 * k + 1] = z1
+            z[3 * k + 2] = z2
+            r0, r1, r2 = r[3 * k], r[3 * k + 1], r[3 * k + 2]
+            rr += r0 * r0 + r1 * r1 + r2 * r2
+            rz += r0 * z0 + r1 * z1 + r2 * z2
+        partial[c, 1] = rr
+        partial[c, 2] = rz
+
+
+@numba.njit(cache=True, parallel=True)
+def _cg_direction(beta, z, p):
+    """``p = z + β·p`` on every core."""
+    for i in numba.prange(p.shape[0]):
+        p[i] = z[i] + beta * p[i]
 
 
 @numba.njit(cache=True)
-def _apply_blocks(inv, r, z):
-    """``z = P⁻¹·r`` with the 3×3 block-diagonal ``P⁻¹`` in ``inv``."""
-    for k in range(inv.shape[0]):
-        r0, r1, r2 = r[3 * k], r[3 * k + 1], r[3 * k + 2]
-        for p in range(3):
-            z[3 * k + p] = inv[k, p, 0] * r0 + inv[k, p, 1] * r1 + inv[k, p, 2] * r2
+def _slices_sum(partial, col):
+    """The slices' sums of column ``col``, added in slice order."""
+    acc = 0.0
+    for c in range(partial.shape[0]):
+        acc += partial[c, col]
+    return acc
 
 
 @numba.njit(cache=True)
@@ -205,41 +256,41 @@ def _dot(a, b):
 
 
 @numba.njit(cache=True)
-def _pcg(system, inv, b, x, rtol, maxiter, r, z, p, q):
+def _pcg(system, inv, b, x, rtol, maxiter, r, z, p, q, partial):
     """Conjugate gradients on ``A·x = b`` (``x`` holds the start and receives the solution), ``A``
     applied by :func:`_system_product` from ``system = (particles, ptr, adj, other, blocks, D)``,
     preconditioned with the 3×3 diagonal blocks' inverses ``inv``; stops when
     ``|b − A·x| ≤ rtol·|b|`` (the recurrence's residual, as ``scipy.sparse.linalg.cg``). Returns the
     iterations taken, or −1 when ``maxiter`` did not reach the tolerance. ``r``, ``z``, ``p``, ``q``
-    are scratch of ``b``'s length."""
+    are scratch of ``b``'s length, ``partial`` of ``(_SLICES, 3)``. Each iteration is three passes
+    on every core — the product with ``p·Ap``, the update with ``r·r`` and ``r·z``, the new
+    direction — whose sums are taken over fixed slices (the same bits at any thread count)."""
     particles, ptr, adj, other, blocks, D = system
     n = b.shape[0]
-    _system_product(particles, ptr, adj, other, blocks, D, x, q)
+    _system_product(particles, ptr, adj, other, blocks, D, x, q, partial)
     for i in range(n):
         r[i] = b[i] - q[i]
+        p[i] = 0.0
     stop = rtol * rtol * _dot(b, b)
-    rr = _dot(r, r)
+    # r·r and z = P⁻¹r, r·z, through the update with α = 0 (x and r unchanged)
+    _cg_update(0.0, x, r, p, q, inv, z, partial)
+    rr = _slices_sum(partial, 1)
     if rr <= stop:
         return 0
-    _apply_blocks(inv, r, z)
-    rz = _dot(r, z)
+    rz = _slices_sum(partial, 2)
     for i in range(n):
         p[i] = z[i]
     for it in range(1, maxiter + 1):
-        _system_product(particles, ptr, adj, other, blocks, D, p, q)
-        alpha = rz / _dot(p, q)
-        for i in range(n):
-            x[i] += alpha * p[i]
-            r[i] -= alpha * q[i]
-        rr = _dot(r, r)
+        _system_product(particles, ptr, adj, other, blocks, D, p, q, partial)
+        alpha = rz / _slices_sum(partial, 0)
+        _cg_update(alpha, x, r, p, q, inv, z, partial)
+        rr = _slices_sum(partial, 1)
         if rr <= stop:
             return it
-        _apply_blocks(inv, r, z)
-        rz_new = _dot(r, z)
+        rz_new = _slices_sum(partial, 2)
         beta = rz_new / rz
         rz = rz_new
-        for i in range(n):
-            p[i] = z[i] + beta * p[i]
+        _cg_direction(beta, z, p)
     return -1
 
 
@@ -406,7 +457,9 @@ class ImplicitEuler(_LinearisedImplicitEuler):
     DIRECT_AFTER_FALLBACK = 16
 
     def reset(self, state, forces, dt):
-        state.history.pop("dv", None)  # the warm start is stale after a jump of the state or of dt
+        # the warm start is stale after a jump of the state or of dt
+        state.history.pop("dv", None)
+        state.history.pop("dv_before", None)
         self._direct_steps = 0
 
     def _build(self, springs):
@@ -424,10 +477,12 @@ class ImplicitEuler(_LinearisedImplicitEuler):
         # CG's matrix-free operator: each free particle's springs and their far ends' free indices
         ptr, adj, sign = incidence(springs, len(index))
         far = np.where(sign > 0, springs[adj, 1], springs[adj, 0])
-        self._system = (np.flatnonzero(free), ptr, adj, index[far], np.empty((len(springs), 3, 3)),
-                        np.empty((len(index), 3, 3)))
-        self._block_inv = np.empty((n_free, 3, 3))
+        self._system = (np.flatnonzero(free).astype(np.int32), ptr.astype(np.int32),
+                        adj.astype(np.int32), index[far].astype(np.int32),
+                        np.empty((len(springs), 6)), np.empty((len(index), 6)))
+        self._block_inv = np.empty((n_free, 6))
         self._cg_work = np.empty((6, 3 * n_free))  # b, b/s, and CG's r, z, p, q
+        self._cg_partial = np.empty((_SLICES, 3))
         self._y = np.empty(3 * n_free)
         self._jacobian = tuple(np.empty((len(springs), 3, 3)) for _ in range(3))
         self._diag = np.empty(len(index))
@@ -439,6 +494,7 @@ class ImplicitEuler(_LinearisedImplicitEuler):
                 self._pattern_springs is not None and np.array_equal(self._pattern_springs, springs)):
             self._build(springs)  # the set of active springs changed
             state.history.pop("dv", None)
+            state.history.pop("dv_before", None)
         self._pattern_springs = springs
         f = forces.force(x, v, out=self._buffer("_f", x))
         kx, _, cv = forces.spring_term.jacobian_blocks(x, v, self.clamp_compression,
@@ -460,6 +516,9 @@ class ImplicitEuler(_LinearisedImplicitEuler):
             A = self._matrix
             _assemble_baraff_witkin(springs, kx, cv, f, v, dt, diag, self._slot, self._dslot, A.data,
                                     self._rhs)
+            last = state.history.get("dv")
+            if last is not None:  # the warm start's second point, for when CG is tried again
+                state.history["dv_before"] = last
             dv = state.history["dv"] = self._direct(A, self._rhs.ravel()[self._free_dofs])
         self.counters["solves"] += 1
         _update(x, v, self._system[0], dv, dt)
@@ -482,8 +541,8 @@ class ImplicitEuler(_LinearisedImplicitEuler):
         from each spring's 3×3 block), preconditioned with the inverses of the particles' 3×3
         diagonal blocks (a particle's own coupling, which the plain diagonal leaves out), compiled
         (:func:`_pcg`: the products on every core, the sums of the dot products in a fixed order, so
-        the same bits at any thread count), warm-started from the last step's ``Δv`` (the state's
-        ``history["dv"]``, which receives the solution); solved as ``A·y = b/s`` with ``s`` the
+        the same bits at any thread count), warm-started from the last two steps' ``Δv`` (the state's
+        ``history["dv"]``, which receives the solution, and ``history["dv_before"]``); solved as ``A·y = b/s`` with ``s`` the
         power of two nearest ``|b|`` (exact, so the iterates are those of the unscaled solve) so
         that a right-hand side near zero (a cloth coming to rest: its velocities decay into subnormal
         numbers) cannot make CG divide 0 by 0; ``b = 0`` gives ``dv = 0``. ``None`` when it has not
@@ -493,18 +552,27 @@ class ImplicitEuler(_LinearisedImplicitEuler):
         dv = state.history.get("dv")
         if dv is None or len(dv) != n:
             dv = state.history["dv"] = np.zeros(n)  # no warm start
+        before = state.history.get("dv_before")  # the step before's Δv
+        if before is None or len(before) != n:
+            before = state.history["dv_before"] = dv.copy()
         # not np.linalg.norm: its BLAS threads spin on the cores for milliseconds after the call,
         # which slowed every product of the solve after it 2.4× on two cores
         norm = math.sqrt(_dot(b, b))
         self.counters["last_cg_iterations"] = 0
         if norm == 0.0:
+            np.copyto(before, dv)
             dv[:] = 0.0
             return dv
         inv_scale = math.ldexp(1.0, -math.frexp(norm)[1])  # a power of two: scaling by it is exact
         _block_inverses(self._system[0], self._system[5], self._block_inv)
-        y = np.multiply(dv, inv_scale, out=self._y)
+        # start from the last two steps' Δv extrapolated, 2·Δv₁ − Δv₂ (9 % fewer iterations than
+        # from Δv₁ on the hanging 64×64 cloth at dt = 1/60; it is Δv₁ itself on the first step)
+        y = np.multiply(dv, 2.0, out=self._y)
+        y -= before
+        y *= inv_scale
+        np.copyto(before, dv)
         its = _pcg(self._system, self._block_inv, np.multiply(b, inv_scale, out=self._cg_work[1]), y,
-                   self.cg_tolerance, self.cg_max_iterations, *self._cg_work[2:])
+                   self.cg_tolerance, self.cg_max_iterations, *self._cg_work[2:], self._cg_partial)
         count = self.cg_max_iterations if its < 0 else its
         self.counters["last_cg_iterations"] = count
         self.counters["cg_iterations"] += count
