@@ -398,6 +398,8 @@ def test_bench_implicit_prints_a_row_per_method(capsys):
         "implicit_euler_prefactored", "kang", "liu2013 (10 iterations)", "liu2013 (10, Chebyshev)",
         "xpbd (10 substeps)"]
     cg = rows[1].split("|")
-    assert float(cg[4]) == pytest.approx(float(cg[3]) / float(rows[0].split("|")[3]), rel=0.02, abs=0.6)
+    # the ratio to the symplectic step, within what the printed milliseconds' rounding allows
+    base, ms, ratio = float(rows[0].split("|")[3]), float(cg[3]), float(cg[4])
+    assert (ms - 5e-4) / (base + 5e-4) - 0.5 <= ratio <= (ms + 5e-4) / max(base - 5e-4, 1e-9) + 0.5
     cg_iterations = float(cg[5])
     assert cg_iterations >= 1

@@ -82,14 +82,30 @@ def _assemble_baraff_witkin(springs, kx, cv, f, v, h, diag, slot, dslot, data, r
     force's dependence on positions is left out (it would make the matrix unsymmetric), as Baraff &
     Witkin do."""
     data[:] = 0.0
-    n = f.shape[0]
-    for p in range(n):
+    _baraff_witkin_rhs(springs, kx, f, v, h, rhs)
+    for p in range(f.shape[0]):
         for a in range(3):
-            rhs[p, a] = h * f[p, a]
             d = dslot[p, a]
             if d >= 0:
                 data[d] += diag[p]
     h2 = h * h
+    for s in range(springs.shape[0]):
+        for b in range(4):
+            sign = 1.0 if b < 2 else -1.0
+            for p in range(3):
+                for q in range(3):
+                    e = slot[s, b, p, q]
+                    if e >= 0:
+                        data[e] += sign * (h * cv[s, p, q] + h2 * kx[s, p, q])
+
+
+@numba.njit(cache=True)
+def _baraff_witkin_rhs(springs, kx, f, v, h, rhs):
+    """``rhs = h·(f + h·∂f/∂x·v)`` from the springs' elastic blocks ``kx``."""
+    h2 = h * h
+    for p in range(f.shape[0]):
+        for a in range(3):
+            rhs[p, a] = h * f[p, a]
     for s in range(springs.shape[0]):
         i = springs[s, 0]
         j = springs[s, 1]
@@ -99,13 +115,6 @@ def _assemble_baraff_witkin(springs, kx, cv, f, v, h, diag, slot, dslot, data, r
                 kr += kx[s, p, q] * (v[j, q] - v[i, q])
             rhs[i, p] += h2 * kr
             rhs[j, p] -= h2 * kr
-        for b in range(4):
-            sign = 1.0 if b < 2 else -1.0
-            for p in range(3):
-                for q in range(3):
-                    e = slot[s, b, p, q]
-                    if e >= 0:
-                        data[e] += sign * (h * cv[s, p, q] + h2 * kx[s, p, q])
 
 
 #: a symmetric 3×3 block stored as its upper triangle: (0,0) (0,1) (0,2) (1,1) (1,2) (2,2)
@@ -122,11 +131,9 @@ def _system_blocks(springs, kx, cv, f, v, h, diag, rhs, blocks, D):
     diagonal block ``m_i + h·drag + Σ_{s∋i} B_s`` into ``D``, both symmetric and kept as their upper
     triangles (:data:`_SYM`): ``A`` is then ``(A·x)_i = D_i·x_i − Σ_{s∋i} B_s·x_j`` over the free
     ``j``."""
-    n = f.shape[0]
+    _baraff_witkin_rhs(springs, kx, f, v, h, rhs)
     h2 = h * h
-    for p in range(n):
-        for a in range(3):
-            rhs[p, a] = h * f[p, a]
+    for p in range(f.shape[0]):
         D[p, 0] = diag[p]
         D[p, 1] = 0.0
         D[p, 2] = 0.0
@@ -136,12 +143,6 @@ def _system_blocks(springs, kx, cv, f, v, h, diag, rhs, blocks, D):
     for s in range(springs.shape[0]):
         i = springs[s, 0]
         j = springs[s, 1]
-        for p in range(3):
-            kr = 0.0
-            for q in range(3):
-                kr += kx[s, p, q] * (v[j, q] - v[i, q])
-            rhs[i, p] += h2 * kr
-            rhs[j, p] -= h2 * kr
         for u in range(6):
             p, q = _SYM[u]
             e = h * cv[s, p, q] + h2 * kx[s, p, q]
