@@ -241,6 +241,30 @@ def spring_forces_gather(x, v, springs, rest, k, c, kind, tab, with_damping, ptr
 
 
 @numba.njit(cache=True)
+def runge_kutta_fused(x, v, A, b, dt, kx, kv, xs, coef, springs, rest, k, c, kind, tab,
+                      with_damping, ptr, adj, sign, fs, base, inv_mass):
+    """A whole explicit Runge–Kutta step of tableau ``(A, b)`` in place on ``x``, ``v``, each stage
+    one pass of :func:`spring_forces_gather` in :data:`GATHER_RK_STAGE` (its forces, the division by
+    the mass and the next stage's state, or in the last stage the step's update): the operations of
+    the stage-by-stage Python loop in :class:`~cloth_sim.integrators.explicit.ExplicitRungeKutta`,
+    in one call instead of one per stage. ``kx``, ``kv`` (stages, n, 3), ``xs`` (n, 3) and ``coef``
+    (stages,) are scratch."""
+    stages = b.shape[0]
+    for p in range(x.shape[0]):
+        for d in range(3):
+            kx[0, p, d] = v[p, d]
+    for i in range(stages):
+        last = i == stages - 1
+        m = stages if last else i + 1
+        for j in range(m):
+            coef[j] = (b[j] if last else A[i + 1, j]) * dt
+        spring_forces_gather(x if i == 0 else xs, kx[i], springs, rest, k, c, kind, tab,
+                             with_damping, ptr, adj, sign, fs, base, kv[i], inv_mass, 0.0,
+                             GATHER_RK_STAGE, x if last else xs, v if last else kx[i + 1],
+                             (x, v, kx, kv, coef[:m]))
+
+
+@numba.njit(cache=True)
 def kick_drift(x, v, f, inv_mass, dt):
     """Symplectic Euler's update in one pass: ``v += (f·m⁻¹)·dt``, then ``x += v·dt`` with the new
     velocity, each particle once (``inv_mass`` (n, 1) is 0 on pins, which keep their velocity). The
@@ -554,18 +578,18 @@ class Forces:
 
     @property
     def fuses_stages(self) -> bool:
-        """Whether :meth:`acceleration_stage` runs as one pass (the springs on every core, last)."""
+        """Whether :meth:`runge_kutta_step` applies (the springs on every core, and last)."""
         return self._gather_base is not None
 
-    def acceleration_stage(self, x, v, a, xo, vo, x0, v0, kx, kv, coef) -> None:
-        """``a = M⁻¹ f(x, v)``, then each particle's ``xo = x0 + Σ_j kx[j]·coef[j]``, ``vo = v0 +
-        Σ_j kv[j]·coef[j]`` (``a`` is one of ``kv``'s stages) in the same parallel pass: a
-        Runge–Kutta stage and the next stage's state. Only where :attr:`fuses_stages`."""
+    def runge_kutta_step(self, x, v, A, b, dt, kx, kv, xs, coef) -> None:
+        """An explicit Runge–Kutta step in place in one call (:func:`runge_kutta_fused`): each
+        stage's forces and the next stage's state in one parallel pass. Only where
+        :attr:`fuses_stages`."""
         st = self.spring_term
-        spring_forces_gather(x, v, st.springs, st.rest, st.k, st.c, st.kind, BUCKLE_TABLE,
-                             st.with_damping, *st._incidence, st._fs, self._gather_base, a,
-                             self.inv_mass, 0.0, GATHER_RK_STAGE, xo, vo, (x0, v0, kx, kv, coef))
-        self.evaluations += 1
+        runge_kutta_fused(x, v, A, b, dt, kx, kv, xs, coef, st.springs, st.rest, st.k, st.c, st.kind,
+                          BUCKLE_TABLE, st.with_damping, *st._incidence, st._fs, self._gather_base,
+                          self.inv_mass)
+        self.evaluations += len(b)
 
     def spring_energy(self, x: np.ndarray) -> float:
         return self.spring_term.energy(x)

@@ -29,7 +29,7 @@ from . import stability as stab
 from .colliders import Contacts, _positive
 from .constraints import DEFAULT_STRAIN_LIMIT_PASSES, StrainLimit
 from .forces import (BUCKLE_TABLE, GATHER_ACCELERATION, GATHER_FORCE, GATHER_KICK_DRIFT,
-                     GATHER_RK_STAGE, Forces,
+                     GATHER_RK_STAGE, Forces, runge_kutta_fused,
                      incidence, spring_forces_gather, spring_strains)
 from .model import ClothModel
 from .parameters import SCHEMA, ParameterError
@@ -653,6 +653,9 @@ def compile_kernels() -> float:
         for mode in (GATHER_FORCE, GATHER_ACCELERATION):
             spring_forces_gather(sim.positions, sim.velocities, *gather, mode, np.zeros((1, 3)),
                                  np.zeros((1, 3)), stage)
-        # and the Runge–Kutta stages' update on every core (wind or drag after the springs)
+        # the whole fused Runge–Kutta step, and the stages' update on every core (wind or drag
+        # after the springs)
+        runge_kutta_fused(x, v, np.zeros((2, 2)), np.ones(2), 1e-4, k[0], k[1], np.zeros_like(x),
+                          np.zeros(2), *gather[:12], gather[13])
         combine_parallel(x, v, x, v, k[0], k[1], np.ones(2))
     return time.perf_counter() - t0

@@ -30,16 +30,7 @@ class ExplicitRungeKutta(Integrator):
         kx, kv, coef = k[0], k[1], self._coef
         xs = self._buffer("_xs", x)
         if forces.fuses_stages:  # each stage's forces and the next stage's state in one pass
-            np.copyto(kx[0], v)
-            for i in range(stages):
-                last = i == stages - 1
-                if last:
-                    np.multiply(self.b, dt, out=coef)
-                else:
-                    np.multiply(self.A[i + 1, :i + 1], dt, out=coef[:i + 1])
-                forces.acceleration_stage(x if i == 0 else xs, kx[i], kv[i],
-                                          x if last else xs, v if last else kx[i + 1], x, v, kx, kv,
-                                          coef if last else coef[:i + 1])
+            forces.runge_kutta_step(x, v, self.A, self.b, dt, kx, kv, xs, coef)
             return
         combine = _combine_parallel if forces.spring_term.parallel else _combine
         for i in range(stages):
