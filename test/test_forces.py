@@ -252,7 +252,7 @@ def test_spring_forces_are_bit_identical_at_any_thread_count(model_name, monkeyp
     fused = [(run(1, **kw), run(two, **kw)) for kw in kinds]
     monkeypatch.setattr(forces, "PARALLEL_MIN_SPRINGS", 10**9)  # the serial loop and update pass
     for kw, (one, both) in zip(kinds, fused):
-        serial = run(1, **kw)
+        serial = run(1, **kw)  # (Runge–Kutta: the stage-by-stage path, a kernel call per stage)
         assert all(np.array_equal(a, b) and np.array_equal(a, c) for a, b, c in zip(one, both, serial)), kw
 
 
