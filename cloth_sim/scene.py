@@ -127,19 +127,23 @@ class Scene:
         p = {"rows": self.rows, "cols": self.cols, "spacing": self.spacing,
              "particle_mass": self.particle_mass, "model": self.model,
              "stiffness": self.stiffness, "damping": self.damping}
+        unknown = sorted(set(override) - set(p))
+        if unknown:  # (a misspelt or simulator-only option used to vanish here unnoticed)
+            raise TypeError(f"unknown scene override(s): {', '.join(unknown)}; accepted: "
+                            f"{', '.join([*p, *self.SIMULATOR_OPTIONS])}")
         p.update(override)
         return ClothModel.grid(p["rows"], p["cols"], p["spacing"], p["particle_mass"],
                                stiffness=p["stiffness"], damping=p["damping"],
                                pinned=self.pinned_cells(p["rows"], p["cols"]), model=p["model"],
                                orientation=self.orientation, origin=self.origin)
 
-    SIMULATOR_OPTIONS = ("integrator", "dt", "gravity", "wind", "strain_limit", "drag",
-                         "integrator_options", "colliders", "thickness", "self_collision")
+    SIMULATOR_OPTIONS = ("integrator", "dt", "gravity", "wind", "strain_limit", "strain_limit_passes",
+                         "strain_limit_long_range", "drag", "integrator_options", "colliders",
+                         "thickness", "self_collision")
 
     def build_simulator(self, **override) -> Simulator:
         """A simulator of the scene; ``override`` takes :meth:`build_model`'s keys and the
-        simulator's ``integrator``, ``dt``, ``gravity``, ``wind``, ``strain_limit``, ``drag`` and
-        ``integrator_options``."""
+        simulator's options in :attr:`SIMULATOR_OPTIONS`; any other key is a ``TypeError``."""
         sim_kw = {"integrator": self.integrator, "dt": self.dt, "gravity": self.gravity,
                   "wind": self.wind, "strain_limit": self.strain_limit, "drag": self.drag,
                   "colliders": self.make_colliders(), "thickness": self.thickness,
