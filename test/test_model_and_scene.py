@@ -180,3 +180,15 @@ def test_console_script_is_installed():
     out = subprocess.run([str(Path(sys.executable).parent / "cloth-sim"), "--help"], capture_output=True,
                          text=True, timeout=60)
     assert out.returncode == 0 and "run" in out.stdout
+
+
+def test_a_scene_passes_the_simulator_options_on_and_refuses_unknown_ones():
+    """``build_simulator`` forwards the strain limit's options (it once dropped them, and a
+    benchmark's "Provot alone" row ran with the attachments on) and refuses a key it does not know
+    instead of ignoring it."""
+    scene = load_scene("hanging")
+    sim = scene.build_simulator(rows=8, cols=8, strain_limit=0.1, strain_limit_passes=3,
+                                strain_limit_long_range=False)
+    assert sim._strain.passes == 3 and sim._strain.long_range is False
+    with pytest.raises(TypeError, match="unknown scene override.*strain_limit_pases"):
+        scene.build_simulator(rows=8, cols=8, strain_limit_pases=3)
