@@ -91,7 +91,8 @@ def _bench_params(args) -> int:
 
 def _bench_node(args) -> int:
     from .ros.bench import print_node_table
-    print_node_table(args.sizes, args.seconds, args.integrator, args.dt, args.rate)
+    print_node_table(args.sizes, args.seconds, args.integrator, args.dt, args.rate,
+                     args.strain_limit_passes)
     return 0
 
 
@@ -233,6 +234,8 @@ def build_parser() -> argparse.ArgumentParser:
     nb.add_argument("--integrator", default="symplectic_euler", choices=integrators.available())
     nb.add_argument("--dt", type=float, default=1e-3)
     nb.add_argument("--rate", type=float, default=60.0, help="publish_rate (Hz)")
+    nb.add_argument("--strain-limit-passes", type=int, default=None,
+                    help="the node's strain_limit_passes (default: its own, 20)")
     nb.set_defaults(func=_bench_node)
     ls = bsub.add_parser("lockstep", help="steps per second through ~/step from another process (needs rclpy)")
     ls.add_argument("--size", type=int, default=32, help="cloth N×N (default 32)")

@@ -171,6 +171,9 @@ def _schema() -> dict[str, Param]:
           scene_key="drag"),
         P("strain_limit", float, "", "Provot's critical deformation rate (0.1 = 10 %); 0 turns it "
           "off.", lo=0.0, hi=10.0, scene_key="strain_limit"),
+        P("strain_limit_passes", int, "", "Most correction passes of the strain limit per step (it "
+          "stops once a pass corrects nothing): fewer is faster and lets the cloth stretch more.",
+          lo=1, hi=100),
         P("rows", int, "", "Particles along the grid's rows; rebuilds and resets the cloth.", lo=2,
           hi=MAX_GRID, apply="rebuild", scene_key="grid.rows"),
         P("cols", int, "", "Particles along the grid's columns; rebuilds and resets the cloth.", lo=2,

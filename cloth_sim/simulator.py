@@ -104,7 +104,8 @@ class Simulator:
         self.base_model = model
         self._grippers: dict[str, Gripper] = {}
         self._integrator_options = dict(integrator_options or {})
-        self._strain_options = (strain_limit_passes, strain_limit_long_range)
+        self._strain_options = (SCHEMA["strain_limit_passes"].check(strain_limit_passes),
+                                bool(strain_limit_long_range))
         self._k = np.array(model.stiffness, dtype=np.float64)
         self._c = np.array(model.damping, dtype=np.float64)
         self._gravity = np.array(SCHEMA["gravity"].check(gravity), dtype=np.float64)
@@ -287,6 +288,18 @@ class Simulator:
     def strain_limit(self, tau: float | None) -> None:
         self._strain.set_tau(None if tau is None else SCHEMA["strain_limit"].check(tau))
         self._active_stages = [s for s in self.stages if s.active]
+
+    @property
+    def strain_limit_passes(self) -> int:
+        """Most correction passes of the strain limit per step (the limit stops once a pass corrects
+        nothing); fewer is faster and lets the cloth stretch more."""
+        return self._strain.passes
+
+    @strain_limit_passes.setter
+    def strain_limit_passes(self, passes: int) -> None:
+        passes = SCHEMA["strain_limit_passes"].check(passes)
+        self._strain.passes = passes
+        self._strain_options = (passes, self._strain_options[1])
 
     @property
     def colliders(self) -> list:

@@ -191,6 +191,7 @@ def runaway_is_dt_independent(node: ClothSimNode) -> bool:
     span = max(until - node_sim.time, dt)
     sim = Simulator(node_sim.model, integrator=method, dt=max(dt / 4, 1e-7),
                     gravity=cfg["gravity"], wind=node_sim.wind, drag=cfg["drag"], strain_limit=cfg["strain_limit"] or None,
+                    strain_limit_passes=cfg["strain_limit_passes"],
                     colliders=node.scene.make_colliders(), thickness=cfg["thickness"],
                     self_collision=cfg["self_collision"])
     for f in GRID_FAMILIES:
@@ -219,6 +220,7 @@ def mismatches(node: ClothSimNode) -> list[str]:
     checks = {"integrator": sim.integrator, "dt": sim.dt, "drag": sim.drag,
               "thickness": sim.thickness, "self_collision": sim.self_collision,
               "strain_limit": sim.strain_limit or 0.0, "gravity": list(sim.gravity),
+              "strain_limit_passes": sim.strain_limit_passes,
               "rows": sim.model.rows, "cols": sim.model.cols, "model": sim.model.model}
     for f in GRID_FAMILIES:
         family = sim.model.family == sim.model.family_index(f)

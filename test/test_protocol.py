@@ -424,3 +424,24 @@ def test_choi_ko_onset_band_of_the_methods_without_a_step_limit():
     calm = load_scene("hanging").build_simulator(model="choi_ko", integrator="implicit_euler",
                                                  stiffness={"bend": 1e-4})
     assert calm.analysis.onset_band == (math.inf, math.inf) and calm.stable_dt() == math.inf
+
+
+def test_strain_limit_passes_is_a_live_setting_checked_against_the_schema():
+    """Fewer passes of the strain limit leave more stretch (the trade the node's parameter offers),
+    the setting reaches the limiter, and a bad value is refused naming the field and its range."""
+    model = ClothModel.grid(24, 24, 1 / 23, 0.01, stiffness=50.0, damping=0.05, pinned=[(0, 0), (0, -1)])
+    worst = {}
+    for passes in (1, 20):
+        sim = Simulator(model, dt=1e-3, strain_limit=0.1, strain_limit_passes=passes)
+        assert sim.strain_limit_passes == passes
+        worst[passes] = 0.0
+        for _ in range(40):
+            sim.step(20)
+            worst[passes] = max(worst[passes], sim.max_strain())
+    assert worst[1] > worst[20] + 0.005
+    sim.strain_limit_passes = 7
+    assert sim._strain.passes == 7
+    for bad in (0, 101, 2.5, "5"):
+        with pytest.raises(ParameterError, match=r"strain_limit_passes = .* expected an integer in \[1, 100\]"):
+            sim.strain_limit_passes = bad
+    assert sim.strain_limit_passes == 7

@@ -20,10 +20,13 @@ from sensor_msgs.msg import PointCloud2
 from visualization_msgs.msg import Marker
 
 
-def measure(n: int, seconds: float, subscribe: bool, integrator: str, dt: float, rate: float) -> dict:
+def measure(n: int, seconds: float, subscribe: bool, integrator: str, dt: float, rate: float,
+            passes: int | None = None) -> dict:
     overrides = [Parameter("rows", value=n), Parameter("cols", value=n),
                  Parameter("spacing", value=1.0 / (n - 1)), Parameter("integrator", value=integrator),
                  Parameter("dt", value=dt), Parameter("publish_rate", value=rate)]
+    if passes is not None:
+        overrides.append(Parameter("strain_limit_passes", value=passes))
     with _node_and_probe(overrides) as (node, probe, ex, stats):
         clouds, meshes = [0], [0]
         if subscribe:  # what RViz's two displays ask for; raw: this probe shares the node's thread,
@@ -94,16 +97,19 @@ def _rss_mb() -> float:
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
-def print_node_table(sizes, seconds: float, integrator: str, dt: float, rate: float) -> list[dict]:
-    print(f"# cloth_sim_node, hanging scene resized to N×N, {integrator}, dt={dt:g} s, {rate:g} Hz, "
-          f"{seconds:g} s per row after 2 s warm-up; {platform.machine()}, {os.cpu_count()} cores")
+def print_node_table(sizes, seconds: float, integrator: str, dt: float, rate: float,
+                     passes: int | None = None) -> list[dict]:
+    limiter = "" if passes is None else f", strain_limit_passes {passes}"
+    print(f"# cloth_sim_node, hanging scene resized to N×N, {integrator}, dt={dt:g} s, {rate:g} Hz"
+          f"{limiter}, {seconds:g} s per row after 2 s warm-up; {platform.machine()}, "
+          f"{os.cpu_count()} cores")
     print("| N | ~/points + ~/mesh subscribers | real-time factor | ms/step | tick wall ms | ticks/s | "
           "meshes/s | overruns | resident MB |")
     print("|---|---|---|---|---|---|---|---|---|")
     rows = []
     for n in sizes:
         for sub in (False, True):
-            r = measure(n, seconds, sub, integrator, dt, rate)
+            r = measure(n, seconds, sub, integrator, dt, rate, passes)
             rows.append(r)
             print(f"| {n} | {'yes' if sub else 'no'} | {r['rtf']:.3f} | {r['ms_per_step']:.3f} | "
                   f"{r['tick_ms']:.2f} | {r['ticks_per_s']:.1f} | {r['meshes_per_s']:.1f} | "

@@ -245,6 +245,7 @@ class ClothSimNode(Node):
     def _build_simulator(cfg: dict, model, scene) -> Simulator:
         sim = Simulator(model, integrator=cfg["integrator"], dt=cfg["dt"], gravity=cfg["gravity"],
                         wind=_wind(cfg), drag=cfg["drag"], strain_limit=cfg["strain_limit"] or None,
+                        strain_limit_passes=cfg["strain_limit_passes"],
                         colliders=scene.make_colliders(), thickness=cfg["thickness"],
                         self_collision=cfg["self_collision"])
         scene.apply_grippers(sim)
@@ -443,6 +444,8 @@ class ClothSimNode(Node):
             sim.drag = cand["drag"]
         if cand["strain_limit"] != cur["strain_limit"]:
             sim.strain_limit = cand["strain_limit"] or None
+        if cand["strain_limit_passes"] != cur["strain_limit_passes"]:
+            sim.strain_limit_passes = cand["strain_limit_passes"]
         if cand["thickness"] != cur["thickness"]:
             sim.thickness = cand["thickness"]
         if cand["self_collision"] != cur["self_collision"]:

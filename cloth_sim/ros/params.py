@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 
+from ..constraints import DEFAULT_STRAIN_LIMIT_PASSES
 from ..model import GRID_FAMILIES
 from ..parameters import SCHEMA, Param, ParameterError
 from ..scene import Scene
@@ -65,6 +66,7 @@ def scene_values(scene: Scene) -> dict:
 
 def defaults(scene: Scene) -> dict:
     values = {"scene": scene.name, "allow_unstable": False, "publish_rate": 60.0, "frame_id": "cloth",
-              "publish_clock": False, "real_time_factor": 1.0}
+              "publish_clock": False, "real_time_factor": 1.0,
+              "strain_limit_passes": DEFAULT_STRAIN_LIMIT_PASSES}
     values.update(scene_values(scene))
     return values
