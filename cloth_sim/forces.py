@@ -177,17 +177,18 @@ def spring_forces_gather(x, v, springs, rest, k, c, kind, tab, with_damping, ptr
 
     ``mode`` says what each particle does with its summed force ``f`` in the same pass:
     :data:`GATHER_FORCE` keeps it; :data:`GATHER_ACCELERATION` turns it into ``f·m⁻¹`` (the product
-    :meth:`Forces.acceleration` takes afterwards otherwise: the same bits, one pass over ``f`` fewer,
-    for the Runge–Kutta stages); with :data:`GATHER_KICK_DRIFT` it takes symplectic Euler's update,
-    ``v += (f·m⁻¹)·dt; x += v·dt`` into ``xo``, ``vo`` (``x`` and ``v`` themselves: separate
-    arguments so that read-only ``x``, ``v`` type-check when there is no update, and ``xo``, ``vo``
-    are then :data:`_NO_STATE`; ``inv_mass``: (n, 1), 0 on pins), the operations of
-    :func:`kick_drift` in its order: no particle's position is read
-    after the first loop, and each core updates the particles whose forces it summed, while they are
-    in its cache (a separate serial pass cost a 128×128 step 0.06 ms and most of what the second
-    core saved). The per-spring lines
-    repeat :func:`spring_forces`'s on purpose: moved into a shared helper (inlined or not), numba
-    compiled the serial loop 3–4× slower (0.34 → 1.1 ms at 64×64)."""
+    :meth:`Forces.acceleration` takes afterwards otherwise: the same bits, one pass over ``f``
+    fewer); :data:`GATHER_RK_STAGE` does that and then computes the particle's next Runge–Kutta
+    stage (or the step's update) from ``stage = (x₀, v₀, kx, kv, coef)`` into ``xo``, ``vo``
+    (:func:`combine_particle`; ``f`` is ``kv``'s current stage); with :data:`GATHER_KICK_DRIFT` it
+    takes symplectic Euler's update, ``v += (f·m⁻¹)·dt; x += v·dt`` into ``xo``, ``vo`` (``x`` and
+    ``v`` themselves: separate arguments so that read-only ``x``, ``v`` type-check when there is no
+    update, and ``xo``, ``vo`` are then :data:`_NO_STATE`; ``inv_mass``: (n, 1), 0 on pins), the
+    operations of :func:`kick_drift` in its order. No particle's position is read after the first
+    loop, and each core updates the particles whose forces it summed, while they are in its cache (a
+    separate serial pass cost a 128×128 step 0.06 ms and most of what the second core saved). The
+    per-spring lines repeat :func:`spring_forces`'s on purpose: moved into a shared helper (inlined
+    or not), numba compiled the serial loop 3–4× slower (0.34 → 1.1 ms at 64×64)."""
     for s in numba.prange(springs.shape[0]):
         i = springs[s, 0]
         j = springs[s, 1]
@@ -391,6 +392,10 @@ class SpringTerm:
         if self.parallel:
             self._incidence = _incidence_of(model, live)
             self._fs = np.empty((len(self.springs), 3))
+            #: what every call of the gather passes first: the springs, their material, incidence
+            #: and per-spring force scratch
+            self._gather_args = (self.springs, self.rest, self.k, self.c, self.kind, BUCKLE_TABLE,
+                                 self.with_damping, *self._incidence, self._fs)
 
     @property
     def active(self) -> bool:
@@ -398,9 +403,8 @@ class SpringTerm:
 
     def add_force(self, x, v, f):
         if self.parallel:
-            spring_forces_gather(x, v, self.springs, self.rest, self.k, self.c, self.kind,
-                                 BUCKLE_TABLE, self.with_damping, *self._incidence, self._fs, f, f,
-                                 _NO_MASS, 0.0, GATHER_FORCE, _NO_STATE, _NO_STATE, _NO_STAGE)
+            spring_forces_gather(x, v, *self._gather_args, f, f, _NO_MASS, 0.0, GATHER_FORCE,
+                                 _NO_STATE, _NO_STATE, _NO_STAGE)
         else:  # the same bits on one core
             spring_forces(x, v, self.springs, self.rest, self.k, self.c, self.kind, BUCKLE_TABLE,
                           self.with_damping, f)
@@ -552,9 +556,7 @@ class Forces:
         either way."""
         base = self._gather_base
         if base is not None:
-            st = self.spring_term
-            spring_forces_gather(x, v, st.springs, st.rest, st.k, st.c, st.kind, BUCKLE_TABLE,
-                                 st.with_damping, *st._incidence, st._fs, base, f, self.inv_mass, dt,
+            spring_forces_gather(x, v, *self.spring_term._gather_args, base, f, self.inv_mass, dt,
                                  GATHER_KICK_DRIFT, x, v, _NO_STAGE)
             self.evaluations += 1
         else:
@@ -566,9 +568,7 @@ class Forces:
         a = np.empty_like(x) if out is None else out
         base = self._gather_base
         if base is not None:
-            st = self.spring_term
-            spring_forces_gather(x, v, st.springs, st.rest, st.k, st.c, st.kind, BUCKLE_TABLE,
-                                 st.with_damping, *st._incidence, st._fs, base, a, self.inv_mass, 0.0,
+            spring_forces_gather(x, v, *self.spring_term._gather_args, base, a, self.inv_mass, 0.0,
                                  GATHER_ACCELERATION, _NO_STATE, _NO_STATE, _NO_STAGE)
             self.evaluations += 1
             return a
@@ -585,10 +585,8 @@ class Forces:
         """An explicit Runge–Kutta step in place in one call (:func:`runge_kutta_fused`): each
         stage's forces and the next stage's state in one parallel pass. Only where
         :attr:`fuses_stages`."""
-        st = self.spring_term
-        runge_kutta_fused(x, v, A, b, dt, kx, kv, xs, coef, st.springs, st.rest, st.k, st.c, st.kind,
-                          BUCKLE_TABLE, st.with_damping, *st._incidence, st._fs, self._gather_base,
-                          self.inv_mass)
+        runge_kutta_fused(x, v, A, b, dt, kx, kv, xs, coef, *self.spring_term._gather_args,
+                          self._gather_base, self.inv_mass)
         self.evaluations += len(b)
 
     def spring_energy(self, x: np.ndarray) -> float:

@@ -655,9 +655,10 @@ def compile_kernels() -> float:
         # the parallel gather, which only cloths above forces.PARALLEL_MIN_SPRINGS use: with the
         # state's own (writable) arrays, updating them or not, and with read-only views (reports)
         term = sim.forces.spring_term
-        gather = (term.springs, term.rest, term.k, term.c, term.kind, BUCKLE_TABLE, True,
-                  *incidence(term.springs, model.n_particles), np.empty((len(term.springs), 3)),
-                  sim.forces.terms[0].force, np.zeros_like(sim.positions), sim.forces.inv_mass, 1e-4)
+        springs = (term.springs, term.rest, term.k, term.c, term.kind, BUCKLE_TABLE, True,
+                   *incidence(term.springs, model.n_particles), np.empty((len(term.springs), 3)))
+        gravity, inv_mass = sim.forces.terms[0].force, sim.forces.inv_mass
+        gather = (*springs, gravity, np.zeros_like(sim.positions), inv_mass, 1e-4)
         x, v = sim.positions.copy(), sim.velocities.copy()
         k = np.zeros((2, 2, *x.shape))
         stage = (x, v, k[0], k[1], np.ones(2))
@@ -669,6 +670,6 @@ def compile_kernels() -> float:
         # the whole fused Runge–Kutta step, and the stages' update on every core (wind or drag
         # after the springs)
         runge_kutta_fused(x, v, np.zeros((2, 2)), np.ones(2), 1e-4, k[0], k[1], np.zeros_like(x),
-                          np.zeros(2), *gather[:12], gather[13])
+                          np.zeros(2), *springs, gravity, inv_mass)
         combine_parallel(x, v, x, v, k[0], k[1], np.ones(2))
     return time.perf_counter() - t0

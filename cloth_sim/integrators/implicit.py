@@ -411,16 +411,16 @@ class ImplicitEuler(_LinearisedImplicitEuler):
     Options (keyword arguments of the constructor, or attributes):
 
     * ``solver`` — ``"cg"``: conjugate gradients preconditioned with each particle's 3×3 diagonal
-      block, compiled (:func:`_pcg`), warm-started from the last ``Δv``, stopping at
+      block, compiled (:func:`_pcg`), warm-started from the last two steps' ``Δv``, stopping at
       ``cg_tolerance`` (relative residual); when it has not converged after ``cg_max_iterations``
       (1000) the step is solved directly instead, and so are the next 16 (the counter
       ``direct_fallbacks``): a stiff or heavily damped material makes the system ill-conditioned.
-      The cap is well below what a direct solve costs: at 64×64 an iteration takes ~0.13 ms and
-      a direct solve 220 ms, at 81×81 ~0.2 and 500 ms; the hanging scene at dt = 1/60 with its
-      mass spread over the finer grid needs 160–210 iterations there (200, the cap until the solve
-      was compiled, sent it to the direct solve at 0.2–0.5 s a step); ``"direct"``: a direct solve every step, sparse Cholesky
-      (``cholespy``) of the symmetric positive definite matrix, or SuperLU's LU when
-      ``clamp_compression`` is off and the matrix may be indefinite.
+      The cap is well below what a direct solve costs: at 64×64 an iteration takes ~0.1 ms and a
+      direct solve 220 ms, at 81×81 ~0.15 and 460 ms; the hanging scene at dt = 1/60 with its mass
+      spread over the finer grid needs 150–190 iterations there (200, the cap until the solve was
+      compiled, sent it to the direct solve at 0.2–0.5 s a step); ``"direct"``: a direct solve every
+      step, sparse Cholesky (``cholespy``) of the symmetric positive definite matrix, or SuperLU's
+      LU when ``clamp_compression`` is off and the matrix may be indefinite.
     * ``clamp_compression`` (default on) — drop the compressive, indefinite part of each spring's
       stiffness block (``E''`` and ``E'/l`` below zero), which keeps the matrix symmetric positive
       definite so CG applies at any step. It changes the Jacobian, not the force: the step stays
@@ -542,13 +542,13 @@ class ImplicitEuler(_LinearisedImplicitEuler):
         from each spring's 3×3 block), preconditioned with the inverses of the particles' 3×3
         diagonal blocks (a particle's own coupling, which the plain diagonal leaves out), compiled
         (:func:`_pcg`: the products on every core, the sums of the dot products in a fixed order, so
-        the same bits at any thread count), warm-started from the last two steps' ``Δv`` (the state's
-        ``history["dv"]``, which receives the solution, and ``history["dv_before"]``); solved as ``A·y = b/s`` with ``s`` the
-        power of two nearest ``|b|`` (exact, so the iterates are those of the unscaled solve) so
-        that a right-hand side near zero (a cloth coming to rest: its velocities decay into subnormal
-        numbers) cannot make CG divide 0 by 0; ``b = 0`` gives ``dv = 0``. ``None`` when it has not
-        converged: the caller solves directly. Every array is the integrator's or the state's own:
-        a step allocates none."""
+        the same bits at any thread count), warm-started from the last two steps' ``Δv`` (the
+        state's ``history["dv"]``, which receives the solution, and ``history["dv_before"]``);
+        solved as ``A·y = b/s`` with ``s`` the power of two nearest ``|b|`` (exact, so the iterates
+        are those of the unscaled solve) so that a right-hand side near zero (a cloth coming to
+        rest: its velocities decay into subnormal numbers) cannot make CG divide 0 by 0; ``b = 0``
+        gives ``dv = 0``. ``None`` when it has not converged: the caller solves directly. Every
+        array is the integrator's or the state's own: a step allocates none."""
         n = len(b)
         dv = state.history.get("dv")
         if dv is None or len(dv) != n:
