@@ -18,6 +18,7 @@ setup(
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", ["config/cloth_sim.yaml"]),
         ("share/" + package_name + "/config/scenes", glob("config/scenes/*.yaml")),
+        ("share/" + package_name + "/config/meshes", glob("config/meshes/*.obj")),
         ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
     ],
     install_requires=["setuptools"],

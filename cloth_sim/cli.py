@@ -43,7 +43,9 @@ def _run(args) -> int:
     if args.dt is not None:
         scene.dt = args.dt
     sim = scene.build_simulator()
-    print(f"scene {scene.name} ({scene.source}): {scene.rows}×{scene.cols} {scene.model}, "
+    cloth = (f"{scene.rows}×{scene.cols}" if scene.mesh is None else
+             f"mesh {scene.mesh['file'].name} ({sim.model.n_particles} vertices)")
+    print(f"scene {scene.name} ({scene.source}): {cloth} {scene.model}, "
           f"{sim.integrator}, dt={sim.dt:g} s, stable_dt={sim.stable_dt():.4g} s, "
           f"terms: {', '.join(sim.active_terms)}", flush=True)
     t_wall = time.perf_counter()

@@ -17,6 +17,7 @@ TENSION_ONLY = 1  #: Choi & Ko type-1 interaction: pulls when stretched, nothing
 BUCKLING = 2  #: Choi & Ko type-2 interaction: immediate-buckling arc when compressed, Hooke when stretched.
 
 GRID_FAMILIES = ("structural", "shear", "bend")
+MESH_FAMILIES = ("structural", "bend")  # a triangle mesh: its edges, and across each interior edge
 SPRING_FAMILY = "spring"  # the single family of a from_springs model
 MODELS = ("provot", "choi_ko")
 ORIENTATIONS = ("horizontal", "vertical")
@@ -223,6 +224,66 @@ class ClothModel:
                    kind=np.full(m, LINEAR, np.int8), strain_limited=np.ones(m, bool),
                    pinned=pin_mask, triangles=tris.reshape(-1, 3))
 
+    @classmethod
+    def from_mesh(cls, source, density: float, stiffness: dict | float,
+                  damping: dict | float | None = None, pinned=(), model: str = "provot",
+                  scale: float = 1.0, position=(0.0, 0.0, 0.0),
+                  orientation=(1.0, 0.0, 0.0, 0.0)) -> "ClothModel":
+        """A cloth from any triangle mesh: ``source`` is a file (OBJ, PLY, STL, glTF/GLB, OFF; see
+        :mod:`cloth_sim.mesh`) or a ``(vertices, faces)`` pair.
+
+        Springs: one ``structural`` per unique edge, one ``bend`` per interior edge joining the two
+        vertices opposite it; rest lengths are the mesh's own, so a garment modelled curved rests
+        curved. Masses: ``density`` (kg/m²) × a third of each adjacent triangle's area. Vertices at
+        the same position are welded into one particle (a mesh without duplicates keeps its vertex
+        order). ``model="choi_ko"``: structural springs resist stretching only and bend springs buckle
+        (as on a grid). ``pinned`` lists vertex indices of the source (mapped through the welding).
+        ``scale`` is metres per file unit; the scaled mesh is then rotated by ``orientation`` (a unit
+        quaternion ``(w, x, y, z)``) and moved by ``position``. ``stiffness``/``damping``: dicts
+        keyed by ``structural`` and ``bend``, or one number for both.
+
+        A mesh that cannot be cloth raises ``ValueError`` naming the source and the element (see
+        :func:`cloth_sim.mesh.check_mesh`); nothing is built."""
+        from . import mesh as M
+        from .grippers import check_pose
+        from .parameters import SCHEMA
+
+        vertices, faces, name = M.read_mesh(source, scale)
+        density = SCHEMA["density"].check(density)
+        if model not in MODELS:
+            raise ValueError(f"from_mesh: unknown model {model!r}; expected one of {', '.join(MODELS)}")
+        k_fam = _per_family("stiffness", stiffness, MESH_FAMILIES)
+        c_fam = _per_family("damping", damping if damping is not None else 0.0, MESH_FAMILIES)
+        try:
+            pos, _, rot = check_pose(position, orientation)
+        except ValueError as e:
+            raise ValueError(f"from_mesh: {e}") from None
+        M.check_mesh(vertices, faces, name)  # before welding: indices and coordinates as given
+        x, tris, index = M.weld(vertices, faces)
+        M.check_mesh(x, tris, name)  # after: welding can make a triangle degenerate or an edge shared
+        x = x @ rot.T + pos
+        structural, bend = M.mesh_springs(tris, len(x))
+        springs = np.concatenate([structural, bend]).astype(np.int64)
+        family = np.repeat(np.arange(2, dtype=np.int64), [len(structural), len(bend)])
+        pin_mask = np.zeros(len(x), dtype=bool)
+        p = np.asarray(list(pinned), dtype=np.float64).ravel()
+        if p.size:
+            if not np.all((p == np.round(p)) & (p >= 0) & (p < len(vertices))):
+                raise ValueError(f"from_mesh: pinned must be vertex indices in [0, {len(vertices) - 1}], "
+                                 f"got {list(pinned)[:8]!r}")
+            pin_mask[index[p.astype(np.int64)]] = True
+        kind = np.full(len(springs), LINEAR, dtype=np.int8)
+        if model == "choi_ko":
+            kind[family == 0] = TENSION_ONLY
+            kind[family == 1] = BUCKLING
+        return cls(positions=x, masses=M.lumped_masses(x, tris, density), springs=springs,
+                   rest_lengths=np.linalg.norm(x[springs[:, 1]] - x[springs[:, 0]], axis=1),
+                   stiffness=np.array([k_fam[f] for f in MESH_FAMILIES])[family],
+                   damping=np.array([c_fam[f] for f in MESH_FAMILIES])[family], family=family,
+                   family_names=MESH_FAMILIES, kind=kind, strain_limited=family == 0,
+                   pinned=pin_mask, triangles=tris, model=model,
+                   meta={"source": name, "vertex_index": index, "density": density})
+
     # ------------------------------------------------------------------ queries
     @property
     def n_particles(self) -> int:
@@ -247,15 +308,15 @@ class ClothModel:
         return (row % self.rows) * self.cols + (col % self.cols)
 
 
-def _per_family(name: str, value) -> dict:
+def _per_family(name: str, value, families=GRID_FAMILIES) -> dict:
     from .parameters import SCHEMA
 
     if isinstance(value, dict):
-        unknown = set(value) - set(GRID_FAMILIES)
+        unknown = set(value) - set(families)
         if unknown:
             raise ValueError(f"{name}: unknown spring families {sorted(map(str, unknown))}; "
-                             f"expected {', '.join(GRID_FAMILIES)}")
-        value = {f: value.get(f, 0.0) for f in GRID_FAMILIES}
+                             f"expected {', '.join(families)}")
+        value = {f: value.get(f, 0.0) for f in families}
     else:
-        value = {f: value for f in GRID_FAMILIES}
+        value = {f: value for f in families}
     return {f: SCHEMA[f"{name}.{f}"].check(v) for f, v in value.items()}

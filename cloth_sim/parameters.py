@@ -161,6 +161,9 @@ def _schema() -> dict[str, Param]:
             scene_key=f"damping.{f}") for f in GRID_FAMILIES],
         P("particle_mass", float, "kg", "Mass of each particle; rebuilds and resets the cloth.",
           lo=1e-6, hi=1e3, apply="rebuild", scene_key="particle_mass"),
+        P("density", float, "kg/m²", "Areal density of a mesh cloth (each vertex carries a third "
+          "of its triangles' mass); rebuilds and resets the cloth. Mesh scenes only.", lo=1e-6,
+          hi=1e3, apply="rebuild"),  # a scene's mesh.density (cloth_sim.scene)
         P("gravity", "vector3", "m/s²", "Gravity acceleration [x, y, z].", lo=-1e3, hi=1e3,
           scene_key="gravity"),
         P("wind.direction", "vector3", "", "Wind direction [x, y, z]; particle i feels "

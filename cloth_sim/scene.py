@@ -26,12 +26,26 @@ A scene is a YAML mapping (see ``config/scenes/*.yaml``)::
       - {type: capsule, a: [0, 0, 0], b: [0, 0.2, 0], radius: 0.01}
 
 ``grid`` may also give ``origin: [x, y, z]``, where particle (0, 0) starts.
-Every field but ``grid`` has a default. A malformed file raises :class:`SceneError` naming the file,
+
+A garment or any triangle mesh takes the place of ``grid`` (see :meth:`ClothModel.from_mesh
+<cloth_sim.model.ClothModel.from_mesh>`)::
+
+    mesh: {file: ../meshes/towel.obj,   # relative to this scene file; OBJ, PLY, STL, glTF/GLB, OFF
+           scale: 1.0,                  # metres per file unit
+           density: 0.2,                # kg/m²
+           position: [0, 0, 1],         # the scaled mesh rotated by orientation, then moved here
+           orientation: [1, 0, 0, 0]}   # (w, x, y, z)
+    stiffness: {structural: 1000, bend: 1}   # a mesh's two families
+    pinned: [0, 17]                     # vertex indices of the file
+    pinned_box: {min: [x, y, z], max: [x, y, z]}   # and every vertex inside this box (placed)
+
+Every field but ``grid`` (or ``mesh``) has a default. A malformed file raises :class:`SceneError` naming the file,
 the field and what was expected.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import re
 import reprlib
@@ -44,7 +58,8 @@ import yaml
 
 from .colliders import KINDS
 from .self_collision import MAX_THICKNESS_FRACTION
-from .model import GRID_FAMILIES, ORIENTATIONS, ClothModel
+from .mesh import MESH_FORMATS
+from .model import GRID_FAMILIES, MESH_FAMILIES, ORIENTATIONS, ClothModel
 from .parameters import SCHEMA, ParameterError
 from .simulator import Simulator
 
@@ -60,9 +75,9 @@ class Scene:
     """A validated scene."""
 
     name: str
-    rows: int
-    cols: int
-    spacing: float
+    rows: int | None
+    cols: int | None
+    spacing: float | None
     orientation: str = "horizontal"
     model: str = "provot"
     particle_mass: float = 0.01
@@ -84,6 +99,15 @@ class Scene:
     #: grippers holding the cloth from the start: (name, point, radius)
     grippers: list = field(default_factory=list)
     source: str = "<dict>"
+    #: a mesh scene: ``{file (Path), scale, density, position, orientation}``; ``None`` for a grid
+    mesh: dict | None = None
+    #: a mesh scene's pins by place: ``(lo, hi)`` corners of a box in world coordinates, or None
+    pinned_box: tuple | None = None
+
+    @property
+    def families(self) -> tuple[str, ...]:
+        """The spring families of the scene's cloth."""
+        return MESH_FAMILIES if self.mesh is not None else GRID_FAMILIES
 
     def apply_grippers(self, sim) -> None:
         """Grasp with the scene's grippers; one whose radius reaches no particle (a coarser grid
@@ -122,20 +146,45 @@ class Scene:
         return sorted(set(cells))
 
     def build_model(self, **override) -> ClothModel:
-        """The scene's model; ``override`` replaces rows, cols, spacing, particle_mass, model,
-        stiffness or damping (used by the node's live parameters)."""
-        p = {"rows": self.rows, "cols": self.cols, "spacing": self.spacing,
-             "particle_mass": self.particle_mass, "model": self.model,
-             "stiffness": self.stiffness, "damping": self.damping}
+        """The scene's model; ``override`` replaces rows, cols, spacing, particle_mass (a grid) or
+        density (a mesh), model, stiffness or damping (used by the node's live parameters)."""
+        p = ({"density": self.mesh["density"]} if self.mesh is not None else
+             {"rows": self.rows, "cols": self.cols, "spacing": self.spacing,
+              "particle_mass": self.particle_mass})
+        p.update({"model": self.model, "stiffness": self.stiffness, "damping": self.damping})
         unknown = sorted(set(override) - set(p))
         if unknown:  # (a misspelt or simulator-only option used to vanish here unnoticed)
             raise TypeError(f"unknown scene override(s): {', '.join(unknown)}; accepted: "
                             f"{', '.join([*p, *self.SIMULATOR_OPTIONS])}")
         p.update(override)
+        if self.mesh is not None:
+            return self._mesh_model(p)
         return ClothModel.grid(p["rows"], p["cols"], p["spacing"], p["particle_mass"],
                                stiffness=p["stiffness"], damping=p["damping"],
                                pinned=self.pinned_cells(p["rows"], p["cols"]), model=p["model"],
                                orientation=self.orientation, origin=self.origin)
+
+    def _mesh_model(self, p: dict) -> ClothModel:
+        m = self.mesh
+        fams = {name: {f: v for f, v in p[name].items() if f in MESH_FAMILIES}
+                for name in ("stiffness", "damping")}
+        model = ClothModel.from_mesh(str(m["file"]), density=p["density"], model=p["model"],
+                                     pinned=[q for q in self.pinned if not isinstance(q, str)],
+                                     scale=m["scale"], position=m["position"],
+                                     orientation=m["orientation"], **fams)
+        if self.pinned_box is not None:
+            from .mesh import vertices_in_box
+
+            inside = vertices_in_box(model.positions, *self.pinned_box)
+            if len(inside) == 0:
+                raise ValueError(f"{self.source}: field 'pinned_box' holds no vertex of "
+                                 f"{m['file']} as placed (its vertices span "
+                                 f"{model.positions.min(0).round(4).tolist()} to "
+                                 f"{model.positions.max(0).round(4).tolist()})")
+            mask = np.array(model.pinned)
+            mask[inside] = True
+            model = dataclasses.replace(model, pinned=mask)
+        return model
 
     SIMULATOR_OPTIONS = ("integrator", "dt", "gravity", "wind", "strain_limit", "strain_limit_passes",
                          "strain_limit_long_range", "drag", "integrator_options", "colliders",
@@ -272,38 +321,18 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
     v = _Validator(source)
     if not isinstance(data, dict):
         v.fail("(top level)", "a mapping of scene fields", data)
-    known = {"name", "grid", "model", "particle_mass", "stiffness", "damping", "pinned",
-             "pinned_edges", "gravity", "wind", "drag", "strain_limit", "integrator", "dt",
-             "thickness", "self_collision", "colliders", "grippers"}
+    known = {"name", "grid", "mesh", "model", "particle_mass", "stiffness", "damping", "pinned",
+             "pinned_edges", "pinned_box", "gravity", "wind", "drag", "strain_limit", "integrator",
+             "dt", "thickness", "self_collision", "colliders", "grippers"}
     v.known("", data, known)
-    grid = data.get("grid")
-    if not isinstance(grid, dict):
-        v.fail("grid", "a mapping with rows, cols, spacing", grid)
-    v.known("grid.", grid, {"rows", "cols", "spacing", "orientation", "origin"})
-    s = Scene(name=str(data.get("name", name)), source=source,
-              rows=v.param("rows", grid.get("rows")), cols=v.param("cols", grid.get("cols")),
-              spacing=v.param("spacing", grid.get("spacing")),
-              orientation=v.choice("grid.orientation", grid.get("orientation", "horizontal"),
-                                   ORIENTATIONS))
+    if "mesh" in data:
+        if "grid" in data:
+            raise SceneError(f"{source}: fields 'grid' and 'mesh' are both given: a scene's cloth is "
+                             f"one or the other")
+        s = _mesh_scene(v, data, source, name)
+    else:
+        s = _grid_scene(v, data, source, name)
     s.model = v.param("model", data.get("model", "provot"))
-    s.particle_mass = v.param("particle_mass", data.get("particle_mass", s.particle_mass))
-    s.stiffness = v.families("stiffness", data.get("stiffness", s.stiffness))
-    s.damping = v.families("damping", data.get("damping", s.damping))
-    pins = data.get("pinned", [])
-    if not isinstance(pins, list):
-        v.fail("pinned", "a list of [row, col] pairs", pins)
-    for i, p in enumerate(pins):
-        if not (isinstance(p, (list, tuple)) and len(p) == 2 and all(
-                isinstance(q, int) and not isinstance(q, bool) for q in p)):
-            v.fail(f"pinned[{i}]", "a [row, col] pair of integers", p)
-        if not (-s.rows <= p[0] < s.rows and -s.cols <= p[1] < s.cols):
-            v.fail(f"pinned[{i}]", f"a cell inside the {s.rows}×{s.cols} grid", p)
-    edges = data.get("pinned_edges", [])
-    if not isinstance(edges, list):
-        v.fail("pinned_edges", f"a list of {', '.join(EDGES)}", edges)
-    for i, e in enumerate(edges):
-        v.choice(f"pinned_edges[{i}]", e, EDGES)
-    s.pinned = [tuple(p) for p in pins] + list(edges)
     s.gravity = tuple(v.param("gravity", data.get("gravity", s.gravity)))
     wind = data.get("wind", {}) or {}
     if not isinstance(wind, dict):
@@ -316,10 +345,10 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
     s.strain_limit = None if sl is None else v.param("strain_limit", sl)
     s.integrator = v.param("integrator", data.get("integrator", s.integrator))
     s.dt = v.param("dt", data.get("dt", s.dt))
-    s.origin = tuple(v.vector("grid.origin", grid.get("origin", (0.0, 0.0, 0.0)), 3))
     s.thickness = v.param("thickness", data.get("thickness", s.thickness))
     s.self_collision = v.param("self_collision", data.get("self_collision", False))
-    if s.self_collision and s.thickness > MAX_THICKNESS_FRACTION * s.spacing:
+    # (a mesh's shortest edge is known once it is read: Simulator checks the thickness there)
+    if s.self_collision and s.mesh is None and s.thickness > MAX_THICKNESS_FRACTION * s.spacing:
         v.fail("thickness", f"at most {MAX_THICKNESS_FRACTION:g} × grid.spacing = "
                f"{MAX_THICKNESS_FRACTION * s.spacing:.4g} m with self_collision on", s.thickness)
     cols_ = data.get("colliders", []) or []
@@ -351,6 +380,111 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
         if radius <= 0:
             v.fail(f"{where}.radius", "a finite number > 0", radius)
         s.grippers.append((name, point, radius))
+    return s
+
+
+def _grid_scene(v: "_Validator", data: dict, source: str, name: str) -> Scene:
+    grid = data.get("grid")
+    if not isinstance(grid, dict):
+        v.fail("grid", "a mapping with rows, cols, spacing (or a mesh mapping instead)", grid)
+    v.known("grid.", grid, {"rows", "cols", "spacing", "orientation", "origin"})
+    for key in ("pinned_box",):
+        if key in data:
+            raise SceneError(f"{source}: field '{key}' is for mesh scenes; a grid pins (row, col) "
+                             f"cells with pinned and pinned_edges")
+    s = Scene(name=str(data.get("name", name)), source=source,
+              rows=v.param("rows", grid.get("rows")), cols=v.param("cols", grid.get("cols")),
+              spacing=v.param("spacing", grid.get("spacing")),
+              orientation=v.choice("grid.orientation", grid.get("orientation", "horizontal"),
+                                   ORIENTATIONS))
+    s.particle_mass = v.param("particle_mass", data.get("particle_mass", s.particle_mass))
+    s.stiffness = v.families("stiffness", data.get("stiffness", s.stiffness))
+    s.damping = v.families("damping", data.get("damping", s.damping))
+    pins = data.get("pinned", [])
+    if not isinstance(pins, list):
+        v.fail("pinned", "a list of [row, col] pairs", pins)
+    for i, p in enumerate(pins):
+        if not (isinstance(p, (list, tuple)) and len(p) == 2 and all(
+                isinstance(q, int) and not isinstance(q, bool) for q in p)):
+            v.fail(f"pinned[{i}]", "a [row, col] pair of integers", p)
+        if not (-s.rows <= p[0] < s.rows and -s.cols <= p[1] < s.cols):
+            v.fail(f"pinned[{i}]", f"a cell inside the {s.rows}×{s.cols} grid", p)
+    edges = data.get("pinned_edges", [])
+    if not isinstance(edges, list):
+        v.fail("pinned_edges", f"a list of {', '.join(EDGES)}", edges)
+    for i, e in enumerate(edges):
+        v.choice(f"pinned_edges[{i}]", e, EDGES)
+    s.pinned = [tuple(p) for p in pins] + list(edges)
+    s.origin = tuple(v.vector("grid.origin", grid.get("origin", (0.0, 0.0, 0.0)), 3))
+    return s
+
+
+#: the most vertex indices a mesh scene's pinned list may hold
+MAX_PINNED = 100_000
+
+
+def _mesh_scene(v: "_Validator", data: dict, source: str, name: str) -> Scene:
+    """A mesh scene's own fields: ``mesh`` (file relative to the scene file, scale, density, pose),
+    ``pinned`` vertex indices and ``pinned_box``; grid-only fields are refused with the reason."""
+    mesh = data.get("mesh")
+    if not isinstance(mesh, dict):
+        v.fail("mesh", "a mapping with file, density and optional scale, position, orientation", mesh)
+    v.known("mesh.", mesh, {"file", "scale", "density", "position", "orientation"})
+    for key in ("particle_mass", "pinned_edges"):
+        if key in data:
+            raise SceneError(f"{source}: field '{key}' is for grid scenes; "
+                             + ("a mesh's masses come from mesh.density (kg/m²)" if key == "particle_mass"
+                                else "a mesh pins vertex indices (pinned) or a box (pinned_box)"))
+    file = mesh.get("file")
+    if not isinstance(file, str) or not file:
+        v.fail("mesh.file", f"a mesh file path ({', '.join('.' + e for e in MESH_FORMATS)}), "
+               f"relative to the scene file", file)
+    path = Path(file)
+    if not path.is_absolute():
+        path = (Path(source).parent if source != "<dict>" else Path.cwd()) / path
+    path = Path(os.path.normpath(path))
+    if path.suffix.lower().lstrip(".") not in MESH_FORMATS:
+        v.fail("mesh.file", f"a mesh file ending in {', '.join('.' + e for e in MESH_FORMATS)}", file)
+    try:
+        found = path.is_file()
+    except OSError:
+        found = False
+    if not found:
+        v.fail("mesh.file", f"an existing mesh file (looked for {_short_path(str(path))})", file)
+    scale = v.number("mesh.scale", mesh.get("scale", 1.0), lo=0.0)
+    if scale <= 0:
+        v.fail("mesh.scale", "a finite number > 0 (metres per file unit)", scale)
+    if "density" not in mesh:
+        raise SceneError(f"{source}: field 'mesh.density' is missing: a mesh's masses come from its "
+                         f"areal density (kg/m²)")
+    density = v.param("density", mesh["density"], field="mesh.density")
+    position = v.vector("mesh.position", mesh.get("position", (0.0, 0.0, 0.0)), 3)
+    orientation = v.vector("mesh.orientation", mesh.get("orientation", (1.0, 0.0, 0.0, 0.0)), 4)
+    if not np.any(orientation):
+        v.fail("mesh.orientation", "a nonzero quaternion (w, x, y, z)", orientation)
+    s = Scene(name=str(data.get("name", name)), source=source, rows=None, cols=None, spacing=None,
+              mesh={"file": path, "scale": scale, "density": density, "position": position,
+                    "orientation": orientation})
+    s.stiffness = v.families("stiffness", data.get("stiffness", {"structural": 1e3, "bend": 1.0}),
+                             MESH_FAMILIES)
+    s.damping = v.families("damping", data.get("damping", 0.0), MESH_FAMILIES)
+    pins = data.get("pinned", [])
+    if not isinstance(pins, list) or len(pins) > MAX_PINNED:
+        v.fail("pinned", f"a list of at most {MAX_PINNED} vertex indices", pins)
+    for i, p in enumerate(pins):
+        if not (isinstance(p, int) and not isinstance(p, bool) and p >= 0):
+            v.fail(f"pinned[{i}]", "a vertex index (an integer >= 0)", p)
+    s.pinned = list(pins)
+    box = data.get("pinned_box")
+    if box is not None:
+        if not isinstance(box, dict):
+            v.fail("pinned_box", "a mapping with min and max corners", box)
+        v.known("pinned_box.", box, {"min", "max"})
+        lo = v.vector("pinned_box.min", box.get("min"), 3)
+        hi = v.vector("pinned_box.max", box.get("max"), 3)
+        if any(a > b for a, b in zip(lo, hi)):
+            v.fail("pinned_box", "min <= max in every coordinate", box)
+        s.pinned_box = (lo, hi)
     return s
 
 
@@ -387,11 +521,12 @@ class _Validator:
             raise SceneError(f"{self.source}: unknown field(s) {prefix}{(', ' + prefix).join(unknown)}; "
                              f"expected {', '.join(sorted(keys))}")
 
-    def param(self, name, x):
-        """``x`` checked against the schema's entry ``name``, reported under its scene key."""
+    def param(self, name, x, field=None):
+        """``x`` checked against the schema's entry ``name``, reported under its scene key (or
+        ``field``)."""
         spec = SCHEMA[name]
         try:
-            return spec.check(x, field=spec.scene_key)
+            return spec.check(x, field=field or spec.scene_key)
         except ParameterError as e:
             self.fail(e.name, e.accepted, x)
 
@@ -446,15 +581,17 @@ class _Validator:
             self.fail(fld, f"one of {', '.join(options)}", x)
         return x
 
-    def families(self, fld, x):
+    def families(self, fld, x, families=GRID_FAMILIES):
         if isinstance(x, (int, float)) and not isinstance(x, bool):
-            x = {f: x for f in GRID_FAMILIES}
+            x = {f: x for f in families}
         if not isinstance(x, dict):
-            self.fail(fld, f"a mapping of {', '.join(GRID_FAMILIES)} to numbers >= 0", x)
-        unknown = sorted(_short(k) for k in x if k not in GRID_FAMILIES)
+            self.fail(fld, f"a mapping of {', '.join(families)} to numbers >= 0", x)
+        unknown = sorted(_short(k) for k in x if k not in families)
         if unknown:
-            self.fail(fld, f"keyed by {', '.join(GRID_FAMILIES)}", unknown)
-        return {f: self.param(f"{fld}.{f}", x.get(f, 0.0)) for f in GRID_FAMILIES}
+            self.fail(fld, f"keyed by {', '.join(families)}"
+                      + (" (a mesh has no shear springs)" if "shear" in x and "shear" not in families
+                         else ""), unknown)
+        return {f: self.param(f"{fld}.{f}", x.get(f, 0.0)) for f in families}
 
 
 _REPR = reprlib.Repr()

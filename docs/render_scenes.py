@@ -1,4 +1,4 @@
-"""Render the contact scenes (table, drape, fold) after a few seconds of simulation into
+"""Render the contact and garment scenes (table, drape, fold, tshirt, towel) after a few seconds of simulation into
 docs/img/<scene>.png, as shown in the README.
 
     .venv/bin/python docs/render_scenes.py [--seconds 3] [--out docs/img] [scene[:seconds] ...]
@@ -58,7 +58,9 @@ def render(name: str, seconds: float, out: Path) -> Path:
     mid, half = (lo + hi) / 2, (hi - lo).max() / 2
     ax.set(xlim=(mid[0] - half, mid[0] + half), ylim=(mid[1] - half, mid[1] + half),
            zlim=(max(lo[2], mid[2] - half), mid[2] + half), xlabel="x", ylabel="y", zlabel="z")
-    ax.set_title(f"{name}: t = {sim.time:.1f} s, {sim.model.rows}×{sim.model.cols}, "
+    cloth = (f"{sim.model.rows}×{sim.model.cols}" if sim.model.rows else
+             f"{sim.model.n_particles} vertices, {len(sim.model.triangles)} triangles")
+    ax.set_title(f"{name}: t = {sim.time:.1f} s, {cloth}, "
                  f"{', '.join(sim.active_stages)}", fontsize=9)
     ax.view_init(elev=22, azim=-60)
     out.mkdir(parents=True, exist_ok=True)
@@ -72,7 +74,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=3.0)
     ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parent / "img")
-    ap.add_argument("scenes", nargs="*", default=["table", "drape", "fold:0.8"],
+    ap.add_argument("scenes", nargs="*", default=["table", "drape", "fold:0.8", "tshirt:0.6", "towel:1.5"],
                     help="scene names, each optionally :seconds (default --seconds)")
     args = ap.parse_args(argv)
     for item in args.scenes:

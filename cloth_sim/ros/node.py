@@ -43,7 +43,6 @@ from visualization_msgs.msg import Marker, MarkerArray
 from .. import integrators
 from ..integrators.base import Stability
 from .. import stability as stab
-from ..model import GRID_FAMILIES
 from ..parameters import REBUILD, SCHEMA
 from ..scene import GRIPPER_NAME, SceneError, load_scene
 from ..self_collision import check_thickness
@@ -109,8 +108,8 @@ def _srv_types():
 
 def _material(model, cfg: dict) -> tuple[np.ndarray, np.ndarray]:
     """Per-spring stiffness and damping of ``model`` from the family parameters in ``cfg``."""
-    k = np.array([cfg[f"stiffness.{f}"] for f in GRID_FAMILIES])[model.family]
-    c = np.array([cfg[f"damping.{f}"] for f in GRID_FAMILIES])[model.family]
+    k = np.array([cfg[f"stiffness.{f}"] for f in model.family_names])[model.family]
+    c = np.array([cfg[f"damping.{f}"] for f in model.family_names])[model.family]
     return k, c
 
 
@@ -215,7 +214,7 @@ class ClothSimNode(Node):
         self._ready = True
         _settle_garbage()
         self.get_logger().info(
-            f"scene {self.scene.name}: {self.cfg['rows']}×{self.cfg['cols']} {self.cfg['model']}, "
+            f"scene {self.scene.name}: {self.cloth_text()}, "
             f"{self.sim.integrator}, dt={self.sim.dt:g} s, {self.cfg['publish_rate']:g} Hz, "
             f"terms: {', '.join(self.sim.active_terms)}; kernels ready in {kernels:.2f} s")
 
@@ -232,10 +231,11 @@ class ClothSimNode(Node):
         key = (scene.source, *(cfg[k] for k in MODEL_KEYS))
         model = self._models.get(key)
         if model is None:
-            model = scene.build_model(rows=cfg["rows"], cols=cfg["cols"], spacing=cfg["spacing"],
-                                      particle_mass=cfg["particle_mass"], model=cfg["model"],
-                                      stiffness={f: cfg[f"stiffness.{f}"] for f in GRID_FAMILIES},
-                                      damping={f: cfg[f"damping.{f}"] for f in GRID_FAMILIES})
+            size = ({"density": cfg["density"]} if scene.mesh is not None else
+                    {k: cfg[k] for k in ("rows", "cols", "spacing", "particle_mass")})
+            model = scene.build_model(**size, model=cfg["model"],
+                                      stiffness={f: cfg[f"stiffness.{f}"] for f in scene.families},
+                                      damping={f: cfg[f"damping.{f}"] for f in scene.families})
             if len(self._models) >= 4:
                 self._models.pop(next(iter(self._models)))
             self._models[key] = model
@@ -251,7 +251,7 @@ class ClothSimNode(Node):
         scene.apply_grippers(sim)
         k, c = _material(model, cfg)
         if not (np.array_equal(model.stiffness, k) and np.array_equal(model.damping, c)):
-            for f in GRID_FAMILIES:  # a kept model built with other values: set them
+            for f in model.family_names:  # a kept model built with other values: set them
                 sim.set_stiffness(f, cfg[f"stiffness.{f}"])
                 sim.set_damping(f, cfg[f"damping.{f}"])
         return sim
@@ -354,6 +354,9 @@ class ClothSimNode(Node):
         try:
             if cand["scene"] != self.cfg["scene"]:
                 scene = load_scene(cand["scene"])
+            reason = P.not_applicable(scene, cand, self.cfg)
+            if reason:
+                return SetParametersResult(successful=False, reason=reason)
             rebuild = scene is not self.scene or any(cand[k] != self.cfg[k] for k in MODEL_KEYS)
             model = self._model(cand, scene) if rebuild else self.sim.model
         except (SceneError, ValueError) as e:  # e.g. a scene whose file changed since
@@ -426,7 +429,7 @@ class ClothSimNode(Node):
 
     def _apply_live(self, cand: dict) -> None:
         sim, cur = self.sim, self.cfg
-        for f in GRID_FAMILIES:
+        for f in sim.model.family_names:
             if cand[f"stiffness.{f}"] != cur[f"stiffness.{f}"]:
                 sim.set_stiffness(f, cand[f"stiffness.{f}"])
             if cand[f"damping.{f}"] != cur[f"damping.{f}"]:
@@ -774,8 +777,23 @@ class ClothSimNode(Node):
         self._publish_diagnostics()
 
     def point_cloud(self, stamp) -> PointCloud2:
-        return messages.point_cloud(self.sim.positions, self.cfg["rows"], self.cfg["cols"],
+        rows, cols = self.cloud_shape()
+        return messages.point_cloud(self.sim.positions, rows, cols,
                                     self.cfg["frame_id"], stamp)
+
+    def cloud_shape(self) -> tuple[int, int]:
+        """``~/points``' height and width: the grid's rows and columns, or 1 × vertices (a mesh's
+        cloud is unorganised)."""
+        model = self.sim.model
+        return (model.rows, model.cols) if model.rows else (1, model.n_particles)
+
+    def cloth_text(self) -> str:
+        """``32×32 provot`` or ``mesh tshirt.obj (1234 vertices, 2300 triangles) provot``."""
+        model = self.sim.model
+        if model.rows:
+            return f"{model.rows}×{model.cols} {model.model}"
+        return (f"mesh {self.scene.mesh['file'].name} ({model.n_particles} vertices, "
+                f"{len(model.triangles)} triangles) {model.model}")
 
     def real_time_factor(self) -> float:
         if len(self._history) < 2:
