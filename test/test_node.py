@@ -767,3 +767,25 @@ def test_clock_real_time_factor_and_step(ros):
     assert node.sim.time - sim0 > 1.5 * (time.monotonic() - wall0)
     r = ros.set_params("/cloth_sim", {"real_time_factor": -1.0})[0]
     assert not r.successful and "real_time_factor" in r.reason
+
+
+def test_a_mesh_scene_publishes_an_unorganised_cloud_and_refuses_grid_parameters(ros):
+    node = ros.start(scene="towel")
+    clouds = ros.collect(PointCloud2, "/cloth_sim/points")
+    meshes = ros.collect(Marker, "/cloth_sim/mesh")
+    assert ros.spin_until(lambda: clouds and meshes, 15)
+    n = node.sim.model.n_particles
+    assert (clouds[-1].height, clouds[-1].width, clouds[-1].row_step) == (1, n, 12 * n)
+    assert len(meshes[-1].points) == 3 * len(node.sim.model.triangles)
+    for change in ({"rows": 20}, {"spacing": 0.05}, {"stiffness.shear": 5.0}):
+        (result,) = ros.set_params("/cloth_sim", change)
+        assert not result.successful and "not used by scene towel, a triangle mesh" in result.reason
+    (result,) = ros.set_params("/cloth_sim", {"stiffness.bend": 0.2})  # a mesh family: live
+    assert result.successful and node.sim.stiffness("bend")[0] == 0.2
+    (result,) = ros.set_params("/cloth_sim", {"density": 0.8})  # rebuilds
+    assert result.successful and node.sim.model.masses.sum() == pytest.approx(0.8 * 0.5 * 0.8)
+    # back to a grid: its own parameters apply again, density does not
+    assert all(r.successful for r in ros.set_params("/cloth_sim", {"scene": "hanging", "rows": 10}))
+    assert node.sim.model.rows == 10
+    (result,) = ros.set_params("/cloth_sim", {"density": 0.3})
+    assert not result.successful and "density applies to mesh scenes" in result.reason
