@@ -56,6 +56,8 @@ import math
 import numba
 import numpy as np
 
+from .colliders import SUPPORT
+
 
 @numba.njit(cache=True, inline="always")
 def closest_on_triangle(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):
@@ -201,9 +203,10 @@ def candidate_pairs(x0, tris, radius):
 
 
 @numba.njit(cache=True)
-def proximity(x, x0, v, tris, pairs, inv_mass, h):
+def proximity(x, x0, v, tris, pairs, held_inv_mass, free_inv_mass, clearance, h):
     """Push pairs closer than ``h`` apart (on the particle's side at the start) and remove their
-    approaching normal velocity; returns how many pairs were pushed."""
+    approaching normal velocity; returns how many pairs were pushed. ``held_inv_mass`` is 0 where a
+    collider supports the particle (:func:`_separate` for the rest)."""
     pushed = 0
     for q in range(pairs.shape[0]):
         p, i = pairs[q, 0], pairs[q, 1]
@@ -231,33 +234,11 @@ def proximity(x, x0, v, tris, pairs, inv_mass, h):
         if sd >= h:
             continue
         # the particle takes the share α of the push and the triangle, moved as a whole (its held
-        # corners stay), the rest: every particle moves at most the push, however lopsided the
+        # corners staying), the rest: every particle moves at most the push, however lopsided the
         # weights (barycentric mass weighting would move a lone free corner by push / w)
-        it = wa * inv_mass[a] + wb * inv_mass[b] + wc * inv_mass[c]
-        if inv_mass[p] + it == 0.0:
+        if not _separate(x, v, held_inv_mass, free_inv_mass, clearance, (p, p, p), (1.0, 0.0, 0.0),
+                         (a, b, c), (wa, wb, wc), nx, ny, nz, min(h - sd, 2.0 * h)):
             continue
-        alpha = inv_mass[p] / (inv_mass[p] + it)
-        push = min(h - sd, 2.0 * h)
-        x[p, 0] += alpha * push * nx
-        x[p, 1] += alpha * push * ny
-        x[p, 2] += alpha * push * nz
-        for vert in (a, b, c):
-            if inv_mass[vert] > 0.0:
-                x[vert, 0] -= (1.0 - alpha) * push * nx
-                x[vert, 1] -= (1.0 - alpha) * push * ny
-                x[vert, 2] -= (1.0 - alpha) * push * nz
-        vn = ((v[p, 0] - wa * v[a, 0] - wb * v[b, 0] - wc * v[c, 0]) * nx
-              + (v[p, 1] - wa * v[a, 1] - wb * v[b, 1] - wc * v[c, 1]) * ny
-              + (v[p, 2] - wa * v[a, 2] - wb * v[b, 2] - wc * v[c, 2]) * nz)
-        if vn < 0.0:  # approaching: the normal velocity between them goes, shared alike
-            v[p, 0] -= alpha * vn * nx
-            v[p, 1] -= alpha * vn * ny
-            v[p, 2] -= alpha * vn * nz
-            for vert in (a, b, c):
-                if inv_mass[vert] > 0.0:
-                    v[vert, 0] += (1.0 - alpha) * vn * nx
-                    v[vert, 1] += (1.0 - alpha) * vn * ny
-                    v[vert, 2] += (1.0 - alpha) * vn * nz
         pushed += 1
     return pushed
 
@@ -386,16 +367,32 @@ def edge_pairs(x0, edges, radius):
 
 
 @numba.njit(cache=True, inline="always")
-def _separate(x, v, inv_mass, s1, w1, s2, w2, nx, ny, nz, push):
+def _separate(x, v, held_inv_mass, free_inv_mass, clearance, s1, w1, s2, w2, nx, ny, nz, push):
     """Push side 1 (the points ``Σ w1·x[s1]``) along ``+n`` and side 2 along ``−n`` by ``push`` in
     all, shared by their inverse masses (each side moved as a whole, held particles staying), and
     remove an approaching velocity along ``n`` alike. ``s1, s2``: 3 particle indices each, ``w1, w2``
-    their weights (0 for an unused slot). Returns whether anything could move."""
+    their weights (0 for an unused slot). A side held by a collider (``held_inv_mass`` 0) stays; when
+    both are, the side farther above the colliders (``clearance``) moves alone, by its own masses.
+    Returns whether anything could move."""
+    inv_mass = held_inv_mass
     i1 = w1[0] * inv_mass[s1[0]] + w1[1] * inv_mass[s1[1]] + w1[2] * inv_mass[s1[2]]
     i2 = w2[0] * inv_mass[s2[0]] + w2[1] * inv_mass[s2[1]] + w2[2] * inv_mass[s2[2]]
-    if i1 + i2 == 0.0:
-        return False
-    alpha = i1 / (i1 + i2)
+    if i1 + i2 != 0.0:
+        alpha = i1 / (i1 + i2)
+    else:
+        inv_mass = free_inv_mass
+        c1, c2 = np.inf, np.inf
+        for k in range(3):
+            if w1[k] > 0.0:
+                c1 = min(c1, clearance[s1[k]])
+            if w2[k] > 0.0:
+                c2 = min(c2, clearance[s2[k]])
+        alpha = 1.0 if c1 >= c2 else 0.0
+        moving = (w1[0] * inv_mass[s1[0]] + w1[1] * inv_mass[s1[1]] + w1[2] * inv_mass[s1[2]]
+                  if alpha == 1.0 else
+                  w2[0] * inv_mass[s2[0]] + w2[1] * inv_mass[s2[1]] + w2[2] * inv_mass[s2[2]])
+        if moving == 0.0:
+            return False
     vn = 0.0
     for k in range(3):
         vn += (w1[k] * v[s1[k], 0] - w2[k] * v[s2[k], 0]) * nx
@@ -404,7 +401,7 @@ def _separate(x, v, inv_mass, s1, w1, s2, w2, nx, ny, nz, push):
     vn = min(vn, 0.0)  # only an approaching velocity goes
     for k in range(3):
         p = s1[k]
-        if w1[k] > 0.0 and inv_mass[p] > 0.0:
+        if w1[k] > 0.0 and inv_mass[p] > 0.0 and alpha > 0.0:
             x[p, 0] += alpha * push * nx
             x[p, 1] += alpha * push * ny
             x[p, 2] += alpha * push * nz
@@ -412,7 +409,7 @@ def _separate(x, v, inv_mass, s1, w1, s2, w2, nx, ny, nz, push):
             v[p, 1] -= alpha * vn * ny
             v[p, 2] -= alpha * vn * nz
         q = s2[k]
-        if w2[k] > 0.0 and inv_mass[q] > 0.0:
+        if w2[k] > 0.0 and inv_mass[q] > 0.0 and alpha < 1.0:
             x[q, 0] -= (1.0 - alpha) * push * nx
             x[q, 1] -= (1.0 - alpha) * push * ny
             x[q, 2] -= (1.0 - alpha) * push * nz
@@ -452,8 +449,8 @@ def _adjacent(p, q, adj_ptr, adj):
 
 
 @numba.njit(cache=True)
-def proximity_features(x, x0, v, tris, pairs, inv_mass, h, tri_edge, edge_owner, edge_tris,
-                       vertex_owner, adj_ptr, adj):
+def proximity_features(x, x0, v, tris, pairs, held_inv_mass, free_inv_mass, clearance, h, tri_edge,
+                       edge_owner, edge_tris, vertex_owner, adj_ptr, adj):
     """The point–edge and point–point cases of the proximity pass (module docstring): candidate
     pairs whose nearest point on the triangle is on an edge or a corner; returns how many were
     pushed."""
@@ -484,14 +481,15 @@ def proximity_features(x, x0, v, tris, pairs, inv_mass, h, tri_edge, edge_owner,
         nx, ny, nz, d = _direction(x, x0, p, s2, w2)
         if nx == 0.0 and ny == 0.0 and nz == 0.0:
             continue
-        if _separate(x, v, inv_mass, (p, p, p), (1.0, 0.0, 0.0), s2, w2, nx, ny, nz,
+        if _separate(x, v, held_inv_mass, free_inv_mass, clearance, (p, p, p), (1.0, 0.0, 0.0), s2, w2,
+                     nx, ny, nz,
                      min(h - d, 2.0 * h)):
             pushed += 1
     return pushed
 
 
 @numba.njit(cache=True)
-def proximity_edges(x, x0, v, edges, pairs, inv_mass, h):
+def proximity_edges(x, x0, v, edges, pairs, held_inv_mass, free_inv_mass, clearance, h):
     """The edge–edge case of the proximity pass: pairs whose nearest points both lie inside their
     edges, closer than ``h``, pushed apart; returns how many."""
     pushed = 0
@@ -514,7 +512,9 @@ def proximity_edges(x, x0, v, edges, pairs, inv_mass, h):
         nl = math.sqrt(nx * nx + ny * ny + nz * nz)
         if nl == 0.0:
             continue
-        if _separate(x, v, inv_mass, (a, b, b), (1.0 - sv, sv, 0.0), (c, d, d), (1.0 - tv, tv, 0.0),
+        if _separate(x, v, held_inv_mass, free_inv_mass, clearance, (a, b, b), (1.0 - sv, sv, 0.0),
+                     (c, d, d),
+                     (1.0 - tv, tv, 0.0),
                      nx / nl, ny / nl, nz / nl, min(h - dist, 2.0 * h)):
             pushed += 1
     return pushed
@@ -605,6 +605,7 @@ class SelfCollision:
         inv = np.where(model.pinned, 0.0, 1.0 / model.masses)
         self._inv_mass = np.ascontiguousarray(inv)
         self._factor = np.ones(model.n_particles)
+        self._no_clearance = np.full(model.n_particles, np.inf)
         self.last_pairs = self.last_pushed = self.last_slowed = self.last_edge_pairs = 0
 
     @property
@@ -621,25 +622,30 @@ class SelfCollision:
             check_thickness(self.model, self.thickness)
         self.enabled = bool(on)
 
-    #: per particle, True where a collider holds it (set by the simulator from the contact stage):
-    #: self-collision moves those as if pinned, so it never pushes the cloth into a collider
-    held = None
+    #: per particle, how far above a collider's skin the contact stage left it (``inf``: no collider;
+    #: set by the simulator): within ``SUPPORT·thickness`` self-collision moves it as if pinned, so it
+    #: never pushes the cloth into a collider
+    clearance = None
 
     def apply(self, state, start, dt, velocity_follow):
         x, x0, v = state.x, start.x, state.v
         h = self.thickness
         inv_mass = self._inv_mass
-        if self.held is not None and self.held.any():
-            inv_mass = np.where(self.held, 0.0, inv_mass)
+        clearance = self._no_clearance if self.clearance is None else self.clearance
+        held = clearance < SUPPORT * h
+        if held.any():
+            inv_mass = np.where(held, 0.0, inv_mass)
         radius = h + 2.0 * max_displacement(x, x0)
         tris, (edges, tri_edge, edge_owner, edge_tris, vertex_owner, adj_ptr, adj) = \
             self._tris, self._features
         pairs, dist = candidate_pairs(x0, tris, radius)
         e_pairs, e_dist = edge_pairs(x0, edges, radius)
-        self.last_pushed = (proximity(x, x0, v, tris, pairs, inv_mass, h)
-                            + proximity_features(x, x0, v, tris, pairs, inv_mass, h, tri_edge,
-                                                 edge_owner, edge_tris, vertex_owner, adj_ptr, adj)
-                            + proximity_edges(x, x0, v, edges, e_pairs, inv_mass, h))
+        free = self._inv_mass
+        self.last_pushed = (proximity(x, x0, v, tris, pairs, inv_mass, free, clearance, h)
+                            + proximity_features(x, x0, v, tris, pairs, inv_mass, free, clearance, h,
+                                                 tri_edge, edge_owner, edge_tris, vertex_owner,
+                                                 adj_ptr, adj)
+                            + proximity_edges(x, x0, v, edges, e_pairs, inv_mass, free, clearance, h))
         # a pair the no-crossing pass must see is closer at the start than the two motions
         # together, at most twice the longest: the search covered that unless the pushes made
         # some motion longer than radius / 2

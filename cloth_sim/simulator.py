@@ -577,7 +577,7 @@ class Simulator:
         is kept and only told the pins)."""
         self._strain = StrainLimit(model, tau, *self._strain_options)
         self._self_collision = SelfCollision(model, self._contacts.thickness, self_collision)
-        self._self_collision.held = self._contacts.touching
+        self._self_collision.clearance = self._contacts.clearance
         #: the post-step stages, in order; only the active ones run. Self-collision is last: its
         #: no-crossing guarantee is about the motion every other stage has shaped.
         self.stages = [self._strain, self._contacts, self._self_collision]
