@@ -10,7 +10,7 @@
     Print how long a step that diverges holds the caller (guard, restore, message), per integrator.
 ``cloth-sim bench params [--size 32] [--rate 60]``
     Print the ~/stats gap while a 26-parameter file is loaded the way `ros2 param load` does (needs rclpy).
-``cloth-sim bench node [--sizes 32 64] [--seconds 10]``
+``cloth-sim bench node [--sizes 32 64] [--seconds 10]`` (or ``--scene tshirt``)
 
 ``cloth-sim bench peers [--sizes 32 64 128] [--rounds 9]`` (NVIDIA Warp's CPU cloth kernel beside ours)
 
@@ -92,7 +92,10 @@ def _bench_params(args) -> int:
 
 
 def _bench_node(args) -> int:
-    from .ros.bench import print_node_table
+    from .ros.bench import print_node_table, print_scene_node_table
+    if args.scene:
+        print_scene_node_table(args.scene, args.seconds, args.rate)
+        return 0
     print_node_table(args.sizes, args.seconds, args.integrator, args.dt, args.rate,
                      args.strain_limit_passes)
     return 0
@@ -232,6 +235,8 @@ def build_parser() -> argparse.ArgumentParser:
     bp.set_defaults(func=_bench_params)
     nb = bsub.add_parser("node", help="real-time factor of cloth_sim_node (needs rclpy)")
     nb.add_argument("--sizes", type=int, nargs="+", default=[32, 64])
+    nb.add_argument("--scene", default=None, help="a scene as it ships (e.g. tshirt), self-collision "
+                    "off and on, instead of the hanging scene at --sizes")
     nb.add_argument("--seconds", type=float, default=10.0, help="measured wall time per row")
     nb.add_argument("--integrator", default="symplectic_euler", choices=integrators.available())
     nb.add_argument("--dt", type=float, default=1e-3)

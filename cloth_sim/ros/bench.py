@@ -27,6 +27,12 @@ def measure(n: int, seconds: float, subscribe: bool, integrator: str, dt: float,
                  Parameter("dt", value=dt), Parameter("publish_rate", value=rate)]
     if passes is not None:
         overrides.append(Parameter("strain_limit_passes", value=passes))
+    return dict(measure_node(overrides, seconds, subscribe), N=n)
+
+
+def measure_node(overrides: list, seconds: float, subscribe: bool) -> dict:
+    """The node started with ``overrides``, run ``seconds`` after a 2 s warm-up, with or without
+    ``~/points`` and ``~/mesh`` subscribed: real-time factor, step and tick costs, overruns."""
     with _node_and_probe(overrides) as (node, probe, ex, stats):
         clouds, meshes = [0], [0]
         if subscribe:  # what RViz's two displays ask for; raw: this probe shares the node's thread,
@@ -50,7 +56,7 @@ def measure(n: int, seconds: float, subscribe: bool, integrator: str, dt: float,
             ex.spin_once(timeout_sec=0.01)
         wall, sim = time.monotonic() - w0, node.sim.time - s0
         steps = sum(s.steps for s in stats)
-        out = {"N": n, "subscriber": subscribe, "rtf": sim / wall,
+        out = {"subscriber": subscribe, "rtf": sim / wall,
                "ms_per_step": 1e3 * sum(s.step_time_mean * s.steps for s in stats) / max(steps, 1),
                "tick_ms": 1e3 * sum(s.tick_wall_time for s in stats) / max(len(stats), 1),
                "ticks_per_s": len(stats) / wall, "clouds": clouds[0], "meshes_per_s": meshes[0] / wall,
@@ -95,6 +101,25 @@ def _rss_mb() -> float:
         import resource
 
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def print_scene_node_table(scene: str, seconds: float, rate: float) -> list[dict]:
+    """A named scene (a garment) in the node as it ships (its integrator and dt), with self-collision
+    off and on, ``~/points`` and ``~/mesh`` subscribed."""
+    print(f"# cloth_sim_node, scene {scene} as it ships, {rate:g} Hz, ~/points + ~/mesh subscribed, "
+          f"{seconds:g} s per row after 2 s warm-up; {platform.machine()}, {os.cpu_count()} cores")
+    print("| self_collision | real-time factor | ms/step | tick wall ms | ticks/s | meshes/s | "
+          "overruns |")
+    print("|---|---|---|---|---|---|---|")
+    rows = []
+    for on in (False, True):
+        r = measure_node([Parameter("scene", value=scene), Parameter("self_collision", value=on),
+                          Parameter("publish_rate", value=rate)], seconds, True)
+        rows.append(dict(r, self_collision=on))
+        print(f"| {'on' if on else 'off'} | {r['rtf']:.3f} | {r['ms_per_step']:.3f} | "
+              f"{r['tick_ms']:.2f} | {r['ticks_per_s']:.1f} | {r['meshes_per_s']:.1f} | "
+              f"{r['overruns']} |", flush=True)
+    return rows
 
 
 def print_node_table(sizes, seconds: float, integrator: str, dt: float, rate: float,
