@@ -296,33 +296,44 @@ def closest_on_segments(x, a, b, c, d):
 @numba.njit(cache=True)
 def edge_pairs(x0, edges, radius):
     """``(pairs, distances)``: every pair of edges ``(e, f)``, ``e < f``, sharing no particle, whose
-    segments at the start lie within ``radius``, and that distance; in a fixed order. Edge midpoints
-    go into a spatial hash (cells of the longest edge plus ``radius``: two such edges have midpoints
-    within that), each edge visits the 27 cells around its own."""
+    segments at the start lie within ``radius``, and that distance; in a fixed order. Each edge's box
+    goes into every cell of a spatial hash it overlaps (cells as wide as the longest edge or the
+    radius if larger: one to eight cells an edge); each edge visits the cells its box grown by
+    ``radius`` overlaps. (Hashing midpoints and visiting the 27 cells around them, cells of the
+    longest edge plus the radius, took 19 ms on the T-shirt lying flat, 6,814 edges and 35,000 pairs
+    between its layers; this takes a fraction.)"""
     m = edges.shape[0]
     longest = 0.0
     for e in range(m):
         a, b = edges[e, 0], edges[e, 1]
         longest = max(longest, (x0[a, 0] - x0[b, 0]) ** 2 + (x0[a, 1] - x0[b, 1]) ** 2
                       + (x0[a, 2] - x0[b, 2]) ** 2)
-    inv = 1.0 / max(radius + math.sqrt(longest), 1e-300)
-    size = 2 * m + 1
-    start = np.zeros(size + 1, np.int64)
-    cell = np.empty((m, 3), np.int64)
-    bucket_of = np.empty(m, np.int64)
+    inv = 1.0 / max(radius, math.sqrt(longest), 1e-300)
+    lo = np.empty((m, 3))
+    hi = np.empty((m, 3))
     for e in range(m):
         a, b = edges[e, 0], edges[e, 1]
         for k in range(3):
-            cell[e, k] = _cell(0.5 * (x0[a, k] + x0[b, k]), inv)
-        bucket_of[e] = _hash(cell[e, 0], cell[e, 1], cell[e, 2], size)
-        start[bucket_of[e] + 1] += 1
+            lo[e, k] = min(x0[a, k], x0[b, k])
+            hi[e, k] = max(x0[a, k], x0[b, k])
+    size = 4 * m + 1
+    start = np.zeros(size + 1, np.int64)
+    for e in range(m):  # count the entries per bucket
+        for ci in range(_cell(lo[e, 0], inv), _cell(hi[e, 0], inv) + 1):
+            for cj in range(_cell(lo[e, 1], inv), _cell(hi[e, 1], inv) + 1):
+                for ck in range(_cell(lo[e, 2], inv), _cell(hi[e, 2], inv) + 1):
+                    start[_hash(ci, cj, ck, size) + 1] += 1
     for q in range(size):
         start[q + 1] += start[q]
     fill = start[:-1].copy()
-    members = np.empty(m, np.int64)
+    members = np.empty(start[size], np.int64)
     for e in range(m):
-        members[fill[bucket_of[e]]] = e
-        fill[bucket_of[e]] += 1
+        for ci in range(_cell(lo[e, 0], inv), _cell(hi[e, 0], inv) + 1):
+            for cj in range(_cell(lo[e, 1], inv), _cell(hi[e, 1], inv) + 1):
+                for ck in range(_cell(lo[e, 2], inv), _cell(hi[e, 2], inv) + 1):
+                    bucket = _hash(ci, cj, ck, size)
+                    members[fill[bucket]] = e
+                    fill[bucket] += 1
     seen = np.full(m, -1, np.int64)
     cap = 2 * m + 16
     pairs = np.empty((cap, 2), np.int64)
@@ -330,10 +341,10 @@ def edge_pairs(x0, edges, radius):
     n_pairs = 0
     for e in range(m):
         a, b = edges[e, 0], edges[e, 1]
-        for di in range(-1, 2):
-            for dj in range(-1, 2):
-                for dk in range(-1, 2):
-                    bucket = _hash(cell[e, 0] + di, cell[e, 1] + dj, cell[e, 2] + dk, size)
+        for ci in range(_cell(lo[e, 0] - radius, inv), _cell(hi[e, 0] + radius, inv) + 1):
+            for cj in range(_cell(lo[e, 1] - radius, inv), _cell(hi[e, 1] + radius, inv) + 1):
+                for ck in range(_cell(lo[e, 2] - radius, inv), _cell(hi[e, 2] + radius, inv) + 1):
+                    bucket = _hash(ci, cj, ck, size)
                     for q in range(start[bucket], start[bucket + 1]):
                         f = members[q]
                         if f <= e or seen[f] == e:
@@ -342,14 +353,10 @@ def edge_pairs(x0, edges, radius):
                         c, d = edges[f, 0], edges[f, 1]
                         if c == a or c == b or d == a or d == b:
                             continue
-                        apart = False
-                        for k in range(3):  # boxes farther apart than radius: no distance needed
-                            if (min(x0[c, k], x0[d, k]) > max(x0[a, k], x0[b, k]) + radius
-                                    or min(x0[a, k], x0[b, k]) > max(x0[c, k], x0[d, k]) + radius):
-                                apart = True
-                                break
-                        if apart:
-                            continue
+                        if (lo[f, 0] > hi[e, 0] + radius or lo[e, 0] > hi[f, 0] + radius
+                                or lo[f, 1] > hi[e, 1] + radius or lo[e, 1] > hi[f, 1] + radius
+                                or lo[f, 2] > hi[e, 2] + radius or lo[e, 2] > hi[f, 2] + radius):
+                            continue  # boxes farther apart than radius: no distance needed
                         dd = closest_on_segments(x0, a, b, c, d)[2]
                         if dd >= radius:
                             continue
