@@ -13,10 +13,14 @@ from launch_ros.actions import Node
 
 
 def generate_launch_description():
-    params = os.path.join(get_package_share_directory("cloth_sim"), "config", "cloth_sim.yaml")
+    share = get_package_share_directory("cloth_sim")
+    params = os.path.join(share, "config", "cloth_sim.yaml")
+    # the scenes the package has: its config/scenes directory, where the node looks them up too
+    scenes = sorted(name[:-5] for name in os.listdir(os.path.join(share, "config", "scenes"))
+                    if name.endswith(".yaml"))
     return LaunchDescription([
         DeclareLaunchArgument("scene", default_value="hanging",
-                              description="hanging, curtain, flag, free_fall or a scene YAML path"),
+                              description=f"{', '.join(scenes)} or a scene YAML path"),
         Node(package="cloth_sim", executable="cloth_sim_node", name="cloth_sim", output="screen",
              parameters=[params, {"scene": LaunchConfiguration("scene")}]),
     ])

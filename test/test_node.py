@@ -789,3 +789,46 @@ def test_a_mesh_scene_publishes_an_unorganised_cloud_and_refuses_grid_parameters
     assert node.sim.model.rows == 10
     (result,) = ros.set_params("/cloth_sim", {"density": 0.3})
     assert not result.successful and "density applies to mesh scenes" in result.reason
+
+
+def test_the_launch_file_describes_every_scene_the_package_has(monkeypatch):
+    """`ros2 launch -s cloth_sim cloth_sim.launch.py` lists the scenes from the package's scene
+    directory (it once named 4 of 7). Run here with stand-ins for the launch packages."""
+    import types
+
+    from cloth_sim.scene import available_scenes
+
+    captured = {}
+    fakes = {
+        "ament_index_python": types.ModuleType("ament_index_python"),
+        "ament_index_python.packages": types.SimpleNamespace(
+            get_package_share_directory=lambda pkg: str(ROOT)),
+        "launch": types.SimpleNamespace(LaunchDescription=list),
+        "launch.actions": types.SimpleNamespace(
+            DeclareLaunchArgument=lambda name, **kw: captured.setdefault(name, kw)),
+        "launch.substitutions": types.SimpleNamespace(LaunchConfiguration=str),
+        "launch_ros.actions": types.SimpleNamespace(Node=lambda **kw: kw),
+        "launch_ros": types.ModuleType("launch_ros"),
+    }
+    for name, module in fakes.items():
+        monkeypatch.setitem(sys.modules, name, module)
+    namespace = {}
+    exec(compile((ROOT / "launch" / "cloth_sim.launch.py").read_text(), "launch", "exec"), namespace)
+    namespace["generate_launch_description"]()
+    described = captured["scene"]["description"]
+    for scene in available_scenes():
+        assert scene in described, scene
+    assert "tshirt" in described and "towel" in described
+
+
+def test_integer_arrays_are_taken_as_double_arrays(ros):
+    """`gravity: [0, 0, -9]` in a params file, or `ros2 param set /cloth_sim gravity "[0, 0, -9]"`,
+    was refused by rclpy's type check naming no parameter; an integer for a double already worked."""
+    node = ros.start(gravity=[0, 0, -9])
+    assert list(node.get_parameter("gravity").value) == [0.0, 0.0, -9.0]
+    assert node.sim.gravity.tolist() == [0.0, 0.0, -9.0]
+    results = ros.set_params("/cloth_sim", {"wind.direction": [0, 1, 0], "gravity": [0, 0, -5]})
+    assert all(r.successful for r in results), [r.reason for r in results]
+    assert node.sim.gravity.tolist() == [0.0, 0.0, -5.0]
+    (result,) = ros.set_params("/cloth_sim", {"gravity": [0, -9]})
+    assert not result.successful and "gravity must have exactly 3 elements" in result.reason

@@ -114,11 +114,14 @@ def _material(model, cfg: dict) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _as_declared(p: Parameter) -> Parameter:
-    """An integer given for a double parameter (``ros2 param set /cloth_sim dt 1``), as a double:
-    the schema accepts it, rclpy's type check would not."""
+    """An integer given for a double parameter (``ros2 param set /cloth_sim dt 1``), as a double, and
+    an integer array for a double array (``gravity: [0, 0, -9]`` in a params file), as a double
+    array: the schema accepts them, rclpy's type check would not (its refusal names no parameter)."""
     spec = SCHEMA.get(p.name)
     if spec is not None and spec.type is float and p.type_ == Parameter.Type.INTEGER:
         return Parameter(p.name, value=float(p.value))
+    if spec is not None and spec.type == "vector3" and p.type_ == Parameter.Type.INTEGER_ARRAY:
+        return Parameter(p.name, value=[float(v) for v in p.value])
     return p
 
 
