@@ -4,7 +4,8 @@ PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
-# the package's own message (msg/) generated with rosidl + cmake from the wheels: tools/build_interfaces.py
+# the package's own interfaces (msg/, srv/) and the standard ones no wheel has (interfaces/), generated
+# with rosidl + cmake from the wheels: tools/build_interfaces.py
 MSGS   := build/interfaces/.built
 # scipy's sparse solvers and numpy's BLAS oversubscribe 2 cores badly when threaded.
 export OPENBLAS_NUM_THREADS ?= 1
@@ -26,6 +27,7 @@ $(STAMP): requirements.txt setup.py pyproject.toml
 	@touch $@
 
 $(MSGS): $(STAMP) msg/Stats.msg $(wildcard srv/*.srv) CMakeLists.txt package.xml tools/build_interfaces.py \
+		$(wildcard interfaces/*/*.txt interfaces/*/package.xml interfaces/*/*/*.msg interfaces/*/*/*.srv interfaces/*/*/*.action) \
 		$(wildcard launch/* config/*.yaml config/scenes/*.yaml)
 	$(PY) tools/build_interfaces.py
 	@touch $@

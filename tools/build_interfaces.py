@@ -1,4 +1,5 @@
-"""Generate and build the package's own interfaces (msg/, srv/) with rosidl from the PyPI wheels.
+"""Generate and build the package's own interfaces (msg/, srv/), and the standard ones no wheel has
+(interfaces/: simulation_interfaces, tf2_msgs), with rosidl from the PyPI wheels.
 
 Run by `make` with the project's venv Python. It applies the fix the wheels need (their exported
 CMake files name the wheel build host's Python and numpy include directories), configures this
@@ -26,6 +27,8 @@ BUILD = ROOT / "build" / "interfaces"
 PREFIX = BUILD / "install"
 HOST_PY_INCLUDE = "/opt/python/cp311-cp311/include/python3.11"
 HOST_NUMPY_INCLUDE = "/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include"
+#: standard interface packages no wheel has, generated from interfaces/<name> (see its README)
+VENDORED = ("simulation_interfaces", "tf2_msgs")
 
 
 def fix_wheel_cmake_paths(venv: Path) -> int:
@@ -59,8 +62,11 @@ def expose_in_venv(venv: Path) -> None:
     ``AMENT_PREFIX_PATH`` holding the venv, ``ros2 interface show cloth_sim/msg/Stats``,
     ``ros2 run cloth_sim cloth_sim_node`` and ``ros2 launch cloth_sim cloth_sim.launch.py`` work."""
     index = PREFIX / "share" / "ament_index" / "resource_index"
-    for entry in index.glob("*/cloth_sim"):
-        _link(venv / "share" / "ament_index" / "resource_index" / entry.parent.name / "cloth_sim", entry)
+    for name in ("cloth_sim", *VENDORED):
+        for entry in index.glob(f"*/{name}"):
+            _link(venv / "share" / "ament_index" / "resource_index" / entry.parent.name / name, entry)
+    for name in VENDORED:
+        _link(venv / "share" / name, PREFIX / "share" / name)
     share = PREFIX / "share" / "cloth_sim"
     # real directories of linked files: `ros2 launch` looks for launch files with os.walk, which
     # does not enter linked directories
@@ -86,47 +92,57 @@ def main() -> int:
     env = dict(os.environ)
     env["PATH"] = f"{venv / 'bin'}{os.pathsep}{env.get('PATH', '')}"
     env["VIRTUAL_ENV"] = str(venv)
-    env["AMENT_PREFIX_PATH"] = str(venv)
-    env["CMAKE_PREFIX_PATH"] = str(venv)
     rpath = f"{PREFIX / 'lib'};{venv / 'lib'}"
     if PREFIX.exists():
         shutil.rmtree(PREFIX)
-    # CMake refuses exported include dirs inside the source tree, and the venv (with numpy's
-    # headers) lives in the repository: configure from a copy of what the interfaces need.
-    src = BUILD / "src"
-    if src.exists():
-        shutil.rmtree(src)
-    src.mkdir(parents=True)
-    for name in ("CMakeLists.txt", "package.xml"):
-        shutil.copy2(ROOT / name, src / name)
-    shutil.copytree(ROOT / "msg", src / "msg")
-    shutil.copytree(ROOT / "srv", src / "srv")
-    work = BUILD / "cmake"
-    work.mkdir(parents=True, exist_ok=True)
-    configure = [cmake, "-S", str(src), "-B", str(work), "-DCLOTH_SIM_INTERFACES_ONLY=ON",
-                 "-DBUILD_TESTING=OFF", f"-DPython3_EXECUTABLE={venv / 'bin' / 'python3'}",
-                 f"-DCMAKE_INSTALL_PREFIX={PREFIX}", f"-DCMAKE_INSTALL_RPATH={rpath}",
-                 "-DCMAKE_BUILD_TYPE=Release"]
-    for cmd in (configure, [cmake, "--build", str(work), "-j", str(os.cpu_count() or 2)],
-                [cmake, "--install", str(work)]):
-        out = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        if out.returncode != 0:
-            print(out.stdout[-6000:], file=sys.stderr)
-            print(f"build_interfaces: error: {' '.join(cmd[:3])} … failed ({out.returncode})",
-                  file=sys.stderr)
-            return 1
+    env["CMAKE_PREFIX_PATH"] = f"{PREFIX}{os.pathsep}{venv}"
+    env["AMENT_PREFIX_PATH"] = f"{PREFIX}{os.pathsep}{venv}"
+    # the standard interfaces no wheel has (interfaces/README.md), then the package's own
+    packages = [(name, ROOT / "interfaces" / name, ["CMakeLists.txt", "package.xml"],
+                 [d for d in ("msg", "srv", "action") if (ROOT / "interfaces" / name / d).is_dir()], [])
+                for name in VENDORED]
+    packages.append(("cloth_sim", ROOT, ["CMakeLists.txt", "package.xml"], ["msg", "srv"],
+                     ["-DCLOTH_SIM_INTERFACES_ONLY=ON"]))
+    for name, root, files, dirs, options in packages:
+        # CMake refuses exported include dirs inside the source tree, and the venv (with numpy's
+        # headers) lives in the repository: configure from a copy of what the interfaces need.
+        src = BUILD / "src" / name
+        if src.exists():
+            shutil.rmtree(src)
+        src.mkdir(parents=True)
+        for f in files:
+            shutil.copy2(root / f, src / f)
+        for d in dirs:
+            shutil.copytree(root / d, src / d)
+        work = BUILD / "cmake" / name
+        work.mkdir(parents=True, exist_ok=True)
+        configure = [cmake, "-S", str(src), "-B", str(work), *options,
+                     "-DBUILD_TESTING=OFF", f"-DPython3_EXECUTABLE={venv / 'bin' / 'python3'}",
+                     f"-DCMAKE_INSTALL_PREFIX={PREFIX}", f"-DCMAKE_INSTALL_RPATH={rpath}",
+                     "-DCMAKE_BUILD_TYPE=Release"]
+        for cmd in (configure, [cmake, "--build", str(work), "-j", str(os.cpu_count() or 2)],
+                    [cmake, "--install", str(work)]):
+            out = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                 text=True)
+            if out.returncode != 0:
+                print(out.stdout[-6000:], file=sys.stderr)
+                print(f"build_interfaces: error: {name}: {' '.join(cmd[:3])} … failed "
+                      f"({out.returncode})", file=sys.stderr)
+                return 1
+        print(f"build_interfaces: {name} built", flush=True)
     # rosidl's type-support dispatch dlopens the libraries by name along LD_LIBRARY_PATH, which the
     # wheels' bootstrapper sets to the venv's lib/: link them there.
-    for lib in (PREFIX / "lib").glob("libcloth_sim__*.so"):
-        link = venv / "lib" / lib.name
-        if link.is_symlink() or link.exists():
-            link.unlink()
-        link.symlink_to(lib)
+    for name in ("cloth_sim", *VENDORED):
+        for lib in (PREFIX / "lib").glob(f"lib{name}__*.so"):
+            link = venv / "lib" / lib.name
+            if link.is_symlink() or link.exists():
+                link.unlink()
+            link.symlink_to(lib)
     expose_in_venv(venv)
     site = next(PREFIX.glob("lib/python3*/site-packages"))
     pth = Path(sysconfig.get_paths()["purelib"]) / "cloth_sim_interfaces.pth"
     pth.write_text(f"{site}\n")
-    print(f"build_interfaces: msg/ and srv/ generated into {site}")
+    print(f"build_interfaces: msg/, srv/ and {', '.join(VENDORED)} generated into {site}")
     return 0
 
 
