@@ -176,6 +176,14 @@ class Simulator:
         """Simulated time (s)."""
         return self.state.time(self._dt)
 
+    def set_time(self, t: float) -> None:
+        """Set the simulated time (s, finite, ≥ 0); the state is untouched (the standard's
+        ``reset_simulation`` with only its time or only its state in scope)."""
+        t = float(t)
+        if not (math.isfinite(t) and t >= 0):
+            raise ValueError(f"time must be a finite number >= 0, got {t!r}")
+        self.state.t_base, self.state.steps = t, 0
+
     def reset(self) -> None:
         """Back to the model's initial positions, at rest, at time 0; parameters are kept, every
         gripper is released."""

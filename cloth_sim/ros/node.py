@@ -49,6 +49,7 @@ from ..self_collision import check_thickness
 from ..simulator import SimulationDiverged, Simulator, compile_kernels
 from . import messages
 from . import params as P
+from .sim_interfaces import SimulationInterfaces
 
 STATUS_PERIOD = 5.0  # s of wall time between status log lines
 WARN_MARGIN = 0.8    # WARN when dt is above this fraction of stable_dt
@@ -209,6 +210,7 @@ class ClothSimNode(Node):
         self.create_service(Grasp, "~/grasp", self._on_grasp)
         self.create_service(Release, "~/release", self._on_release)
         self.create_service(Step, "~/step", self._on_step)
+        self.interfaces = SimulationInterfaces(self)  # the ROS simulation standard's services
         self.add_pre_set_parameters_callback(self._pre_set)
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._post_set)
@@ -481,7 +483,9 @@ class ClothSimNode(Node):
         return self._stable_dt
 
     # ------------------------------------------------------------------ services
-    def _on_reset(self, request, response):
+    def reset_simulation(self, keep_paused: bool = False) -> None:
+        """The scene's initial shape at rest, time 0, its own grippers holding again; running
+        afterwards unless ``keep_paused`` (``~/reset`` runs, the standard's reset keeps the state)."""
         self.sim.reset()  # releases every gripper
         self._drop_grippers()
         self.scene.apply_grippers(self.sim)  # the scene's own grippers hold again
@@ -491,16 +495,26 @@ class ClothSimNode(Node):
         self._carry = 0.0
         self._history.clear()
         self.error = None
-        self.paused = False
+        if not keep_paused:
+            self.paused = False
+            self.interfaces.stopped = False
+
+    def set_paused(self, paused: bool) -> None:
+        if not paused and self.error:
+            self.error = None  # the user un-pauses after a blow-up: try again from the good state
+        self.paused = bool(paused)
+        if not paused:
+            self.interfaces.stopped = False
+        self._history.clear()
+
+    def _on_reset(self, request, response):
+        self.reset_simulation()
         response.success = True
         response.message = f"reset {self.scene.name} to its initial shape at rest, time 0"
         return response
 
     def _on_pause(self, request, response):
-        if not request.data and self.error:
-            self.error = None  # the user un-pauses after a blow-up: try again from the good state
-        self.paused = bool(request.data)
-        self._history.clear()
+        self.set_paused(bool(request.data))
         response.success = True
         response.message = "paused" if self.paused else "running"
         return response
@@ -536,6 +550,9 @@ class ClothSimNode(Node):
                 self._keep_checkpoint()
             except SimulationDiverged as e:
                 self._recover(e)
+        elif self.interfaces.busy:  # a simulate_steps goal steps the paused simulation
+            budget = max(0.25 * period, TICK_BUDGET * period - late)
+            steps, step_wall, step_max = self.interfaces.tick(t0, budget)
         self._publish(t0, steps, step_wall, step_max)
         if time.perf_counter() - t0 > period:
             self.overruns += 1
@@ -577,6 +594,9 @@ class ClothSimNode(Node):
     def _step_cost(self) -> float:
         costs = [w / s for s, w, _ in self._tick_costs if s]
         return float(np.median(costs)) if costs else 1e-4
+
+    def stamp(self):
+        return self._stamp()
 
     def _stamp(self):
         """The messages' stamp: the simulated time with ``publish_clock``, else the node's clock."""
@@ -676,27 +696,35 @@ class ClothSimNode(Node):
         self._grippers = {}
         self._pose_targets = {k: v for k, v in self._pose_targets.items() if k[0] != "gripper"}
 
-    def _on_step(self, request, response):
-        response.sim_time = self.sim.time
+    def step_paused(self, n: int) -> tuple[bool, str]:
+        """Exactly ``n`` steps now, while paused (``~/step``, the standard's ``step_simulation``);
+        ``(success, message)``. A blow-up goes back and stays paused, as in a tick."""
         if not self.paused:
-            response.success = False
-            response.message = "~/step runs only while paused: call ~/pause with data: true first"
-            return response
-        if request.steps > MAX_STEP_REQUEST:
-            response.success = False
-            response.message = (f"steps = {request.steps} is not accepted: expected an integer in "
-                                f"[0, {MAX_STEP_REQUEST}] (the node answers nothing else while it steps)")
-            return response
+            return False, "~/step runs only while paused: call ~/pause with data: true first"
+        if n > MAX_STEP_REQUEST or n < 0:
+            return False, (f"steps = {n} is not accepted: expected an integer in "
+                           f"[0, {MAX_STEP_REQUEST}] (the node answers nothing else while it steps)")
         t0 = time.perf_counter()
         try:
-            steps, wall, longest = self._advance(int(request.steps), t0, math.inf)
+            steps, wall, longest = self._advance(int(n), t0, math.inf)
         except SimulationDiverged as e:
             self._recover(e)
-            response.success, response.message = False, self.error or str(e)
-            response.sim_time = self.sim.time
-            return response
+            return False, self.error or str(e)
         self._publish(t0, steps, wall, longest)
-        response.success, response.message = True, f"{steps} steps"
+        return True, f"{steps} steps"
+
+    def step_within(self, n: int, t0: float, budget: float) -> tuple:
+        """Up to ``n`` steps while paused within a tick's ``budget`` (the standard's
+        ``simulate_steps``): ``(steps, step wall, longest, None)``, or ``(None, 0, 0, message)``
+        after a blow-up (the node went back and paused)."""
+        try:
+            return (*self._advance(int(n), t0, budget), None)
+        except SimulationDiverged as e:
+            self._recover(e)
+            return None, 0.0, 0.0, self.error or str(e)
+
+    def _on_step(self, request, response):
+        response.success, response.message = self.step_paused(int(request.steps))
         response.sim_time = self.sim.time
         return response
 

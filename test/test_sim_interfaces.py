@@ -1,0 +1,211 @@
+"""The ROS simulation standard (simulation_interfaces) through rclpy clients: every advertised feature
+does what the standard says, a feature not advertised answers with the standard's error result, and
+bad requests get the standard's codes with a message."""
+
+import math
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import WrenchStamped
+from rclpy.action import ActionClient
+from simulation_interfaces import srv
+from simulation_interfaces.action import SimulateSteps
+from simulation_interfaces.msg import EntityCategory, Result, SimulationState, SimulatorFeatures
+
+from cloth_sim.msg import Stats
+from cloth_sim.ros.sim_interfaces import FEATURES, UNSUPPORTED
+from test_node import ros  # noqa: F401 (the fixture)
+
+NS = "/cloth_sim"
+
+
+def call(ros, kind, name, **fields):
+    return ros.call(kind, f"{NS}/{name}", kind.Request(**fields))
+
+
+def set_state(ros, state):
+    return call(ros, srv.SetSimulationState, "set_simulation_state",
+                state=SimulationState(state=state)).result
+
+
+def test_features_are_stated_and_unsupported_services_answer_with_the_standard_result(ros):
+    ros.start()
+    features = call(ros, srv.GetSimulatorFeatures, "get_simulator_features").features
+    assert sorted(features.features) == sorted(FEATURES)
+    assert SimulatorFeatures.STEP_SIMULATION_ACTION in features.features
+    assert SimulatorFeatures.SPAWNING not in features.features and features.spawn_formats == []
+    for name, kind in UNSUPPORTED.items():
+        r = ros.call(kind, f"{NS}/{name}", kind.Request()).result
+        assert r.result == Result.RESULT_FEATURE_UNSUPPORTED and name in r.error_message
+
+
+def test_state_changes_are_visible_in_stats_and_follow_the_standard_transitions(ros):
+    node = ros.start()
+    stats = ros.collect(Stats, f"{NS}/stats")
+    get = lambda: call(ros, srv.GetSimulationState, "get_simulation_state").state.state  # noqa: E731
+    S = SimulationState
+    assert get() == S.STATE_PLAYING
+    assert set_state(ros, S.STATE_PLAYING).result == srv.SetSimulationState.Response.ALREADY_IN_TARGET_STATE
+    assert set_state(ros, S.STATE_PAUSED).result == Result.RESULT_OK and get() == S.STATE_PAUSED
+    n = len(stats)
+    assert ros.spin_until(lambda: len(stats) > n + 3 and stats[-1].paused)
+    t = node.sim.time
+    ros.spin_for(0.3)
+    assert node.sim.time == t  # paused: no step
+    assert set_state(ros, S.STATE_STOPPED).result == Result.RESULT_OK and get() == S.STATE_STOPPED
+    assert node.sim.time == 0.0 and node.paused
+    np.testing.assert_array_equal(node.sim.positions, node.sim.model.positions)
+    assert set_state(ros, S.STATE_PAUSED).result == srv.SetSimulationState.Response.INCORRECT_TRANSITION
+    assert set_state(ros, S.STATE_QUITTING).result == Result.RESULT_FEATURE_UNSUPPORTED
+    assert set_state(ros, S.STATE_PLAYING).result == Result.RESULT_OK and get() == S.STATE_PLAYING
+    n = len(stats)
+    assert ros.spin_until(lambda: len(stats) > n + 3 and not stats[-1].paused and stats[-1].sim_time > 0)
+
+
+def test_step_simulation_advances_exactly_n_steps_and_only_while_paused(ros):
+    node = ros.start()
+    r = call(ros, srv.StepSimulation, "step_simulation", steps=5).result
+    assert r.result == Result.RESULT_OPERATION_FAILED and "paused" in r.error_message
+    set_state(ros, SimulationState.STATE_PAUSED)
+    for n in (1, 7, 250):
+        before = node.sim.steps_taken
+        t = node.sim.time
+        assert call(ros, srv.StepSimulation, "step_simulation", steps=n).result.result == Result.RESULT_OK
+        assert node.sim.steps_taken - before == n
+        assert node.sim.time == pytest.approx(t + n * node.sim.dt, abs=1e-12)
+    # from STOPPED a step goes on (and the state becomes PAUSED)
+    set_state(ros, SimulationState.STATE_STOPPED)
+    assert call(ros, srv.StepSimulation, "step_simulation", steps=3).result.result == Result.RESULT_OK
+    assert node.sim.time == pytest.approx(3 * node.sim.dt)
+    assert call(ros, srv.GetSimulationState, "get_simulation_state").state.state == SimulationState.STATE_PAUSED
+
+
+def _send_goal(ros, client, steps, feedback):
+    assert ros.spin_until(client.server_is_ready, 10)
+    fut = client.send_goal_async(SimulateSteps.Goal(steps=steps), feedback_callback=feedback.append)
+    assert ros.spin_until(fut.done, 10)
+    handle = fut.result()
+    assert handle.accepted
+    return handle
+
+
+def test_simulate_steps_reports_feedback_finishes_and_can_be_cancelled(ros):
+    node = ros.start()
+    client = ActionClient(ros.node, SimulateSteps, f"{NS}/simulate_steps")
+    set_state(ros, SimulationState.STATE_PAUSED)
+    feedback = []
+    before = node.sim.steps_taken
+    handle = _send_goal(ros, client, 120, feedback)
+    res = handle.get_result_async()
+    assert ros.spin_until(res.done, 20)
+    assert res.result().result.result.result == Result.RESULT_OK
+    assert node.sim.steps_taken - before == 120
+    assert feedback and feedback[-1].feedback.completed_steps == 120
+    assert feedback[-1].feedback.remaining_steps == 0
+    assert all(f.feedback.completed_steps + f.feedback.remaining_steps == 120 for f in feedback)
+    # a long goal, cancelled: it stops where it was, and says so
+    feedback.clear()
+    handle = _send_goal(ros, client, 10_000_000, feedback)
+    assert ros.spin_until(lambda: len(feedback) >= 2, 10)
+    cancel = handle.cancel_goal_async()
+    assert ros.spin_until(cancel.done, 10)
+    res = handle.get_result_async()
+    assert ros.spin_until(res.done, 10)
+    from action_msgs.msg import GoalStatus
+
+    assert res.result().status == GoalStatus.STATUS_CANCELED
+    assert "canceled after" in res.result().result.result.error_message
+    steps = node.sim.steps_taken
+    ros.spin_for(0.3)
+    assert node.sim.steps_taken == steps  # nothing steps after the cancel
+    # refused while playing
+    set_state(ros, SimulationState.STATE_PLAYING)
+    handle = _send_goal(ros, client, 10, [])
+    res = handle.get_result_async()
+    assert ros.spin_until(res.done, 10)
+    assert res.result().result.result.result == Result.RESULT_OPERATION_FAILED
+
+
+def test_entities_states_bounds_and_bad_requests(ros):
+    node = ros.start(scene="drape", rows=10, cols=10, spacing=1.0 / 9)
+    names = call(ros, srv.GetEntities, "get_entities").entities
+    assert names[0] == "cloth" and any(n.startswith("collider/") for n in names)
+    only = call(ros, srv.GetEntities, "get_entities",
+                filters=srv.GetEntities.Request().filters.__class__(
+                    categories=[EntityCategory(category=EntityCategory.CATEGORY_STATIC_OBJECT)])).entities
+    assert only == [n for n in names if n.startswith("collider/")]
+    bad = srv.GetEntities.Request()
+    bad.filters.filter = "("
+    r = ros.call(srv.GetEntities, f"{NS}/get_entities", bad).result
+    assert r.result == Result.RESULT_OPERATION_FAILED and "regular expression" in r.error_message
+    # the sphere's bounds are its own; the cloth's box holds every particle
+    sphere = next(n for n in names if n.startswith("collider/"))
+    b = call(ros, srv.GetEntityBounds, "get_entity_bounds", entity=sphere).bounds
+    c = node.sim.colliders[0]
+    assert b.type == b.TYPE_SPHERE and b.points[1].x == pytest.approx(c.radius)
+    b = call(ros, srv.GetEntityBounds, "get_entity_bounds", entity="cloth").bounds
+    lo, hi = node.sim.positions.min(0), node.sim.positions.max(0)
+    assert b.type == b.TYPE_BOX and [b.points[0].x, b.points[1].z] == pytest.approx([lo[0], hi[2]])
+    # unknown entity, NaN pose, a twist for a kinematic body: the standard's codes, with a message
+    r = call(ros, srv.GetEntityState, "get_entity_state", entity="nothing").result
+    assert r.result == Result.RESULT_NOT_FOUND and "cloth" in r.error_message
+    req = srv.SetEntityState.Request(entity=sphere)
+    req.state.pose.position.x = math.nan
+    r = ros.call(srv.SetEntityState, f"{NS}/set_entity_state", req).result
+    assert r.result == srv.SetEntityState.Response.INVALID_POSE and "position" in r.error_message
+    req = srv.SetEntityState.Request(entity=sphere)
+    req.state.pose.orientation.w = 1.0
+    req.state.twist.linear.x = 1.0
+    r = ros.call(srv.SetEntityState, f"{NS}/set_entity_state", req).result
+    assert r.result == srv.SetEntityState.Response.INVALID_POSE and "kinematic" in r.error_message
+    # a collider moved by set_entity_state is where get_entity_state says, and the cloth meets it
+    req = srv.SetEntityState.Request(entity=sphere)
+    req.state.pose.position.x, req.state.pose.position.y, req.state.pose.position.z = 0.5, 0.5, 0.3
+    req.state.pose.orientation.w = 1.0
+    assert ros.call(srv.SetEntityState, f"{NS}/set_entity_state", req).result.result == Result.RESULT_OK
+    ros.spin_for(0.5)
+    got = call(ros, srv.GetEntityState, "get_entity_state", entity=sphere).state.pose.position
+    assert [got.x, got.y, got.z] == pytest.approx([0.5, 0.5, 0.3])
+    assert c.signed_distance(node.sim.positions).min() >= 0.97 * node.sim.thickness
+
+
+def test_set_entity_state_moves_a_gripper_and_its_wrench_follows(ros):
+    from cloth_sim.srv import Grasp
+
+    node = ros.start(scene="free_fall", rows=8, cols=8, spacing=0.05, gravity=[0.0, 0.0, 0.0])
+    set_state(ros, SimulationState.STATE_PAUSED)
+    req = Grasp.Request(gripper="g", radius=0.01)
+    assert ros.call(Grasp, f"{NS}/grasp", req).success
+    wrenches = ros.collect(WrenchStamped, f"{NS}/grippers/g/wrench")
+    assert "gripper/g" in call(ros, srv.GetEntities, "get_entities").entities
+    req = srv.SetEntityState.Request(entity="gripper/g")
+    req.state.pose.position.x = -0.05  # pull the corner away from the cloth: the cloth pulls back
+    req.state.pose.orientation.w = 1.0
+    assert ros.call(srv.SetEntityState, f"{NS}/set_entity_state", req).result.result == Result.RESULT_OK
+    assert call(ros, srv.StepSimulation, "step_simulation", steps=20).result.result == Result.RESULT_OK
+    state = call(ros, srv.GetEntityState, "get_entity_state", entity="gripper/g").state
+    assert state.pose.position.x == pytest.approx(-0.05)
+    force, _ = node.sim.gripper_wrench("g")
+    assert force[0] > 0  # the stretched springs pull the gripper back towards the cloth (+x)
+    assert ros.spin_until(lambda: wrenches and wrenches[-1].wrench.force.x > 0, 10)
+
+
+def test_reset_scopes(ros):
+    node = ros.start()
+    set_state(ros, SimulationState.STATE_PAUSED)
+    call(ros, srv.StepSimulation, "step_simulation", steps=100)
+    moved = node.sim.positions.copy()
+    R = srv.ResetSimulation.Request
+    assert call(ros, srv.ResetSimulation, "reset_simulation", scope=R.SCOPE_TIME).result.result == Result.RESULT_OK
+    assert node.sim.time == 0.0
+    np.testing.assert_array_equal(node.sim.positions, moved)  # time only
+    call(ros, srv.StepSimulation, "step_simulation", steps=10)
+    assert call(ros, srv.ResetSimulation, "reset_simulation", scope=R.SCOPE_STATE).result.result == Result.RESULT_OK
+    assert node.sim.time == pytest.approx(10 * node.sim.dt)  # state only
+    np.testing.assert_array_equal(node.sim.positions, node.sim.model.positions)
+    assert node.paused  # a reset keeps the simulation's state
+    r = call(ros, srv.ResetSimulation, "reset_simulation", scope=R.SCOPE_SPAWNED).result
+    assert r.result == Result.RESULT_FEATURE_UNSUPPORTED
+    call(ros, srv.StepSimulation, "step_simulation", steps=10)
+    assert call(ros, srv.ResetSimulation, "reset_simulation", scope=R.SCOPE_DEFAULT).result.result == Result.RESULT_OK
+    assert node.sim.time == 0.0
