@@ -185,6 +185,8 @@ def _schema() -> dict[str, Param]:
           "resets the cloth.", lo=1e-4, hi=10.0, apply="rebuild", scene_key="grid.spacing"),
         P("model", str, "", "Spring model; rebuilds and resets the cloth.", choices=MODELS,
           apply="rebuild", scene_key="model"),
+        P("world_frame_id", str, "", "Parent of frame_id on /tf_static (an identity transform): "
+          "where the simulation's frame sits in the world.", apply="node", nonempty=True),
         P("frame_id", str, "", "frame_id of the published cloud, mesh and stats.", apply="node",
           nonempty=True),
         P("publish_clock", bool, "", "Publish /clock with the simulated time and stamp every message "

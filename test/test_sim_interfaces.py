@@ -209,3 +209,29 @@ def test_reset_scopes(ros):
     call(ros, srv.StepSimulation, "step_simulation", steps=10)
     assert call(ros, srv.ResetSimulation, "reset_simulation", scope=R.SCOPE_DEFAULT).result.result == Result.RESULT_OK
     assert node.sim.time == 0.0
+
+
+def test_frames_reach_tf_static_and_tf(ros):
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from tf2_msgs.msg import TFMessage
+
+    node = ros.start(scene="drape", rows=10, cols=10, spacing=1.0 / 9)
+    static, dynamic = [], []
+    qos = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                     reliability=ReliabilityPolicy.RELIABLE)
+    ros.node.create_subscription(TFMessage, "/tf_static", static.append, qos)  # a late joiner
+    ros.node.create_subscription(TFMessage, "/tf", dynamic.append, 10)
+    assert ros.spin_until(lambda: static and dynamic, 10)
+    (t,) = static[-1].transforms
+    assert (t.header.frame_id, t.child_frame_id) == ("world", "cloth") and t.transform.rotation.w == 1.0
+    frames = {f.child_frame_id: f for f in dynamic[-1].transforms}
+    c = node.sim.colliders[0]
+    f = frames[f"cloth/collider/{c.name}"]
+    assert f.header.frame_id == "cloth"
+    assert [f.transform.translation.x, f.transform.translation.y, f.transform.translation.z] == \
+        pytest.approx(c.position.tolist())
+    # a new frame_id moves the static frame with it
+    assert all(r.successful for r in ros.set_params("/cloth_sim", {"frame_id": "sheet",
+                                                                     "world_frame_id": "map"}))
+    assert ros.spin_until(lambda: static[-1].transforms[0].child_frame_id == "sheet", 10)
+    assert static[-1].transforms[0].header.frame_id == "map"

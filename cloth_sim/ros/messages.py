@@ -201,3 +201,31 @@ def wrench(force, torque, frame_id: str, stamp):
     m.wrench.force.x, m.wrench.force.y, m.wrench.force.z = (float(v) for v in force)
     m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z = (float(v) for v in torque)
     return m
+
+
+def transform(parent: str, child: str, position, orientation, stamp):
+    """``geometry_msgs/TransformStamped``: ``child`` at ``position`` with ``orientation`` (w, x, y,
+    z) in ``parent``."""
+    from geometry_msgs.msg import TransformStamped
+
+    t = TransformStamped()
+    t.header.stamp = stamp
+    t.header.frame_id = parent
+    t.child_frame_id = child
+    t.transform.translation.x, t.transform.translation.y, t.transform.translation.z = (
+        float(v) for v in position)
+    (t.transform.rotation.w, t.transform.rotation.x, t.transform.rotation.y,
+     t.transform.rotation.z) = (float(v) for v in orientation)
+    return t
+
+
+def entity_frames(sim, frame_id: str, stamp) -> list:
+    """The moving frames of a simulation for ``/tf``: each collider (``<frame_id>/collider/<name>``)
+    and each gripper (``<frame_id>/gripper/<name>``) in ``frame_id``, named as the standard's
+    entities are."""
+    out = [transform(frame_id, f"{frame_id}/collider/{c.name}", c.position, c.orientation, stamp)
+           for c in sim.colliders]
+    for name in sim.grippers:
+        p, q = sim.gripper_pose(name)
+        out.append(transform(frame_id, f"{frame_id}/gripper/{name}", p, q, stamp))
+    return out

@@ -49,6 +49,7 @@ from ..self_collision import check_thickness
 from ..simulator import SimulationDiverged, Simulator, compile_kernels
 from . import messages
 from . import params as P
+from .frames import Frames
 from .sim_interfaces import SimulationInterfaces
 
 STATUS_PERIOD = 5.0  # s of wall time between status log lines
@@ -211,6 +212,8 @@ class ClothSimNode(Node):
         self.create_service(Release, "~/release", self._on_release)
         self.create_service(Step, "~/step", self._on_step)
         self.interfaces = SimulationInterfaces(self)  # the ROS simulation standard's services
+        self.frames = Frames(self)  # TF
+        self.frames.publish_static(self.cfg["world_frame_id"], self.cfg["frame_id"])
         self.add_pre_set_parameters_callback(self._pre_set)
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._post_set)
@@ -421,6 +424,7 @@ class ClothSimNode(Node):
         rate_changed = cand["publish_rate"] != self.cfg["publish_rate"]
         self.cfg = cand
         self._stable_dt = limit
+        self.frames.publish_static(cand["world_frame_id"], cand["frame_id"])
         if rate_changed:
             self.timer.cancel()
             self.destroy_timer(self.timer)
@@ -627,6 +631,7 @@ class ClothSimNode(Node):
         for name, (_, pub) in self._grippers.items():
             force, torque = sim.gripper_wrench(name)
             pub.publish(messages.wrench(force, torque, frame, stamp))
+        self.frames.publish(sim, frame, stamp)
         wall_now = time.monotonic()
         self._history.append((wall_now, sim.time))
         while self._history and wall_now - self._history[0][0] > RTF_WINDOW:

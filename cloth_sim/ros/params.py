@@ -94,6 +94,7 @@ def not_applicable(scene: Scene, cand: dict, current: dict) -> str | None:
 
 def defaults(scene: Scene) -> dict:
     values = {"scene": scene.name, "allow_unstable": False, "publish_rate": 60.0, "frame_id": "cloth",
+              "world_frame_id": "world",
               "publish_clock": False, "real_time_factor": 1.0,
               "strain_limit_passes": DEFAULT_STRAIN_LIMIT_PASSES}
     values.update(UNUSED_VALUES)
