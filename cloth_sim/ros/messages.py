@@ -229,3 +229,24 @@ def entity_frames(sim, frame_id: str, stamp) -> list:
         p, q = sim.gripper_pose(name)
         out.append(transform(frame_id, f"{frame_id}/gripper/{name}", p, q, stamp))
     return out
+
+
+def checked_pose(pose, frame: str, node_frame: str, prefix: str = ""):
+    """``(position, unit quaternion (w, x, y, z), None)`` from a ``geometry_msgs/Pose`` given in
+    ``frame``, or ``(None, None, problem)`` naming the field (``prefix`` + its name) and what is
+    expected: a frame other than ``node_frame`` (or empty), a non-finite position, a zero or
+    non-finite quaternion."""
+    import numpy as np
+
+    p, q = pose.position, pose.orientation
+    position = np.array([p.x, p.y, p.z])
+    orientation = np.array([q.w, q.x, q.y, q.z])
+    if frame not in ("", node_frame):
+        return None, None, (f"{prefix}header.frame_id = {frame!r}: expected {node_frame!r} (the node's "
+                            f"frame_id; the node does not transform poses)")
+    if not np.all(np.isfinite(position)):
+        return None, None, f"{prefix}pose.position = {position.tolist()}: expected 3 finite numbers"
+    if not (np.all(np.isfinite(orientation)) and np.linalg.norm(orientation) > 1e-6):
+        return None, None, (f"{prefix}pose.orientation = {orientation.tolist()} (w, x, y, z): "
+                            f"expected a finite, nonzero quaternion")
+    return position, orientation / np.linalg.norm(orientation), None

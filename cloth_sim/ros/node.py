@@ -751,23 +751,12 @@ class ClothSimNode(Node):
         """A new pose for a collider or a gripper: checked here (a bad one is logged, naming the
         field, and ignored), reached over the next tick's steps (its velocity is the pose change
         over them)."""
-        p, q = msg.pose.position, msg.pose.orientation
-        position = np.array([p.x, p.y, p.z])
-        orientation = np.array([q.w, q.x, q.y, q.z])
-        frame = msg.header.frame_id
-        problem = None
-        if frame not in ("", self.cfg["frame_id"]):
-            problem = (f"header.frame_id = {frame!r}: expected {self.cfg['frame_id']!r} (the node's "
-                       f"frame_id; the node does not transform poses)")
-        elif not np.all(np.isfinite(position)):
-            problem = f"pose.position = {position.tolist()}: expected 3 finite numbers"
-        elif not (np.all(np.isfinite(orientation)) and np.linalg.norm(orientation) > 1e-6):
-            problem = (f"pose.orientation = {orientation.tolist()} (w, x, y, z): expected a finite, "
-                       f"nonzero quaternion")
+        position, orientation, problem = messages.checked_pose(msg.pose, msg.header.frame_id,
+                                                               self.cfg["frame_id"])
         if problem:
             self.get_logger().warning(f"{topic} ignored: {problem}", throttle_duration_sec=1.0)
             return
-        self._pose_targets[key] = (position, orientation / np.linalg.norm(orientation))
+        self._pose_targets[key] = (position, orientation)
 
     def _pose_moves(self) -> dict:
         """``{key: (p0, q0, p1, q1)}``: from where each moved collider or gripper is to its target

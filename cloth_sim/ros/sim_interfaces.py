@@ -25,6 +25,8 @@ import numpy as np
 from geometry_msgs.msg import Vector3
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.task import Future
+
+from .messages import checked_pose
 from simulation_interfaces import srv
 from simulation_interfaces.action import SimulateSteps
 from simulation_interfaces.msg import (Bounds, EntityCategory, EntityInfo, EntityState, Result,
@@ -308,28 +310,16 @@ class SimulationInterfaces:
                                      "the cloth's state is its particles': move it with its grippers "
                                      "(gripper/<name>) or grasp it (~/grasp)")
             return response
-        p, q = state.pose.position, state.pose.orientation
-        position = np.array([p.x, p.y, p.z])
-        orientation = np.array([q.w, q.x, q.y, q.z])
-        frame = state.header.frame_id
-        twist = [state.twist.linear.x, state.twist.linear.y, state.twist.linear.z,
-                 state.twist.angular.x, state.twist.angular.y, state.twist.angular.z]
-        problem = None
-        if frame not in ("", self.node.cfg["frame_id"]):
-            problem = (f"state.header.frame_id = {frame!r}: expected {self.node.cfg['frame_id']!r} "
-                       f"(the node's frame_id) or empty")
-        elif not np.all(np.isfinite(position)):
-            problem = f"state.pose.position = {position.tolist()}: expected 3 finite numbers"
-        elif not (np.all(np.isfinite(orientation)) and np.linalg.norm(orientation) > 1e-6):
-            problem = (f"state.pose.orientation = {orientation.tolist()} (w, x, y, z): expected a "
-                       f"finite, nonzero quaternion")
-        elif any(twist):
+        position, orientation, problem = checked_pose(state.pose, state.header.frame_id,
+                                                      self.node.cfg["frame_id"], prefix="state.")
+        twist = state.twist
+        if problem is None and any((twist.linear.x, twist.linear.y, twist.linear.z,
+                                    twist.angular.x, twist.angular.y, twist.angular.z)):
             problem = ("state.twist: cloth_sim's colliders and grippers are kinematic, moved by pose; "
                        "give a zero twist (the pose is reached over the next step)")
         if problem:
             response.result = result(srv.SetEntityState.Response.INVALID_POSE, problem)
             return response
-        orientation /= np.linalg.norm(orientation)
         kind, _, key = name.partition("/")
         sim = self.node.sim
         if kind == "collider":
