@@ -415,6 +415,7 @@ class Contacts:
 
     def _pack(self):
         cs = self.colliders
+        self._packed = list(cs)
         self._kinds = np.array([c.kind for c in cs], dtype=np.int64)
         self._pos = np.array([c.position for c in cs], dtype=np.float64).reshape(-1, 3)
         self._rot = np.array([c.rotation for c in cs], dtype=np.float64).reshape(-1, 3, 3)
@@ -429,11 +430,42 @@ class Contacts:
         """Particles the stage leaves alone (pins and held particles)."""
         self._pinned = np.ascontiguousarray(pinned)
 
-    def set_pose(self, i: int, position, orientation=(1.0, 0.0, 0.0, 0.0)) -> None:
+    def add(self, collider) -> int:
+        """Append a collider (its pose now is where its first step starts); returns its index."""
+        if not isinstance(collider, Collider):
+            raise ValueError(f"a collider must be a cloth_sim.colliders shape (Plane, Sphere, Box, "
+                             f"Capsule), got {type(collider).__name__}")
+        if any(c.name == collider.name for c in self.colliders):
+            raise ValueError(f"a collider named {collider.name!r} exists already; colliders: "
+                             f"{', '.join(c.name for c in self.colliders)}")
+        self.colliders.append(collider)
+        self._repack()
+        return len(self.colliders) - 1
+
+    def remove(self, i: int):
+        """Remove collider ``i``; returns it."""
+        self._index(i, "remove")
+        c = self.colliders.pop(i)
+        self._repack()
+        return c
+
+    def _repack(self) -> None:
+        """The packed arrays again after the list changed; the others keep their step-start poses."""
+        starts = {id(c): (p, r) for c, p, r in zip(self._packed, self._pos0, self._rot0)}
+        self._pack()
+        self._pos0, self._rot0 = self._pos.copy(), self._rot.copy()
+        for k, c in enumerate(self.colliders):
+            if id(c) in starts:
+                self._pos0[k], self._rot0[k] = starts[id(c)]
+
+    def _index(self, i, doing: str) -> None:
         n = len(self.colliders)
         if isinstance(i, bool) or not isinstance(i, (int, np.integer)) or not -n <= i < n:
             raise ValueError(f"collider index must be an integer in [0, {n - 1}], got {i!r}"
-                             if n else "there are no colliders to move")
+                             if n else f"there are no colliders to {doing}")
+
+    def set_pose(self, i: int, position, orientation=(1.0, 0.0, 0.0, 0.0)) -> None:
+        self._index(i, "move")
         self.colliders[i].set_pose(position, orientation)
         self._pos[i] = self.colliders[i].position
         self._rot[i] = self.colliders[i].rotation

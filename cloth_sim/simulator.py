@@ -321,6 +321,21 @@ class Simulator:
         what rests on it. A bad index or a non-finite pose raises ``ValueError`` and moves nothing."""
         self._contacts.set_pose(i, position, orientation)
 
+    def add_collider(self, collider) -> int:
+        """Add a collider (a shape of :mod:`cloth_sim.colliders`, its name not in use) from the next
+        step on; returns its index in :attr:`colliders`. A bad shape or a name in use raises
+        ``ValueError`` and changes nothing."""
+        i = self._contacts.add(collider)
+        self._active_stages = [s for s in self.stages if s.active]
+        return i
+
+    def remove_collider(self, i: int):
+        """Remove collider ``i`` (the later ones move up by one); returns it. A bad index raises
+        ``ValueError``."""
+        c = self._contacts.remove(i)
+        self._active_stages = [s for s in self.stages if s.active]
+        return c
+
     @property
     def thickness(self) -> float:
         """Distance (m) the cloth keeps from colliders and (with self-collision) from itself."""

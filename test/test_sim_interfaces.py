@@ -33,7 +33,7 @@ def test_features_are_stated_and_unsupported_services_answer_with_the_standard_r
     features = call(ros, srv.GetSimulatorFeatures, "get_simulator_features").features
     assert sorted(features.features) == sorted(FEATURES)
     assert SimulatorFeatures.STEP_SIMULATION_ACTION in features.features
-    assert SimulatorFeatures.SPAWNING not in features.features and features.spawn_formats == []
+    assert SimulatorFeatures.SPAWNING in features.features and features.spawn_formats
     for name, kind in UNSUPPORTED.items():
         r = ros.call(kind, f"{NS}/{name}", kind.Request()).result
         assert r.result == Result.RESULT_FEATURE_UNSUPPORTED and name in r.error_message
@@ -205,7 +205,7 @@ def test_reset_scopes(ros):
     np.testing.assert_array_equal(node.sim.positions, node.sim.model.positions)
     assert node.paused  # a reset keeps the simulation's state
     r = call(ros, srv.ResetSimulation, "reset_simulation", scope=R.SCOPE_SPAWNED).result
-    assert r.result == Result.RESULT_FEATURE_UNSUPPORTED
+    assert r.result == Result.RESULT_OK  # nothing spawned: nothing to remove
     call(ros, srv.StepSimulation, "step_simulation", steps=10)
     assert call(ros, srv.ResetSimulation, "reset_simulation", scope=R.SCOPE_DEFAULT).result.result == Result.RESULT_OK
     assert node.sim.time == 0.0
@@ -235,3 +235,54 @@ def test_frames_reach_tf_static_and_tf(ros):
                                                                      "world_frame_id": "map"}))
     assert ros.spin_until(lambda: static[-1].transforms[0].child_frame_id == "sheet", 10)
     assert static[-1].transforms[0].header.frame_id == "map"
+
+
+def test_a_spawned_sphere_is_hit_by_the_cloth_and_a_deleted_one_no_longer_is(ros):
+    node = ros.start(scene="free_fall", rows=10, cols=10, spacing=0.05)
+    set_state(ros, SimulationState.STATE_PAUSED)
+    spawnables = call(ros, srv.GetSpawnables, "get_spawnables").spawnables
+    assert {s.uri.split("?")[0] for s in spawnables} == {
+        "cloth_sim://sphere", "cloth_sim://box", "cloth_sim://capsule", "cloth_sim://plane"}
+    centre = node.sim.positions.mean(axis=0) - [0.0, 0.0, 0.15]
+    req = srv.SpawnEntity.Request(name="ball", uri="cloth_sim://sphere?radius=0.08&friction=0.5")
+    req.initial_pose.pose.position.x, req.initial_pose.pose.position.y, req.initial_pose.pose.position.z = centre
+    req.initial_pose.pose.orientation.w = 1.0
+    r = ros.call(srv.SpawnEntity, f"{NS}/spawn_entity", req)
+    assert r.result.result == Result.RESULT_OK and r.entity_name == "collider/ball"
+    assert "collider/ball" in call(ros, srv.GetEntities, "get_entities").entities
+    ball = node.sim.colliders[-1]
+    call(ros, srv.StepSimulation, "step_simulation", steps=400)
+    # the cloth came down on it and rests on it at the thickness, above its centre
+    assert ball.signed_distance(node.sim.positions).min() >= 0.97 * node.sim.thickness
+    assert node.sim.positions[:, 2].max() > centre[2]
+    # the same name again: refused unless renaming is allowed; bad resources get the standard's codes
+    r = ros.call(srv.SpawnEntity, f"{NS}/spawn_entity", req)
+    assert r.result.result == srv.SpawnEntity.Response.NAME_NOT_UNIQUE
+    req.allow_renaming = True
+    req.initial_pose.pose.position.x += 5.0
+    assert ros.call(srv.SpawnEntity, f"{NS}/spawn_entity", req).entity_name == "collider/ball_1"
+    R = srv.SpawnEntity.Response
+    for fields, code, words in [
+            ({"uri": "model://table"}, R.UNSUPPORTED_FORMAT, "cloth_sim://<shape>"),
+            ({"uri": "cloth_sim://sphere?radius=-1"}, R.RESOURCE_PARSE_ERROR, "radius"),
+            ({"resource_string": "{type: sphere, radius: 0.05, colour: red}"}, R.RESOURCE_PARSE_ERROR,
+             "colour"),
+            ({}, R.NO_RESOURCE, "uri"),
+            ({"uri": "cloth_sim://box", "name": "9lives"}, R.NAME_INVALID, "name")]:
+        r = ros.call(srv.SpawnEntity, f"{NS}/spawn_entity", srv.SpawnEntity.Request(**fields)).result
+        assert r.result == code and words in r.error_message, (fields, r.error_message)
+    bad = srv.SpawnEntity.Request(uri="cloth_sim://sphere?radius=0.05")
+    bad.initial_pose.pose.position.x = math.nan
+    r = ros.call(srv.SpawnEntity, f"{NS}/spawn_entity", bad).result
+    assert r.result == R.INVALID_POSE and "initial_pose.pose.position" in r.error_message
+    # deleted: the cloth falls past where it was
+    assert call(ros, srv.DeleteEntity, "delete_entity", entity="collider/ball").result.result == Result.RESULT_OK
+    assert "collider/ball" not in call(ros, srv.GetEntities, "get_entities").entities
+    call(ros, srv.StepSimulation, "step_simulation", steps=400)
+    assert node.sim.positions[:, 2].max() < centre[2] - 0.08
+    assert call(ros, srv.DeleteEntity, "delete_entity", entity="cloth").result.result == \
+        Result.RESULT_OPERATION_FAILED
+    # resetting the spawned scope removes what is left of them
+    R2 = srv.ResetSimulation.Request
+    assert call(ros, srv.ResetSimulation, "reset_simulation", scope=R2.SCOPE_SPAWNED).result.result == Result.RESULT_OK
+    assert not [n for n in call(ros, srv.GetEntities, "get_entities").entities if n.startswith("collider/")]

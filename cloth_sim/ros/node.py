@@ -405,6 +405,7 @@ class ClothSimNode(Node):
         if scene is not None:
             self.sim = self._build_simulator(cand, model, scene)
             self.scene = scene
+            self.interfaces.spawned.clear()  # the new simulation has the scene's colliders only
             self._drop_grippers()
             self._adopt_grippers()
             self._subscribe_colliders()
@@ -679,17 +680,21 @@ class ClothSimNode(Node):
             if name not in self._grippers:
                 self._gripper_topics(name)
 
-    def _on_release(self, request, response):
-        name = request.gripper
-        try:
-            self.sim.release(name)
-        except ValueError as e:
-            response.success, response.message = False, str(e)
-            return response
+    def release_gripper(self, name: str) -> None:
+        """Let go with gripper ``name`` and drop its topics (``ValueError`` for an unknown one)."""
+        self.sim.release(name)
         sub, pub = self._grippers.pop(name)
         self.destroy_subscription(sub)
         self.destroy_publisher(pub)
         self._pose_targets.pop(("gripper", name), None)
+
+    def _on_release(self, request, response):
+        name = request.gripper
+        try:
+            self.release_gripper(name)
+        except ValueError as e:
+            response.success, response.message = False, str(e)
+            return response
         response.success, response.message = True, f"gripper {name!r} released"
         return response
 
@@ -746,6 +751,10 @@ class ClothSimNode(Node):
             self._pose_subs.append(self.create_subscription(
                 PoseStamped, topic, lambda msg, i=i, topic=topic: self._on_pose(("collider", i), topic, msg),
                 10))
+
+    def colliders_changed(self) -> None:
+        """After a collider was spawned or deleted: the pose topics follow the new list."""
+        self._subscribe_colliders()
 
     def _on_pose(self, key, topic: str, msg) -> None:
         """A new pose for a collider or a gripper: checked here (a bad one is logged, naming the

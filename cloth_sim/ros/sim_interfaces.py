@@ -34,25 +34,34 @@ from simulation_interfaces.msg import (Bounds, EntityCategory, EntityInfo, Entit
 
 F = SimulatorFeatures
 #: what cloth_sim supports of the standard (get_simulator_features)
-FEATURES = (F.ENTITY_STATE_GETTING, F.ENTITY_STATE_SETTING, F.ENTITY_BOUNDS, F.ENTITY_CATEGORIES,
+FEATURES = (F.SPAWNING, F.SPAWNING_RESOURCE_STRING, F.DELETING, F.SPAWNABLES,
+            F.SIMULATION_RESET_SPAWNED, F.ENTITY_STATE_GETTING, F.ENTITY_STATE_SETTING, F.ENTITY_BOUNDS, F.ENTITY_CATEGORIES,
             F.ENTITY_INFO_GETTING, F.SIMULATION_RESET, F.SIMULATION_RESET_TIME,
             F.SIMULATION_RESET_STATE, F.SIMULATION_STATE_GETTING, F.SIMULATION_STATE_SETTING,
             F.SIMULATION_STATE_PAUSE, F.STEP_SIMULATION_SINGLE, F.STEP_SIMULATION_MULTIPLE,
             F.STEP_SIMULATION_ACTION)
 #: the services of the standard cloth_sim does not support (yet): they answer FEATURE_UNSUPPORTED
 UNSUPPORTED = {
-    "spawn_entity": srv.SpawnEntity, "spawn_entities": srv.SpawnEntities,
-    "delete_entity": srv.DeleteEntity, "get_spawnables": srv.GetSpawnables,
-    "set_entity_info": srv.SetEntityInfo, "get_named_poses": srv.GetNamedPoses,
+    "spawn_entities": srv.SpawnEntities, "set_entity_info": srv.SetEntityInfo, "get_named_poses": srv.GetNamedPoses,
     "get_named_pose_bounds": srv.GetNamedPoseBounds, "load_world": srv.LoadWorld,
     "unload_world": srv.UnloadWorld, "get_current_world": srv.GetCurrentWorld,
     "get_available_worlds": srv.GetAvailableWorlds,
 }
 #: the standard's reset scopes cloth_sim takes
-SCOPES = {srv.ResetSimulation.Request.SCOPE_DEFAULT, srv.ResetSimulation.Request.SCOPE_ALL,
-          srv.ResetSimulation.Request.SCOPE_TIME, srv.ResetSimulation.Request.SCOPE_STATE,
-          srv.ResetSimulation.Request.SCOPE_TIME | srv.ResetSimulation.Request.SCOPE_STATE}
+SCOPE_ALL = srv.ResetSimulation.Request.SCOPE_ALL
 CLOTH = "cloth"
+#: spawn_entity's URI scheme: ``cloth_sim://<shape>?<field>=<value>&…`` (a vector as ``x,y,z``)
+SCHEME = "cloth_sim"
+#: what each shape needs besides its pose (initial_pose places it), with the defaults used when
+#: a URI or resource does not give them
+SPAWN_DEFAULTS = {"plane": {"normal": [0.0, 0.0, 1.0]}, "sphere": {"center": [0.0, 0.0, 0.0]},
+                  "box": {"center": [0.0, 0.0, 0.0]}, "capsule": {}}
+SPAWNABLES = {
+    "sphere": "cloth_sim://sphere?radius=0.1&friction=0.3",
+    "box": "cloth_sim://box?half_extents=0.2,0.2,0.02&friction=0.5",
+    "capsule": "cloth_sim://capsule?a=0,0,-0.1&b=0,0,0.1&radius=0.02",
+    "plane": "cloth_sim://plane?normal=0,0,1&friction=0.5",
+}
 
 
 def result(code: int = Result.RESULT_OK, message: str = "") -> Result:
@@ -67,6 +76,8 @@ class SimulationInterfaces:
     def __init__(self, node):
         self.node = node
         self.stopped = False
+        #: names of the colliders spawned through spawn_entity (reset with SCOPE_SPAWNED removes them)
+        self.spawned: set[str] = set()
         self._goal = None  # (goal handle, remaining steps, completed, future) of simulate_steps
         handlers = {
             "get_simulator_features": (srv.GetSimulatorFeatures, self.get_simulator_features),
@@ -80,6 +91,9 @@ class SimulationInterfaces:
             "set_entity_state": (srv.SetEntityState, self.set_entity_state),
             "get_entity_bounds": (srv.GetEntityBounds, self.get_entity_bounds),
             "get_entity_info": (srv.GetEntityInfo, self.get_entity_info),
+            "spawn_entity": (srv.SpawnEntity, self.spawn_entity),
+            "delete_entity": (srv.DeleteEntity, self.delete_entity),
+            "get_spawnables": (srv.GetSpawnables, self.get_spawnables),
         }
         for name, (kind, handler) in handlers.items():
             node.create_service(kind, f"~/{name}", handler)
@@ -92,9 +106,12 @@ class SimulationInterfaces:
     # ------------------------------------------------------------------ features and state
     def get_simulator_features(self, request, response):
         response.features.features = list(FEATURES)
-        response.features.spawn_formats = []
+        response.features.spawn_formats = ["cloth_sim_collider"]
         response.features.custom_info = ("cloth_sim: a mass-spring cloth; entities are 'cloth', "
-                                         "'collider/<name>' and 'gripper/<name>'")
+                                         "'collider/<name>' and 'gripper/<name>'; spawn_entity takes a "
+                                         "collider: uri cloth_sim://<plane|sphere|box|capsule>?"
+                                         "<field>=<value>&… or resource_string, a scene's collider "
+                                         "mapping in YAML; initial_pose places it")
         return response
 
     def state(self) -> int:
@@ -139,21 +156,24 @@ class SimulationInterfaces:
 
     def reset_simulation(self, request, response):
         R = srv.ResetSimulation.Request
-        scope = request.scope
-        if scope not in SCOPES:
+        scope = R.SCOPE_ALL if request.scope == R.SCOPE_DEFAULT else request.scope
+        known = R.SCOPE_TIME | R.SCOPE_STATE | R.SCOPE_SPAWNED
+        if scope != SCOPE_ALL and scope & ~known:
             response.result = result(Result.RESULT_FEATURE_UNSUPPORTED,
-                                     f"scope {scope}: cloth_sim resets SCOPE_DEFAULT, SCOPE_ALL, "
-                                     f"SCOPE_TIME, SCOPE_STATE (it spawns nothing to despawn)")
+                                     f"scope {request.scope}: cloth_sim resets SCOPE_DEFAULT, "
+                                     f"SCOPE_ALL and any of SCOPE_TIME, SCOPE_STATE, SCOPE_SPAWNED")
             return response
+        if scope & R.SCOPE_SPAWNED:
+            for name in sorted(self.spawned):
+                self._remove_collider(name)
         sim = self.node.sim
-        if scope == R.SCOPE_TIME:
-            sim.set_time(0.0)
-        elif scope == R.SCOPE_STATE:
+        if scope & R.SCOPE_STATE:
             t = sim.time
             self.node.reset_simulation(keep_paused=True)
-            sim.set_time(t)
-        else:
-            self.node.reset_simulation(keep_paused=True)
+            if not scope & R.SCOPE_TIME:
+                sim.set_time(t)
+        elif scope & R.SCOPE_TIME:
+            sim.set_time(0.0)
         response.result = result()
         return response
 
@@ -330,6 +350,111 @@ class SimulationInterfaces:
         response.result = result()
         return response
 
+    def spawn_entity(self, request, response):
+        """A collider from ``uri`` (``cloth_sim://<shape>?…``) or ``resource_string`` (YAML: a
+        scene's collider mapping), placed at ``initial_pose``."""
+        code, message, collider = self._collider_from(request)
+        if collider is None:
+            response.result = result(code, message)
+            return response
+        self.node.sim.add_collider(collider)
+        self.spawned.add(collider.name)
+        self.node.colliders_changed()
+        response.entity_name = f"collider/{collider.name}"
+        response.result = result(Result.RESULT_OK, f"spawned {type(collider).__name__.lower()} "
+                                 f"{response.entity_name}")
+        return response
+
+    def _collider_from(self, request):
+        """``(code, message, collider)``: the collider a spawn request describes, or the standard's
+        code and the reason (collider ``None``)."""
+        import yaml
+
+        from ..colliders import KINDS
+        from ..scene import SceneError, _Validator
+
+        R = srv.SpawnEntity.Response
+        if not request.uri and not request.resource_string:
+            return R.NO_RESOURCE, "give uri (cloth_sim://<shape>?…) or resource_string (YAML)", None
+        if request.entity_namespace:
+            return (R.NAMESPACE_INVALID, f"entity_namespace = {request.entity_namespace!r}: a "
+                    f"collider has no interfaces to put under a namespace; leave it empty", None)
+        if request.uri:
+            spec = _parse_uri(request.uri)
+            if isinstance(spec, str):
+                return R.UNSUPPORTED_FORMAT, spec, None
+        else:
+            try:
+                spec = yaml.safe_load(request.resource_string)
+            except yaml.YAMLError as e:
+                return R.RESOURCE_PARSE_ERROR, f"resource_string is not YAML ({e})", None
+            if not isinstance(spec, dict) or spec.get("type") not in SPAWN_DEFAULTS:
+                return (R.UNSUPPORTED_FORMAT, "resource_string must be a mapping with type: plane, "
+                        "sphere, box or capsule, and that shape's fields", None)
+        kind = spec["type"]
+        spec = {**SPAWN_DEFAULTS[kind], **spec}
+        names = {c.name for c in self.node.sim.colliders}
+        name = request.name or f"{kind}_{len(names)}"
+        if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]{0,63}", name):
+            return (R.NAME_INVALID, f"name = {name!r}: expected ASCII letters, digits and _ (not "
+                    f"starting with a digit, at most 64): it names the collider's topic and frame", None)
+        if name in names:
+            if not request.allow_renaming:
+                return R.NAME_NOT_UNIQUE, f"a collider named {name!r} exists (allow_renaming: false)", None
+            name = next(f"{name}_{k}" for k in range(1, len(names) + 2) if f"{name}_{k}" not in names)
+        spec["name"] = name
+        try:
+            kind, kw = _Validator("spawn_entity").collider(0, spec)
+        except SceneError as e:
+            return R.RESOURCE_PARSE_ERROR, str(e).replace("colliders[0].", ""), None
+        position, orientation, problem = checked_pose(request.initial_pose.pose,
+                                                      request.initial_pose.header.frame_id,
+                                                      self.node.cfg["frame_id"], prefix="initial_pose.")
+        if problem:
+            return R.INVALID_POSE, problem, None
+        collider = KINDS[kind](**kw)
+        # the pose: a sphere's or box's centre, a capsule's midpoint, a point on a plane (the
+        # identity orientation keeps a plane's normal and a capsule's segment as built)
+        collider.set_pose(position, orientation)
+        return Result.RESULT_OK, "", collider
+
+    def delete_entity(self, request, response):
+        name = request.entity
+        entities = self.entities()
+        if name not in entities:
+            response.result = self._unknown(name)
+        elif name == CLOTH:
+            response.result = result(Result.RESULT_OPERATION_FAILED, "the cloth cannot be deleted "
+                                     "(a scene change replaces it)")
+        elif name.startswith("gripper/"):
+            self.node.release_gripper(name.partition("/")[2])
+            response.result = result(Result.RESULT_OK, f"{name} released the cloth")
+        else:
+            self._remove_collider(name.partition("/")[2])
+            response.result = result()
+        return response
+
+    def _remove_collider(self, name: str) -> None:
+        sim = self.node.sim
+        index = next((i for i, c in enumerate(sim.colliders) if c.name == name), None)
+        if index is not None:
+            sim.remove_collider(index)
+            self.node.colliders_changed()
+        self.spawned.discard(name)
+
+    def get_spawnables(self, request, response):
+        from simulation_interfaces.msg import Spawnable
+
+        if request.sources:
+            response.result = result(Result.RESULT_FEATURE_UNSUPPORTED,
+                                     "cloth_sim's spawnables are its collider shapes: no sources")
+            return response
+        response.spawnables = [Spawnable(uri=uri, description=f"a {kind} collider (fields as in a "
+                                         f"scene file; initial_pose places it)")
+                               for kind, uri in SPAWNABLES.items()]
+        response.result = result()
+        return response
+
     def get_entity_bounds(self, request, response):
         name = request.entity
         if name not in self.entities():
@@ -395,3 +520,23 @@ def collider_extent(c):
 
 def _vec(a) -> Vector3:
     return Vector3(x=float(a[0]), y=float(a[1]), z=float(a[2]))
+
+
+def _parse_uri(uri: str):
+    """``{type, fields…}`` of a ``cloth_sim://<shape>?<field>=<value>&…`` URI (numbers, and vectors
+    as ``x,y,z``), or the reason it is not one (a string)."""
+    from urllib.parse import parse_qsl
+
+    # (by hand: an underscore is no URI scheme character for urllib)
+    shape, _, query = uri[len(SCHEME) + 3:].partition("?")
+    if not uri.startswith(f"{SCHEME}://") or shape not in SPAWN_DEFAULTS:
+        return (f"uri = {uri!r}: expected {SCHEME}://<shape>?<field>=<value>&… with shape one of "
+                f"{', '.join(SPAWN_DEFAULTS)} (get_spawnables lists examples)")
+    spec = {"type": shape}
+    for key, value in parse_qsl(query, keep_blank_values=True):
+        try:
+            numbers = [float(v) for v in value.split(",")]
+        except ValueError:
+            return f"uri field {key} = {value!r}: expected a number or numbers separated by commas"
+        spec[key] = numbers[0] if len(numbers) == 1 else numbers
+    return spec
