@@ -241,6 +241,7 @@ def run(sets: int, seed: int, domain: int, quiet: bool = False, keep: int = 3) -
     figures = dict(sets=0, accepted=0, refused=0, crashes=0, hangs=0, slow_answers=0, invalid_accepted=0,
                    valid_refused=0, unnamed_refusals=0, nonfinite_clouds=0, clouds=0,
                    mismatches=0, unexpected_blowups=0, dt_independent_runaways=0, stability_refusals=0,
+                   scene_kind_refusals=0,
                    rate_refusals=0, thickness_refusals=0)
     examples: dict[str, list] = {}
 
@@ -390,6 +391,15 @@ def run(sets: int, seed: int, domain: int, quiet: bool = False, keep: int = 3) -
                             note("valid_refused", (params, r.reason))
                     elif "cannot be met" in r.reason:
                         figures["rate_refusals"] += 1
+                    elif "not used by scene" in r.reason:
+                        # a mesh's density on a grid (the fuzz's scenes are grids): right only when
+                        # the batch changes it
+                        figures["scene_kind_refusals"] += 1
+                        base = before_cfg if atomic else running
+                        if "scene" not in names and not any(
+                                n == "density" and SCHEMA[n].check(v) != base[n]
+                                for n, v in (params if atomic else [(name, value)])):
+                            note("valid_refused", (params, r.reason))
                     elif "too thick for self_collision" in r.reason:
                         figures["thickness_refusals"] += 1
                         cand = dict(before_cfg if atomic else running)

@@ -1,0 +1,114 @@
+"""Simulation control: pause, reset and stepping on request (``~/pause``, ``~/reset``, ``~/step``
+and the standard's equivalents in :mod:`cloth_sim.ros.sim_interfaces`), and recovery after a
+blow-up: the node keeps checkpoints and goes back to one, paused.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+from ..simulator import SimulationDiverged
+
+#: the most steps one ~/step request may ask for (the node answers nothing else meanwhile)
+MAX_STEP_REQUEST = 100_000
+#: recovery checkpoints: one every CHECKPOINT_EVERY s of simulated time, the last CHECKPOINTS kept
+CHECKPOINT_EVERY = 0.1
+CHECKPOINTS = 20
+
+
+class SimulationControl:
+    """Pause, reset, step and recover (a mixin of :class:`~cloth_sim.ros.node.ClothSimNode`)."""
+
+    def reset_simulation(self, keep_paused: bool = False) -> None:
+        """The scene's initial shape at rest, time 0, its own grippers holding again; running
+        afterwards unless ``keep_paused`` (``~/reset`` runs, the standard's reset keeps the state)."""
+        self.sim.reset()  # releases every gripper
+        self._drop_grippers()
+        self.scene.apply_grippers(self.sim)  # the scene's own grippers hold again
+        self._adopt_grippers()
+        self._checkpoints.clear()
+        self._change_checkpoint = None
+        self._carry = 0.0
+        self._history.clear()
+        self.error = None
+        if not keep_paused:
+            self.paused = False
+            self.interfaces.stopped = False
+
+    def set_paused(self, paused: bool) -> None:
+        if not paused and self.error:
+            self.error = None  # the user un-pauses after a blow-up: try again from the good state
+        self.paused = bool(paused)
+        if not paused:
+            self.interfaces.stopped = False
+        self._history.clear()
+
+    def _on_reset(self, request, response):
+        self.reset_simulation()
+        response.success = True
+        response.message = f"reset {self.scene.name} to its initial shape at rest, time 0"
+        return response
+
+    def _on_pause(self, request, response):
+        self.set_paused(bool(request.data))
+        response.success = True
+        response.message = "paused" if self.paused else "running"
+        return response
+
+    def step_paused(self, n: int) -> tuple[bool, str]:
+        """Exactly ``n`` steps now, while paused (``~/step``, the standard's ``step_simulation``);
+        ``(success, message)``. A blow-up goes back and stays paused, as in a tick."""
+        if not self.paused:
+            return False, "~/step runs only while paused: call ~/pause with data: true first"
+        if n > MAX_STEP_REQUEST or n < 0:
+            return False, (f"steps = {n} is not accepted: expected an integer in "
+                           f"[0, {MAX_STEP_REQUEST}] (the node answers nothing else while it steps)")
+        t0 = time.perf_counter()
+        try:
+            steps, wall, longest = self._advance(int(n), t0, math.inf)
+        except SimulationDiverged as e:
+            self._recover(e)
+            return False, self.error or str(e)
+        self._publish(t0, steps, wall, longest)
+        return True, f"{steps} steps"
+
+    def step_within(self, n: int, t0: float, budget: float) -> tuple:
+        """Up to ``n`` steps while paused within a tick's ``budget`` (the standard's
+        ``simulate_steps``): ``(steps, step wall, longest, None)``, or ``(None, 0, 0, message)``
+        after a blow-up (the node went back and paused)."""
+        try:
+            return (*self._advance(int(n), t0, budget), None)
+        except SimulationDiverged as e:
+            self._recover(e)
+            return None, 0.0, 0.0, self.error or str(e)
+
+    def _on_step(self, request, response):
+        response.success, response.message = self.step_paused(int(request.steps))
+        response.sim_time = self.sim.time
+        return response
+
+    def _keep_checkpoint(self) -> None:
+        if not self._checkpoints or self.sim.time - self._checkpoints[-1][0] >= CHECKPOINT_EVERY:
+            self._checkpoints.append((self.sim.time, self.sim.save_state()))
+
+    def _recover(self, error: SimulationDiverged) -> None:
+        """Pause after a blow-up, back at a state from before the run-away began: the one saved
+        before the last parameter change when that came within the last second of simulated time
+        (a dt or stiffness that does not hold diverges within a few steps, and the steps in
+        between are already running away), else the oldest kept checkpoint (up to 2 s back). A
+        stable dt and ``~/pause false`` then resume from there."""
+        sim = self.sim
+        candidates = [c for c in (self._change_checkpoint,) if c and sim.time - c[0] <= 1.0]
+        candidates += list(self._checkpoints)[:1]
+        if candidates:
+            when, saved = candidates[0]
+            sim.restore_state(saved)
+        self._checkpoints.clear()
+        self._change_checkpoint = None
+        self.error = str(error)
+        self.paused = True
+        self._carry = 0.0
+        self.get_logger().error(f"{error} Went back to t={sim.time:.3f} s and paused: fix the "
+                                f"parameters, then call ~/pause with data=false, or ~/reset.")
+        self._publish_diagnostics()

@@ -1,0 +1,325 @@
+"""The parameter gate: every value set on the node passes here, as rclpy intends it (ros2/demos
+``set_parameters_callback.py``). The pre-set callback expands a scene change into the scene's values
+and turns values the schema takes but rclpy's types would not (an integer for a double, an integer
+array for a double array) into the declared type; the on-set callback validates the whole batch with
+no side effects (the stability analysis it needs is computed once per material and kept,
+:mod:`cloth_sim.stability`); the post-set callback applies it, live or by rebuilding the cloth.
+"""
+
+from __future__ import annotations
+
+import gc
+import math
+
+import numpy as np
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.parameter import Parameter
+
+from .. import integrators
+from .. import stability as stab
+from ..integrators.base import Stability
+from ..parameters import REBUILD, SCHEMA
+from ..scene import SceneError, load_scene
+from ..self_collision import check_thickness
+from ..simulator import Simulator
+from . import params as P
+
+#: a publish_rate is refused only when the measured cost exceeds the time available this many times
+RATE_REFUSAL_LOAD = 10.0
+#: the rebuild parameters that shape the model (``scene`` is the other one)
+MODEL_KEYS = tuple(name for name in REBUILD if name != "scene")
+
+
+def _settle_garbage() -> None:
+    """Collect once and move every object alive now to the collector's permanent generation.
+
+    Python's full (generation-2) collection walks every tracked object: after start-up (rclpy,
+    numba, scipy, the model) that is ~140,000 objects and 30–75 ms, which, whenever the collector
+    chose to run it, stalled a tick by 2–4 periods at 60 Hz. Frozen objects are not walked, so a
+    later full collection only sees what was made since. Called at start-up and after a rebuild
+    (the objects a new simulation keeps); garbage is collected first, so nothing collectable is
+    frozen."""
+    gc.collect()
+    gc.freeze()
+
+
+def _material(model, cfg: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Per-spring stiffness and damping of ``model`` from the family parameters in ``cfg``."""
+    k = np.array([cfg[f"stiffness.{f}"] for f in model.family_names])[model.family]
+    c = np.array([cfg[f"damping.{f}"] for f in model.family_names])[model.family]
+    return k, c
+
+
+def _as_declared(p: Parameter) -> Parameter:
+    """An integer given for a double parameter (``ros2 param set /cloth_sim dt 1``), as a double, and
+    an integer array for a double array (``gravity: [0, 0, -9]`` in a params file), as a double
+    array: the schema accepts them, rclpy's type check would not (its refusal names no parameter)."""
+    spec = SCHEMA.get(p.name)
+    if spec is not None and spec.type is float and p.type_ == Parameter.Type.INTEGER:
+        return Parameter(p.name, value=float(p.value))
+    if spec is not None and spec.type == "vector3" and p.type_ == Parameter.Type.INTEGER_ARRAY:
+        return Parameter(p.name, value=[float(v) for v in p.value])
+    return p
+
+
+def _wind(cfg: dict):
+    w = cfg["wind.strength"] * np.asarray(cfg["wind.direction"], dtype=float)
+    return w if np.any(w) else None
+
+
+
+class ParameterGate:
+    """The node's parameter callbacks and the building of its model and simulator (a mixin of
+    :class:`~cloth_sim.ros.node.ClothSimNode`, over its ``cfg``, ``scene`` and ``sim``)."""
+
+    def _model(self, cfg: dict, scene):
+        """The model for ``cfg``'s rebuild values (kept: validation and application share it)."""
+        key = (scene.source, *(cfg[k] for k in MODEL_KEYS))
+        model = self._models.get(key)
+        if model is None:
+            size = ({"density": cfg["density"]} if scene.mesh is not None else
+                    {k: cfg[k] for k in ("rows", "cols", "spacing", "particle_mass")})
+            model = scene.build_model(**size, model=cfg["model"],
+                                      stiffness={f: cfg[f"stiffness.{f}"] for f in scene.families},
+                                      damping={f: cfg[f"damping.{f}"] for f in scene.families})
+            if len(self._models) >= 4:
+                self._models.pop(next(iter(self._models)))
+            self._models[key] = model
+        return model
+
+    @staticmethod
+    def _build_simulator(cfg: dict, model, scene) -> Simulator:
+        sim = Simulator(model, integrator=cfg["integrator"], dt=cfg["dt"], gravity=cfg["gravity"],
+                        wind=_wind(cfg), drag=cfg["drag"], strain_limit=cfg["strain_limit"] or None,
+                        strain_limit_passes=cfg["strain_limit_passes"],
+                        colliders=scene.make_colliders(), thickness=cfg["thickness"],
+                        self_collision=cfg["self_collision"])
+        scene.apply_grippers(sim)
+        k, c = _material(model, cfg)
+        if not (np.array_equal(model.stiffness, k) and np.array_equal(model.damping, c)):
+            for f in model.family_names:  # a kept model built with other values: set them
+                sim.set_stiffness(f, cfg[f"stiffness.{f}"])
+                sim.set_damping(f, cfg[f"damping.{f}"])
+        return sim
+
+    @staticmethod
+    def _check_stability(cfg: dict, model) -> tuple[str | None, float]:
+        """``(reason, stable_dt)``: the limit of ``cfg``'s method on ``model`` with ``cfg``'s
+        material (computed once per material and method, :mod:`cloth_sim.stability`), and the
+        reason to refuse ``cfg["dt"]`` above it (``None`` when fine or ``allow_unstable``)."""
+        k, c = _material(model, cfg)
+        analysis = stab.analysis_for(model, k, c, cfg["drag"])
+        integ = integrators.get(cfg["integrator"])(model)
+        limit = integ.stable_dt(analysis)
+        if not integ.step_is_stable(analysis, cfg["dt"]) and not cfg["allow_unstable"]:
+            above = integ.stable_again_above(analysis)
+            if above < math.inf:  # Choi–Ko's onset band of an unconditionally stable method
+                return (f"dt={cfg['dt']:g} s is inside the band of steps where Choi–Ko's buckling onset "
+                        f"load 12·k_b/L² throws this cloth about with {cfg['integrator']} "
+                        f"({limit:.4g} s < dt < {above:.4g} s; stiffness.bend is a flexural rigidity "
+                        f"in N·m² in this model): choose dt <= {limit:.4g} or dt >= {above:.4g}, a "
+                        f"smaller stiffness.bend, or set allow_unstable to true"), limit
+            unconditional = ", ".join(n for n in integrators.available()
+                                      if integrators.get(n).stability is Stability.UNCONDITIONAL)
+            onset = (" (set by Choi–Ko's buckling onset load 12·k_b/L²: stiffness.bend is a flexural "
+                     "rigidity in N·m² in this model)" if limit == analysis.onset_limit else "")
+            return (f"dt={cfg['dt']:g} s is above the stable limit of {cfg['integrator']} for this "
+                    f"cloth, stable_dt={limit:.4g} s{onset}: choose dt <= {limit:.4g}, an "
+                    f"unconditionally stable integrator ({unconditional}), or set allow_unstable to "
+                    f"true"), limit
+        return None, limit
+
+    def _pre_set(self, parameters: list[Parameter]) -> list[Parameter]:
+        """The gate every value passes first (it runs before rclpy's own type and range checks,
+        whose refusals do not name the parameter): a value the schema refuses is noted, and stands
+        in the batch as the parameter's current value, so that the on-set callback refuses the batch
+        with the schema's reason. A scene change brings the scene's values for every parameter the
+        batch does not set."""
+        self._gate_errors = []
+        gated = []
+        for p in parameters:
+            reason = self._gate(p)
+            if reason:
+                self._gate_errors.append(reason)
+                # a stand-in that passes rclpy's checks, so the on-set callback gives the reason
+                # (an unknown name would raise before it, with an empty list in rclpy 7.1's text)
+                gated.append(self.get_parameter(p.name if self.has_parameter(p.name) else "frame_id"))
+                continue
+            gated.append(_as_declared(p))
+        parameters = gated
+        if self._gate_errors:
+            return parameters
+        scene = next((p for p in parameters if p.name == "scene"), None)
+        if scene is None or scene.value == self.cfg["scene"] or not isinstance(scene.value, str):
+            return parameters
+        try:
+            new = load_scene(scene.value)
+        except SceneError:
+            return parameters  # the on-set callback refuses it with the reason
+        named = {p.name for p in parameters}
+        return list(parameters) + [Parameter(k, value=v) for k, v in P.scene_values(new).items()
+                                   if k not in named]
+
+    def _gate(self, p: Parameter) -> str | None:
+        """The schema's reason to refuse ``p`` (or the declared type's, for rclpy's own
+        parameters), ``None`` when it may go on."""
+        if not self.has_parameter(p.name):
+            return (f"{p.name} is not a parameter of this node; its parameters are "
+                    f"{', '.join(sorted(SCHEMA))}")
+        if p.type_ == Parameter.Type.NOT_SET:
+            return f"{p.name} cannot be unset"
+        if p.name in SCHEMA:
+            return P.check_value(p.name, p.value)[1]
+        declared = self.describe_parameter(p.name)
+        if not declared.dynamic_typing and declared.type != p.type_.value:
+            return (f"{p.name} = {p.value!r} is not accepted: expected a "
+                    f"{Parameter.Type(declared.type).name.lower()}")
+        return None
+
+    def _on_set(self, parameters: list[Parameter]) -> SetParametersResult:
+        """Validate the whole batch; nothing changes here (the post-set callback applies it)."""
+        if not self._ready:
+            return SetParametersResult(successful=True)
+        self._validated = None
+        if self._gate_errors:
+            reason, self._gate_errors = "; ".join(self._gate_errors), []
+            return SetParametersResult(successful=False, reason=reason)
+        cand = dict(self.cfg)
+        for p in parameters:
+            if p.name not in SCHEMA:
+                continue
+            value, reason = P.check_value(p.name, p.value)
+            if reason:
+                return SetParametersResult(successful=False, reason=reason)
+            cand[p.name] = value
+        if cand == self.cfg:
+            self._validated = (cand, None, None, self._stable_dt)
+            return SetParametersResult(successful=True)
+        scene = self.scene
+        try:
+            if cand["scene"] != self.cfg["scene"]:
+                scene = load_scene(cand["scene"])
+            reason = P.not_applicable(scene, cand, self.cfg)
+            if reason:
+                return SetParametersResult(successful=False, reason=reason)
+            rebuild = scene is not self.scene or any(cand[k] != self.cfg[k] for k in MODEL_KEYS)
+            model = self._model(cand, scene) if rebuild else self.sim.model
+        except (SceneError, ValueError) as e:  # e.g. a scene whose file changed since
+            return SetParametersResult(successful=False, reason=f"scene: {e}")
+        if cand["publish_rate"] not in self._rates_run:
+            reason = self._check_rate(cand)
+            if reason:
+                return SetParametersResult(successful=False, reason=reason)
+        if cand["self_collision"]:
+            try:
+                check_thickness(model, cand["thickness"])
+            except ValueError as e:  # a finer cloth (rows, spacing, a scene) can be the cause
+                reason = self._blame(parameters, cand, str(e), ("thickness", "self_collision"))
+                return SetParametersResult(successful=False, reason=reason)
+        reason, limit = self._check_stability(cand, model)
+        if reason:  # the refusal names what made the limit fall, as well as dt
+            return SetParametersResult(successful=False,
+                                       reason=self._blame(parameters, cand, reason, ("dt",)))
+        self._validated = (cand, scene if rebuild else None, model if rebuild else None, limit)
+        return SetParametersResult(successful=True)
+
+    def _blame(self, parameters, cand: dict, reason: str, named: tuple) -> str:
+        """``reason`` for a refusal of a combination, prefixed with the other values of the
+        request that changed (``reason`` names ``named`` itself)."""
+        changed = [p.name for p in parameters if p.name in SCHEMA and p.name not in named
+                   and cand[p.name] != self.cfg[p.name]]
+        if not changed:
+            return reason
+        return (f"{', '.join(f'{n} = {cand[n]!r}' for n in changed)}: with "
+                f"{'this value' if len(changed) == 1 else 'these values'}, {reason}")
+
+    def _post_set(self, parameters: list[Parameter]) -> None:
+        """Apply what :meth:`_on_set` accepted."""
+        if not self._ready or self._validated is None:
+            return
+        cand, scene, model, limit = self._validated
+        self._validated = None
+        if scene is not None:
+            self.sim = self._build_simulator(cand, model, scene)
+            self.scene = scene
+            self.interfaces.spawned.clear()  # the new simulation has the scene's colliders only
+            self._drop_grippers()
+            self._adopt_grippers()
+            self._subscribe_colliders()
+            self._carry = 0.0
+            self._history.clear()
+            self._checkpoints.clear()
+            self._change_checkpoint = None
+            _settle_garbage()
+        else:
+            if cand != self.cfg:
+                self._change_checkpoint = (self.sim.time, self.sim.save_state())
+            self._apply_live(cand)
+        if cand["real_time_factor"] != self.cfg["real_time_factor"]:
+            self._carry = 0.0  # a backlog owed at the old pace is not owed at the new one
+            self._history.clear()
+        self._rates_run.add(cand["publish_rate"])
+        rate_changed = cand["publish_rate"] != self.cfg["publish_rate"]
+        self.cfg = cand
+        self._stable_dt = limit
+        self.frames.publish_static(cand["world_frame_id"], cand["frame_id"])
+        if rate_changed:
+            self.timer.cancel()
+            self.destroy_timer(self.timer)
+            self.timer = self.create_timer(1.0 / cand["publish_rate"], self._tick)
+            # the new timer's first tick comes a full new period from now; it is due a period
+            # after the last one, so it steps that much less (its budget's deadline) and the
+            # ~/stats interval across the change stays under 1.8 new periods (it reached 2)
+            self._next_tick = (None if self._last_tick is None
+                               else self._last_tick + 1.0 / cand["publish_rate"])
+            self._resync = True
+
+    def _apply_live(self, cand: dict) -> None:
+        sim, cur = self.sim, self.cfg
+        for f in sim.model.family_names:
+            if cand[f"stiffness.{f}"] != cur[f"stiffness.{f}"]:
+                sim.set_stiffness(f, cand[f"stiffness.{f}"])
+            if cand[f"damping.{f}"] != cur[f"damping.{f}"]:
+                sim.set_damping(f, cand[f"damping.{f}"])
+        if cand["integrator"] != sim.integrator:
+            sim.set_integrator(cand["integrator"])
+        if cand["dt"] != sim.dt:
+            sim.dt = cand["dt"]
+        if cand["gravity"] != cur["gravity"]:
+            sim.gravity = cand["gravity"]
+        if (cand["wind.strength"], cand["wind.direction"]) != (cur["wind.strength"],
+                                                              cur["wind.direction"]):
+            sim.wind = _wind(cand)
+        if cand["drag"] != cur["drag"]:
+            sim.drag = cand["drag"]
+        if cand["strain_limit"] != cur["strain_limit"]:
+            sim.strain_limit = cand["strain_limit"] or None
+        if cand["strain_limit_passes"] != cur["strain_limit_passes"]:
+            sim.strain_limit_passes = cand["strain_limit_passes"]
+        if cand["thickness"] != cur["thickness"]:
+            sim.thickness = cand["thickness"]
+        if cand["self_collision"] != cur["self_collision"]:
+            sim.self_collision = cand["self_collision"]
+
+    def _check_rate(self, cand: dict) -> str | None:
+        """A rate is refused only when the measured cost of stepping and publishing exceeds the
+        time available many times over (RATE_REFUSAL_LOAD): measured costs are noisy, and a tick
+        that does not fit only lowers the real-time factor (ticks are bounded, /diagnostics warns).
+        A rate the node has run with is never refused."""
+        if len(self._tick_costs) < 10:
+            return None
+        steps = sum(c[0] for c in self._tick_costs)
+        step_wall = sum(c[1] for c in self._tick_costs)
+        pub_wall = sum(c[2] for c in self._tick_costs) / len(self._tick_costs)
+        per_step = step_wall / steps if steps else 0.0
+        load = per_step / cand["dt"] + cand["publish_rate"] * pub_wall
+        if load > RATE_REFUSAL_LOAD:
+            return (f"publish_rate={cand['publish_rate']:g} Hz cannot be met: stepping "
+                    f"({1e3 * per_step:.3f} ms/step at dt={cand['dt']:g}) and publishing "
+                    f"({1e3 * pub_wall:.3f} ms/tick) would need {load:.2f} s of work per second; "
+                    f"lower publish_rate, or raise dt")
+        return None
+
+    def stable_dt(self) -> float:
+        """The current method's stable_dt (``inf`` for unconditionally stable methods)."""
+        return self._stable_dt

@@ -1,0 +1,118 @@
+"""Manipulation: grippers (``~/grasp``, ``~/release``, ``~/grippers/<name>/pose`` in and
+``~/grippers/<name>/wrench`` out) and the colliders' pose topics (``~/colliders/<name>/pose``). A pose
+received is reached over the next tick's steps (see the node's ``_advance``).
+"""
+
+from __future__ import annotations
+
+from geometry_msgs.msg import PoseStamped, WrenchStamped
+
+from ..scene import GRIPPER_NAME
+from . import messages
+
+
+class Manipulation:
+    """Grippers and collider poses (a mixin of :class:`~cloth_sim.ros.node.ClothSimNode`)."""
+
+    def _on_grasp(self, request, response):
+        p = request.point
+        name = request.gripper
+        response.success, response.count = False, 0
+        if not GRIPPER_NAME.fullmatch(name or ""):  # the same rule as a scene's gripper names
+            response.message = (f"gripper = {name!r}: expected a name of ASCII letters, digits and _ "
+                                f"(not starting with a digit, at most 64); it names its topics")
+            return response
+        try:
+            idx = self.sim.grasp(name, (p.x, p.y, p.z), request.radius)
+        except ValueError as e:
+            response.message = str(e)
+            return response
+        self._gripper_topics(name)
+        response.success, response.count = True, len(idx)
+        response.message = f"gripper {name!r} holds {len(idx)} particles"
+        return response
+
+    def _gripper_topics(self, name: str) -> None:
+        pose_sub = self.create_subscription(
+            PoseStamped, f"~/grippers/{name}/pose",
+            lambda msg, name=name: self._on_pose(("gripper", name), f"~/grippers/{name}/pose", msg), 10)
+        wrench_pub = self.create_publisher(WrenchStamped, f"~/grippers/{name}/wrench", 10)
+        self._grippers[name] = (pose_sub, wrench_pub)
+
+    def _adopt_grippers(self) -> None:
+        """Topics for the grippers the scene declares (the simulator holds with them already)."""
+        for name in self.sim.grippers:
+            if name not in self._grippers:
+                self._gripper_topics(name)
+
+    def release_gripper(self, name: str) -> None:
+        """Let go with gripper ``name`` and drop its topics (``ValueError`` for an unknown one)."""
+        self.sim.release(name)
+        sub, pub = self._grippers.pop(name)
+        self.destroy_subscription(sub)
+        self.destroy_publisher(pub)
+        self._pose_targets.pop(("gripper", name), None)
+
+    def _on_release(self, request, response):
+        name = request.gripper
+        try:
+            self.release_gripper(name)
+        except ValueError as e:
+            response.success, response.message = False, str(e)
+            return response
+        response.success, response.message = True, f"gripper {name!r} released"
+        return response
+
+    def _drop_grippers(self) -> None:
+        """A rebuild or a reset: the grippers' particles are gone or back in place; so are they."""
+        for sub, pub in self._grippers.values():
+            self.destroy_subscription(sub)
+            self.destroy_publisher(pub)
+        self._grippers = {}
+        self._pose_targets = {k: v for k, v in self._pose_targets.items() if k[0] != "gripper"}
+
+    def _subscribe_colliders(self) -> None:
+        """``~/colliders/<name>/pose`` for each collider of the current scene (again after a
+        scene change)."""
+        for sub in self._pose_subs:
+            self.destroy_subscription(sub)
+        self._pose_subs = []
+        self._pose_targets = {k: v for k, v in self._pose_targets.items() if k[0] != "collider"}
+        for i, c in enumerate(self.sim.colliders):
+            topic = f"~/colliders/{c.name}/pose"
+            self._pose_subs.append(self.create_subscription(
+                PoseStamped, topic, lambda msg, i=i, topic=topic: self._on_pose(("collider", i), topic, msg),
+                10))
+
+    def colliders_changed(self) -> None:
+        """After a collider was spawned or deleted: the pose topics follow the new list."""
+        self._subscribe_colliders()
+
+    def _on_pose(self, key, topic: str, msg) -> None:
+        """A new pose for a collider or a gripper: checked here (a bad one is logged, naming the
+        field, and ignored), reached over the next tick's steps (its velocity is the pose change
+        over them)."""
+        position, orientation, problem = messages.checked_pose(msg.pose, msg.header.frame_id,
+                                                               self.cfg["frame_id"])
+        if problem:
+            self.get_logger().warning(f"{topic} ignored: {problem}", throttle_duration_sec=1.0)
+            return
+        self._pose_targets[key] = (position, orientation)
+
+    def _pose_moves(self) -> dict:
+        """``{key: (p0, q0, p1, q1)}``: from where each moved collider or gripper is to its target
+        (the quaternion's sign chosen for the shorter way)."""
+        moves, sim = {}, self.sim
+        for (kind, key), (p1, q1) in self._pose_targets.items():
+            if kind == "collider":
+                c = sim.colliders[key]
+                p0, q0 = c.position.copy(), c.orientation.copy()
+            elif key in sim.grippers:
+                p0, q0 = sim.gripper_pose(key)
+            else:
+                continue
+            if float(q0 @ q1) < 0:
+                q1 = -q1
+            moves[(kind, key)] = (p0, q0, p1, q1)
+        self._pose_targets = {}
+        return moves
