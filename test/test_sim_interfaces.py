@@ -286,3 +286,61 @@ def test_a_spawned_sphere_is_hit_by_the_cloth_and_a_deleted_one_no_longer_is(ros
     R2 = srv.ResetSimulation.Request
     assert call(ros, srv.ResetSimulation, "reset_simulation", scope=R2.SCOPE_SPAWNED).result.result == Result.RESULT_OK
     assert not [n for n in call(ros, srv.GetEntities, "get_entities").entities if n.startswith("collider/")]
+
+
+def test_a_node_process_is_driven_through_the_standard_from_another_process():
+    """The same calls a Gazebo harness makes, to a cloth_sim_node process: features, pause, exactly
+    n steps, and the state they leave."""
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    from test_node import next_domain, node_env
+
+    domain = next_domain()
+    exe = Path(sys.executable).parent / "cloth_sim_node"
+    proc = subprocess.Popen([str(exe), "--ros-args", "-p", "rows:=12", "-p", "cols:=12", "-p",
+                             "spacing:=0.09"], env=node_env(domain), stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    client = rclpy.create_node("harness", context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(client)
+
+    def call(kind, name, **fields):
+        cli = client.create_client(kind, f"{NS}/{name}")
+        end = time.monotonic() + 30
+        while not cli.service_is_ready() and time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.05)
+        fut = cli.call_async(kind.Request(**fields))
+        while not fut.done() and time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.05)
+        assert fut.done(), f"{name} did not answer"
+        return fut.result()
+
+    try:
+        assert SimulatorFeatures.STEP_SIMULATION_MULTIPLE in call(
+            srv.GetSimulatorFeatures, "get_simulator_features").features.features
+        assert call(srv.SetSimulationState, "set_simulation_state",
+                    state=SimulationState(state=SimulationState.STATE_PAUSED)).result.result == Result.RESULT_OK
+        call(srv.ResetSimulation, "reset_simulation", scope=srv.ResetSimulation.Request.SCOPE_TIME)
+        assert call(srv.StepSimulation, "step_simulation", steps=250).result.result == Result.RESULT_OK
+        from cloth_sim.srv import Step
+
+        # ~/step with 0 steps reports the simulated time: exactly the 250 steps of dt = 1 ms
+        assert call(Step, "step", steps=0).sim_time == pytest.approx(0.25, abs=1e-9)
+        state = call(srv.GetSimulationState, "get_simulation_state").state.state
+        assert state == SimulationState.STATE_PAUSED
+    finally:
+        ex.shutdown()
+        client.destroy_node()
+        rclpy.shutdown(context=ctx)
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=20)
+    assert proc.returncode == 0, out
