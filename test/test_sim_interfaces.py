@@ -155,9 +155,9 @@ def test_entities_states_bounds_and_bad_requests(ros):
     assert r.result == srv.SetEntityState.Response.INVALID_POSE and "position" in r.error_message
     req = srv.SetEntityState.Request(entity=sphere)
     req.state.pose.orientation.w = 1.0
-    req.state.twist.linear.x = 1.0
+    req.state.twist.linear.x = math.inf
     r = ros.call(srv.SetEntityState, f"{NS}/set_entity_state", req).result
-    assert r.result == srv.SetEntityState.Response.INVALID_POSE and "kinematic" in r.error_message
+    assert r.result == srv.SetEntityState.Response.INVALID_POSE and "twist" in r.error_message
     # a collider moved by set_entity_state is where get_entity_state says, and the cloth meets it
     req = srv.SetEntityState.Request(entity=sphere)
     req.state.pose.position.x, req.state.pose.position.y, req.state.pose.position.z = 0.5, 0.5, 0.3
@@ -344,3 +344,42 @@ def test_a_node_process_is_driven_through_the_standard_from_another_process():
         proc.send_signal(signal.SIGINT)
         out, _ = proc.communicate(timeout=20)
     assert proc.returncode == 0, out
+
+
+def test_a_twist_keeps_a_kinematic_collider_moving_and_drags_what_rests_on_it(ros):
+    """set_entity_state with a twist: the table moves at that velocity, step by step (exactly
+    v·n·dt after n steps), turns at its angular velocity, reports the twist, and carries the cloth
+    lying on it by friction; a zero twist stops it."""
+    node = ros.start(scene="table", rows=10, cols=10, spacing=0.06)
+    set_state(ros, SimulationState.STATE_PAUSED)
+    call(ros, srv.StepSimulation, "step_simulation", steps=800)  # the cloth settles on the table
+    table = node.sim.colliders[0]
+    p0, q0 = table.position.copy(), table.orientation.copy()
+    on_table = table.signed_distance(node.sim.positions) < 2 * node.sim.thickness
+    x0 = node.sim.positions[on_table].mean(axis=0)
+    req = srv.SetEntityState.Request(entity=f"collider/{table.name}")
+    (req.state.pose.position.x, req.state.pose.position.y, req.state.pose.position.z) = p0
+    (req.state.pose.orientation.w, req.state.pose.orientation.x, req.state.pose.orientation.y,
+     req.state.pose.orientation.z) = q0
+    req.state.twist.linear.y = 0.2
+    assert ros.call(srv.SetEntityState, f"{NS}/set_entity_state", req).result.result == Result.RESULT_OK
+    state = call(ros, srv.GetEntityState, "get_entity_state", entity=f"collider/{table.name}").state
+    assert state.twist.linear.y == 0.2
+    n = 500
+    call(ros, srv.StepSimulation, "step_simulation", steps=n)
+    assert table.position == pytest.approx(p0 + [0.0, 0.2 * n * node.sim.dt, 0.0], abs=1e-12)
+    # what rests on it went along (friction): most of the table's 0.1 m
+    moved = node.sim.positions[on_table].mean(axis=0) - x0
+    assert moved[1] > 0.05
+    req.state.twist.linear.y = 0.0
+    (req.state.pose.position.x, req.state.pose.position.y, req.state.pose.position.z) = table.position
+    ros.call(srv.SetEntityState, f"{NS}/set_entity_state", req)
+    p1 = table.position.copy()
+    call(ros, srv.StepSimulation, "step_simulation", steps=50)
+    np.testing.assert_array_equal(table.position, p1)
+    # an angular velocity turns it: a quarter turn about z in pi/2 s
+    req.state.twist.angular.z = 1.0
+    ros.call(srv.SetEntityState, f"{NS}/set_entity_state", req)
+    call(ros, srv.StepSimulation, "step_simulation", steps=int(round(math.pi / 2 / node.sim.dt)))
+    angle = 2 * math.atan2(table.orientation[3], table.orientation[0]) - 2 * math.atan2(q0[3], q0[0])
+    assert angle == pytest.approx(math.pi / 2, abs=2e-3)

@@ -5,6 +5,9 @@ received is reached over the next tick's steps (see the node's ``_advance``).
 
 from __future__ import annotations
 
+import math
+
+import numpy as np
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 
 from ..scene import GRIPPER_NAME
@@ -13,6 +16,45 @@ from . import messages
 
 class Manipulation:
     """Grippers and collider poses (a mixin of :class:`~cloth_sim.ros.node.ClothSimNode`)."""
+
+    #: ``{("collider" | "gripper", name): (linear, angular)}``: kinematic velocities (world frame,
+    #: m/s and rad/s) given by the standard's ``set_entity_state``, applied before every step
+    _twists: dict = {}
+
+    def set_twist(self, kind: str, name: str, linear, angular) -> None:
+        """Keep collider or gripper ``name`` moving at this twist from the next step on (zero
+        stops it); a pose received on its topic stops it too."""
+        twists = dict(self._twists)
+        if np.any(linear) or np.any(angular):
+            twists[(kind, name)] = (np.array(linear, float), np.array(angular, float))
+        else:
+            twists.pop((kind, name), None)
+        self._twists = twists
+
+    def twist(self, kind: str, name: str):
+        """``(linear, angular)`` the entity moves at (zeros when it is not moving by a twist)."""
+        return self._twists.get((kind, name), (np.zeros(3), np.zeros(3)))
+
+    def _apply_twists(self, dt: float) -> None:
+        """Each moving collider and gripper one step of ``dt`` further along its twist (an entity
+        gone since is dropped)."""
+        sim = self.sim
+        index = {c.name: i for i, c in enumerate(sim.colliders)}
+        for (kind, name), (v, w) in list(self._twists.items()):
+            if (kind == "collider" and name not in index) or (kind == "gripper"
+                                                              and name not in sim.grippers):
+                self.set_twist(kind, name, 0, 0)
+                continue
+            if kind == "collider":
+                c = sim.colliders[index[name]]
+                p, q = c.position, c.orientation
+            else:
+                p, q = sim.gripper_pose(name)
+            q = _turn(q, w, dt)
+            if kind == "collider":
+                sim.set_collider_pose(index[name], p + v * dt, q)
+            else:
+                sim.set_gripper_pose(name, p + v * dt, q)
 
     def _on_grasp(self, request, response):
         p = request.point
@@ -97,6 +139,8 @@ class Manipulation:
         if problem:
             self.get_logger().warning(f"{topic} ignored: {problem}", throttle_duration_sec=1.0)
             return
+        kind, which = key
+        self.set_twist(kind, self.sim.colliders[which].name if kind == "collider" else which, 0, 0)
         self._pose_targets[key] = (position, orientation)
 
     def _pose_moves(self) -> dict:
@@ -116,3 +160,17 @@ class Manipulation:
             moves[(kind, key)] = (p0, q0, p1, q1)
         self._pose_targets = {}
         return moves
+
+
+def _turn(q, w, dt: float) -> np.ndarray:
+    """The unit quaternion ``q`` (w, x, y, z) turned by the world-frame angular velocity ``w`` over
+    ``dt``: ``exp(w·dt/2) ⊗ q``."""
+    angle = float(np.linalg.norm(w)) * dt
+    if angle == 0.0:
+        return np.asarray(q, float)
+    axis = np.asarray(w, float) / np.linalg.norm(w)
+    a0, (a1, a2, a3) = math.cos(angle / 2), math.sin(angle / 2) * axis
+    b0, b1, b2, b3 = q
+    out = np.array([a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3, a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
+                    a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1, a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0])
+    return out / np.linalg.norm(out)

@@ -250,6 +250,8 @@ class ClothSimNode(ParameterGate, SimulationControl, Manipulation, Publishing, N
                         sim.set_gripper_pose(key, (1 - f) * p0 + f * p1, q)
                 if f >= 1.0:
                     moves = None
+            if self._twists:  # colliders and grippers moving at a set velocity
+                self._apply_twists(sim.dt)
             s0 = time.perf_counter()
             sim.step()
             el = time.perf_counter() - s0

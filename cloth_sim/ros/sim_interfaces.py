@@ -9,7 +9,7 @@ supported (:data:`FEATURES`); every other service of the standard exists too and
 ``RESULT_FEATURE_UNSUPPORTED`` with a message, never a time-out.
 
 Entities: ``cloth`` (the cloth itself, CATEGORY_OBJECT), ``collider/<name>`` (the scene's
-colliders, CATEGORY_STATIC_OBJECT: kinematic, moved by pose) and ``gripper/<name>`` (each gripper
+colliders, CATEGORY_STATIC_OBJECT: kinematic, moved by pose or at a set twist) and ``gripper/<name>`` (each gripper
 holding the cloth, CATEGORY_ROBOT). States are in the node's ``frame_id``.
 
 Simulation states: PLAYING (ticking), PAUSED (``~/pause``), STOPPED (reset to the start and paused;
@@ -307,6 +307,9 @@ class SimulationInterfaces:
             p, q = c.position, c.orientation
         else:
             p, q = sim.gripper_pose(key)
+        v, w = node.twist(kind, key)
+        state.twist.linear = _vec(v)
+        state.twist.angular = _vec(w)
         state.pose.position.x, state.pose.position.y, state.pose.position.z = (float(a) for a in p)
         (state.pose.orientation.w, state.pose.orientation.x, state.pose.orientation.y,
          state.pose.orientation.z) = (float(a) for a in q)
@@ -332,11 +335,12 @@ class SimulationInterfaces:
             return response
         position, orientation, problem = checked_pose(state.pose, state.header.frame_id,
                                                       self.node.cfg["frame_id"], prefix="state.")
-        twist = state.twist
-        if problem is None and any((twist.linear.x, twist.linear.y, twist.linear.z,
-                                    twist.angular.x, twist.angular.y, twist.angular.z)):
-            problem = ("state.twist: cloth_sim's colliders and grippers are kinematic, moved by pose; "
-                       "give a zero twist (the pose is reached over the next step)")
+        t = state.twist
+        linear = np.array([t.linear.x, t.linear.y, t.linear.z])
+        angular = np.array([t.angular.x, t.angular.y, t.angular.z])
+        if problem is None and not (np.all(np.isfinite(linear)) and np.all(np.isfinite(angular))):
+            problem = (f"state.twist = {linear.tolist()}, {angular.tolist()}: expected finite "
+                       f"linear and angular velocities")
         if problem:
             response.result = result(srv.SetEntityState.Response.INVALID_POSE, problem)
             return response
@@ -347,6 +351,7 @@ class SimulationInterfaces:
             sim.set_collider_pose(index, position, orientation)
         else:
             sim.set_gripper_pose(key, position, orientation)
+        self.node.set_twist(kind, key, linear, angular)  # kinematic: it keeps this velocity
         response.result = result()
         return response
 
