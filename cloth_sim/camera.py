@@ -414,3 +414,55 @@ def render_colliders(kinds, pos, rot, geo, intr, depth, obj, tri):
                     depth[v, u] = z
                     obj[v, u] = 1 + i
                     tri[v, u] = -1
+
+
+def look_at_orientation(position, target) -> np.ndarray:
+    """The optical frame's unit quaternion ``(w, x, y, z)`` for a camera at ``position`` looking at
+    ``target``: z along the view, image up (−y) towards world +z (world +y when looking straight up
+    or down, −y straight up), x = y × z. ``ValueError`` when the two points coincide."""
+    p, t = _vector("camera.position", position), _vector("camera.look_at", target)
+    z = t - p
+    if not np.linalg.norm(z) > 1e-9:
+        raise ValueError(f"camera.look_at must be a point other than camera.position = {p.tolist()}")
+    z /= np.linalg.norm(z)
+    # straight down or up: image up along world +y or −y, so that (0, 1, 0, 0) and (1, 0, 0, 0)
+    # are those views' orientations, as the contract has them
+    up = np.array([0.0, 0.0, 1.0]) if abs(z[2]) < 1 - 1e-9 else np.array([0.0, -np.sign(z[2]), 0.0])
+    y = -(up - (up @ z) * z)
+    y /= np.linalg.norm(y)
+    x = np.cross(y, z)
+    return matrix_quaternion(np.stack([x, y, z], axis=1))
+
+
+def matrix_quaternion(R: np.ndarray) -> np.ndarray:
+    """The unit quaternion ``(w, x, y, z)`` of a rotation matrix (Shepperd's method), ``w ≥ 0``."""
+    tr = R[0, 0] + R[1, 1] + R[2, 2]
+    if tr > 0:
+        s = 2.0 * math.sqrt(1.0 + tr)
+        q = [0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s]
+    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
+        q = [(R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s]
+    elif R[1, 1] > R[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
+        q = [(R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s]
+    else:
+        s = 2.0 * math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
+        q = [(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s]
+    q = np.array(q)
+    return q / np.linalg.norm(q) * (1.0 if q[0] >= 0 else -1.0)
+
+
+def camera_from_settings(settings: dict, seed: int = 0) -> DepthCamera:
+    """A :class:`DepthCamera` from the node's ``camera.*`` settings (keys without the prefix:
+    width, height, fov in degrees, position, look_at, near, far, noise "none" or "kinect")."""
+    w, h = int(settings["width"]), int(settings["height"])
+    f = 0.5 * w / math.tan(math.radians(float(settings["fov"])) / 2)
+    noise = None if settings["noise"] == "none" else settings["noise"]
+    if not float(settings["far"]) > float(settings["near"]):
+        raise ValueError(f"camera.far = {settings['far']!r} is not accepted: expected a distance above "
+                         f"camera.near = {settings['near']!r}")
+    return DepthCamera(width=w, height=h, fx=f, fy=f, cx=(w - 1) / 2, cy=(h - 1) / 2,
+                       position=settings["position"],
+                       orientation=look_at_orientation(settings["position"], settings["look_at"]),
+                       near=float(settings["near"]), far=float(settings["far"]), noise=noise, seed=seed)

@@ -193,6 +193,27 @@ def _schema() -> dict[str, Param]:
           "with it (for use_sim_time nodes, lockstep tests, data generation).", apply="node"),
         P("real_time_factor", float, "", "Simulated seconds per wall-clock second the node aims at; "
           "0 runs as fast as the CPU allows.", lo=0.0, hi=1000.0, apply="node"),
+        P("camera.enable", bool, "", "Render and publish the depth camera (~/camera/...) while "
+          "its topics are subscribed.", apply="node", scene_key="camera.enable"),
+        P("camera.width", int, "px", "Depth image width.", lo=1, hi=4096, apply="node",
+          scene_key="camera.width"),
+        P("camera.height", int, "px", "Depth image height.", lo=1, hi=4096, apply="node",
+          scene_key="camera.height"),
+        P("camera.fov", float, "deg", "Horizontal field of view (square pixels, principal point "
+          "at the image centre).", lo=1.0, hi=170.0, apply="node", scene_key="camera.fov"),
+        P("camera.position", "vector3", "m", "Where the camera is, in frame_id.", lo=-1e3, hi=1e3,
+          apply="node", scene_key="camera.position"),
+        P("camera.look_at", "vector3", "m", "The point the optical axis goes through, in frame_id "
+          "(image up is world +z, or +y looking straight up or down).", lo=-1e3, hi=1e3,
+          apply="node", scene_key="camera.look_at"),
+        P("camera.rate", float, "Hz", "Images per second of wall time.", lo=0.1, hi=120.0,
+          apply="node", scene_key="camera.rate"),
+        P("camera.near", float, "m", "Nearest depth seen.", lo=1e-3, hi=1e3, apply="node",
+          scene_key="camera.near"),
+        P("camera.far", float, "m", "Farthest depth seen (above camera.near).", lo=1e-3, hi=1e4,
+          apply="node", scene_key="camera.far"),
+        P("camera.noise", str, "", "Depth noise model: none, or kinect (Nguyen et al. 2012's axial "
+          "noise).", choices=("none", "kinect"), apply="node", scene_key="camera.noise"),
         P("thickness", float, "m", "Distance the cloth keeps from every collider and, with "
           "self_collision, from its own non-adjacent triangles.", lo=0.0, lo_open=True, hi=1.0,
           scene_key="thickness"),

@@ -64,6 +64,10 @@ from .parameters import SCHEMA, ParameterError
 from .simulator import Simulator
 
 EDGES = ("first_row", "last_row", "first_col", "last_col")
+#: the depth camera's settings when a scene does not give them (scene key ``camera``)
+CAMERA_DEFAULTS = {"enable": False, "width": 640, "height": 480, "fov": 60.0,
+                   "position": [0.5, -1.0, 1.0], "look_at": [0.5, 0.5, 0.0], "rate": 30.0,
+                   "near": 0.1, "far": 10.0, "noise": "none"}
 
 
 class SceneError(ValueError):
@@ -101,6 +105,8 @@ class Scene:
     source: str = "<dict>"
     #: a mesh scene: ``{file (Path), scale, density, position, orientation}``; ``None`` for a grid
     mesh: dict | None = None
+    #: the depth camera's settings (the node's camera.* parameters), CAMERA_DEFAULTS where not given
+    camera: dict = field(default_factory=lambda: dict(CAMERA_DEFAULTS))
     #: a mesh scene's pins by place: ``(lo, hi)`` corners of a box in world coordinates, or None
     pinned_box: tuple | None = None
 
@@ -323,7 +329,7 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
         v.fail("(top level)", "a mapping of scene fields", data)
     known = {"name", "grid", "mesh", "model", "particle_mass", "stiffness", "damping", "pinned",
              "pinned_edges", "pinned_box", "gravity", "wind", "drag", "strain_limit", "integrator",
-             "dt", "thickness", "self_collision", "colliders", "grippers"}
+             "dt", "thickness", "self_collision", "colliders", "grippers", "camera"}
     v.known("", data, known)
     if "mesh" in data:
         if "grid" in data:
@@ -351,6 +357,13 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
     if s.self_collision and s.mesh is None and s.thickness > MAX_THICKNESS_FRACTION * s.spacing:
         v.fail("thickness", f"at most {MAX_THICKNESS_FRACTION:g} × grid.spacing = "
                f"{MAX_THICKNESS_FRACTION * s.spacing:.4g} m with self_collision on", s.thickness)
+    cam = data.get("camera", {}) or {}
+    if not isinstance(cam, dict):
+        v.fail("camera", "a mapping of camera settings (enable, width, height, fov, position, "
+               "look_at, rate, near, far, noise)", cam)
+    v.known("camera.", cam, set(CAMERA_DEFAULTS))
+    s.camera = {k: v.param(f"camera.{k}", cam.get(k, default)) for k, default in CAMERA_DEFAULTS.items()}
+    # (near < far and look_at ≠ position are checked where the camera is built: the node's gate)
     cols_ = data.get("colliders", []) or []
     if not isinstance(cols_, list):
         v.fail("colliders", "a list of collider mappings", cols_)

@@ -695,4 +695,9 @@ def compile_kernels() -> float:
         runge_kutta_fused(x, v, np.zeros((2, 2)), np.ones(2), 1e-4, k[0], k[1], np.zeros_like(x),
                           np.zeros(2), *springs, gravity, inv_mass)
         combine_parallel(x, v, x, v, k[0], k[1], np.ones(2))
+        # the depth camera's kernels (triangles, each collider shape)
+        from .camera import DepthCamera
+
+        DepthCamera(width=8, height=6, fx=5.0, fy=5.0, cx=3.5, cy=2.5, position=(0.2, 0.2, 1.0),
+                    noise="kinect").render(sim)
     return time.perf_counter() - t0

@@ -241,7 +241,7 @@ def run(sets: int, seed: int, domain: int, quiet: bool = False, keep: int = 3) -
     figures = dict(sets=0, accepted=0, refused=0, crashes=0, hangs=0, slow_answers=0, invalid_accepted=0,
                    valid_refused=0, unnamed_refusals=0, nonfinite_clouds=0, clouds=0,
                    mismatches=0, unexpected_blowups=0, dt_independent_runaways=0, stability_refusals=0,
-                   scene_kind_refusals=0,
+                   scene_kind_refusals=0, camera_refusals=0,
                    rate_refusals=0, thickness_refusals=0)
     examples: dict[str, list] = {}
 
@@ -391,6 +391,18 @@ def run(sets: int, seed: int, domain: int, quiet: bool = False, keep: int = 3) -
                             note("valid_refused", (params, r.reason))
                     elif "cannot be met" in r.reason:
                         figures["rate_refusals"] += 1
+                    elif "camera.far" in r.reason or "camera.look_at must be a point" in r.reason:
+                        # the camera's combinations: right only when the camera is on and its far
+                        # is not above its near, or it looks at its own position
+                        figures["camera_refusals"] += 1
+                        cand = dict(before_cfg if atomic else running)
+                        for n, v in (params if atomic else [(name, value)]):
+                            if n in SCHEMA and n != "scene":
+                                cand[n] = SCHEMA[n].check(v)
+                        if "scene" not in names and not (cand["camera.enable"] and (
+                                cand["camera.far"] <= cand["camera.near"]
+                                or cand["camera.position"] == cand["camera.look_at"])):
+                            note("valid_refused", (params, r.reason))
                     elif "not used by scene" in r.reason:
                         # a mesh's density on a grid (the fuzz's scenes are grids): right only when
                         # the batch changes it

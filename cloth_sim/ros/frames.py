@@ -3,7 +3,8 @@
 * ``/tf_static`` (transient local, as tf2's static broadcaster): ``world_frame_id`` → ``frame_id``,
   the identity — the simulation's frame placed in the world — again whenever either name changes;
 * ``/tf``: each collider and gripper in ``frame_id`` (``<frame_id>/collider/<name>``,
-  ``<frame_id>/gripper/<name>``), every tick while ``/tf`` has a subscriber.
+  ``<frame_id>/gripper/<name>``) and the depth camera's optical frame (``<frame_id>/camera_optical``),
+  every tick while ``/tf`` has a subscriber.
 
 The messages are built by :func:`cloth_sim.ros.messages.transform` and
 :func:`~cloth_sim.ros.messages.entity_frames`.
@@ -39,7 +40,9 @@ class Frames:
                                self.node.get_clock().now().to_msg())
         self.static_pub.publish(TFMessage(transforms=[t]))
 
-    def publish(self, sim, frame: str, stamp) -> None:
-        """The colliders' and grippers' frames on ``/tf`` (only while someone listens)."""
-        if (sim.colliders or sim.grippers) and self.pub.get_subscription_count() > 0:
-            self.pub.publish(TFMessage(transforms=messages.entity_frames(sim, frame, stamp)))
+    def publish(self, sim, frame: str, stamp, extra=()) -> None:
+        """The colliders' and grippers' frames, and ``extra`` ones (the camera's), on ``/tf`` (only
+        while someone listens)."""
+        if (sim.colliders or sim.grippers or extra) and self.pub.get_subscription_count() > 0:
+            self.pub.publish(TFMessage(transforms=messages.entity_frames(sim, frame, stamp)
+                                       + list(extra)))

@@ -23,6 +23,7 @@ from ..scene import SceneError, load_scene
 from ..self_collision import check_thickness
 from ..simulator import Simulator
 from . import params as P
+from .camera_publisher import check as camera_check
 
 #: a publish_rate is refused only when the measured cost exceeds the time available this many times
 RATE_REFUSAL_LOAD = 10.0
@@ -216,6 +217,11 @@ class ParameterGate:
             except ValueError as e:  # a finer cloth (rows, spacing, a scene) can be the cause
                 reason = self._blame(parameters, cand, str(e), ("thickness", "self_collision"))
                 return SetParametersResult(successful=False, reason=reason)
+        reason = camera_check(cand)
+        if reason:  # a combination (far above near, look_at away from position): name what changed too
+            named = tuple(n for n in SCHEMA if n.startswith("camera.") and n in reason)
+            return SetParametersResult(successful=False,
+                                       reason=self._blame(parameters, cand, reason, named))
         reason, limit = self._check_stability(cand, model)
         if reason:  # the refusal names what made the limit fall, as well as dt
             return SetParametersResult(successful=False,
@@ -263,6 +269,7 @@ class ParameterGate:
         self.cfg = cand
         self._stable_dt = limit
         self.frames.publish_static(cand["world_frame_id"], cand["frame_id"])
+        self.camera_pub.configure(cand)
         if rate_changed:
             self.timer.cancel()
             self.destroy_timer(self.timer)

@@ -250,3 +250,37 @@ def checked_pose(pose, frame: str, node_frame: str, prefix: str = ""):
         return None, None, (f"{prefix}pose.orientation = {orientation.tolist()} (w, x, y, z): "
                             f"expected a finite, nonzero quaternion")
     return position, orientation / np.linalg.norm(orientation), None
+
+
+def image(values: np.ndarray, encoding: str, frame_id: str, stamp):
+    """``sensor_msgs/Image`` of a 2-D array (``32FC1`` float32 depth in metres with NaN invalid, as
+    REP 118 says; ``16SC1`` and ``32SC1`` labels)."""
+    from sensor_msgs.msg import Image
+
+    a = np.ascontiguousarray(values)
+    msg = Image()
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame_id
+    msg.height, msg.width = a.shape
+    msg.encoding = encoding
+    msg.is_bigendian = sys.byteorder == "big"
+    msg.step = a.shape[1] * a.itemsize
+    msg.data = array.array("B", a.tobytes())
+    return msg
+
+
+def camera_info(camera, frame_id: str, stamp):
+    """``sensor_msgs/CameraInfo`` of a :class:`~cloth_sim.camera.DepthCamera`: pinhole, no
+    distortion (``plumb_bob`` with zeros), ``P = [K | 0]``."""
+    from sensor_msgs.msg import CameraInfo
+
+    msg = CameraInfo()
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame_id
+    msg.width, msg.height = camera.width, camera.height
+    msg.distortion_model = "plumb_bob"
+    msg.d = [0.0] * 5
+    msg.k = [camera.fx, 0.0, camera.cx, 0.0, camera.fy, camera.cy, 0.0, 0.0, 1.0]
+    msg.r = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+    msg.p = [camera.fx, 0.0, camera.cx, 0.0, 0.0, camera.fy, camera.cy, 0.0, 0.0, 0.0, 1.0, 0.0]
+    return msg

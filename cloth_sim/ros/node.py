@@ -42,6 +42,8 @@ from ..scene import SceneError, load_scene
 from ..self_collision import check_thickness
 from ..simulator import SimulationDiverged, compile_kernels
 from . import params as P
+from .camera_publisher import CameraPublisher
+from .camera_publisher import check as camera_check
 from .control import CHECKPOINTS, SimulationControl
 from .frames import Frames
 from .gate import MODEL_KEYS, ParameterGate, _as_declared, _settle_garbage  # noqa: F401 (MODEL_KEYS: fuzz_node)
@@ -159,6 +161,10 @@ class ClothSimNode(ParameterGate, SimulationControl, Manipulation, Publishing, N
         self.interfaces = SimulationInterfaces(self)  # the ROS simulation standard's services
         self.frames = Frames(self)  # TF
         self.frames.publish_static(self.cfg["world_frame_id"], self.cfg["frame_id"])
+        reason = camera_check(self.cfg)
+        if reason:
+            raise StartupError(reason)
+        self.camera_pub = CameraPublisher(self)  # the depth camera's topics
         self.add_pre_set_parameters_callback(self._pre_set)
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._post_set)

@@ -70,6 +70,8 @@ def scene_values(scene: Scene) -> dict:
     else:
         values.update({"rows": int(scene.rows), "cols": int(scene.cols),
                        "spacing": float(scene.spacing), "particle_mass": float(scene.particle_mass)})
+    for k, value in scene.camera.items():  # (the scene's camera, or the default one)
+        values[f"camera.{k}"] = [float(x) for x in value] if isinstance(value, list) else value
     for f in scene.families:
         values[f"stiffness.{f}"] = float(scene.stiffness[f])
         values[f"damping.{f}"] = float(scene.damping[f])

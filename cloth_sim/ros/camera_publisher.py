@@ -1,0 +1,107 @@
+"""The depth camera on the ROS side: renders :class:`cloth_sim.camera.DepthCamera` from the node's
+``camera.*`` parameters at ``camera.rate`` (wall time, its own timer), only while one of its topics
+has a subscriber, and publishes, stamped like every message of the node, in the optical frame
+``<frame_id>/camera_optical`` (on ``/tf`` via :mod:`cloth_sim.ros.frames`):
+
+* ``~/camera/depth/image`` — ``sensor_msgs/Image`` ``32FC1``, metres, NaN where nothing is in range
+  (REP 118);
+* ``~/camera/depth/camera_info`` — the pinhole intrinsics, no distortion;
+* ``~/camera/points`` — an organised ``PointCloud2`` (height × width, float32 x y z, NaN where the
+  image is): what ``depth_image_proc/point_cloud_xyz`` makes of the image;
+* ``~/camera/labels`` — ``16SC1``: −1 nothing, 0 the cloth, 1 + i collider i (the ground truth), and
+  ``~/camera/triangles`` — ``32SC1``: the cloth triangle each pixel sees, −1 elsewhere.
+"""
+
+from __future__ import annotations
+
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+
+from ..camera import camera_from_settings
+from . import messages
+
+#: the node's camera parameters, without their ``camera.`` prefix
+SETTINGS = ("enable", "width", "height", "fov", "position", "look_at", "rate", "near", "far", "noise")
+
+
+def settings(cfg: dict) -> dict:
+    return {k: cfg[f"camera.{k}"] for k in SETTINGS}
+
+
+def check(cfg: dict) -> str | None:
+    """The reason ``cfg``'s camera cannot be built (naming the parameter), ``None`` when it can or
+    is off."""
+    if not cfg["camera.enable"]:
+        return None
+    try:
+        camera_from_settings(settings(cfg))
+    except ValueError as e:
+        return str(e)
+    return None
+
+
+class CameraPublisher:
+    """The camera's topics and timer on ``node``."""
+
+    def __init__(self, node):
+        self.node = node
+        self.image_pub = node.create_publisher(Image, "~/camera/depth/image", 5)
+        self.info_pub = node.create_publisher(CameraInfo, "~/camera/depth/camera_info", 5)
+        self.points_pub = node.create_publisher(PointCloud2, "~/camera/points", 5)
+        self.labels_pub = node.create_publisher(Image, "~/camera/labels", 5)
+        self.triangles_pub = node.create_publisher(Image, "~/camera/triangles", 5)
+        self.camera = None
+        self.timer = None
+        self.frames = 0
+        self._settings = None
+        self.configure(node.cfg)
+
+    def optical_frame(self) -> str:
+        return f"{self.node.cfg['frame_id']}/camera_optical"
+
+    def transforms(self, stamp) -> list:
+        """The optical frame in ``frame_id``, for ``/tf`` (none while the camera is off)."""
+        if self.camera is None:
+            return []
+        return [messages.transform(self.node.cfg["frame_id"], self.optical_frame(),
+                                   self.camera.position, self.camera.orientation, stamp)]
+
+    def configure(self, cfg: dict) -> None:
+        """Build the camera from ``cfg`` (already checked by :func:`check`) and time it; off when
+        ``camera.enable`` is false. A first tiny render compiles or loads the kernels, here rather
+        than in a tick."""
+        new = settings(cfg)
+        if new == self._settings:
+            return
+        self._settings = new
+        if self.timer is not None:
+            self.node.destroy_timer(self.timer)
+            self.timer = None
+        self.camera = camera_from_settings(new) if new["enable"] else None
+        if self.camera is not None:
+            # compiled (or loaded) for any size by a tiny image: a 4096² one would hold up the
+            # parameter answer
+            camera_from_settings({**new, "width": 4, "height": 3}).render(self.node.sim)
+            self.timer = self.node.create_timer(1.0 / float(new["rate"]), self._on_timer)
+
+    def _subscribed(self) -> bool:
+        return any(p.get_subscription_count() > 0 for p in (
+            self.image_pub, self.info_pub, self.points_pub, self.labels_pub, self.triangles_pub))
+
+    def _on_timer(self) -> None:
+        if self.camera is None or not self._subscribed():
+            return
+        frame = self.camera.render(self.node.sim)
+        stamp, optical = self.node.stamp(), self.optical_frame()
+        self.frames += 1
+        if self.image_pub.get_subscription_count():
+            self.image_pub.publish(messages.image(frame.depth, "32FC1", optical, stamp))
+        if self.info_pub.get_subscription_count():
+            self.info_pub.publish(messages.camera_info(self.camera, optical, stamp))
+        if self.points_pub.get_subscription_count():
+            pts = frame.points()
+            self.points_pub.publish(messages.point_cloud(pts.reshape(-1, 3), pts.shape[0], pts.shape[1],
+                                                         optical, stamp))
+        if self.labels_pub.get_subscription_count():
+            self.labels_pub.publish(messages.image(frame.object, "16SC1", optical, stamp))
+        if self.triangles_pub.get_subscription_count():
+            self.triangles_pub.publish(messages.image(frame.triangle, "32SC1", optical, stamp))
