@@ -126,10 +126,9 @@ def weld(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return vertices[first[order]], index[faces], index
 
 
-def check_mesh(vertices: np.ndarray, faces: np.ndarray, name: str) -> None:
+def check_indices(vertices: np.ndarray, faces: np.ndarray, name: str) -> None:
     """``ValueError`` naming ``name`` and the element for: no triangles, a vertex index out of range,
-    a non-finite coordinate, a degenerate triangle (a repeated corner or zero area), the same
-    triangle twice, an edge shared by more than two triangles, a vertex in no triangle."""
+    a non-finite coordinate (what welding needs sound; :func:`check_mesh` checks the rest)."""
     n, t = len(vertices), len(faces)
     if t == 0:
         raise ValueError(f"{name}: the mesh has no triangles")
@@ -142,6 +141,14 @@ def check_mesh(vertices: np.ndarray, faces: np.ndarray, name: str) -> None:
     if len(bad):
         raise ValueError(f"{name}: vertex {int(bad[0])} has a non-finite coordinate "
                          f"{vertices[bad[0]].tolist()}")
+
+
+def check_mesh(vertices: np.ndarray, faces: np.ndarray, name: str) -> None:
+    """:func:`check_indices`, and a ``ValueError`` naming ``name`` and the element for: a degenerate
+    triangle (a repeated corner or zero area), the same triangle twice, an edge shared by more
+    than two triangles, a vertex in no triangle."""
+    check_indices(vertices, faces, name)
+    n = len(vertices)
     a, b, c = (vertices[faces[:, k]] for k in range(3))
     area2 = np.linalg.norm(np.cross(b - a, c - a), axis=1)
     longest2 = np.max([((b - a) ** 2).sum(1), ((c - b) ** 2).sum(1), ((a - c) ** 2).sum(1)], axis=0)

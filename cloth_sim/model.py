@@ -258,9 +258,10 @@ class ClothModel:
             pos, _, rot = check_pose(position, orientation)
         except ValueError as e:
             raise ValueError(f"from_mesh: {e}") from None
-        M.check_mesh(vertices, faces, name)  # before welding: indices and coordinates as given
+        M.check_indices(vertices, faces, name)  # before welding: indices and coordinates as given
         x, tris, index = M.weld(vertices, faces)
-        M.check_mesh(x, tris, name)  # after: welding can make a triangle degenerate or an edge shared
+        M.check_mesh(x, tris, name)  # the rest after: welding can make a triangle degenerate or an
+        # edge shared, and leaves no unused duplicate of a vertex
         x = x @ rot.T + pos
         structural, bend = M.mesh_springs(tris, len(x))
         springs = np.concatenate([structural, bend]).astype(np.int64)

@@ -401,10 +401,9 @@ def _grid_scene(v: "_Validator", data: dict, source: str, name: str) -> Scene:
     if not isinstance(grid, dict):
         v.fail("grid", "a mapping with rows, cols, spacing (or a mesh mapping instead)", grid)
     v.known("grid.", grid, {"rows", "cols", "spacing", "orientation", "origin"})
-    for key in ("pinned_box",):
-        if key in data:
-            raise SceneError(f"{source}: field '{key}' is for mesh scenes; a grid pins (row, col) "
-                             f"cells with pinned and pinned_edges")
+    if "pinned_box" in data:
+        raise SceneError(f"{source}: field 'pinned_box' is for mesh scenes; a grid pins (row, col) "
+                         f"cells with pinned and pinned_edges")
     s = Scene(name=str(data.get("name", name)), source=source,
               rows=v.param("rows", grid.get("rows")), cols=v.param("cols", grid.get("cols")),
               spacing=v.param("spacing", grid.get("spacing")),

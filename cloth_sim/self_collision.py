@@ -677,12 +677,12 @@ def _features(tris: np.ndarray, n: int):
         z = np.zeros((0, 2), np.int64)
         return (z, np.zeros((0, 3), np.int64), np.zeros(0, np.int64), z, np.full(n, -1, np.int64),
                 np.zeros(n + 1, np.int64), np.zeros(0, np.int64))
+    from .mesh import _half_edges  # the unique edges, and each half-edge's
+
     a = tris.ravel()
-    b = np.roll(tris, -1, axis=1).ravel()
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    keys, tri_edge = np.unique(lo * np.int64(n) + hi, return_inverse=True)
-    tri_edge = tri_edge.reshape(-1, 3).astype(np.int64)
-    edges = np.stack(np.divmod(keys, np.int64(n)), axis=1).astype(np.int64)
+    edges, group, _ = _half_edges(tris, n)
+    tri_edge = group.reshape(-1, 3).astype(np.int64)
+    edges = edges.astype(np.int64)
     half_tri = np.repeat(np.arange(len(tris), dtype=np.int64), 3)
     order = np.lexsort((half_tri, tri_edge.ravel()))
     e_sorted, t_sorted = tri_edge.ravel()[order], half_tri[order]

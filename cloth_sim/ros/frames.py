@@ -40,9 +40,14 @@ class Frames:
                                self.node.get_clock().now().to_msg())
         self.static_pub.publish(TFMessage(transforms=[t]))
 
-    def publish(self, sim, frame: str, stamp, extra=()) -> None:
-        """The colliders' and grippers' frames, and ``extra`` ones (the camera's), on ``/tf`` (only
-        while someone listens)."""
-        if (sim.colliders or sim.grippers or extra) and self.pub.get_subscription_count() > 0:
-            self.pub.publish(TFMessage(transforms=messages.entity_frames(sim, frame, stamp)
-                                       + list(extra)))
+    def publish(self, sim, frame: str, stamp, camera=None) -> None:
+        """The colliders' and grippers' frames, and ``camera``'s optical frame (a
+        :class:`~cloth_sim.ros.camera_publisher.CameraPublisher`), on ``/tf`` — built only while
+        someone listens."""
+        if self.pub.get_subscription_count() == 0:
+            return
+        transforms = messages.entity_frames(sim, frame, stamp)
+        if camera is not None:
+            transforms += camera.transforms(stamp)
+        if transforms:
+            self.pub.publish(TFMessage(transforms=transforms))

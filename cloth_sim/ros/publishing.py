@@ -57,7 +57,7 @@ class Publishing:
         for name, (_, pub) in self._grippers.items():
             force, torque = sim.gripper_wrench(name)
             pub.publish(messages.wrench(force, torque, frame, stamp))
-        self.frames.publish(sim, frame, stamp, self.camera_pub.transforms(stamp))
+        self.frames.publish(sim, frame, stamp, self.camera_pub)
         wall_now = time.monotonic()
         self._history.append((wall_now, sim.time))
         while self._history and wall_now - self._history[0][0] > RTF_WINDOW:

@@ -286,6 +286,10 @@ class SimulationInterfaces:
         response.states = [self._state(n) for n in response.entities]
         return response
 
+    def _collider_index(self, name: str) -> int | None:
+        """The index in ``sim.colliders`` of the collider called ``name`` (``None``: none is)."""
+        return next((i for i, c in enumerate(self.node.sim.colliders) if c.name == name), None)
+
     def _unknown(self, name: str) -> Result:
         return result(Result.RESULT_NOT_FOUND, f"no entity {name!r}; entities: "
                       f"{', '.join(self.entities())}")
@@ -303,7 +307,7 @@ class SimulationInterfaces:
             return state
         kind, _, key = name.partition("/")
         if kind == "collider":
-            c = next(c for c in sim.colliders if c.name == key)
+            c = sim.colliders[self._collider_index(key)]
             p, q = c.position, c.orientation
         else:
             p, q = sim.gripper_pose(key)
@@ -347,8 +351,7 @@ class SimulationInterfaces:
         kind, _, key = name.partition("/")
         sim = self.node.sim
         if kind == "collider":
-            index = next(i for i, c in enumerate(sim.colliders) if c.name == key)
-            sim.set_collider_pose(index, position, orientation)
+            sim.set_collider_pose(self._collider_index(key), position, orientation)
         else:
             sim.set_gripper_pose(key, position, orientation)
         self.node.set_twist(kind, key, linear, angular)  # kinematic: it keeps this velocity
@@ -441,7 +444,7 @@ class SimulationInterfaces:
 
     def _remove_collider(self, name: str) -> None:
         sim = self.node.sim
-        index = next((i for i, c in enumerate(sim.colliders) if c.name == name), None)
+        index = self._collider_index(name)
         if index is not None:
             sim.remove_collider(index)
             self.node.colliders_changed()
@@ -473,8 +476,7 @@ class SimulationInterfaces:
         elif kind == "gripper":
             pts = sim.positions[sim.grippers[key]]
         else:
-            c = next(c for c in sim.colliders if c.name == key)
-            pts = collider_extent(c)
+            pts = collider_extent(sim.colliders[self._collider_index(key)])
         if pts is None:
             b.type = Bounds.TYPE_EMPTY  # an infinite plane
         elif isinstance(pts, tuple):  # a sphere: centre, then (radius, 0, 0)
