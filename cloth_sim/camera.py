@@ -68,16 +68,16 @@ class Frame:
     rotation: np.ndarray
     position: np.ndarray
 
-    def points(self) -> np.ndarray:
-        """``(H, W, 3)`` float32 in the optical frame: ``depth · K⁻¹(u, v, 1)``, NaN where depth is."""
+    def points(self, out: np.ndarray | None = None) -> np.ndarray:
+        """``(H, W, 3)`` float32 in the optical frame: ``depth · K⁻¹(u, v, 1)``, NaN where depth is;
+        written into ``out`` (a C-contiguous float32 ``(H, W, 3)`` array) when given."""
         h, w = self.depth.shape
-        u = (np.arange(w, dtype=np.float64) - self.cx) / self.fx
-        v = (np.arange(h, dtype=np.float64) - self.cy) / self.fy
-        z = self.depth.astype(np.float64)
-        out = np.empty((h, w, 3), np.float32)
-        out[..., 0] = z * u[None, :]
-        out[..., 1] = z * v[:, None]
-        out[..., 2] = z
+        if out is None:
+            out = np.empty((h, w, 3), np.float32)
+        elif out.shape != (h, w, 3) or out.dtype != np.float32 or not out.flags.c_contiguous:
+            raise ValueError(f"out must be a C-contiguous float32 array of shape {(h, w, 3)}, got "
+                             f"{out.dtype} {out.shape}")
+        back_project(self.depth, self.fx, self.fy, self.cx, self.cy, out)
         return out
 
     def rest_points(self, positions: np.ndarray, rest_positions: np.ndarray,
@@ -174,6 +174,20 @@ class DepthCamera:
         depth[miss] = np.nan
         return Frame(depth.astype(np.float32), obj, tri, self.fx, self.fy, self.cx, self.cy,
                      R.copy(), p.copy())
+
+
+@numba.njit(cache=True)
+def back_project(depth, fx, fy, cx, cy, out):
+    """``out[v, u] = depth[v, u] · ((u − cx)/fx, (v − cy)/fy, 1)`` (float64 arithmetic, float32
+    stored)."""
+    h, w = depth.shape
+    for v in range(h):
+        y = (v - cy) / fy
+        for u in range(w):
+            z = np.float64(depth[v, u])
+            out[v, u, 0] = z * ((u - cx) / fx)
+            out[v, u, 1] = z * y
+            out[v, u, 2] = z
 
 
 def kinect_sigma(z):

@@ -16,6 +16,7 @@
 
 ``cloth-sim bench strain [--sizes 32 64] [--seconds 3]`` (worst strain and cost of the strain limit)
 ``cloth-sim bench contacts [--sizes 32 64] [--seconds 1.5]`` (cost of colliders and self-collision)
+``cloth-sim bench camera [--size 32] [--seconds 10]`` (the node's real-time factor, camera topics subscribed)
 ``cloth-sim bench lockstep [--size 32]`` (steps per second through ~/step from another process)
 ``cloth-sim bench startup [--sizes 32 64] [--trials 4]`` (process start to the first cloud)
     Print the node's real-time factor with and without a ~/points subscriber (needs rclpy).
@@ -98,6 +99,13 @@ def _bench_node(args) -> int:
         return 0
     print_node_table(args.sizes, args.seconds, args.integrator, args.dt, args.rate,
                      args.strain_limit_passes)
+    return 0
+
+
+def _bench_camera(args) -> int:
+    from .ros.bench import print_camera_node_table
+
+    print_camera_node_table(args.size, args.seconds, args.width, args.height, args.camera_rate)
     return 0
 
 
@@ -244,6 +252,14 @@ def build_parser() -> argparse.ArgumentParser:
     nb.add_argument("--strain-limit-passes", type=int, default=None,
                     help="the node's strain_limit_passes (default: its own, 20)")
     nb.set_defaults(func=_bench_node)
+    cb = bsub.add_parser("camera", help="real-time factor of cloth_sim_node with its depth camera "
+                         "unsubscribed and subscribed (needs rclpy)")
+    cb.add_argument("--size", type=int, default=32, help="cloth N×N (default 32)")
+    cb.add_argument("--seconds", type=float, default=10.0, help="measured wall time per row")
+    cb.add_argument("--width", type=int, default=640)
+    cb.add_argument("--height", type=int, default=480)
+    cb.add_argument("--camera-rate", type=float, default=30.0, help="camera.rate (Hz, default 30)")
+    cb.set_defaults(func=_bench_camera)
     ls = bsub.add_parser("lockstep", help="steps per second through ~/step from another process (needs rclpy)")
     ls.add_argument("--size", type=int, default=32, help="cloth N×N (default 32)")
     ls.add_argument("--calls", type=int, default=300, help="~/step calls per row")

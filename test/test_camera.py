@@ -140,6 +140,12 @@ def test_points_are_depth_times_the_inverse_intrinsics():
             assert np.all(np.isnan(pts[v, u]))
         else:
             np.testing.assert_allclose(pts[v, u], want, rtol=1e-6)
+    # into a caller's buffer (what the node reuses every frame): the same numbers; a wrong one refused
+    buf = np.zeros((30, 40, 3), np.float32)
+    assert f.points(out=buf) is buf
+    np.testing.assert_array_equal(buf, pts)
+    with pytest.raises(ValueError, match="out must be a C-contiguous float32 array of shape"):
+        f.points(out=np.zeros((30, 40, 3)))
 
 
 def test_kinect_noise_has_its_spread_and_a_seed_reproduces_an_image():

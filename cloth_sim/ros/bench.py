@@ -200,16 +200,17 @@ def _bench_domain() -> int:
     return 50 + os.getpid() % 40
 
 
-def _start_node(domain: int, size: int):
+def _start_node(domain: int, size: int, params=()):
     """``cloth_sim_node`` in its own process on ``domain`` (localhost only), its default scene
-    resized to ``size``×``size`` over the same 1 m."""
+    resized to ``size``×``size`` over the same 1 m, and ``params`` (``name:=value`` strings)."""
     import subprocess
     import sys
 
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     exe = os.path.join(sys.prefix, "bin", "cloth_sim_node")
+    extra = [a for p in params for a in ("-p", p)]
     return subprocess.Popen([exe, "--ros-args", "-p", f"rows:={size}", "-p", f"cols:={size}",
-                             "-p", f"spacing:={1.0 / (size - 1)}"],
+                             "-p", f"spacing:={1.0 / (size - 1)}", *extra],
                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
 
@@ -321,4 +322,76 @@ def print_startup_table(trials: int = 4, sizes=(32, 64)) -> list[dict]:
             kept = times[1:] or times
             rows.append({"n": n, "median_s": statistics.median(kept), "trials_s": times})
             print(f"| {n} | {statistics.median(kept):.2f} | {', '.join(f'{t:.2f}' for t in times)} |")
+    return rows
+
+
+#: the camera's topics, by type, as a ROS user subscribes to them
+CAMERA_TOPICS = (("Image", "/cloth_sim/camera/depth/image"),
+                 ("CameraInfo", "/cloth_sim/camera/depth/camera_info"),
+                 ("PointCloud2", "/cloth_sim/camera/points"),
+                 ("Image", "/cloth_sim/camera/labels"),
+                 ("Image", "/cloth_sim/camera/triangles"))
+
+
+def print_camera_node_table(size: int = 32, seconds: float = 10.0, width: int = 640, height: int = 480,
+                            camera_rate: float = 30.0) -> list[dict]:
+    """The node's real-time factor with the depth camera on (``width``×``height`` at
+    ``camera_rate``), its topics unsubscribed and all five subscribed: ``cloth_sim_node`` in its own
+    process (the ``size``×``size`` hanging scene, the camera at (0.5, −0.8, 0.6) looking at the
+    cloth), this process subscribing as a viewer in another process does (raw: it counts the
+    messages without deserialising them) and reading ~/stats. The real-time factor is simulated
+    time over wall time between the first and last ~/stats received in each window."""
+    from sensor_msgs import msg as sensor_msgs
+
+    from cloth_sim.msg import Stats
+
+    domain = _bench_domain()
+    params = ["camera.enable:=true", f"camera.width:={width}", f"camera.height:={height}",
+              f"camera.rate:={camera_rate}", "camera.position:=[0.5, -0.8, 0.6]",
+              "camera.look_at:=[0.5, 0.5, -0.4]"]
+    print(f"# cloth_sim_node in its own process, hanging scene {size}×{size}, symplectic Euler, "
+          f"dt = 1 ms, 60 Hz; depth camera {width}×{height} at {camera_rate:g} Hz; {seconds:g} s per "
+          f"row after 3 s warm-up; {platform.machine()}, {os.cpu_count()} cores")
+    print("| camera topics subscribed | real-time factor | camera frames/s received | MB/s received |")
+    print("|---|---|---|---|")
+    node = _start_node(domain, size, params)
+    rows = []
+    try:
+        with _remote_client(domain, "camera_bench") as (probe, ex):
+            stats: list = []
+            probe.create_subscription(Stats, "/cloth_sim/stats", lambda m: stats.append(
+                (time.monotonic(), m.sim_time)), 100)
+            got = {"n": 0, "bytes": 0}
+
+            def count(raw):
+                got["n"] += 1
+                got["bytes"] += len(raw)
+
+            def window(secs):
+                stats.clear()
+                got["n"] = got["bytes"] = 0
+                end = time.monotonic() + secs
+                while time.monotonic() < end:
+                    ex.spin_once(timeout_sec=0.01)
+                (w0, s0), (w1, s1) = stats[0], stats[-1]
+                return (s1 - s0) / (w1 - w0)
+
+            end = time.monotonic() + 60
+            while not stats and time.monotonic() < end:  # the node's start-up
+                ex.spin_once(timeout_sec=0.05)
+            window(3.0)
+            for subscribed in (False, True):
+                if subscribed:
+                    for kind, topic in CAMERA_TOPICS:
+                        probe.create_subscription(getattr(sensor_msgs, kind), topic, count, 10, raw=True)
+                    window(3.0)  # discovery, first frames
+                rtf = window(seconds)
+                frames = got["n"] / len(CAMERA_TOPICS) / seconds
+                rows.append({"subscribed": subscribed, "rtf": rtf, "frames_per_s": frames,
+                             "mb_per_s": got["bytes"] / seconds / 1e6})
+                print(f"| {'all five' if subscribed else 'none'} | {rtf:.3f} | {frames:.1f} | "
+                      f"{got['bytes'] / seconds / 1e6:.0f} |", flush=True)
+    finally:
+        node.terminate()
+        node.wait(timeout=20)
     return rows

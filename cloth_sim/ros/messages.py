@@ -269,6 +269,53 @@ def image(values: np.ndarray, encoding: str, frame_id: str, stamp):
     return msg
 
 
+#: bytes no header or size serialises to: where a template's ``data`` begins
+_DATA_PROBE = b"\xa5cloth_sim data\x5a"
+
+
+def _splice(template_msg, payload) -> bytes:
+    """``template_msg`` (its ``data`` set to :data:`_DATA_PROBE`) serialised with ``payload`` (a
+    buffer) as its ``data``: a ``uint8[]`` is a 4-byte length and the bytes, and what follows it in
+    ``Image`` (nothing) and ``PointCloud2`` (``bool is_dense``) needs no alignment, so the rest of
+    the serialisation stands. One copy of the payload instead of three (array, array.array, CDR)."""
+    from rclpy.serialization import serialize_message
+
+    template = serialize_message(template_msg)
+    at = template.rfind(_DATA_PROBE)
+    if at < 4 or template[at - 4:at] != len(_DATA_PROBE).to_bytes(4, "little"):
+        raise RuntimeError("unexpected serialisation")  # not little-endian CDR
+    payload = memoryview(payload).cast("B")
+    return b"".join((template[:at - 4], len(payload).to_bytes(4, "little"), payload,
+                     template[at + len(_DATA_PROBE):]))
+
+
+def image_bytes(values: np.ndarray, encoding: str, frame_id: str, stamp) -> bytes:
+    """:func:`image`, serialised (what rclpy publishes), built with one copy of the pixels."""
+    from sensor_msgs.msg import Image
+
+    a = np.ascontiguousarray(values)
+    msg = Image()
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame_id
+    msg.height, msg.width = a.shape
+    msg.encoding = encoding
+    msg.is_bigendian = sys.byteorder == "big"
+    msg.step = a.shape[1] * a.itemsize
+    msg.data = _DATA_PROBE
+    return _splice(msg, a)
+
+
+def point_cloud_bytes(points: np.ndarray, frame_id: str, stamp, dense: bool) -> bytes:
+    """:func:`point_cloud` of an organised ``(H, W, 3)`` float32 C-contiguous array, serialised,
+    built with one copy of the points; ``dense``: no point is NaN (the caller knows it from the
+    image, cheaper than scanning the cloud)."""
+    h, w, _ = points.shape
+    msg = point_cloud(np.zeros((0, 3), np.float32), h, w, frame_id, stamp)
+    msg.is_dense = bool(dense)
+    msg.data = _DATA_PROBE
+    return _splice(msg, points)
+
+
 def camera_info(camera, frame_id: str, stamp):
     """``sensor_msgs/CameraInfo`` of a :class:`~cloth_sim.camera.DepthCamera`: pinhole, no
     distortion (``plumb_bob`` with zeros), ``P = [K | 0]``."""
