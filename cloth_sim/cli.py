@@ -29,6 +29,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from pathlib import Path
 
 from . import integrators
 from .bag.store import BagError
@@ -306,10 +307,43 @@ def build_parser() -> argparse.ArgumentParser:
     inf = sub.add_parser("info", help="topics, types, counts, duration and size of a bag, like `ros2 bag info`")
     inf.add_argument("bag", metavar="BAG", help="bag directory or .mcap file")
     inf.set_defaults(func=_info)
+    sw = sub.add_parser("sweep", help="run every run of a sweep spec on Ray (a local one, or a cluster "
+                        "with --address) into OUT: runs.parquet and a bag per run; again to resume",
+                        description="Run a sweep spec (see docs/sweeps/ and the README): each run "
+                        "headless on Ray, OUT/runs/<run>/ a bag of its frames, OUT/runs.parquet one "
+                        "row per run. The same command again resumes an interrupted sweep.")
+    sw.add_argument("spec", metavar="SPEC.yaml", nargs="?", help="the sweep spec")
+    sw.add_argument("-o", "--output", metavar="OUT", help="output directory (local or shared path)")
+    sw.add_argument("--workers", type=int, default=None, metavar="N",
+                    help="runs at a time (default: every CPU of this machine or the cluster)")
+    sw.add_argument("--address", default=None, metavar="ADDRESS",
+                    help="join this Ray cluster (e.g. 10.0.0.5:6379, or auto) instead of starting one")
+    sw.add_argument("--summary", metavar="OUT", help="print counts by status and the slowest runs of "
+                    "the sweep in OUT, and run nothing")
+    sw.add_argument("--no-progress", action="store_true", help="no progress bar")
+    sw.set_defaults(func=_sweep)
     ri = sub.add_parser("reindex", help="make a bag whose recorder died whole again (MCAP summary, metadata.yaml)")
     ri.add_argument("bag", metavar="BAG", help="bag directory or .mcap file")
     ri.set_defaults(func=_reindex)
     return p
+
+
+def _sweep(args) -> int:
+    from .sweep import engine
+
+    if args.summary:
+        print(engine.summary(args.summary))
+        return 0
+    if not args.spec or not args.output:
+        raise ValueError("sweep needs SPEC.yaml and -o OUT (or --summary OUT)")
+    t = time.perf_counter()
+    counts = engine.sweep(args.spec, args.output, workers=args.workers, address=args.address,
+                          progress=not args.no_progress)
+    total = sum(counts.values())
+    print(f"sweep {args.output}: {total} runs, " + ", ".join(
+        f"{counts[s]} {s}" for s in ("ok", "diverged", "refused", "failed") if counts[s] or s == "ok")
+        + f"; {time.perf_counter() - t:.1f} s; {Path(args.output) / 'runs.parquet'}")
+    return 0
 
 
 def main(argv=None) -> int:

@@ -20,24 +20,12 @@ from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from ..camera import camera_from_settings
 from . import messages
 
-#: the node's camera parameters, without their ``camera.`` prefix
-SETTINGS = ("enable", "width", "height", "fov", "position", "look_at", "rate", "near", "far", "noise")
+# the checks are the core's (the sweeps use them too)
+from ..settings import CAMERA_SETTINGS as SETTINGS  # noqa: E402
+from ..settings import camera_reason as check  # noqa: E402
+from ..settings import camera_settings as settings  # noqa: E402
 
-
-def settings(cfg: dict) -> dict:
-    return {k: cfg[f"camera.{k}"] for k in SETTINGS}
-
-
-def check(cfg: dict) -> str | None:
-    """The reason ``cfg``'s camera cannot be built (naming the parameter), ``None`` when it can or
-    is off."""
-    if not cfg["camera.enable"]:
-        return None
-    try:
-        camera_from_settings(settings(cfg))
-    except ValueError as e:
-        return str(e)
-    return None
+__all__ = ["SETTINGS", "CameraPublisher", "check", "settings"]
 
 
 class CameraPublisher:

@@ -9,26 +9,20 @@ no side effects (the stability analysis it needs is computed once per material a
 from __future__ import annotations
 
 import gc
-import math
 
-import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.parameter import Parameter
 
-from .. import integrators
-from .. import stability as stab
-from ..integrators.base import Stability
-from ..parameters import REBUILD, SCHEMA
+from .. import settings
+from ..parameters import SCHEMA
 from ..scene import SceneError, load_scene
 from ..self_collision import check_thickness
-from ..simulator import Simulator
+from ..settings import MODEL_KEYS
 from . import params as P
 from .camera_publisher import check as camera_check
 
 #: a publish_rate is refused only when the measured cost exceeds the time available this many times
 RATE_REFUSAL_LOAD = 10.0
-#: the rebuild parameters that shape the model (``scene`` is the other one)
-MODEL_KEYS = tuple(name for name in REBUILD if name != "scene")
 
 
 def _settle_garbage() -> None:
@@ -44,13 +38,6 @@ def _settle_garbage() -> None:
     gc.freeze()
 
 
-def _material(model, cfg: dict) -> tuple[np.ndarray, np.ndarray]:
-    """Per-spring stiffness and damping of ``model`` from the family parameters in ``cfg``."""
-    k = np.array([cfg[f"stiffness.{f}"] for f in model.family_names])[model.family]
-    c = np.array([cfg[f"damping.{f}"] for f in model.family_names])[model.family]
-    return k, c
-
-
 def _as_declared(p: Parameter) -> Parameter:
     """An integer given for a double parameter (``ros2 param set /cloth_sim dt 1``), as a double, and
     an integer array for a double array (``gravity: [0, 0, -9]`` in a params file), as a double
@@ -63,12 +50,6 @@ def _as_declared(p: Parameter) -> Parameter:
     return p
 
 
-def _wind(cfg: dict):
-    w = cfg["wind.strength"] * np.asarray(cfg["wind.direction"], dtype=float)
-    return w if np.any(w) else None
-
-
-
 class ParameterGate:
     """The node's parameter callbacks and the building of its model and simulator (a mixin of
     :class:`~cloth_sim.ros.node.ClothSimNode`, over its ``cfg``, ``scene`` and ``sim``)."""
@@ -78,57 +59,14 @@ class ParameterGate:
         key = (scene.source, *(cfg[k] for k in MODEL_KEYS))
         model = self._models.get(key)
         if model is None:
-            size = ({"density": cfg["density"]} if scene.mesh is not None else
-                    {k: cfg[k] for k in ("rows", "cols", "spacing", "particle_mass")})
-            model = scene.build_model(**size, model=cfg["model"],
-                                      stiffness={f: cfg[f"stiffness.{f}"] for f in scene.families},
-                                      damping={f: cfg[f"damping.{f}"] for f in scene.families})
+            model = settings.build_model(cfg, scene)
             if len(self._models) >= 4:
                 self._models.pop(next(iter(self._models)))
             self._models[key] = model
         return model
 
-    @staticmethod
-    def _build_simulator(cfg: dict, model, scene) -> Simulator:
-        sim = Simulator(model, integrator=cfg["integrator"], dt=cfg["dt"], gravity=cfg["gravity"],
-                        wind=_wind(cfg), drag=cfg["drag"], strain_limit=cfg["strain_limit"] or None,
-                        strain_limit_passes=cfg["strain_limit_passes"],
-                        colliders=scene.make_colliders(), thickness=cfg["thickness"],
-                        self_collision=cfg["self_collision"])
-        scene.apply_grippers(sim)
-        k, c = _material(model, cfg)
-        if not (np.array_equal(model.stiffness, k) and np.array_equal(model.damping, c)):
-            for f in model.family_names:  # a kept model built with other values: set them
-                sim.set_stiffness(f, cfg[f"stiffness.{f}"])
-                sim.set_damping(f, cfg[f"damping.{f}"])
-        return sim
-
-    @staticmethod
-    def _check_stability(cfg: dict, model) -> tuple[str | None, float]:
-        """``(reason, stable_dt)``: the limit of ``cfg``'s method on ``model`` with ``cfg``'s
-        material (computed once per material and method, :mod:`cloth_sim.stability`), and the
-        reason to refuse ``cfg["dt"]`` above it (``None`` when fine or ``allow_unstable``)."""
-        k, c = _material(model, cfg)
-        analysis = stab.analysis_for(model, k, c, cfg["drag"])
-        integ = integrators.get(cfg["integrator"])(model)
-        limit = integ.stable_dt(analysis)
-        if not integ.step_is_stable(analysis, cfg["dt"]) and not cfg["allow_unstable"]:
-            above = integ.stable_again_above(analysis)
-            if above < math.inf:  # Choi–Ko's onset band of an unconditionally stable method
-                return (f"dt={cfg['dt']:g} s is inside the band of steps where Choi–Ko's buckling onset "
-                        f"load 12·k_b/L² throws this cloth about with {cfg['integrator']} "
-                        f"({limit:.4g} s < dt < {above:.4g} s; stiffness.bend is a flexural rigidity "
-                        f"in N·m² in this model): choose dt <= {limit:.4g} or dt >= {above:.4g}, a "
-                        f"smaller stiffness.bend, or set allow_unstable to true"), limit
-            unconditional = ", ".join(n for n in integrators.available()
-                                      if integrators.get(n).stability is Stability.UNCONDITIONAL)
-            onset = (" (set by Choi–Ko's buckling onset load 12·k_b/L²: stiffness.bend is a flexural "
-                     "rigidity in N·m² in this model)" if limit == analysis.onset_limit else "")
-            return (f"dt={cfg['dt']:g} s is above the stable limit of {cfg['integrator']} for this "
-                    f"cloth, stable_dt={limit:.4g} s{onset}: choose dt <= {limit:.4g}, an "
-                    f"unconditionally stable integrator ({unconditional}), or set allow_unstable to "
-                    f"true"), limit
-        return None, limit
+    _build_simulator = staticmethod(settings.build_simulator)
+    _check_stability = staticmethod(settings.check_stability)
 
     def _pre_set(self, parameters: list[Parameter]) -> list[Parameter]:
         """The gate every value passes first (it runs before rclpy's own type and range checks,
@@ -296,7 +234,7 @@ class ParameterGate:
             sim.gravity = cand["gravity"]
         if (cand["wind.strength"], cand["wind.direction"]) != (cur["wind.strength"],
                                                               cur["wind.direction"]):
-            sim.wind = _wind(cand)
+            sim.wind = settings.wind(cand)
         if cand["drag"] != cur["drag"]:
             sim.drag = cand["drag"]
         if cand["strain_limit"] != cur["strain_limit"]:

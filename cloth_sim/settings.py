@@ -1,0 +1,203 @@
+"""The node's settings as plain values — what a scene implies, which combinations are refused, and
+the simulator they build — with no ROS, so that the node's parameter gate
+(:mod:`cloth_sim.ros.gate`) and the sweeps (:mod:`cloth_sim.sweep`) give a value the same meaning and
+refuse it for the same reason.
+
+A *configuration* is a dict holding a value for every name of :data:`~cloth_sim.parameters.SCHEMA`
+(:func:`defaults` gives a scene's). :func:`configure` checks one made from a scene and overrides
+exactly as the node checks a parameter change and builds its simulator.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import integrators
+from . import stability as stab
+from .constraints import DEFAULT_STRAIN_LIMIT_PASSES
+from .integrators.base import Stability
+from .parameters import REBUILD, SCHEMA, ParameterError
+from .scene import Scene, load_scene
+from .self_collision import check_thickness
+from .simulator import Simulator
+
+#: the rebuild parameters that shape the model (``scene`` is the other one)
+MODEL_KEYS = tuple(name for name in REBUILD if name != "scene")
+#: the parameters that shape a grid only, and a mesh only: a scene of the other kind refuses a change
+GRID_ONLY = ("rows", "cols", "spacing", "particle_mass", "stiffness.shear", "damping.shear")
+MESH_ONLY = ("density",)
+#: what those parameters hold while the scene does not use them (start-up on a scene of the other
+#: kind; they keep their values across scene changes)
+UNUSED_VALUES = {"rows": 32, "cols": 32, "spacing": 1.0 / 31, "particle_mass": 0.01,
+                 "stiffness.shear": 0.0, "damping.shear": 0.0, "density": 0.1}
+#: the camera's parameters, without their ``camera.`` prefix
+CAMERA_SETTINGS = ("enable", "width", "height", "fov", "position", "look_at", "rate", "near", "far",
+                   "noise")
+
+
+def scene_values(scene: Scene) -> dict:
+    """The parameter values a scene implies (a grid's size and mass or a mesh's density; the
+    parameters of the other kind are left out)."""
+    values = {
+        "integrator": scene.integrator, "dt": float(scene.dt),
+        "gravity": [float(g) for g in scene.gravity],
+        "wind.direction": [float(w) for w in scene.wind_direction],
+        "wind.strength": float(scene.wind_strength), "drag": float(scene.drag),
+        "strain_limit": float(scene.strain_limit or 0.0),
+        "model": scene.model, "thickness": float(scene.thickness),
+        "self_collision": bool(scene.self_collision),
+    }
+    if scene.mesh is not None:
+        values["density"] = float(scene.mesh["density"])
+    else:
+        values.update({"rows": int(scene.rows), "cols": int(scene.cols),
+                       "spacing": float(scene.spacing), "particle_mass": float(scene.particle_mass)})
+    for k, value in scene.camera.items():  # (the scene's camera, or the default one)
+        values[f"camera.{k}"] = [float(x) for x in value] if isinstance(value, list) else value
+    for f in scene.families:
+        values[f"stiffness.{f}"] = float(scene.stiffness[f])
+        values[f"damping.{f}"] = float(scene.damping[f])
+    return values
+
+
+def defaults(scene: Scene) -> dict:
+    """Every parameter's value on ``scene`` before anything is set."""
+    values = {"scene": scene.name, "allow_unstable": False, "publish_rate": 60.0, "frame_id": "cloth",
+              "world_frame_id": "world", "publish_clock": False, "real_time_factor": 1.0,
+              "strain_limit_passes": DEFAULT_STRAIN_LIMIT_PASSES}
+    values.update(UNUSED_VALUES)
+    values.update(scene_values(scene))
+    return values
+
+
+def not_applicable(scene: Scene, cand: dict, current: dict) -> str | None:
+    """The reason to refuse a change of a parameter ``scene``'s cloth does not have (a grid's size
+    on a mesh, a mesh's density on a grid), ``None`` when there is none."""
+    names = GRID_ONLY if scene.mesh is not None else MESH_ONLY
+    changed = [n for n in names if cand[n] != current[n]]
+    if not changed:
+        return None
+    if scene.mesh is not None:
+        return (f"{', '.join(changed)}: not used by scene {scene.name}, a triangle mesh "
+                f"({scene.mesh['file'].name}): its particles are the mesh's vertices, its masses come "
+                f"from density (kg/m²) and its springs are structural (edges) and bend (across edges), "
+                f"no shear")
+    return (f"{', '.join(changed)}: not used by scene {scene.name}, a {scene.rows}×{scene.cols} grid "
+            f"(its masses come from particle_mass); density applies to mesh scenes")
+
+
+def camera_settings(cfg: dict) -> dict:
+    return {k: cfg[f"camera.{k}"] for k in CAMERA_SETTINGS}
+
+
+def camera_reason(cfg: dict) -> str | None:
+    """The reason ``cfg``'s camera cannot be built (naming the parameter), ``None`` when it can or
+    is off."""
+    from .camera import camera_from_settings
+
+    if not cfg["camera.enable"]:
+        return None
+    try:
+        camera_from_settings(camera_settings(cfg))
+    except ValueError as e:
+        return str(e)
+    return None
+
+
+def material(model, cfg: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Per-spring stiffness and damping of ``model`` from the family parameters in ``cfg``."""
+    k = np.array([cfg[f"stiffness.{f}"] for f in model.family_names])[model.family]
+    c = np.array([cfg[f"damping.{f}"] for f in model.family_names])[model.family]
+    return k, c
+
+
+def wind(cfg: dict):
+    """The wind vector of ``cfg`` (strength × direction), ``None`` when it is off."""
+    w = cfg["wind.strength"] * np.asarray(cfg["wind.direction"], dtype=float)
+    return w if np.any(w) else None
+
+
+def build_model(cfg: dict, scene: Scene):
+    """``scene``'s model with ``cfg``'s size or density, spring model and material."""
+    size = ({"density": cfg["density"]} if scene.mesh is not None else
+            {k: cfg[k] for k in ("rows", "cols", "spacing", "particle_mass")})
+    return scene.build_model(**size, model=cfg["model"],
+                             stiffness={f: cfg[f"stiffness.{f}"] for f in scene.families},
+                             damping={f: cfg[f"damping.{f}"] for f in scene.families})
+
+
+def build_simulator(cfg: dict, model, scene: Scene) -> Simulator:
+    """A simulator of ``model`` (built for ``scene``) with ``cfg``'s live values, the scene's
+    colliders and grippers."""
+    sim = Simulator(model, integrator=cfg["integrator"], dt=cfg["dt"], gravity=cfg["gravity"],
+                    wind=wind(cfg), drag=cfg["drag"], strain_limit=cfg["strain_limit"] or None,
+                    strain_limit_passes=cfg["strain_limit_passes"],
+                    colliders=scene.make_colliders(), thickness=cfg["thickness"],
+                    self_collision=cfg["self_collision"])
+    scene.apply_grippers(sim)
+    k, c = material(model, cfg)
+    if not (np.array_equal(model.stiffness, k) and np.array_equal(model.damping, c)):
+        for f in model.family_names:  # a kept model built with other values: set them
+            sim.set_stiffness(f, cfg[f"stiffness.{f}"])
+            sim.set_damping(f, cfg[f"damping.{f}"])
+    return sim
+
+
+def check_stability(cfg: dict, model) -> tuple[str | None, float]:
+    """``(reason, stable_dt)``: the limit of ``cfg``'s method on ``model`` with ``cfg``'s material
+    (computed once per material and method, :mod:`cloth_sim.stability`), and the reason to refuse
+    ``cfg["dt"]`` above it (``None`` when fine or ``allow_unstable``)."""
+    k, c = material(model, cfg)
+    analysis = stab.analysis_for(model, k, c, cfg["drag"])
+    integ = integrators.get(cfg["integrator"])(model)
+    limit = integ.stable_dt(analysis)
+    if not integ.step_is_stable(analysis, cfg["dt"]) and not cfg["allow_unstable"]:
+        above = integ.stable_again_above(analysis)
+        if above < math.inf:  # Choi–Ko's onset band of an unconditionally stable method
+            return (f"dt={cfg['dt']:g} s is inside the band of steps where Choi–Ko's buckling onset "
+                    f"load 12·k_b/L² throws this cloth about with {cfg['integrator']} "
+                    f"({limit:.4g} s < dt < {above:.4g} s; stiffness.bend is a flexural rigidity "
+                    f"in N·m² in this model): choose dt <= {limit:.4g} or dt >= {above:.4g}, a "
+                    f"smaller stiffness.bend, or set allow_unstable to true"), limit
+        unconditional = ", ".join(n for n in integrators.available()
+                                  if integrators.get(n).stability is Stability.UNCONDITIONAL)
+        onset = (" (set by Choi–Ko's buckling onset load 12·k_b/L²: stiffness.bend is a flexural "
+                 "rigidity in N·m² in this model)" if limit == analysis.onset_limit else "")
+        return (f"dt={cfg['dt']:g} s is above the stable limit of {cfg['integrator']} for this "
+                f"cloth, stable_dt={limit:.4g} s{onset}: choose dt <= {limit:.4g}, an "
+                f"unconditionally stable integrator ({unconditional}), or set allow_unstable to "
+                f"true"), limit
+    return None, limit
+
+
+def configure(scene: str | Scene, values: dict) -> tuple[dict, Scene, Simulator, float]:
+    """``(cfg, scene, simulator, stable_dt)`` for ``scene`` (a name, a path or a loaded scene) with
+    ``values`` (parameter name → value) set on it, checked as the node checks a parameter change:
+    each value by the schema, then the combination (a grid's parameters on a mesh, the thickness
+    self-collision needs, the camera, the method's stable step). A refusal raises ``ValueError``
+    (:class:`~cloth_sim.parameters.ParameterError` for a single value) naming the parameter."""
+    if not isinstance(scene, Scene):
+        scene = load_scene(values.get("scene", scene))
+    cfg = defaults(scene)
+    for name, value in values.items():
+        if name not in SCHEMA:
+            raise ParameterError(name, value, "a parameter of the node",
+                                 f"{name} is not a parameter; the parameters are "
+                                 f"{', '.join(sorted(SCHEMA))}")
+        if name != "scene":
+            cfg[name] = SCHEMA[name].check(value)
+    reason = not_applicable(scene, cfg, defaults(scene))
+    if reason:
+        raise ValueError(reason)
+    model = build_model(cfg, scene)
+    if cfg["self_collision"]:
+        check_thickness(model, cfg["thickness"])
+    reason = camera_reason(cfg)
+    if reason:
+        raise ValueError(reason)
+    reason, limit = check_stability(cfg, model)
+    if reason:
+        raise ValueError(reason)
+    return cfg, scene, build_simulator(cfg, model, scene), limit
