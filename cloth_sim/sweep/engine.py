@@ -31,7 +31,7 @@ from .spec import Spec, SpecError, load_spec, run_id
 
 #: the columns of runs.parquet after the swept values
 RESULT_COLUMNS = ("status", "message", "wall_s", "steps", "sim_time", "max_strain", "kinetic",
-                  "potential", "stable_dt", "frames")
+                  "potential", "stable_dt", "frames", "worker")
 #: rows per Parquet row group (and per batch read while writing it)
 BATCH = 1000
 
@@ -88,6 +88,10 @@ def sweep(spec_path, out, workers: int | None = None, address: str | None = None
     if len(done) < len(spec):
         _run_on_ray(spec, out, pending, len(spec), counts, workers, address, progress)
     write_parquet(spec, out)
+    try:
+        (out / ".partial").rmdir()  # empty once every run is committed
+    except OSError:
+        pass
     return counts
 
 

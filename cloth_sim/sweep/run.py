@@ -22,6 +22,7 @@ import json
 import math
 import os
 import shutil
+import socket
 import time
 import uuid
 from pathlib import Path
@@ -36,7 +37,7 @@ from .spec import Spec, resolve, run_id
 STATUSES = ("ok", "diverged", "refused", "failed")
 #: what a run measures rather than computes: kept beside its directory (``OUT/timings/<run>.json``),
 #: so that the directory's bytes depend on the run's values alone
-TIMINGS = ("wall_s",)
+TIMINGS = ("wall_s", "worker")
 #: the QoS the node offers on its topics (reliable, volatile, keep last 10; the camera's 5)
 _QOS = {"history": "keep_last", "depth": 10, "reliability": "reliable", "durability": "volatile",
         "deadline": {"sec": 0, "nsec": 0}, "lifespan": {"sec": 0, "nsec": 0},
@@ -79,11 +80,11 @@ def _simulate(spec: Spec, run: dict, rid: str, tmp: Path) -> dict:
     params, variables = spec.values_for(run)
     row = {"run": rid, **run, "status": "ok", "message": "", "wall_s": 0.0, "steps": 0,
            "sim_time": 0.0, "max_strain": math.nan, "kinetic": math.nan, "potential": math.nan,
-           "stable_dt": math.nan, "frames": 0}
+           "stable_dt": math.nan, "frames": 0, "worker": _worker()}
     try:
         cfg, scene, sim, stable_dt = settings.configure(params.get("scene", spec.scene), params)
     except ValueError as e:
-        row.update(status="refused", message=str(e), wall_s=time.perf_counter() - t0)
+        row.update(status="refused", message=str(e), wall_s=time.perf_counter() - t0, worker=_worker())
         return row
     row["stable_dt"] = float(stable_dt)
     script = Script([resolve(e, variables) for e in spec.script])
@@ -117,6 +118,10 @@ def _simulate(spec: Spec, run: dict, rid: str, tmp: Path) -> dict:
                kinetic=float(energy["kinetic"]), potential=float(energy["spring"] + energy["gravity"]),
                wall_s=time.perf_counter() - t0)
     return row
+
+
+def _worker() -> str:
+    return f"{socket.gethostname()}:{os.getpid()}"
 
 
 class _Bag:
@@ -181,7 +186,7 @@ def read_row(run_dir) -> dict:
     try:
         row.update(json.loads((run_dir.parent.parent / "timings" / f"{run_dir.name}.json").read_text()))
     except (OSError, ValueError):
-        row.update({k: math.nan for k in TIMINGS})
+        row.update(wall_s=math.nan, worker="")
     return row
 
 

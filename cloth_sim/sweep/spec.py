@@ -221,7 +221,7 @@ def spec_from_dict(data, source: str = "<dict>", text: str = "", base: Path | No
     used = {name for event in script for name in _variables_in(event)}
     for name in sorted(variables - used):
         where = "grid" if name in grid else ("random" if name in draws else "set")
-        fail(f"{where}.{name}", f"is neither a parameter of the node nor a variable the script "
+        fail(f"{where}.{name}", f"{name!r} is not a parameter of the node nor a variable the script "
              f"uses (as ${name}); the parameters are {', '.join(sorted(SCHEMA))}")
     if "scene" not in grid and "scene" not in draws:
         _check_colliders(scene, script, fail)
@@ -243,8 +243,8 @@ def _mapping(x, key, fail) -> dict:
 
 def _key(where, key, fail) -> None:
     if not isinstance(key, str) or not (key in SCHEMA or _VARIABLE_NAME.match(key)):
-        fail(where, "a key must be a parameter of the node or a script variable name "
-             "(letters, digits, _)")
+        fail(where, f"{key!r} is not a parameter of the node nor a script variable name (letters, "
+             f"digits, _); the parameters are {', '.join(sorted(SCHEMA))}")
 
 
 def _param(where, key, value, fail, name=None):
