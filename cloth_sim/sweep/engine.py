@@ -22,7 +22,6 @@ import logging
 import os
 import shutil
 import sys
-import time
 from collections import Counter
 from pathlib import Path
 
