@@ -137,12 +137,23 @@ def _imports(path):
 
 
 def test_core_imports_no_ros():
-    # the physics core: everything but the ROS adapter, the bag tools and the benchmarks' front ends
+    # the physics core: everything but the ROS adapter, the bag tools, the sweeps and the benchmarks'
+    # front ends
     core = [p for p in (ROOT / "cloth_sim").rglob("*.py")
-            if p.relative_to(ROOT).parts[1] not in ("ros", "bag", "bench", "cli.py")]
+            if p.relative_to(ROOT).parts[1] not in ("ros", "bag", "bench", "sweep", "cli.py")]
     allowed = {"numpy", "scipy", "numba", "yaml", "cholespy", "trimesh", "cloth_sim"}  # + the mesh reader
     assert len(core) > 8
     for path in core:
+        for top in _imports(path):
+            assert top in allowed or top in sys.stdlib_module_names, f"{path.name} imports {top}"
+    # the sweeps run headless: the core, the bag writer, Ray, pyarrow and a progress bar, no ROS
+    sweep = list((ROOT / "cloth_sim" / "sweep").glob("*.py"))
+    assert len(sweep) >= 4
+    for path in sweep:
+        for top in _imports(path):
+            assert top in allowed | {"ray", "pyarrow", "tqdm"} or top in sys.stdlib_module_names, \
+                f"sweep/{path.name} imports {top}"
+    for path in (ROOT / "cloth_sim" / "bag" / "cdr.py", ROOT / "cloth_sim" / "settings.py"):
         for top in _imports(path):
             assert top in allowed or top in sys.stdlib_module_names, f"{path.name} imports {top}"
     # bag storage (info, reindex) works without ROS; only record/play/bench talk to the graph

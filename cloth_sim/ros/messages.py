@@ -255,9 +255,13 @@ def checked_pose(pose, frame: str, node_frame: str, prefix: str = ""):
 def image(values: np.ndarray, encoding: str, frame_id: str, stamp):
     """``sensor_msgs/Image`` of a 2-D array (``32FC1`` float32 depth in metres with NaN invalid, as
     REP 118 says; ``16SC1`` and ``32SC1`` labels)."""
+    a = np.ascontiguousarray(values)
+    return _image(a, encoding, frame_id, stamp, array.array("B", a.tobytes()))
+
+
+def _image(a: np.ndarray, encoding: str, frame_id: str, stamp, data):
     from sensor_msgs.msg import Image
 
-    a = np.ascontiguousarray(values)
     msg = Image()
     msg.header.stamp = stamp
     msg.header.frame_id = frame_id
@@ -265,7 +269,7 @@ def image(values: np.ndarray, encoding: str, frame_id: str, stamp):
     msg.encoding = encoding
     msg.is_bigendian = sys.byteorder == "big"
     msg.step = a.shape[1] * a.itemsize
-    msg.data = array.array("B", a.tobytes())
+    msg.data = data
     return msg
 
 
@@ -291,18 +295,8 @@ def _splice(template_msg, payload) -> bytes:
 
 def image_bytes(values: np.ndarray, encoding: str, frame_id: str, stamp) -> bytes:
     """:func:`image`, serialised (what rclpy publishes), built with one copy of the pixels."""
-    from sensor_msgs.msg import Image
-
     a = np.ascontiguousarray(values)
-    msg = Image()
-    msg.header.stamp = stamp
-    msg.header.frame_id = frame_id
-    msg.height, msg.width = a.shape
-    msg.encoding = encoding
-    msg.is_bigendian = sys.byteorder == "big"
-    msg.step = a.shape[1] * a.itemsize
-    msg.data = _DATA_PROBE
-    return _splice(msg, a)
+    return _splice(_image(a, encoding, frame_id, stamp, _DATA_PROBE), a)
 
 
 def point_cloud_bytes(points: np.ndarray, frame_id: str, stamp, dense: bool) -> bytes:
