@@ -178,7 +178,7 @@ def spec_from_dict(data, source: str = "<dict>", text: str = "", base: Path | No
         fail("seed", f"must be an integer >= 0, got {_short(seed)}")
 
     fixed = _mapping(data.get("set"), "set", fail)
-    fixed = {k: _param("set", k, v, fail) for k, v in fixed.items()}
+    fixed = {k: _param(f"set.{k}", k, v, fail) for k, v in fixed.items()}
     if "scene" in fixed:
         fail("set.scene", "the base scene is the top-level key scene")
 
@@ -187,7 +187,7 @@ def spec_from_dict(data, source: str = "<dict>", text: str = "", base: Path | No
         _key(f"grid.{key}", key, fail)
         if not isinstance(values, list) or not values:
             fail(f"grid.{key}", f"must be a non-empty list of values, got {_short(values)}")
-        checked = [_param("grid", f"{key}[{i}]", v, fail, name=key) for i, v in enumerate(values)]
+        checked = [_param(f"grid.{key}[{i}]", key, v, fail) for i, v in enumerate(values)]
         seen = [json.dumps(v, sort_keys=True) for v in checked]
         dup = next((i for i, s in enumerate(seen) if s in seen[:i]), None)
         if dup is not None:
@@ -247,19 +247,19 @@ def _key(where, key, fail) -> None:
              f"digits, _); the parameters are {', '.join(sorted(SCHEMA))}")
 
 
-def _param(where, key, value, fail, name=None):
-    """A value checked by the schema (a parameter), or a number or vector (a script variable)."""
-    name = name or key
+def _param(field, name, value, fail):
+    """A value of ``name`` at ``field``: checked by the schema (a parameter), or a number or vector
+    (a script variable)."""
     if name in SCHEMA:
         try:
-            return SCHEMA[name].check(value, field=f"{where}.{key}")
+            return SCHEMA[name].check(value, field=field)
         except ParameterError as e:
-            fail(f"{where}.{key}", str(e))
+            fail(field, str(e))
     if _is_number(value):
         return float(value)
     if isinstance(value, list) and len(value) == 3 and all(_is_number(v) for v in value):
         return [float(v) for v in value]
-    fail(f"{where}.{key}", f"a script variable must be a finite number or 3 numbers, got {_short(value)}")
+    fail(field, f"a script variable must be a finite number or 3 numbers, got {_short(value)}")
 
 
 def _distribution(key, dist, fail) -> tuple:
@@ -272,8 +272,7 @@ def _distribution(key, dist, fail) -> tuple:
     if kind == "choice":
         if not isinstance(arg, list) or not arg:
             fail(where, f"must be a non-empty list of values, got {_short(arg)}")
-        return kind, [_param(where, f"[{i}]", v, fail, name=key) if key not in SCHEMA else
-                      _checked(where, i, key, v, fail) for i, v in enumerate(arg)]
+        return kind, [_param(f"{where}[{i}]", key, v, fail) for i, v in enumerate(arg)]
     if key in SCHEMA and SCHEMA[key].type not in (float, int):
         fail(where, f"{key} is {SCHEMA[key].range_text()}: draw it by choice")
     if not isinstance(arg, list) or len(arg) != 2 or not all(_is_number(v) for v in arg):
@@ -293,13 +292,6 @@ def _distribution(key, dist, fail) -> tuple:
         if spec.type is int:
             fail(where, f"{key} is an integer: draw it by choice")
     return kind, [lo, hi]
-
-
-def _checked(where, i, key, v, fail):
-    try:
-        return SCHEMA[key].check(v, field=f"{where}[{i}]")
-    except ParameterError as e:
-        fail(f"{where}[{i}]", str(e))
 
 
 def _number(x, key, fail, lo=None, hi=None, lo_open=False, unit=""):
