@@ -172,6 +172,23 @@ def check_stability(cfg: dict, model) -> tuple[str | None, float]:
     return None, limit
 
 
+def refusal(cfg: dict, model) -> tuple[str | None, tuple[str, ...], float | None]:
+    """The checks of a combination of values on ``model``, in the node's order — the thickness
+    self-collision needs, the camera, the method's stable step: ``(reason, the parameters the
+    reason names, stable_dt)``; ``reason`` is ``None`` when all pass (``stable_dt`` is known only
+    once the stability check has run)."""
+    if cfg["self_collision"]:
+        try:
+            check_thickness(model, cfg["thickness"])
+        except ValueError as e:  # a finer cloth (rows, spacing, a scene) can be the cause
+            return str(e), ("thickness", "self_collision"), None
+    reason = camera_reason(cfg)
+    if reason:  # a combination (far above near, look_at away from position)
+        return reason, tuple(n for n in SCHEMA if n.startswith("camera.") and n in reason), None
+    reason, limit = check_stability(cfg, model)
+    return reason, (("dt",) if reason else ()), limit
+
+
 def configure(scene: str | Scene, values: dict) -> tuple[dict, Scene, Simulator, float]:
     """``(cfg, scene, simulator, stable_dt)`` for ``scene`` (a name, a path or a loaded scene) with
     ``values`` (parameter name → value) set on it, checked as the node checks a parameter change:
@@ -192,12 +209,7 @@ def configure(scene: str | Scene, values: dict) -> tuple[dict, Scene, Simulator,
     if reason:
         raise ValueError(reason)
     model = build_model(cfg, scene)
-    if cfg["self_collision"]:
-        check_thickness(model, cfg["thickness"])
-    reason = camera_reason(cfg)
-    if reason:
-        raise ValueError(reason)
-    reason, limit = check_stability(cfg, model)
+    reason, _, limit = refusal(cfg, model)
     if reason:
         raise ValueError(reason)
     return cfg, scene, build_simulator(cfg, model, scene), limit

@@ -16,10 +16,8 @@ from rclpy.parameter import Parameter
 from .. import settings
 from ..parameters import SCHEMA
 from ..scene import SceneError, load_scene
-from ..self_collision import check_thickness
 from ..settings import MODEL_KEYS
 from . import params as P
-from .camera_publisher import check as camera_check
 
 #: a publish_rate is refused only when the measured cost exceeds the time available this many times
 RATE_REFUSAL_LOAD = 10.0
@@ -66,7 +64,6 @@ class ParameterGate:
         return model
 
     _build_simulator = staticmethod(settings.build_simulator)
-    _check_stability = staticmethod(settings.check_stability)
 
     def _pre_set(self, parameters: list[Parameter]) -> list[Parameter]:
         """The gate every value passes first (it runs before rclpy's own type and range checks,
@@ -149,21 +146,10 @@ class ParameterGate:
             reason = self._check_rate(cand)
             if reason:
                 return SetParametersResult(successful=False, reason=reason)
-        if cand["self_collision"]:
-            try:
-                check_thickness(model, cand["thickness"])
-            except ValueError as e:  # a finer cloth (rows, spacing, a scene) can be the cause
-                reason = self._blame(parameters, cand, str(e), ("thickness", "self_collision"))
-                return SetParametersResult(successful=False, reason=reason)
-        reason = camera_check(cand)
-        if reason:  # a combination (far above near, look_at away from position): name what changed too
-            named = tuple(n for n in SCHEMA if n.startswith("camera.") and n in reason)
+        reason, named, limit = settings.refusal(cand, model)
+        if reason:  # the refusal names what changed as well as what it is about
             return SetParametersResult(successful=False,
                                        reason=self._blame(parameters, cand, reason, named))
-        reason, limit = self._check_stability(cand, model)
-        if reason:  # the refusal names what made the limit fall, as well as dt
-            return SetParametersResult(successful=False,
-                                       reason=self._blame(parameters, cand, reason, ("dt",)))
         self._validated = (cand, scene if rebuild else None, model if rebuild else None, limit)
         return SetParametersResult(successful=True)
 

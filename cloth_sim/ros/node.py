@@ -37,13 +37,12 @@ from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
+from .. import settings
 from ..parameters import SCHEMA
 from ..scene import SceneError, load_scene
-from ..self_collision import check_thickness
 from ..simulator import SimulationDiverged, compile_kernels
 from . import params as P
 from .camera_publisher import CameraPublisher
-from .camera_publisher import check as camera_check
 from .control import CHECKPOINTS, SimulationControl
 from .frames import Frames
 from .gate import MODEL_KEYS, ParameterGate, _as_declared, _settle_garbage  # noqa: F401 (MODEL_KEYS: fuzz_node)
@@ -110,14 +109,10 @@ class ClothSimNode(ParameterGate, SimulationControl, Manipulation, Publishing, N
         self._models = {}  # rebuild key -> model (a scene's model at a size), last few kept
         self._validated = None  # what the on-set callback checked, for the post-set callback
         model = self._model(self.cfg, self.scene)
-        reason, self._stable_dt = self._check_stability(self.cfg, model)
+        # the combination checks a parameter change passes (thickness, camera, stable step)
+        reason, _, self._stable_dt = settings.refusal(self.cfg, model)
         if reason:
             raise StartupError(reason)
-        if self.cfg["self_collision"]:
-            try:
-                check_thickness(model, self.cfg["thickness"])
-            except ValueError as e:
-                raise StartupError(str(e)) from None
         self.sim = self._build_simulator(self.cfg, model, self.scene)
         # every kernel compiled (or loaded from numba's cache) now, not in the tick that first
         # needs it: switching to kang live once stalled the node for 6 s
@@ -161,9 +156,6 @@ class ClothSimNode(ParameterGate, SimulationControl, Manipulation, Publishing, N
         self.interfaces = SimulationInterfaces(self)  # the ROS simulation standard's services
         self.frames = Frames(self)  # TF
         self.frames.publish_static(self.cfg["world_frame_id"], self.cfg["frame_id"])
-        reason = camera_check(self.cfg)
-        if reason:
-            raise StartupError(reason)
         self.camera_pub = CameraPublisher(self)  # the depth camera's topics
         self.add_pre_set_parameters_callback(self._pre_set)
         self.add_on_set_parameters_callback(self._on_set)

@@ -170,7 +170,7 @@ def spec_from_dict(data, source: str = "<dict>", text: str = "", base: Path | No
         fail("scene", f"must be a scene name or a scene file, got {_short(scene)}")
     if base is not None and (scene.endswith((".yaml", ".yml")) and not Path(scene).is_absolute()):
         scene = str((base / scene).resolve())
-    _check_scene(scene, fail)
+    base_scene = _check_scene(scene, fail)
     duration = _number(data["duration"], "duration", fail, lo=0.0, lo_open=True, hi=1e6, unit="s")
     frames = _number(data.get("frames", 0), "frames", fail, lo=0.0, hi=1e4, unit="per simulated second")
     seed = data.get("seed", 0)
@@ -224,7 +224,7 @@ def spec_from_dict(data, source: str = "<dict>", text: str = "", base: Path | No
         fail(f"{where}.{name}", f"{name!r} is not a parameter of the node nor a variable the script "
              f"uses (as ${name}); the parameters are {', '.join(sorted(SCHEMA))}")
     if "scene" not in grid and "scene" not in draws:
-        _check_colliders(scene, script, fail)
+        _check_colliders(base_scene, script, fail)
 
     spec = Spec(scene=scene, duration=duration, frames=frames, seed=int(seed), fixed=fixed,
                 grid=grid, random=draws, samples=int(samples), script=script, source=source, text=text)
@@ -308,24 +308,23 @@ def _is_number(x) -> bool:
     return (not isinstance(x, bool) and isinstance(x, numbers.Real) and math.isfinite(float(x)))
 
 
-def _check_scene(scene, fail) -> None:
+def _check_scene(scene, fail):
+    """The base scene, loaded (it is checked as the node checks a scene file)."""
     from ..scene import SceneError, load_scene
 
     try:
-        load_scene(scene)
+        return load_scene(scene)
     except (SceneError, ValueError) as e:
         fail("scene", str(e))
 
 
 def _check_colliders(scene, script, fail) -> None:
-    from ..scene import load_scene
-
-    names = [c.name for c in load_scene(scene).make_colliders()]
+    names = [c.name for c in scene.make_colliders()]
     for i, event in enumerate(script):
         move = event.get("move")
         if move and "collider" in move and move["collider"] not in names:
             fail(f"script[{i}].move.collider", f"{move['collider']!r} is not a collider of scene "
-                 f"{scene}; its colliders are {', '.join(names) or 'none'}")
+                 f"{scene.name}; its colliders are {', '.join(names) or 'none'}")
 
 
 # ------------------------------------------------------------------------------------------- script
