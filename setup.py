@@ -22,6 +22,8 @@ setup(
         ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
     ],
     install_requires=["setuptools"],
+    # the versions are pinned in requirements.txt; `pip install .[envs]` names what the tasks need
+    extras_require={"envs": ["gymnasium>=1.2,<2", "numpy", "scipy", "numba", "pyyaml", "trimesh", "cholespy"]},
     zip_safe=False,
     maintainer="cloth_sim developers",
     maintainer_email="cloth-sim@example.org",

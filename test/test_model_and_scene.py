@@ -137,10 +137,10 @@ def _imports(path):
 
 
 def test_core_imports_no_ros():
-    # the physics core: everything but the ROS adapter, the bag tools, the sweeps and the benchmarks'
-    # front ends
+    # the physics core: everything but the ROS adapter, the bag tools, the sweeps, the Gymnasium
+    # tasks and the benchmarks' front ends
     core = [p for p in (ROOT / "cloth_sim").rglob("*.py")
-            if p.relative_to(ROOT).parts[1] not in ("ros", "bag", "bench", "sweep", "cli.py")]
+            if p.relative_to(ROOT).parts[1] not in ("ros", "bag", "bench", "sweep", "envs", "cli.py")]
     allowed = {"numpy", "scipy", "numba", "yaml", "cholespy", "trimesh", "cloth_sim"}  # + the mesh reader
     assert len(core) > 8
     for path in core:
@@ -153,6 +153,13 @@ def test_core_imports_no_ros():
         for top in _imports(path):
             assert top in allowed | {"ray", "pyarrow", "tqdm"} or top in sys.stdlib_module_names, \
                 f"sweep/{path.name} imports {top}"
+    # the Gymnasium tasks: the core and gymnasium, no ROS
+    envs = list((ROOT / "cloth_sim" / "envs").glob("*.py"))
+    assert len(envs) >= 6
+    for path in envs:
+        for top in _imports(path):
+            assert top in allowed | {"gymnasium"} or top in sys.stdlib_module_names, \
+                f"envs/{path.name} imports {top}"
     for path in (ROOT / "cloth_sim" / "bag" / "cdr.py", ROOT / "cloth_sim" / "settings.py"):
         for top in _imports(path):
             assert top in allowed or top in sys.stdlib_module_names, f"{path.name} imports {top}"

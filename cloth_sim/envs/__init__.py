@@ -1,0 +1,44 @@
+"""Gymnasium environments: SoftGym's cloth-manipulation benchmark on cloth_sim's physics.
+
+``import cloth_sim.envs`` registers them, or name the module in the id, which Gymnasium imports:
+``gymnasium.make("cloth_sim.envs:cloth_sim/ClothFlatten-v0")`` (Gymnasium 1.x has no plugin entry
+points):
+
+=================================  =========================================================
+``cloth_sim/ClothFlatten-v0``      pickers, horizon 100, action repeat 8 (SoftGym's defaults)
+``cloth_sim/ClothFold-v0``         pickers, horizon 100, action repeat 8
+``cloth_sim/ClothDrop-v0``         pickers, horizon 30, action repeat 16
+``cloth_sim/ClothFlattenPPP-v0``   pick-and-place, horizon 20, action repeat 1
+``cloth_sim/ClothFoldPPP-v0``      pick-and-place, horizon 20, action repeat 1
+=================================  =========================================================
+
+Every keyword of :class:`~cloth_sim.envs.cloth_env.ClothEnv` can be passed to ``gymnasium.make``.
+"""
+
+from __future__ import annotations
+
+import gymnasium
+
+from .cloth_env import ClothEnv
+from .tasks import ClothDropEnv, ClothFlattenEnv, ClothFoldEnv
+
+__all__ = ["ClothEnv", "ClothFlattenEnv", "ClothFoldEnv", "ClothDropEnv", "ENV_IDS", "register"]
+
+_ENVS = {
+    "cloth_sim/ClothFlatten-v0": ("ClothFlattenEnv", {}),
+    "cloth_sim/ClothFold-v0": ("ClothFoldEnv", {}),
+    "cloth_sim/ClothDrop-v0": ("ClothDropEnv", {}),
+    "cloth_sim/ClothFlattenPPP-v0": ("ClothFlattenEnv", dict(action_mode="pickerpickplace", horizon=20)),
+    "cloth_sim/ClothFoldPPP-v0": ("ClothFoldEnv", dict(action_mode="pickerpickplace", horizon=20)),
+}
+ENV_IDS = tuple(_ENVS)
+
+
+def register() -> None:
+    """Register the environments with Gymnasium (done on import; again is a no-op)."""
+    for env_id, (cls, kwargs) in _ENVS.items():
+        if env_id not in gymnasium.registry:
+            gymnasium.register(id=env_id, entry_point=f"cloth_sim.envs.tasks:{cls}", kwargs=kwargs)
+
+
+register()

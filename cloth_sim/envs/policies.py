@@ -1,0 +1,88 @@
+"""Scripted (oracle) policies for the picker tasks: they read the cloth's corners from the simulation,
+so they work with any observation mode. Used by the tests, the README's frames and the benchmark.
+
+Each is a generator of actions: ``for action in fold(env.unwrapped): env.step(action)``. A policy
+moves its pickers through waypoints, each at the pickers' top speed (0.01 m per frame), holding or
+not; an env step's action is repeated ``action_repeat`` frames, so the move asked per frame is the
+distance left over the frames of one env step.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def _go(env, targets, pick: bool, settle: int = 0):
+    """Actions taking the pickers to ``targets`` (one row per picker), then ``settle`` more steps."""
+    targets = np.array([env.pickers.clip(t) for t in np.asarray(targets, float)])
+    for _ in range(400):
+        left = targets - env.pickers.positions
+        if np.abs(left).max() < 1e-6:
+            break
+        yield _action(env, np.clip(left / env.action_repeat, -0.01, 0.01), pick)
+    for _ in range(settle):
+        yield _action(env, np.zeros_like(targets), pick)
+
+
+def _action(env, delta, pick: bool) -> np.ndarray:
+    a = np.zeros((env.num_picker, 4), np.float32)
+    a[:, :3] = delta
+    a[:, 3] = 1.0 if pick else 0.0
+    return a.ravel()
+
+
+def flatten(env):
+    """Pick the two corners of an edge (the pair farthest apart of the cloth's four corners that
+    share an edge), lift them until the cloth hangs free, pull them apart to the edge's length, then
+    drag them across the floor away from where the cloth hangs while lowering, and let go: the cloth
+    is laid down flat behind them."""
+    x = env.sim.positions
+    c = env.corners
+    pairs = [(c[0], c[2]), (c[1], c[3]), (c[0], c[1]), (c[2], c[3])]  # the four edges
+    a, b = max(pairs, key=lambda p: np.linalg.norm(x[p[0], :2] - x[p[1], :2]))
+    edge = env.spacing * ((env.cols - 1) if {a, b} <= {c[0], c[2]} or {a, b} <= {c[1], c[3]}
+                          else (env.rows - 1))
+    yield from _go(env, [x[a], x[b]], pick=False)
+    yield from _go(env, [x[a], x[b]], pick=True, settle=1)
+    top = env.pickers.high[2]
+    p = env.pickers.positions
+    yield from _go(env, [[p[0, 0], p[0, 1], top], [p[1, 0], p[1, 1], top]], pick=True)
+    mid = env.pickers.positions.mean(axis=0)
+    d = env.pickers.positions[1, :2] - env.pickers.positions[0, :2]
+    d = d / max(np.linalg.norm(d), 1e-9)
+    half = np.array([*d, 0.0]) * edge / 2
+    yield from _go(env, [mid - half, mid + half], pick=True, settle=4)  # spread, still
+    # drag away from the cloth's centre, lowering, so it lays down behind the pickers
+    centre = env.sim.positions[:, :2].mean(axis=0)
+    away = np.array([-d[1], d[0]])
+    if away @ (mid[:2] - centre) < 0:
+        away = -away
+    length = env.spacing * (env.rows + env.cols - 2) - edge  # the other side's length
+    p = env.pickers.positions.copy()
+    low = env.pickers.low[2] + 0.02
+    # first drag the hanging cloth's lower edge along the floor, then lower as they go, the cloth
+    # trailing behind
+    for f, z in ((0.2, 0.3), (0.5, 0.05), (1.1, 0.0)):
+        yield from _go(env, [[*(p[i, :2] + away * length * f), low + (p[i, 2] - low) * z]
+                             for i in range(2)], pick=True)
+    yield from _go(env, env.pickers.positions, pick=True, settle=2)
+    yield from _go(env, env.pickers.positions, pick=False, settle=3)
+
+
+def fold(env):
+    """Fold the left half (columns ``< cols/2``) onto the right: pick the left edge's two corners,
+    carry them over in a half circle about the middle to 3 cm above the right edge's corners and let
+    go there."""
+    x = env.sim.positions
+    c = env.corners
+    src, dst = x[[c[0], c[1]]], x[[c[2], c[3]]]
+    yield from _go(env, src, pick=False)
+    yield from _go(env, src, pick=True, settle=1)
+    # along a half circle about the crease, the held edge's path when the cloth folds without
+    # stretching or sliding
+    crease = (src + dst) / 2
+    for angle in np.linspace(np.pi / 6, np.pi, 6):
+        yield from _go(env, crease + (src - crease) * np.cos(angle) +
+                       (0.0, 0.0, np.linalg.norm(src - crease, axis=1).mean() * np.sin(angle)), pick=True)
+    yield from _go(env, dst + (0.0, 0.0, 0.03), pick=True, settle=1)
+    yield from _go(env, env.pickers.positions, pick=False, settle=3)
