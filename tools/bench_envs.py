@@ -24,9 +24,8 @@ TASKS = ("ClothFlatten", "ClothFold", "ClothDrop")
 MODES = ("key_point", "point_cloud", "depth")
 
 
-def one_env(task, mode, steps, cache):
-    env = gym.make(f"cloth_sim/{task}-v0", observation_mode=mode, cache_dir=cache, num_variations=1,
-                   horizon=10 ** 6)
+def _rate(env, steps) -> float:
+    """Env steps per second of ``steps`` seeded random actions (``env`` may be a vector env)."""
     env.reset(seed=0)
     env.action_space.seed(0)
     acts = [env.action_space.sample() for _ in range(steps)]
@@ -34,28 +33,28 @@ def one_env(task, mode, steps, cache):
     t = time.perf_counter()
     for a in acts:
         env.step(a)
-    per_step = (time.perf_counter() - t) / steps
+    return getattr(env, "num_envs", 1) * steps / (time.perf_counter() - t)
+
+
+def one_env(task, mode, steps, cache):
+    env = gym.make(f"cloth_sim/{task}-v0", observation_mode=mode, cache_dir=cache, num_variations=1,
+                   horizon=10 ** 6)
+    rate = _rate(env, steps)
     # the physics alone: the same number of frames on the bare simulator
     u = env.unwrapped
+    n = max(3, steps // 4)
     t = time.perf_counter()
-    for _ in range(max(3, steps // 4)):
+    for _ in range(n):
         u.sim.step(u.action_repeat * SUBSTEPS)
-    physics = (time.perf_counter() - t) / max(3, steps // 4)
+    physics = (time.perf_counter() - t) / n
     env.close()
-    return 1.0 / per_step, per_step / physics
+    return rate, 1.0 / rate / physics
 
 
 def async_envs(task, mode, steps, cache, n=2):
     envs = gym.make_vec(f"cloth_sim/{task}-v0", num_envs=n, vectorization_mode="async",
                         observation_mode=mode, cache_dir=cache, num_variations=1, horizon=10 ** 6)
-    envs.reset(seed=0)
-    envs.action_space.seed(0)
-    acts = [envs.action_space.sample() for _ in range(steps)]
-    envs.step(acts[0])
-    t = time.perf_counter()
-    for a in acts:
-        envs.step(a)
-    rate = n * steps / (time.perf_counter() - t)
+    rate = _rate(envs, steps)
     envs.close()
     return rate
 

@@ -209,6 +209,12 @@ class ClothEnv(gym.Env):
         x[:, 2] = self.thickness
         return x
 
+    def lay_flat(self) -> np.ndarray:
+        """Put the cloth flat on the floor at rest (:meth:`flat_positions`); returns the positions."""
+        x = self.flat_positions()
+        self._set_state(x, np.zeros_like(x))
+        return x
+
     def frames(self, n: int, until=None) -> int:
         """Step ``n`` frames with nothing held moving, or fewer: until ``until()`` holds."""
         for i in range(n):

@@ -25,12 +25,10 @@ MAX_WAIT = 300  # frames (5 s), SoftGym's max_wait_step
 
 
 class ClothFlattenEnv(ClothEnv):
-    task = "ClothFlatten"
-    defaults = dict(horizon=100, action_repeat=8)
+    task = "ClothFlatten"  # SoftGym's horizon 100 and action repeat 8: ClothEnv's defaults
 
     def _generate(self, rng):
-        x = self.flat_positions()
-        self._set_state(x, np.zeros_like(x))
+        x = self.lay_flat()
         j = int(rng.integers(len(x)))
         lift = 0.5 + 0.5 * rng.random()
         p0 = x[j].copy()
@@ -68,11 +66,9 @@ class ClothFlattenEnv(ClothEnv):
 
 class ClothFoldEnv(ClothEnv):
     task = "ClothFold"
-    defaults = dict(horizon=100, action_repeat=8)
 
     def _generate(self, rng):
-        x = self.flat_positions()
-        self._set_state(x, np.zeros_like(x))
+        self.lay_flat()
         self.frames(MAX_WAIT, self.still(0.01))
         x = self.sim.positions.copy()
         c = x[:, :2].mean(axis=0)
