@@ -83,7 +83,6 @@ class ClothEnv(gym.Env):
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": 15}
     #: the task's name (the cache's key and the seed's first word)
     task = "Cloth"
-    task_id = 0
     defaults = dict(horizon=100, action_repeat=8)
     #: bounds of the pickers' centres, (x, y, z) low and high before centring, z up: SoftGym's
     #: ``(-0.4, 0, -0.4)``–``(1.0, 0.5, 0.4)`` (y up) less the picker's radius, but down to the height
@@ -248,7 +247,6 @@ class ClothEnv(gym.Env):
             self.variation = int(self.np_random.integers(self.num_variations))
         state = self.states.get(self.variation)
         self._set_state(state["positions"], state["velocities"])
-        self.initial = state
         self.steps = 0
         self._start()
         return self._observe()

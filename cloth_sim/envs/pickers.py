@@ -33,9 +33,8 @@ class Pickers:
         self.positions = np.zeros((self.count, 3))
         #: the gripper offset (held particle − picker) of each picker holding one, else None
         self.held: list = [None] * self.count
-
-    def names(self) -> list[str]:
-        return [f"picker{i}" for i in range(self.count)]
+        #: each picker's gripper name in the simulator
+        self.names = tuple(f"picker{i}" for i in range(self.count))
 
     def reset(self, sim, center, bounds=None) -> None:
         """Release everything, centre the bounds on ``center`` horizontally (SoftGym's
@@ -84,7 +83,7 @@ class Pickers:
         for s in range(1, substeps + 1):
             for i in moving:
                 p = start[i] + (end[i] - start[i]) * (s / substeps)
-                sim.set_gripper_pose(self.names()[i], p + self.held[i])
+                sim.set_gripper_pose(self.names[i], p + self.held[i])
             sim.step()
         self.positions = end
 
@@ -98,10 +97,10 @@ class Pickers:
         j = int(np.argmin(d))
         if d[j] > self.reach:
             return
-        sim.grasp(self.names()[i], x[j], 1e-12)
+        sim.grasp(self.names[i], x[j], 1e-12)
         self.held[i] = x[j] - self.positions[i]
 
     def _release(self, sim, i: int) -> None:
         if self.held[i] is not None:
-            sim.release(self.names()[i])
+            sim.release(self.names[i])
             self.held[i] = None

@@ -38,10 +38,10 @@ def flatten(env):
     is laid down flat behind them."""
     x = env.sim.positions
     c = env.corners
-    pairs = [(c[0], c[2]), (c[1], c[3]), (c[0], c[1]), (c[2], c[3])]  # the four edges
-    a, b = max(pairs, key=lambda p: np.linalg.norm(x[p[0], :2] - x[p[1], :2]))
-    edge = env.spacing * ((env.cols - 1) if {a, b} <= {c[0], c[2]} or {a, b} <= {c[1], c[3]}
-                          else (env.rows - 1))
+    # the four edges: their corners, their rest length and the other side's
+    w, h = env.spacing * (env.cols - 1), env.spacing * (env.rows - 1)
+    edges = [(c[0], c[2], w, h), (c[1], c[3], w, h), (c[0], c[1], h, w), (c[2], c[3], h, w)]
+    a, b, edge, length = max(edges, key=lambda e: np.linalg.norm(x[e[0], :2] - x[e[1], :2]))
     yield from _go(env, [x[a], x[b]], pick=False)
     yield from _go(env, [x[a], x[b]], pick=True, settle=1)
     top = env.pickers.high[2]
@@ -57,7 +57,6 @@ def flatten(env):
     away = np.array([-d[1], d[0]])
     if away @ (mid[:2] - centre) < 0:
         away = -away
-    length = env.spacing * (env.rows + env.cols - 2) - edge  # the other side's length
     p = env.pickers.positions.copy()
     low = env.pickers.low[2] + 0.02
     # first drag the hanging cloth's lower edge along the floor, then lower as they go, the cloth

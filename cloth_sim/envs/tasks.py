@@ -16,6 +16,8 @@
 
 from __future__ import annotations
 
+from functools import cached_property
+
 import numpy as np
 
 from . import metrics
@@ -55,7 +57,11 @@ class ClothFlattenEnv(ClothEnv):
         lo, hi = x[:, :2].min(axis=0), x[:, :2].max(axis=0)
         self.pickers.reset(self.sim, [*(lo + hi) / 2, 0.2])
         self.area_start = metrics.covered_area(x, self.radius)
-        self.area_flat = metrics.covered_area(self.flat_positions(), self.radius)
+
+    @cached_property
+    def area_flat(self) -> float:
+        """The flat cloth's covered area: the best possible (one per env: it depends on the grid)."""
+        return metrics.covered_area(self.flat_positions(), self.radius)
 
     def _performance(self):
         return metrics.covered_area(self.sim.positions, self.radius), {}
