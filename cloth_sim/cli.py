@@ -99,7 +99,8 @@ def _bench_node(args) -> int:
         print_scene_node_table(args.scene, args.seconds, args.rate)
         return 0
     print_node_table(args.sizes, args.seconds, args.integrator, args.dt, args.rate,
-                     args.strain_limit_passes)
+                     args.strain_limit_passes, args.stiffness,
+                     (True,) if args.subscribed_only else (False, True))
     return 0
 
 
@@ -252,6 +253,10 @@ def build_parser() -> argparse.ArgumentParser:
     nb.add_argument("--rate", type=float, default=60.0, help="publish_rate (Hz)")
     nb.add_argument("--strain-limit-passes", type=int, default=None,
                     help="the node's strain_limit_passes (default: its own, 20)")
+    nb.add_argument("--stiffness", type=float, default=None,
+                    help="structural and shear stiffness, N/m (default: the scene's, 1000)")
+    nb.add_argument("--subscribed-only", action="store_true",
+                    help="only the rows with ~/points and ~/mesh subscribed")
     nb.set_defaults(func=_bench_node)
     cb = bsub.add_parser("camera", help="real-time factor of cloth_sim_node with its depth camera "
                          "unsubscribed and subscribed (needs rclpy)")

@@ -16,6 +16,7 @@ import math
 import time
 from pathlib import Path
 
+import numba
 import numpy as np
 
 from ..scene import load_scene
@@ -38,6 +39,52 @@ def build(n: int, integrator: str, *, wind=None, bend=True, strain_limit=None, d
     dt = 1.0 / 60 if integrator in FRAME_RATE else 1e-3
     return scene.build_simulator(rows=n, cols=n, spacing=1.0 / (n - 1), stiffness=k, damping=c,
                                  integrator=integrator, dt=dt, wind=wind, strain_limit=strain_limit)
+
+
+@numba.njit(parallel=True, cache=True)
+def _triad(a, b, c, s):
+    for i in numba.prange(a.shape[0]):
+        a[i] = b[i] + s * c[i]
+
+
+def triad_bandwidth(total_bytes: int, seconds: float = 0.3) -> float:
+    """Bytes per second of STREAM's triad ``a = b + s·c`` (McCalpin; two arrays read, one written,
+    counted as 24 bytes per element as STREAM counts them) on every core numba uses, over three
+    float64 arrays ``total_bytes`` together (at least 3 × 4 KiB); the best of repeated runs over
+    ``seconds``."""
+    n = max(512, int(total_bytes) // 24)
+    a, b, c = np.zeros(n), np.ones(n), np.full(n, 2.0)
+    _triad(a, b, c, 3.0)  # compile and touch the pages
+    best, spent, reps = math.inf, 0.0, 1
+    while spent < seconds:
+        t = time.perf_counter()
+        for _ in range(reps):
+            _triad(a, b, c, 3.0)
+        el = time.perf_counter() - t
+        spent += el
+        best = min(best, el / reps)
+        if el < 1e-3:
+            reps *= 4
+    return 24.0 * n / best
+
+
+def step_traffic(sim: Simulator) -> int:
+    """The bytes one symplectic Euler step must move at least: each array the step reads, once, and
+    each it writes, once (positions and velocities both ways; the force array written; the springs'
+    ends, rest lengths, stiffness, damping and kind, gravity's force and the inverse masses read; with
+    the parallel gather, its incidence lists read and its per-spring force array written and read
+    back). Caches and the particles' repeated reads by their springs are not counted: a lower bound."""
+    forces = sim.forces
+    term = forces.spring_term
+    state = sim.state
+    read = state.x.nbytes + state.v.nbytes + forces.inv_mass.nbytes
+    read += sum(a.nbytes for a in (term.springs, term.rest, term.k, term.c, term.kind))
+    read += state.x.nbytes  # gravity's force, the sum's start (n × 3)
+    written = state.x.nbytes + state.v.nbytes + state.x.nbytes  # x, v and the force array
+    if term.parallel:
+        read += sum(a.nbytes for a in term._incidence) + term._fs.nbytes
+        written += term._fs.nbytes
+    return int(read + written)
 
 
 def fit_exponent(rows: list[dict]) -> float:
@@ -71,11 +118,18 @@ def main(out: Path, quick: bool = False) -> dict:
                     continue
             else:
                 continue
-            rows.append({"integrator": name, "N": n, "particles": n * n, "ms_per_step": ms,
-                         "dt": sim.dt, "ms_per_simulated_s": ms / sim.dt})
+            row = {"integrator": name, "N": n, "particles": n * n, "ms_per_step": ms,
+                   "ns_per_particle": 1e6 * ms / (n * n), "dt": sim.dt, "ms_per_simulated_s": ms / sim.dt}
+            if name == "symplectic_euler":
+                traffic = step_traffic(sim)
+                bandwidth = triad_bandwidth(traffic)
+                row.update(traffic_bytes=traffic, triad_gb_s=bandwidth / 1e9,
+                           bound_ms=1e3 * traffic / bandwidth)
+            rows.append(row)
             if ms / 1e3 > budget or first > 5 * budget:
                 break
     exponents = {m: fit_exponent([r for r in rows if r["integrator"] == m]) for m in methods}
+    dram = triad_bandwidth(768 << 20 if not quick else 96 << 20)  # far beyond any cache
 
     # what skipping buys: N = 64 hanging scene, symplectic Euler
     n_skip = 32 if quick else 64
@@ -102,10 +156,11 @@ def main(out: Path, quick: bool = False) -> dict:
                     m = measure(n, 5.0, subscribe, "symplectic_euler", 1e-3, 60.0)
                     node_rows.append({"N": n, "subscriber": subscribe, "tick_ms": m["tick_ms"],
                                       "ms_per_step": m["ms_per_step"], "rtf": m["rtf"]})
-    write_rows(out, "scaling", rows, {"exponents": exponents, "skipping": skip_rows, "node": node_rows})
+    write_rows(out, "scaling", rows, {"exponents": exponents, "skipping": skip_rows, "node": node_rows,
+                                      "dram_triad_gb_s": dram / 1e9})
 
     plt = pyplot()
-    fig, ax = plt.subplots(figsize=(7.5, 5.2))
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(12.5, 5.2))
     for name in methods:
         rs = [r for r in rows if r["integrator"] == name]
         ax.loglog([r["particles"] for r in rs], [r["ms_per_step"] for r in rs], "o-",
@@ -115,6 +170,17 @@ def main(out: Path, quick: bool = False) -> dict:
     ax.set_title("hanging scene resized to N×N, strain limit off (min of 3)")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
+    se = [r for r in rows if r["integrator"] == "symplectic_euler"]
+    ax2.semilogx([r["particles"] for r in se], [r["ns_per_particle"] for r in se], "o-",
+                 label="symplectic_euler, measured")
+    ax2.semilogx([r["particles"] for r in se], [1e6 * r["bound_ms"] / r["particles"] for r in se], "s--",
+                 label="its memory traffic at the triad bandwidth (bound)")
+    ax2.set_xlabel("particles n = N²")
+    ax2.set_ylabel("ns per particle per step")
+    ax2.set_title("cost per particle against the bandwidth bound")
+    ax2.set_ylim(bottom=0)
+    ax2.grid(True, which="both", alpha=0.3)
+    ax2.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(out / "scaling.png", dpi=110)
     plt.close(fig)
@@ -122,6 +188,15 @@ def main(out: Path, quick: bool = False) -> dict:
     table = markdown_table(["integrator"] + [f"N={n}" for n in sizes] + ["exponent (N ≥ 32)"],
                            [[m] + [fmt(next((r["ms_per_step"] for r in rows if r["integrator"] == m and r["N"] == n),
                                         math.nan)) for n in sizes] + [fmt(exponents[m])] for m in methods])
+    per_particle = markdown_table(
+        ["integrator"] + [f"N={n}" for n in sizes],
+        [[m] + [fmt(next((r["ns_per_particle"] for r in rows if r["integrator"] == m and r["N"] == n),
+                         math.nan)) for n in sizes] for m in methods])
+    bound_table = markdown_table(
+        ["N", "bytes a step moves (MB)", "triad GB/s at that size", "bound ms/step", "measured ms/step",
+         "measured / bound"],
+        [[r["N"], fmt(r["traffic_bytes"] / 1e6), fmt(r["triad_gb_s"]), fmt(r["bound_ms"]),
+          fmt(r["ms_per_step"]), fmt(r["ms_per_step"] / r["bound_ms"])] for r in se])
     skip_table = markdown_table(["variant", "active terms", "ms/step", "vs everything on"],
                                 [[r["variant"], r["terms"], fmt(r["ms_per_step"]),
                                   f"{r['ms_per_step'] / skip_rows[0]['ms_per_step']:.2f}×"] for r in skip_rows])
@@ -130,7 +205,11 @@ def main(out: Path, quick: bool = False) -> dict:
                                    fmt(r["rtf"])] for r in node_rows])
                   if node_rows else "(not run: --quick, or rclpy missing)")
     text = (f"# scaling — {machine()}\n\nms per step (min of 3); a blank cell: the previous size exceeded "
-            f"the {budget:g} s/step budget.\n\n{table}\n\n## What skipping buys (N = {n_skip}, symplectic Euler, "
+            f"the {budget:g} s/step budget.\n\n{table}\n\nns per particle per step:\n\n{per_particle}\n\n"
+            f"## Symplectic Euler against the memory-bandwidth limit\n\nA step's compulsory traffic "
+            f"(each array it reads and writes, once) over a STREAM triad's bandwidth on arrays of the "
+            f"same total size, every core; far beyond the caches (768 MB) the triad gives "
+            f"{dram / 1e9:.1f} GB/s.\n\n{bound_table}\n\n## What skipping buys (N = {n_skip}, symplectic Euler, "
             f"dt = 1 ms)\n\n{skip_table}\n\n## The node with and without a ~/points subscriber (60 Hz, "
             f"dt = 1 ms, the hanging scene's strain limit 0.1; the cloud is built only when subscribed)\n\n{node_table}\n\n(run time {time.perf_counter() - t_start:.0f} s)\n")
     (out / "scaling.md").write_text(text)

@@ -20,20 +20,41 @@ from sensor_msgs.msg import PointCloud2
 from visualization_msgs.msg import Marker
 
 
+#: the hanging scene's cloth (32×32 particles of 0.01 kg): resized to N×N it keeps its 1 m side and
+#: this mass, so every size is the same cloth, finer (particle_mass = CLOTH_MASS / N²)
+CLOTH_MASS = 10.24
+
+
 def measure(n: int, seconds: float, subscribe: bool, integrator: str, dt: float, rate: float,
-            passes: int | None = None) -> dict:
+            passes: int | None = None, stiffness: float | None = None) -> dict:
+    """The hanging scene resized to ``n``×``n`` (the same 1 m, 10.24 kg cloth), with
+    ``stiffness`` (N/m) on its structural and shear springs if given."""
     overrides = [Parameter("rows", value=n), Parameter("cols", value=n),
-                 Parameter("spacing", value=1.0 / (n - 1)), Parameter("integrator", value=integrator),
+                 Parameter("spacing", value=1.0 / (n - 1)),
+                 Parameter("particle_mass", value=CLOTH_MASS / n ** 2),
+                 Parameter("integrator", value=integrator),
                  Parameter("dt", value=dt), Parameter("publish_rate", value=rate)]
     if passes is not None:
         overrides.append(Parameter("strain_limit_passes", value=passes))
+    if stiffness is not None:
+        overrides += [Parameter("stiffness.structural", value=float(stiffness)),
+                      Parameter("stiffness.shear", value=float(stiffness))]
     return dict(measure_node(overrides, seconds, subscribe), N=n)
 
 
 def measure_node(overrides: list, seconds: float, subscribe: bool) -> dict:
     """The node started with ``overrides``, run ``seconds`` after a 2 s warm-up, with or without
-    ``~/points`` and ``~/mesh`` subscribed: real-time factor, step and tick costs, overruns."""
+    ``~/points`` and ``~/mesh`` subscribed: real-time factor, step and tick costs, overruns, and the
+    worst strain of a strain-limited spring, sampled every 0.1 s of wall time over the whole run
+    (the warm-up, the cloth's fall from flat, included)."""
     with _node_and_probe(overrides) as (node, probe, ex, stats):
+        worst = [0.0]
+
+        def sample():
+            if node.sim.model.n_springs:
+                worst[0] = max(worst[0], float(node.sim.strains(limited_only=True).max()))
+
+        probe.create_timer(0.1, sample)
         clouds, meshes = [0], [0]
         if subscribe:  # what RViz's two displays ask for; raw: this probe shares the node's thread,
             # so it only counts the messages, without deserialising or keeping them (RViz does that in
@@ -60,7 +81,7 @@ def measure_node(overrides: list, seconds: float, subscribe: bool) -> dict:
                "ms_per_step": 1e3 * sum(s.step_time_mean * s.steps for s in stats) / max(steps, 1),
                "tick_ms": 1e3 * sum(s.tick_wall_time for s in stats) / max(len(stats), 1),
                "ticks_per_s": len(stats) / wall, "clouds": clouds[0], "meshes_per_s": meshes[0] / wall,
-               "overruns": node.overruns - o0, "rss_mb": _rss_mb()}
+               "overruns": node.overruns - o0, "rss_mb": _rss_mb(), "worst_strain": worst[0]}
         return out
 
 
@@ -123,22 +144,24 @@ def print_scene_node_table(scene: str, seconds: float, rate: float) -> list[dict
 
 
 def print_node_table(sizes, seconds: float, integrator: str, dt: float, rate: float,
-                     passes: int | None = None) -> list[dict]:
+                     passes: int | None = None, stiffness: float | None = None,
+                     subscribed=(False, True)) -> list[dict]:
     limiter = "" if passes is None else f", strain_limit_passes {passes}"
-    print(f"# cloth_sim_node, hanging scene resized to N×N, {integrator}, dt={dt:g} s, {rate:g} Hz"
-          f"{limiter}, {seconds:g} s per row after 2 s warm-up; {platform.machine()}, "
-          f"{os.cpu_count()} cores")
+    material = "" if stiffness is None else f", structural and shear stiffness {stiffness:g} N/m"
+    print(f"# cloth_sim_node, hanging scene resized to N×N (1 m, {CLOTH_MASS} kg), {integrator}, "
+          f"dt={dt:g} s, {rate:g} Hz{limiter}{material}, {seconds:g} s per row after 2 s warm-up; "
+          f"{platform.machine()}, {os.cpu_count()} cores")
     print("| N | ~/points + ~/mesh subscribers | real-time factor | ms/step | tick wall ms | ticks/s | "
-          "meshes/s | overruns | resident MB |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "meshes/s | overruns | worst strain | resident MB |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     rows = []
     for n in sizes:
-        for sub in (False, True):
-            r = measure(n, seconds, sub, integrator, dt, rate, passes)
+        for sub in subscribed:
+            r = measure(n, seconds, sub, integrator, dt, rate, passes, stiffness)
             rows.append(r)
             print(f"| {n} | {'yes' if sub else 'no'} | {r['rtf']:.3f} | {r['ms_per_step']:.3f} | "
                   f"{r['tick_ms']:.2f} | {r['ticks_per_s']:.1f} | {r['meshes_per_s']:.1f} | "
-                  f"{r['overruns']} | {r['rss_mb']:.0f} |", flush=True)
+                  f"{r['overruns']} | {r['worst_strain']:.4f} | {r['rss_mb']:.0f} |", flush=True)
     return rows
 
 
