@@ -122,36 +122,22 @@ def _hash(i, j, k, size):
     return h % size if h >= 0 else (-h) % size
 
 
-@numba.njit(cache=True, inline="always")
-def _append(pairs, dist, m, i, j, d):
-    """Pair ``(i, j)`` at distance ``d`` written at row ``m`` (the buffers doubled when full);
-    returns the buffers."""
-    if m == pairs.shape[0]:
-        grown = np.empty((2 * m, 2), np.int64)
-        grown[:m] = pairs[:m]
-        pairs = grown
-        grown_d = np.empty(2 * m)
-        grown_d[:m] = dist[:m]
-        dist = grown_d
-    pairs[m, 0], pairs[m, 1] = i, j
-    dist[m] = d
-    return pairs, dist
-
-
 #: hash cell size as a fraction of the longest triangle side, unless the search radius is larger
 #: (measured at 64×64: 3.4 ms at 1.0, 7.5 ms at 0.5, 2.8 ms at 2.0 but 4× the pairs to visit in a
 #: crumpled cloth)
 CELL = 1.0
 
 
-@numba.njit(cache=True)
-def candidate_pairs(x0, tris, radius):
-    """``(pairs, distances)``: every (particle, triangle) pair whose start positions lie within
-    ``radius``, and that distance; the particle not a corner of the triangle; in a fixed order (by
-    triangle, then by the hash's).
+#: the searches split their triangles (edges) into this many fixed, contiguous chunks, run on every
+#: core; each chunk's pairs are kept in order and the chunks joined in order, so the result does not
+#: depend on the thread count
+CHUNKS = 64
 
-    The particles go into a spatial hash (one cell each, a counting sort); each triangle visits the
-    cells its box, grown by ``radius``, overlaps."""
+
+@numba.njit(cache=True)
+def _particle_hash(x0, tris, radius):
+    """The particles in a spatial hash (one cell each, a counting sort): ``(inv, size, start,
+    members, cell)``, ``inv`` the inverse cell size and ``cell[p]`` particle ``p``'s cell."""
     n, t = x0.shape[0], tris.shape[0]
     longest = 0.0
     for i in range(t):
@@ -164,50 +150,108 @@ def candidate_pairs(x0, tris, radius):
     inv = 1.0 / size_cell
     size = 2 * n + 1
     start = np.zeros(size + 1, np.int64)
-    cell_of = np.empty(n, np.int64)
+    cell = np.empty((n, 3), np.int64)
+    bucket_of = np.empty(n, np.int64)
     for p in range(n):
-        b = _hash(_cell(x0[p, 0], inv), _cell(x0[p, 1], inv), _cell(x0[p, 2], inv), size)
-        cell_of[p] = b
+        for k in range(3):
+            cell[p, k] = _cell(x0[p, k], inv)
+        b = _hash(cell[p, 0], cell[p, 1], cell[p, 2], size)
+        bucket_of[p] = b
         start[b + 1] += 1
     for b in range(size):
         start[b + 1] += start[b]
     fill = start[:-1].copy()
     members = np.empty(n, np.int64)
     for p in range(n):
-        members[fill[cell_of[p]]] = p
-        fill[cell_of[p]] += 1
-    seen = np.full(n, -1, np.int64)  # seen[p] == i: p was looked at for triangle i
-    cap = 4 * n + 16
-    pairs = np.empty((cap, 2), np.int64)
-    dist = np.empty(cap)
-    m = 0
-    for i in range(t):
-        a, b, c = tris[i, 0], tris[i, 1], tris[i, 2]
-        seen[a] = seen[b] = seen[c] = i  # its corners are not paired with it
-        lo0 = min(x0[a, 0], x0[b, 0], x0[c, 0]) - radius
-        lo1 = min(x0[a, 1], x0[b, 1], x0[c, 1]) - radius
-        lo2 = min(x0[a, 2], x0[b, 2], x0[c, 2]) - radius
-        hi0 = max(x0[a, 0], x0[b, 0], x0[c, 0]) + radius
-        hi1 = max(x0[a, 1], x0[b, 1], x0[c, 1]) + radius
-        hi2 = max(x0[a, 2], x0[b, 2], x0[c, 2]) + radius
-        for ci in range(_cell(lo0, inv), _cell(hi0, inv) + 1):
-            for cj in range(_cell(lo1, inv), _cell(hi1, inv) + 1):
-                for ck in range(_cell(lo2, inv), _cell(hi2, inv) + 1):
-                    bucket = _hash(ci, cj, ck, size)
-                    for e in range(start[bucket], start[bucket + 1]):
-                        p = members[e]
-                        if seen[p] == i:
-                            continue
-                        seen[p] = i
-                        if not (lo0 <= x0[p, 0] <= hi0 and lo1 <= x0[p, 1] <= hi1
-                                and lo2 <= x0[p, 2] <= hi2):
-                            continue
-                        d0 = _distance(x0, p, a, b, c)[0]
-                        if d0 >= radius:
-                            continue
-                        pairs, dist = _append(pairs, dist, m, p, i, d0)
-                        m += 1
-    return pairs[:m], dist[:m]
+        members[fill[bucket_of[p]]] = p
+        fill[bucket_of[p]] += 1
+    return inv, size, start, members, cell
+
+
+@numba.njit(cache=True, parallel=True)
+def _triangle_queries(x0, tris, radius, inv, size, start, members, cell, cap, pairs, dist, counts):
+    """Each chunk of triangles (:data:`CHUNKS`) visits the cells its triangles' boxes, grown by
+    ``radius``, overlap, and writes its pairs from row ``chunk·cap`` on (``counts[chunk]``: how many
+    it found, which may exceed ``cap``: then only the first ``cap`` were written). A particle is
+    taken only from the bucket of its own cell (another cell hashed to the same bucket does not
+    count), so each is looked at once per triangle without a shared "seen" array."""
+    t = tris.shape[0]
+    per = (t + CHUNKS - 1) // CHUNKS
+    for chunk in numba.prange(CHUNKS):
+        m = 0
+        row = chunk * cap
+        for i in range(chunk * per, min(t, (chunk + 1) * per)):
+            a, b, c = tris[i, 0], tris[i, 1], tris[i, 2]
+            lo0 = min(x0[a, 0], x0[b, 0], x0[c, 0]) - radius
+            lo1 = min(x0[a, 1], x0[b, 1], x0[c, 1]) - radius
+            lo2 = min(x0[a, 2], x0[b, 2], x0[c, 2]) - radius
+            hi0 = max(x0[a, 0], x0[b, 0], x0[c, 0]) + radius
+            hi1 = max(x0[a, 1], x0[b, 1], x0[c, 1]) + radius
+            hi2 = max(x0[a, 2], x0[b, 2], x0[c, 2]) + radius
+            for ci in range(_cell(lo0, inv), _cell(hi0, inv) + 1):
+                for cj in range(_cell(lo1, inv), _cell(hi1, inv) + 1):
+                    for ck in range(_cell(lo2, inv), _cell(hi2, inv) + 1):
+                        bucket = _hash(ci, cj, ck, size)
+                        for e in range(start[bucket], start[bucket + 1]):
+                            p = members[e]
+                            if cell[p, 0] != ci or cell[p, 1] != cj or cell[p, 2] != ck:
+                                continue  # another cell's particle in this bucket
+                            if p == a or p == b or p == c:
+                                continue  # its corners are not paired with it
+                            if not (lo0 <= x0[p, 0] <= hi0 and lo1 <= x0[p, 1] <= hi1
+                                    and lo2 <= x0[p, 2] <= hi2):
+                                continue
+                            d0 = _distance(x0, p, a, b, c)[0]
+                            if d0 >= radius:
+                                continue
+                            if m < cap:
+                                pairs[row + m, 0] = p
+                                pairs[row + m, 1] = i
+                                dist[row + m] = d0
+                            m += 1
+        counts[chunk] = m
+
+
+def _join_chunks(run, rows: int, cap=None):
+    """Run a chunked search (``run(rows, pairs, dist, counts)``) with ``rows`` per chunk, again with
+    enough rows if a chunk found more, and join the chunks' pairs in chunk order. ``cap``: an
+    optional one-element integer array remembering the rows the last search needed (a stage passes
+    its own, so a step whose cloth has as many pairs as the last searches once)."""
+    if cap is not None:
+        rows = max(rows, int(cap[0]))
+    cap_rows = rows
+    while True:
+        pairs = np.empty((CHUNKS * cap_rows, 2), np.int64)
+        dist = np.empty(CHUNKS * cap_rows)
+        counts = np.zeros(CHUNKS, np.int64)
+        run(cap_rows, pairs, dist, counts)
+        most = int(counts.max())
+        if most <= cap_rows:
+            break
+        cap_rows = most + most // 4
+    if cap is not None:
+        cap[0] = most + most // 4
+    keep = (np.arange(cap_rows)[None, :] < counts[:, None]).ravel()
+    return pairs[keep], dist[keep]
+
+
+def candidate_pairs(x0, tris, radius, cap=None):
+    """``(pairs, distances)``: every (particle, triangle) pair whose start positions lie within
+    ``radius``, and that distance; the particle not a corner of the triangle; in a fixed order (by
+    triangle, then by the cells visited), the same at any thread count.
+
+    The particles go into a spatial hash (one cell each, a counting sort); each triangle visits the
+    cells its box, grown by ``radius``, overlaps; the triangles are searched in :data:`CHUNKS`
+    chunks on every core."""
+    tris = np.ascontiguousarray(tris, dtype=np.int64)
+    if len(tris) == 0 or len(x0) == 0:
+        return np.empty((0, 2), np.int64), np.empty(0)
+    hashed = _particle_hash(x0, tris, float(radius))
+
+    def run(rows, pairs, dist, counts):
+        _triangle_queries(x0, tris, float(radius), *hashed, rows, pairs, dist, counts)
+
+    return _join_chunks(run, 4 * len(x0) // CHUNKS + 16, cap)
 
 
 @numba.njit(cache=True)
@@ -302,14 +346,11 @@ def closest_on_segments(x, a, b, c, d):
 
 
 @numba.njit(cache=True)
-def edge_pairs(x0, edges, radius):
-    """``(pairs, distances)``: every pair of edges ``(e, f)``, ``e < f``, sharing no particle, whose
-    segments at the start lie within ``radius``, and that distance; in a fixed order. Each edge's box
-    goes into every cell of a spatial hash it overlaps (cells as wide as the longest edge or the
-    radius if larger: one to eight cells an edge); each edge visits the cells its box grown by
-    ``radius`` overlaps. (Hashing midpoints and visiting the 27 cells around them, cells of the
-    longest edge plus the radius, took 19 ms on the T-shirt lying flat, 6,814 edges and 35,000 pairs
-    between its layers; this takes a fraction.)"""
+def _edge_hash(x0, edges, radius):
+    """The edges' boxes in a spatial hash, each in every cell it overlaps (cells as wide as the
+    longest edge or ``radius`` if larger: one to eight cells an edge): ``(inv, size, start, members,
+    lo, hi, first, entry_cell)``, ``lo``/``hi`` the boxes, ``first`` the lowest cell of each and
+    ``entry_cell`` the cell each entry of ``members`` was put there for."""
     m = edges.shape[0]
     longest = 0.0
     for e in range(m):
@@ -319,11 +360,13 @@ def edge_pairs(x0, edges, radius):
     inv = 1.0 / max(radius, math.sqrt(longest), 1e-300)
     lo = np.empty((m, 3))
     hi = np.empty((m, 3))
+    first = np.empty((m, 3), np.int64)
     for e in range(m):
         a, b = edges[e, 0], edges[e, 1]
         for k in range(3):
             lo[e, k] = min(x0[a, k], x0[b, k])
             hi[e, k] = max(x0[a, k], x0[b, k])
+            first[e, k] = _cell(lo[e, k], inv)
     size = 4 * m + 1
     start = np.zeros(size + 1, np.int64)
     for e in range(m):  # count the entries per bucket
@@ -335,42 +378,87 @@ def edge_pairs(x0, edges, radius):
         start[q + 1] += start[q]
     fill = start[:-1].copy()
     members = np.empty(start[size], np.int64)
+    entry_cell = np.empty((start[size], 3), np.int64)
     for e in range(m):
         for ci in range(_cell(lo[e, 0], inv), _cell(hi[e, 0], inv) + 1):
             for cj in range(_cell(lo[e, 1], inv), _cell(hi[e, 1], inv) + 1):
                 for ck in range(_cell(lo[e, 2], inv), _cell(hi[e, 2], inv) + 1):
                     bucket = _hash(ci, cj, ck, size)
-                    members[fill[bucket]] = e
+                    q = fill[bucket]
+                    members[q] = e
+                    entry_cell[q, 0], entry_cell[q, 1], entry_cell[q, 2] = ci, cj, ck
                     fill[bucket] += 1
-    seen = np.full(m, -1, np.int64)
-    cap = 2 * m + 16
-    pairs = np.empty((cap, 2), np.int64)
-    dist = np.empty(cap)
-    n_pairs = 0
-    for e in range(m):
-        a, b = edges[e, 0], edges[e, 1]
-        for ci in range(_cell(lo[e, 0] - radius, inv), _cell(hi[e, 0] + radius, inv) + 1):
-            for cj in range(_cell(lo[e, 1] - radius, inv), _cell(hi[e, 1] + radius, inv) + 1):
-                for ck in range(_cell(lo[e, 2] - radius, inv), _cell(hi[e, 2] + radius, inv) + 1):
-                    bucket = _hash(ci, cj, ck, size)
-                    for q in range(start[bucket], start[bucket + 1]):
-                        f = members[q]
-                        if f <= e or seen[f] == e:
-                            continue
-                        seen[f] = e
-                        c, d = edges[f, 0], edges[f, 1]
-                        if c == a or c == b or d == a or d == b:
-                            continue
-                        if (lo[f, 0] > hi[e, 0] + radius or lo[e, 0] > hi[f, 0] + radius
-                                or lo[f, 1] > hi[e, 1] + radius or lo[e, 1] > hi[f, 1] + radius
-                                or lo[f, 2] > hi[e, 2] + radius or lo[e, 2] > hi[f, 2] + radius):
-                            continue  # boxes farther apart than radius: no distance needed
-                        dd = closest_on_segments(x0, a, b, c, d)[2]
-                        if dd >= radius:
-                            continue
-                        pairs, dist = _append(pairs, dist, n_pairs, e, f, dd)
-                        n_pairs += 1
-    return pairs[:n_pairs], dist[:n_pairs]
+    return inv, size, start, members, lo, hi, first, entry_cell
+
+
+@numba.njit(cache=True, parallel=True)
+def _edge_queries(x0, edges, radius, inv, size, start, members, lo, hi, first, entry_cell, cap,
+                  pairs, dist, counts):
+    """Each chunk of edges (:data:`CHUNKS`) visits the cells its edges' boxes, grown by ``radius``,
+    overlap, and writes its pairs from row ``chunk·cap`` on (as :func:`_triangle_queries`). An edge
+    ``f`` sits in several cells; the pair ``(e, f)`` is taken only from ``f``'s entry for the first
+    cell (lowest on each axis) that both ``e``'s grown box and ``f``'s box overlap, so once, without
+    a "seen" array (entries of other cells hashed to the same bucket, ``f``'s own included, are
+    passed over)."""
+    m_edges = edges.shape[0]
+    per = (m_edges + CHUNKS - 1) // CHUNKS
+    for chunk in numba.prange(CHUNKS):
+        n_pairs = 0
+        row = chunk * cap
+        for e in range(chunk * per, min(m_edges, (chunk + 1) * per)):
+            a, b = edges[e, 0], edges[e, 1]
+            q0 = _cell(lo[e, 0] - radius, inv)
+            q1 = _cell(lo[e, 1] - radius, inv)
+            q2 = _cell(lo[e, 2] - radius, inv)
+            for ci in range(q0, _cell(hi[e, 0] + radius, inv) + 1):
+                for cj in range(q1, _cell(hi[e, 1] + radius, inv) + 1):
+                    for ck in range(q2, _cell(hi[e, 2] + radius, inv) + 1):
+                        bucket = _hash(ci, cj, ck, size)
+                        for q in range(start[bucket], start[bucket + 1]):
+                            f = members[q]
+                            if f <= e:
+                                continue
+                            if (entry_cell[q, 0] != ci or entry_cell[q, 1] != cj
+                                    or entry_cell[q, 2] != ck):
+                                continue  # another cell's entry in this bucket
+                            if (ci != max(q0, first[f, 0]) or cj != max(q1, first[f, 1])
+                                    or ck != max(q2, first[f, 2])):
+                                continue  # not the first cell the two share
+                            c, d = edges[f, 0], edges[f, 1]
+                            if c == a or c == b or d == a or d == b:
+                                continue
+                            if (lo[f, 0] > hi[e, 0] + radius or lo[e, 0] > hi[f, 0] + radius
+                                    or lo[f, 1] > hi[e, 1] + radius or lo[e, 1] > hi[f, 1] + radius
+                                    or lo[f, 2] > hi[e, 2] + radius or lo[e, 2] > hi[f, 2] + radius):
+                                continue  # boxes farther apart than radius: no distance needed
+                            dd = closest_on_segments(x0, a, b, c, d)[2]
+                            if dd >= radius:
+                                continue
+                            if n_pairs < cap:
+                                pairs[row + n_pairs, 0] = e
+                                pairs[row + n_pairs, 1] = f
+                                dist[row + n_pairs] = dd
+                            n_pairs += 1
+        counts[chunk] = n_pairs
+
+
+def edge_pairs(x0, edges, radius, cap=None):
+    """``(pairs, distances)``: every pair of edges ``(e, f)``, ``e < f``, sharing no particle, whose
+    segments at the start lie within ``radius``, and that distance; in a fixed order (by ``e``, then
+    by the cells visited), the same at any thread count. Each edge's box goes into every cell of a
+    spatial hash it overlaps; each edge visits the cells its box grown by ``radius`` overlaps, in
+    :data:`CHUNKS` chunks on every core. (Hashing midpoints and visiting the 27 cells around them,
+    cells of the longest edge plus the radius, took 19 ms on the T-shirt lying flat, 6,814 edges and
+    35,000 pairs between its layers; this takes a fraction.)"""
+    edges = np.ascontiguousarray(edges, dtype=np.int64)
+    if len(edges) == 0:
+        return np.empty((0, 2), np.int64), np.empty(0)
+    hashed = _edge_hash(x0, edges, float(radius))
+
+    def run(rows, pairs, dist, counts):
+        _edge_queries(x0, edges, float(radius), *hashed, rows, pairs, dist, counts)
+
+    return _join_chunks(run, 2 * len(edges) // CHUNKS + 16, cap)
 
 
 @numba.njit(cache=True, inline="always")
@@ -613,6 +701,7 @@ class SelfCollision:
         self._inv_mass = np.ascontiguousarray(inv)
         self._factor = np.ones(model.n_particles)
         self._no_clearance = np.full(model.n_particles, np.inf)
+        self._caps = (np.zeros(1, np.int64), np.zeros(1, np.int64))  # rows per search chunk
         self.last_pairs = self.last_pushed = self.last_slowed = self.last_edge_pairs = 0
 
     @property
@@ -645,8 +734,9 @@ class SelfCollision:
         radius = h + 2.0 * max_displacement(x, x0)
         tris, (edges, tri_edge, edge_owner, edge_tris, vertex_owner, adj_ptr, adj) = \
             self._tris, self._features
-        pairs, dist = candidate_pairs(x0, tris, radius)
-        e_pairs, e_dist = edge_pairs(x0, edges, radius)
+        caps = self._caps
+        pairs, dist = candidate_pairs(x0, tris, radius, caps[0])
+        e_pairs, e_dist = edge_pairs(x0, edges, radius, caps[1])
         free = self._inv_mass
         self.last_pushed = (proximity(x, x0, v, tris, pairs, inv_mass, free, clearance, h)
                             + proximity_features(x, x0, v, tris, pairs, inv_mass, free, clearance, h,
@@ -658,8 +748,8 @@ class SelfCollision:
         # some motion longer than radius / 2
         grown = 2.0 * max_displacement(x, x0)
         if grown > radius:
-            pairs, dist = candidate_pairs(x0, tris, grown)
-            e_pairs, e_dist = edge_pairs(x0, edges, grown)
+            pairs, dist = candidate_pairs(x0, tris, grown, caps[0])
+            e_pairs, e_dist = edge_pairs(x0, edges, grown, caps[1])
         self.last_pairs, self.last_edge_pairs = len(pairs), len(e_pairs)
         displacement_factors(x, x0, tris, pairs, dist, self._factor)
         edge_displacement_factors(x, x0, edges, e_pairs, e_dist, self._factor)

@@ -347,3 +347,91 @@ def test_self_collision_refuses_a_thickness_beyond_half_an_edge():
     with pytest.raises(SceneError, match="thickness"):
         scene_from_dict({"grid": {"rows": 4, "cols": 4, "spacing": 0.02}, "thickness": 0.011,
                          "self_collision": True})
+
+
+def _brute_force_pairs(x, tris, edges, radius):
+    """Every (particle, triangle) pair within ``radius`` with its exact distance (the projection on
+    the plane when it falls inside, else the nearest of the three sides), and every (edge, edge)
+    pair sharing no particle whose distance, sampled at 401 points along the first edge, is within
+    1 % above ``radius`` — all by testing every pair with numpy."""
+    def seg_point(p, a, b):
+        ab = b - a
+        t = np.clip(((p - a) * ab).sum(-1) / (ab * ab).sum(-1), 0.0, 1.0)
+        return np.linalg.norm(p - (a + t[..., None] * ab), axis=-1)
+
+    tri_pairs = {}
+    for i, (a, b, c) in enumerate(tris):
+        p = np.setdiff1d(np.arange(len(x)), [a, b, c])
+        A, B, C, P = x[a], x[b], x[c], x[p]
+        nrm = np.cross(B - A, C - A)
+        nrm /= np.linalg.norm(nrm)
+        h = ((P - A) @ nrm)
+        q = P - h[:, None] * nrm  # projection onto the plane
+        # barycentric inside test of the projection
+        v0, v1, v2 = C - A, B - A, q - A
+        d00, d01, d11 = v0 @ v0, v0 @ v1, v1 @ v1
+        d02, d12 = v2 @ v0, v2 @ v1
+        den = d00 * d11 - d01 * d01
+        u = (d11 * d02 - d01 * d12) / den
+        v = (d00 * d12 - d01 * d02) / den
+        inside = (u >= 0) & (v >= 0) & (u + v <= 1)
+        d = np.where(inside, np.abs(h), np.minimum.reduce([seg_point(P, A, B), seg_point(P, B, C),
+                                                           seg_point(P, C, A)]))
+        for pp, dd in zip(p[d < radius], d[d < radius]):
+            tri_pairs[(int(pp), i)] = dd
+    edge_pairs = {}
+    s = np.linspace(0.0, 1.0, 401)
+    for e, (a, b) in enumerate(edges):
+        f = np.arange(e + 1, len(edges))
+        f = f[~np.isin(edges[f], [a, b]).any(axis=1)]
+        # segment–segment distance, densely sampled along e against f exactly
+        pts = x[a] + s[:, None] * (x[b] - x[a])  # (401, 3)
+        c, d = x[edges[f, 0]], x[edges[f, 1]]
+        dist = seg_point(pts[:, None, :], c[None], d[None]).min(axis=0)
+        for ff, dd in zip(f[dist < radius * 1.01], dist[dist < radius * 1.01]):
+            edge_pairs[(e, int(ff))] = dd
+    return tri_pairs, edge_pairs
+
+
+def test_self_collision_search_finds_every_pair_within_the_radius_at_any_thread_count():
+    """The particle–triangle and edge–edge searches (hashed, in chunks on every core) against a
+    brute-force test of every pair on a crumpled cloth; the same arrays at 1 and 2 threads, and with
+    a chunk size too small for the pairs (the search runs again, larger)."""
+    import numba
+
+    from cloth_sim import self_collision as S
+
+    rng = np.random.default_rng(3)
+    model = ClothModel.grid(10, 10, 0.02, 0.01, stiffness=100.0)
+    r, c = np.divmod(np.arange(100), 10)  # rows folded over at row 4.5, 6 mm above, jittered
+    x = np.stack([0.02 * c, 0.02 * np.where(r < 5, r, 9 - r) + 0.01 * (r >= 5),
+                  0.006 * (r >= 5)], axis=1) + rng.normal(scale=0.002, size=(100, 3))
+    sim = Simulator(model, thickness=0.004, self_collision=True)
+    tris, edges = sim._self_collision._tris, sim._self_collision._features[0]
+    radius = 0.012
+    tri_truth, edge_truth = _brute_force_pairs(x, tris, edges, radius)
+    assert len(tri_truth) > 200 and len(edge_truth) > 200  # plenty to find
+    threads = numba.get_num_threads()
+    runs = []
+    try:
+        for n_threads, cap in ((1, None), (min(2, numba.config.NUMBA_NUM_THREADS), None),
+                               (min(2, numba.config.NUMBA_NUM_THREADS), np.ones(1, np.int64))):
+            numba.set_num_threads(n_threads)
+            runs.append((*S.candidate_pairs(x, tris, radius, cap), *S.edge_pairs(x, edges, radius, cap)))
+    finally:
+        numba.set_num_threads(threads)
+    pairs, dist, e_pairs, e_dist = runs[0]
+    found = {tuple(p): d for p, d in zip(pairs.tolist(), dist)}
+    assert found.keys() == tri_truth.keys()
+    assert max(abs(found[k] - tri_truth[k]) for k in found) < 1e-12
+    e_found = {tuple(p): d for p, d in zip(e_pairs.tolist(), e_dist)}
+    # the sampled truth is within 1 % of the radius of the exact distance: every exact pair is in
+    # it, and what it adds lies within that band
+    assert e_found.keys() <= edge_truth.keys()
+    assert all(edge_truth[k] >= radius for k in edge_truth.keys() - e_found.keys())
+    step = np.linalg.norm(x[edges[:, 1]] - x[edges[:, 0]], axis=1).max() / 400  # the sampling's
+    assert all(-1e-12 <= edge_truth[k] - e_found[k] <= step for k in e_found)
+    assert len(found) == len(pairs) and len(e_found) == len(e_pairs)  # each pair once
+    assert np.all(np.diff(pairs[:, 1]) >= 0) and np.all(np.diff(e_pairs[:, 0]) >= 0)  # in order
+    for other in runs[1:]:
+        assert all(np.array_equal(a, b) for a, b in zip(runs[0], other))
