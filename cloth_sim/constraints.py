@@ -42,6 +42,9 @@ from .forces import spring_vector
 
 #: Passes per step unless the simulator is told otherwise.
 DEFAULT_STRAIN_LIMIT_PASSES = 20
+#: From this many particles on, the attachments run on every core (below, waking the second core
+#: costs more than it saves: 64×64, 1.7 → 1.4 ms a step; 32×32, 4 % slower)
+PARALLEL_MIN_PARTICLES = 2048
 #: Strain above ``τc`` that a pass tolerates (so passes stop once nothing is meaningfully too long).
 STRAIN_LIMIT_TOLERANCE = 1e-4
 
@@ -80,26 +83,44 @@ def provot_pass(x, springs, rest, tau, tol, pinned):
     return corrected
 
 
+@numba.njit(cache=True, inline="always")
+def _attach(x, anchor, reach, tau, p):
+    """Particle ``p``'s attachments (:func:`attachment_pass`); 1 if it moved, else 0."""
+    moved = 0
+    for a in range(anchor.shape[1]):
+        q = anchor[p, a]
+        if q < 0:
+            continue
+        dx, dy, dz = x[p, 0] - x[q, 0], x[p, 1] - x[q, 1], x[p, 2] - x[q, 2]
+        l = np.sqrt(dx * dx + dy * dy + dz * dz)
+        lmax = (1.0 + tau) * reach[p, a]
+        if l > lmax:
+            f = lmax / l
+            x[p, 0] = x[q, 0] + f * dx
+            x[p, 1] = x[q, 1] + f * dy
+            x[p, 2] = x[q, 2] + f * dz
+            moved = 1
+    return moved
+
+
 @numba.njit(cache=True)
 def attachment_pass(x, anchor, reach, tau):
     """Long-range attachments: each particle ``p`` with an anchor ``anchor[p, a] >= 0`` (a pin) is
     pulled back along the line to it when farther than ``(1 + τ)·reach[p, a]``; returns how many
-    were moved."""
+    particles were moved. :func:`attachment_pass_parallel` does the same on every core."""
     moved = 0
     for p in range(x.shape[0]):
-        for a in range(anchor.shape[1]):
-            q = anchor[p, a]
-            if q < 0:
-                continue
-            dx, dy, dz = x[p, 0] - x[q, 0], x[p, 1] - x[q, 1], x[p, 2] - x[q, 2]
-            l = np.sqrt(dx * dx + dy * dy + dz * dz)
-            lmax = (1.0 + tau) * reach[p, a]
-            if l > lmax:
-                f = lmax / l
-                x[p, 0] = x[q, 0] + f * dx
-                x[p, 1] = x[q, 1] + f * dy
-                x[p, 2] = x[q, 2] + f * dz
-                moved += 1
+        moved += _attach(x, anchor, reach, tau, p)
+    return moved
+
+
+@numba.njit(cache=True, parallel=True)
+def attachment_pass_parallel(x, anchor, reach, tau):
+    """:func:`attachment_pass` on every core: each particle moves only itself and reads only pins,
+    which no attachment moves, so the same bits at any thread count."""
+    moved = 0
+    for p in numba.prange(x.shape[0]):
+        moved += _attach(x, anchor, reach, tau, p)
     return moved
 
 
@@ -175,6 +196,8 @@ class StrainLimit(Stage):
                 self._pinned = np.ascontiguousarray(model.pinned)
             if self.long_range and self._anchor is None:
                 self._anchor, self._reach = nearest_attachments(self.model)
+                self._attach = (attachment_pass_parallel
+                                if self.model.n_particles >= PARALLEL_MIN_PARTICLES else attachment_pass)
         self.tau = tau
 
     @property
@@ -185,14 +208,15 @@ class StrainLimit(Stage):
         """Correct ``x`` in place; returns the number of passes that changed something."""
         used = 0
         lra = self.long_range
-        if lra and attachment_pass(x, self._anchor, self._reach, self.tau):
+        attach = self._attach if lra else None
+        if lra and attach(x, self._anchor, self._reach, self.tau):
             used = 1
         for _ in range(self.passes):
             changed = provot_pass(x, self._springs, self._rest, self.tau, STRAIN_LIMIT_TOLERANCE,
                                   self._pinned)
             # the attachments again after each pass: a pass moves a pin's neighbours back out
             if lra and changed:
-                attachment_pass(x, self._anchor, self._reach, self.tau)
+                attach(x, self._anchor, self._reach, self.tau)
             if changed == 0:
                 break
             used += 1

@@ -278,3 +278,30 @@ def test_long_range_attachments_reach_is_the_rest_geodesic_and_never_over_constr
     at_rest = cloth.positions.copy()
     StrainLimit(cloth, 0.1).correct(at_rest)
     assert np.array_equal(at_rest, cloth.positions)
+
+
+def test_long_range_attachments_on_every_core_are_the_serial_pass_bit_for_bit(monkeypatch):
+    """From PARALLEL_MIN_PARTICLES on, the attachments run on every core: a strain-limited hanging
+    cloth after 0.2 s is the same bits with the serial pass, and at 1 and 2 threads."""
+    import numba
+
+    from cloth_sim import constraints
+
+    def run(threshold, threads):
+        monkeypatch.setattr(constraints, "PARALLEL_MIN_PARTICLES", threshold)
+        before = numba.get_num_threads()
+        numba.set_num_threads(threads)
+        try:
+            model = ClothModel.grid(24, 24, 1 / 23, 10.24 / 24 ** 2, stiffness=1000.0, damping=0.02,
+                                    pinned=[(0, 0), (0, 23)])
+            sim = Simulator(model, dt=1e-3, strain_limit=0.1)
+            assert (sim._strain._attach is constraints.attachment_pass_parallel) == (threshold == 1)
+            sim.advance(0.2)
+            return sim.state.x.copy(), sim.state.v.copy()
+        finally:
+            numba.set_num_threads(before)
+
+    two = min(2, numba.config.NUMBA_NUM_THREADS)
+    serial, one, both = run(10 ** 9, 1), run(1, 1), run(1, two)
+    assert all(np.array_equal(a, b) and np.array_equal(a, c) for a, b, c in zip(serial, one, both))
+    assert np.abs(serial[0] - ClothModel.grid(24, 24, 1 / 23, 0.01, 1000.0).positions).max() > 0.01
