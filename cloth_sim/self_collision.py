@@ -357,7 +357,7 @@ def _edge_hash(x0, edges, radius):
         a, b = edges[e, 0], edges[e, 1]
         longest = max(longest, (x0[a, 0] - x0[b, 0]) ** 2 + (x0[a, 1] - x0[b, 1]) ** 2
                       + (x0[a, 2] - x0[b, 2]) ** 2)
-    inv = 1.0 / max(radius, math.sqrt(longest), 1e-300)
+    inv = 1.0 / max(radius, math.sqrt(longest), 1e-300)  # (half that: 1.7× slower at 64×64)
     lo = np.empty((m, 3))
     hi = np.empty((m, 3))
     first = np.empty((m, 3), np.int64)
