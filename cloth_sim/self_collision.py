@@ -168,6 +168,18 @@ def _particle_hash(x0, tris, radius):
     return inv, size, start, members, cell
 
 
+@numba.njit(cache=True, inline="always")
+def _put(pairs, dist, row, m, cap, i, j, d):
+    """Pair ``(i, j)`` at distance ``d`` as its chunk's ``m``-th (at ``row + m``) if the chunk has
+    room (``m < cap``); returns the chunk's count, ``m + 1``, either way (a count above ``cap`` makes
+    :func:`_join_chunks` search again with more rows)."""
+    if m < cap:
+        pairs[row + m, 0] = i
+        pairs[row + m, 1] = j
+        dist[row + m] = d
+    return m + 1
+
+
 @numba.njit(cache=True, parallel=True)
 def _triangle_queries(x0, tris, radius, inv, size, start, members, cell, cap, pairs, dist, counts):
     """Each chunk of triangles (:data:`CHUNKS`) visits the cells its triangles' boxes, grown by
@@ -204,11 +216,7 @@ def _triangle_queries(x0, tris, radius, inv, size, start, members, cell, cap, pa
                             d0 = _distance(x0, p, a, b, c)[0]
                             if d0 >= radius:
                                 continue
-                            if m < cap:
-                                pairs[row + m, 0] = p
-                                pairs[row + m, 1] = i
-                                dist[row + m] = d0
-                            m += 1
+                            m = _put(pairs, dist, row, m, cap, p, i, d0)
         counts[chunk] = m
 
 
@@ -370,9 +378,9 @@ def _edge_hash(x0, edges, radius):
     size = 4 * m + 1
     start = np.zeros(size + 1, np.int64)
     for e in range(m):  # count the entries per bucket
-        for ci in range(_cell(lo[e, 0], inv), _cell(hi[e, 0], inv) + 1):
-            for cj in range(_cell(lo[e, 1], inv), _cell(hi[e, 1], inv) + 1):
-                for ck in range(_cell(lo[e, 2], inv), _cell(hi[e, 2], inv) + 1):
+        for ci in range(first[e, 0], _cell(hi[e, 0], inv) + 1):
+            for cj in range(first[e, 1], _cell(hi[e, 1], inv) + 1):
+                for ck in range(first[e, 2], _cell(hi[e, 2], inv) + 1):
                     start[_hash(ci, cj, ck, size) + 1] += 1
     for q in range(size):
         start[q + 1] += start[q]
@@ -380,9 +388,9 @@ def _edge_hash(x0, edges, radius):
     members = np.empty(start[size], np.int64)
     entry_cell = np.empty((start[size], 3), np.int64)
     for e in range(m):
-        for ci in range(_cell(lo[e, 0], inv), _cell(hi[e, 0], inv) + 1):
-            for cj in range(_cell(lo[e, 1], inv), _cell(hi[e, 1], inv) + 1):
-                for ck in range(_cell(lo[e, 2], inv), _cell(hi[e, 2], inv) + 1):
+        for ci in range(first[e, 0], _cell(hi[e, 0], inv) + 1):
+            for cj in range(first[e, 1], _cell(hi[e, 1], inv) + 1):
+                for ck in range(first[e, 2], _cell(hi[e, 2], inv) + 1):
                     bucket = _hash(ci, cj, ck, size)
                     q = fill[bucket]
                     members[q] = e
@@ -434,11 +442,7 @@ def _edge_queries(x0, edges, radius, inv, size, start, members, lo, hi, first, e
                             dd = closest_on_segments(x0, a, b, c, d)[2]
                             if dd >= radius:
                                 continue
-                            if n_pairs < cap:
-                                pairs[row + n_pairs, 0] = e
-                                pairs[row + n_pairs, 1] = f
-                                dist[row + n_pairs] = dd
-                            n_pairs += 1
+                            n_pairs = _put(pairs, dist, row, n_pairs, cap, e, f, dd)
         counts[chunk] = n_pairs
 
 
