@@ -78,7 +78,8 @@ def step_traffic(sim: Simulator) -> int:
     term = forces.spring_term
     state = sim.state
     read = state.x.nbytes + state.v.nbytes + forces.inv_mass.nbytes
-    read += sum(a.nbytes for a in (term.springs, term.rest, term.k, term.c, term.kind))
+    read += sum(a.nbytes for a in (term.rest, term.k, term.c, term.kind))
+    read += (term._gather_args[0] if term.parallel else term.springs).nbytes  # their ends
     read += state.x.nbytes  # gravity's force, the sum's start (n × 3)
     written = state.x.nbytes + state.v.nbytes + state.x.nbytes  # x, v and the force array
     if term.parallel:
