@@ -225,10 +225,13 @@ def spring_forces_gather(x, v, springs, rest, k, c, kind, tab, with_damping, ptr
     starts from ``base`` (``f`` itself to add to it, or gravity's force: no pass to copy it first).
     The arrays are :func:`gather_arrays`' (32-bit indices, ``fs`` by coordinate, (3, springs)).
 
-    The springs go in blocks of :data:`GATHER_BLOCK`: their ends' differences gathered into a small
-    array, then :func:`_block_forces` in SIMD. Beside the per-spring loop on Warp's scene (2 cores,
-    one process): 0.125 → 0.106 ms at 64×64, 0.48 → 0.35 ms at 128×128, the same bits; the 32-bit
-    indices are 0.012 / 0.055 ms of that.
+    The springs go in blocks of :data:`GATHER_BLOCK` in :func:`spring_layout`'s order: their ends'
+    differences gathered into a small array, then :func:`_block_forces` in SIMD. Whole symplectic
+    Euler steps on Warp's scene beside the gather of commit 3b1c24a (a per-spring loop, 64-bit
+    indices, the springs in the model's order), 2 cores, one process: 0.140 → 0.104 ms at 64×64,
+    0.52 → 0.40 ms at 128×128, the same bits. Of that, the 32-bit indices alone: 0.125 → 0.113 ms
+    a gather at 64×64; the blocks in SIMD: 0.112 → 0.107 (64×64), 0.43 → 0.35 (128×128); the
+    layout: 0.117 → 0.096 (64×64).
 
     ``mode`` says what each particle does with its summed force ``f`` in the same pass:
     :data:`GATHER_FORCE` keeps it; :data:`GATHER_ACCELERATION` turns it into ``f·m⁻¹`` (the product
