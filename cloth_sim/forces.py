@@ -33,6 +33,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 import scipy.sparse as sp
+from llvmlite import ir
+from numba import types
+from numba.core import cgutils
+from numba.extending import intrinsic
 from scipy.optimize import brentq
 
 from .model import BUCKLING, LINEAR, TENSION_ONLY, ClothModel
@@ -171,6 +175,29 @@ def combine_particle(xo, vo, x, v, kx, kv, coef, p):
 GATHER_BLOCK = 512
 
 
+@intrinsic
+def _block_buffer(typingctx):
+    """A ``(6, GATHER_BLOCK)`` float64 array on the stack of the compiled function that calls it
+    (reserved once in its entry block, 24 kB): each core's block of springs' differences in
+    :func:`spring_forces_gather`. A heap array made there (``np.empty``) was as fast but is an
+    allocation per call and core (``test_a_step_allocates_no_array`` caught it); one made once and
+    passed in, or one per core indexed by ``numba.get_thread_id()``, was 5–25 % slower a step at
+    128×128 — a fresh allocation, on the heap or the stack, is known to the compiler to alias none
+    of the arrays the block reads."""
+    array = types.Array(types.float64, 2, "C")
+
+    def codegen(context, builder, signature, args):
+        data = cgutils.alloca_once(builder, ir.DoubleType(), size=6 * GATHER_BLOCK)
+        out = context.make_array(array)(context, builder)
+        intp = lambda n: context.get_constant(types.intp, n)  # noqa: E731
+        context.populate_array(out, data=data, shape=[intp(6), intp(GATHER_BLOCK)],
+                               strides=[intp(8 * GATHER_BLOCK), intp(8)], itemsize=intp(8),
+                               meminfo=None)
+        return out._getvalue()
+
+    return array(), codegen
+
+
 @numba.njit(cache=True, error_model="numpy")
 def _block_forces(d, rest, k, c, kind, tab, with_damping, fx, fy, fz):
     """One block of springs' forces from their ends' differences ``d`` (rows ``x_j − x_i`` and
@@ -249,7 +276,7 @@ def spring_forces_gather(x, v, springs, rest, k, c, kind, tab, with_damping, ptr
     for b in numba.prange((m + GATHER_BLOCK - 1) // GATHER_BLOCK):
         lo = b * GATHER_BLOCK
         hi = min(lo + GATHER_BLOCK, m)
-        d = np.empty((6, GATHER_BLOCK))
+        d = _block_buffer()
         for s in range(lo, hi):
             i = springs[s, 0]
             j = springs[s, 1]
@@ -398,12 +425,14 @@ def wind_forces(x, tris, wind, normals, f):
 
 
 # --------------------------------------------------------------------------- terms
-#: From this many springs (a 46×46 grid) the spring forces run on every core. With the OpenMP
-#: workers spinning briefly between regions (see ``cloth_sim/__init__.py``), the gather on 2 cores
-#: against the serial loop: 0.74× at 16×16, 0.99× at 32×32, 1.58× at 48×48, 1.67× at 64×64, 1.65× at
-#: 128×128 (``cloth-sim bench peers`` shows it on Warp's scene). Below this the region's fork and join
-#: cost more than they save. Both give the same bits at any thread count.
-PARALLEL_MIN_SPRINGS = 12000
+#: From this many springs (a 19×19 grid) the spring forces run on every core. With the OpenMP
+#: workers spinning briefly between regions (see ``cloth_sim/__init__.py``), whole symplectic Euler
+#: steps on Warp's scene, the gather on 2 cores against the serial loop (one process, 2026-11-25,
+#: after the gather's blocks in SIMD): 0.81× at 12×12 (746 springs), 0.91× at 16×16, 1.10× at 20×20
+#: (2,202 springs), 1.27× at 24×24, 1.52× at 32×32. Below this the regions' fork and join cost more
+#: than they save. (Before the SIMD blocks the crossing was at ~46×46: 0.99× at 32×32.) Both give
+#: the same bits at any thread count.
+PARALLEL_MIN_SPRINGS = 2000
 # the gather's inverse masses and state outputs when it does not update the state
 _NO_MASS = np.zeros((1, 1))
 _NO_STATE = np.zeros((1, 3))
