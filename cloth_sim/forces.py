@@ -33,7 +33,6 @@ from __future__ import annotations
 import numba
 import numpy as np
 import scipy.sparse as sp
-from llvmlite import ir
 from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
@@ -187,7 +186,8 @@ def _block_buffer(typingctx):
     array = types.Array(types.float64, 2, "C")
 
     def codegen(context, builder, signature, args):
-        data = cgutils.alloca_once(builder, ir.DoubleType(), size=6 * GATHER_BLOCK)
+        data = cgutils.alloca_once(builder, context.get_value_type(types.float64),
+                                   size=6 * GATHER_BLOCK)
         out = context.make_array(array)(context, builder)
         intp = lambda n: context.get_constant(types.intp, n)  # noqa: E731
         context.populate_array(out, data=data, shape=[intp(6), intp(GATHER_BLOCK)],
