@@ -206,9 +206,9 @@ def _block_forces(d, rest, k, c, kind, tab, with_damping, fx, fy, fz):
     arrays that the compiler turns into SIMD (four or eight springs' square roots and divisions at
     once; a per-spring loop reading the ends through their indices stays scalar). IEEE square root
     and division give the same bits in SIMD lanes as alone, so this is :func:`spring_forces`'s result
-    bit for bit. Hooke's law first for every spring; then the compressed springs of another
-    :data:`~cloth_sim.model.LINEAR`-less kind (Choi–Ko's tension-only and buckling pairs) again,
-    one by one, with :func:`_axial`. ``error_model="numpy"``: ``1/l`` is computed in every lane and
+    bit for bit. Hooke's law first for every spring; then, one by one with :func:`_axial`, the
+    compressed springs of a kind other than :data:`~cloth_sim.model.LINEAR` (Choi–Ko's
+    tension-only and buckling pairs). ``error_model="numpy"``: ``1/l`` is computed in every lane and
     discarded where ``l < 1e-300`` (such a spring's force is 0, as in the serial loop)."""
     n = rest.shape[0]
     dx_, dy_, dz_, wx, wy, wz = d[0], d[1], d[2], d[3], d[4], d[5]
