@@ -27,7 +27,8 @@ import scipy.sparse as sp
 from . import integrators
 from . import stability as stab
 from .colliders import Contacts, _positive
-from .constraints import DEFAULT_STRAIN_LIMIT_PASSES, StrainLimit
+from .constraints import (DEFAULT_STRAIN_LIMIT_PASSES, StrainLimit, attachment_pass_parallel,
+                          nearest_attachments)
 from .forces import (GATHER_ACCELERATION, GATHER_FORCE, GATHER_KICK_DRIFT,
                      GATHER_RK_STAGE, Forces, gather_arrays, runge_kutta_fused,
                      spring_forces_gather, spring_strains)
@@ -700,6 +701,10 @@ def compile_kernels() -> float:
         runge_kutta_fused(x, v, np.zeros((2, 2)), np.ones(2), 1e-4, k[0], k[1], np.zeros_like(x),
                           np.zeros(2), *springs, gravity, inv_mass)
         combine_parallel(x, v, x, v, k[0], k[1], np.ones(2))
+        # the long-range attachments on every core, which only cloths from
+        # constraints.PARALLEL_MIN_PARTICLES on use (a 64×64 node compiled them in its first tick)
+        anchor, reach = nearest_attachments(model)
+        attachment_pass_parallel(x, anchor, reach, 0.1)
         # the depth camera's kernels (triangles, each collider shape)
         from .camera import DepthCamera
 
