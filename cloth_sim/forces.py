@@ -124,6 +124,21 @@ def _axial(l, L, k, kind, tab):
     return k / L * h, k / (L * L) * dh, k / (L * L * L) * d2h
 
 
+@numba.njit(cache=True, inline="always")
+def _spring_force(dx, dy, dz, l, wx, wy, wz, rest, k, c, kind, tab, with_damping):
+    """The force on a spring's first end, from ``x_j − x_i`` = (dx, dy, dz) of length ``l > 0`` and
+    ``v_j − v_i`` = (wx, wy, wz) (read only ``with_damping``): :func:`_axial`'s ``dE/dl`` plus the
+    damping along the spring, times the unit vector. (Inlined: the serial loop is as fast as with
+    these lines written out, 46 µs at 32×32.)"""
+    inv = 1.0 / l
+    ux, uy, uz = dx * inv, dy * inv, dz * inv
+    _, de, _ = _axial(l, rest, k, kind, tab)
+    mag = de
+    if with_damping:
+        mag += c * (wx * ux + wy * uy + wz * uz)
+    return mag * ux, mag * uy, mag * uz
+
+
 @numba.njit(cache=True)
 def spring_forces(x, v, springs, rest, k, c, kind, tab, with_damping, f):
     """Add every listed spring's elastic (and, if ``with_damping``, damping) force to ``f``."""
@@ -133,13 +148,8 @@ def spring_forces(x, v, springs, rest, k, c, kind, tab, with_damping, f):
         dx, dy, dz, l = spring_vector(x, i, j)
         if l < 1e-300:
             continue
-        inv = 1.0 / l
-        ux, uy, uz = dx * inv, dy * inv, dz * inv
-        _, de, _ = _axial(l, rest[s], k[s], kind[s], tab)
-        mag = de
-        if with_damping:
-            mag += c[s] * ((v[j, 0] - v[i, 0]) * ux + (v[j, 1] - v[i, 1]) * uy + (v[j, 2] - v[i, 2]) * uz)
-        fx, fy, fz = mag * ux, mag * uy, mag * uz
+        fx, fy, fz = _spring_force(dx, dy, dz, l, v[j, 0] - v[i, 0], v[j, 1] - v[i, 1],
+                                   v[j, 2] - v[i, 2], rest[s], k[s], c[s], kind[s], tab, with_damping)
         f[i, 0] += fx
         f[i, 1] += fy
         f[i, 2] += fz
@@ -206,10 +216,11 @@ def _block_forces(d, rest, k, c, kind, tab, with_damping, fx, fy, fz):
     arrays that the compiler turns into SIMD (four or eight springs' square roots and divisions at
     once; a per-spring loop reading the ends through their indices stays scalar). IEEE square root
     and division give the same bits in SIMD lanes as alone, so this is :func:`spring_forces`'s result
-    bit for bit. Hooke's law first for every spring; then, one by one with :func:`_axial`, the
-    compressed springs of a kind other than :data:`~cloth_sim.model.LINEAR` (Choi–Ko's
-    tension-only and buckling pairs). ``error_model="numpy"``: ``1/l`` is computed in every lane and
-    discarded where ``l < 1e-300`` (such a spring's force is 0, as in the serial loop)."""
+    bit for bit. Hooke's law first for every spring; then, one by one with the serial loop's
+    :func:`_spring_force`, the compressed springs of a kind other than
+    :data:`~cloth_sim.model.LINEAR` (Choi–Ko's tension-only and buckling pairs).
+    ``error_model="numpy"``: ``1/l`` is computed in every lane and discarded where ``l < 1e-300``
+    (such a spring's force is 0, as in the serial loop)."""
     n = rest.shape[0]
     dx_, dy_, dz_, wx, wy, wz = d[0], d[1], d[2], d[3], d[4], d[5]
     for t in range(n):
@@ -231,15 +242,8 @@ def _block_forces(d, rest, k, c, kind, tab, with_damping, fx, fy, fz):
         l = np.sqrt(dx * dx + dy * dy + dz * dz)
         if l < 1e-300 or l >= rest[t]:  # Hooke's law above is this spring's force
             continue
-        inv = 1.0 / l
-        ux, uy, uz = dx * inv, dy * inv, dz * inv
-        _, de, _ = _axial(l, rest[t], k[t], kind[t], tab)
-        mag = de
-        if with_damping:
-            mag += c[t] * (wx[t] * ux + wy[t] * uy + wz[t] * uz)
-        fx[t] = mag * ux
-        fy[t] = mag * uy
-        fz[t] = mag * uz
+        fx[t], fy[t], fz[t] = _spring_force(dx, dy, dz, l, wx[t], wy[t], wz[t], rest[t], k[t], c[t],
+                                            kind[t], tab, with_damping)
 
 
 @numba.njit(cache=True, parallel=True)
@@ -463,11 +467,12 @@ def spring_layout(springs: np.ndarray, n: int) -> tuple:
             where[adj].astype(np.uint32), sign)
 
 
-def gather_arrays(springs, rest, k, c, kind, with_damping: bool, n: int) -> tuple:
+def gather_arrays(springs, rest, k, c, kind, with_damping: bool, n: int, layout=None) -> tuple:
     """The arguments :func:`spring_forces_gather` takes before ``base``, for these springs and their
     material: their ends and material in :func:`spring_layout`'s order, the Choi–Ko table, the
-    incidence, and the per-spring force scratch by coordinate (3, springs)."""
-    order, ends, ptr, adj, sign = spring_layout(springs, n)
+    incidence, and the per-spring force scratch by coordinate (3, springs). ``layout``: the springs'
+    :func:`spring_layout`, if already at hand."""
+    order, ends, ptr, adj, sign = spring_layout(springs, n) if layout is None else layout
     return (ends, rest[order], k[order], c[order], kind[order], BUCKLE_TABLE, with_damping,
             ptr, adj, sign, np.empty((3, len(springs))))
 
@@ -506,13 +511,11 @@ class SpringTerm:
         self.with_damping = bool(np.any(self.c > 0))
         self.parallel = len(self.springs) >= PARALLEL_MIN_SPRINGS  # decided once, per term
         if self.parallel:
-            order, ends, *self._incidence = _layout_of(model, live)
-            self._fs = np.empty((3, len(self.springs)))
-            #: what every call of the gather passes first (:func:`gather_arrays`): the springs and
-            #: their material in :func:`spring_layout`'s order, incidence, per-spring force scratch
-            self._gather_args = (ends, self.rest[order], self.k[order], self.c[order],
-                                 self.kind[order], BUCKLE_TABLE, self.with_damping,
-                                 *self._incidence, self._fs)
+            #: what every call of the gather passes first (:func:`gather_arrays`)
+            self._gather_args = gather_arrays(self.springs, self.rest, self.k, self.c, self.kind,
+                                              self.with_damping, model.n_particles,
+                                              _layout_of(model, live))
+            self._incidence, self._fs = self._gather_args[7:10], self._gather_args[10]
 
     @property
     def active(self) -> bool:
