@@ -33,6 +33,7 @@ from pathlib import Path
 
 from . import integrators
 from .bag.store import BagError
+from .model import STRAIN_LIMIT_METHODS
 from .parameters import SCHEMA
 from .scene import SceneError, load_scene
 from .simulator import SimulationDiverged
@@ -100,7 +101,7 @@ def _bench_node(args) -> int:
         return 0
     print_node_table(args.sizes, args.seconds, args.integrator, args.dt, args.rate,
                      args.strain_limit_passes, args.stiffness,
-                     (True,) if args.subscribed_only else (False, True))
+                     (True,) if args.subscribed_only else (False, True), args.strain_limit_method)
     return 0
 
 
@@ -253,6 +254,8 @@ def build_parser() -> argparse.ArgumentParser:
     nb.add_argument("--rate", type=float, default=60.0, help="publish_rate (Hz)")
     nb.add_argument("--strain-limit-passes", type=int, default=None,
                     help="the node's strain_limit_passes (default: its own, 20)")
+    nb.add_argument("--strain-limit-method", default=None, choices=STRAIN_LIMIT_METHODS,
+                    help="the node's strain_limit_method (default: the scene's, projection)")
     nb.add_argument("--stiffness", type=float, default=None,
                     help="structural and shear stiffness, N/m (default: the scene's, 1000)")
     nb.add_argument("--subscribed-only", action="store_true",

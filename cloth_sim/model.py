@@ -20,6 +20,9 @@ GRID_FAMILIES = ("structural", "shear", "bend")
 MESH_FAMILIES = ("structural", "bend")  # a triangle mesh: its edges, and across each interior edge
 SPRING_FAMILY = "spring"  # the single family of a from_springs model
 MODELS = ("provot", "choi_ko")
+#: How the strain limit corrects (:mod:`cloth_sim.constraints`): Provot's Gauss–Seidel passes, or one
+#: projection of every over-stretched spring together (:mod:`cloth_sim.strain_projection`)
+STRAIN_LIMIT_METHODS = ("provot", "projection")
 ORIENTATIONS = ("horizontal", "vertical")
 
 

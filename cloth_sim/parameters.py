@@ -19,7 +19,7 @@ import math
 import numbers
 from dataclasses import dataclass
 
-from .model import GRID_FAMILIES, MODELS
+from .model import GRID_FAMILIES, MODELS, STRAIN_LIMIT_METHODS
 
 #: The largest grid side anywhere (scene files, the node, ``ClothModel.grid``).
 MAX_GRID = 512
@@ -177,6 +177,11 @@ def _schema() -> dict[str, Param]:
         P("strain_limit_passes", int, "", "Most correction passes of the strain limit per step (it "
           "stops once a pass corrects nothing): fewer is faster and lets the cloth stretch more.",
           lo=1, hi=100),
+        P("strain_limit_method", str, "", "How the strain limit corrects: provot (Gauss–Seidel "
+          "passes: fast, the stretch plateaus above the limit on a large hanging cloth) or projection "
+          "(every over-stretched spring projected together: the stretch held to the limit; "
+          "strain_limit_passes bounds its iterations).", choices=STRAIN_LIMIT_METHODS,
+          scene_key="strain_limit_method"),
         P("rows", int, "", "Particles along the grid's rows; rebuilds and resets the cloth.", lo=2,
           hi=MAX_GRID, apply="rebuild", scene_key="grid.rows"),
         P("cols", int, "", "Particles along the grid's columns; rebuilds and resets the cloth.", lo=2,

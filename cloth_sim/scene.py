@@ -93,6 +93,7 @@ class Scene:
     wind_strength: float = 0.0
     drag: float = 0.0
     strain_limit: float | None = None
+    strain_limit_method: str = "provot"
     integrator: str = "symplectic_euler"
     dt: float = 1e-3
     origin: tuple = (0.0, 0.0, 0.0)
@@ -193,14 +194,15 @@ class Scene:
         return model
 
     SIMULATOR_OPTIONS = ("integrator", "dt", "gravity", "wind", "strain_limit", "strain_limit_passes",
-                         "strain_limit_long_range", "drag", "integrator_options", "colliders",
-                         "thickness", "self_collision")
+                         "strain_limit_long_range", "strain_limit_method", "drag",
+                         "integrator_options", "colliders", "thickness", "self_collision")
 
     def build_simulator(self, **override) -> Simulator:
         """A simulator of the scene; ``override`` takes :meth:`build_model`'s keys and the
         simulator's options in :attr:`SIMULATOR_OPTIONS`; any other key is a ``TypeError``."""
         sim_kw = {"integrator": self.integrator, "dt": self.dt, "gravity": self.gravity,
-                  "wind": self.wind, "strain_limit": self.strain_limit, "drag": self.drag,
+                  "wind": self.wind, "strain_limit": self.strain_limit,
+                  "strain_limit_method": self.strain_limit_method, "drag": self.drag,
                   "colliders": self.make_colliders(), "thickness": self.thickness,
                   "self_collision": self.self_collision}
         for key in self.SIMULATOR_OPTIONS:
@@ -328,7 +330,8 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
     if not isinstance(data, dict):
         v.fail("(top level)", "a mapping of scene fields", data)
     known = {"name", "grid", "mesh", "model", "particle_mass", "stiffness", "damping", "pinned",
-             "pinned_edges", "pinned_box", "gravity", "wind", "drag", "strain_limit", "integrator",
+             "pinned_edges", "pinned_box", "gravity", "wind", "drag", "strain_limit",
+             "strain_limit_method", "integrator",
              "dt", "thickness", "self_collision", "colliders", "grippers", "camera"}
     v.known("", data, known)
     if "mesh" in data:
@@ -349,6 +352,7 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
     s.drag = v.param("drag", data.get("drag", 0.0))
     sl = data.get("strain_limit", None)
     s.strain_limit = None if sl is None else v.param("strain_limit", sl)
+    s.strain_limit_method = v.param("strain_limit_method", data.get("strain_limit_method", "provot"))
     s.integrator = v.param("integrator", data.get("integrator", s.integrator))
     s.dt = v.param("dt", data.get("dt", s.dt))
     s.thickness = v.param("thickness", data.get("thickness", s.thickness))

@@ -46,6 +46,7 @@ def scene_values(scene: Scene) -> dict:
         "wind.direction": [float(w) for w in scene.wind_direction],
         "wind.strength": float(scene.wind_strength), "drag": float(scene.drag),
         "strain_limit": float(scene.strain_limit or 0.0),
+        "strain_limit_method": scene.strain_limit_method,
         "model": scene.model, "thickness": float(scene.thickness),
         "self_collision": bool(scene.self_collision),
     }
@@ -134,6 +135,7 @@ def build_simulator(cfg: dict, model, scene: Scene) -> Simulator:
     sim = Simulator(model, integrator=cfg["integrator"], dt=cfg["dt"], gravity=cfg["gravity"],
                     wind=wind(cfg), drag=cfg["drag"], strain_limit=cfg["strain_limit"] or None,
                     strain_limit_passes=cfg["strain_limit_passes"],
+                    strain_limit_method=cfg["strain_limit_method"],
                     colliders=scene.make_colliders(), thickness=cfg["thickness"],
                     self_collision=cfg["self_collision"])
     scene.apply_grippers(sim)

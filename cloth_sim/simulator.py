@@ -84,6 +84,8 @@ class Simulator:
         wind: 3-vector ``w·W``; particle ``i`` feels ``(n_i·wind)·n_i``. ``None``: no wind.
         strain_limit: Provot's critical deformation rate ``τc`` (0.1 = 10 %), ``None`` for none.
         strain_limit_passes: maximum correction passes per step.
+        strain_limit_method: ``"provot"`` (Gauss–Seidel passes) or ``"projection"`` (every
+            over-stretched spring projected together, :mod:`cloth_sim.strain_projection`).
         strain_limit_long_range: long-range attachments to the pins before the passes (see
             :mod:`cloth_sim.constraints`); ``False`` for Provot's passes alone.
         drag: linear air drag coefficient (N·s/m per particle).
@@ -101,7 +103,8 @@ class Simulator:
     def __init__(self, model: ClothModel, integrator: str = "symplectic_euler", dt: float = 1e-3,
                  gravity=(0.0, 0.0, -9.81), wind=None, strain_limit: float | None = None,
                  strain_limit_passes: int = DEFAULT_STRAIN_LIMIT_PASSES,
-                 strain_limit_long_range: bool = True, drag: float = 0.0,
+                 strain_limit_long_range: bool = True, strain_limit_method: str = "provot",
+                 drag: float = 0.0,
                  max_speed: float = 1e3, max_coordinate: float = 1e6,
                  integrator_options: dict | None = None, colliders=None, thickness: float = 0.005,
                  self_collision: bool = False):
@@ -111,7 +114,8 @@ class Simulator:
         self._grippers: dict[str, Gripper] = {}
         self._integrator_options = dict(integrator_options or {})
         self._strain_options = (SCHEMA["strain_limit_passes"].check(strain_limit_passes),
-                                bool(strain_limit_long_range))
+                                bool(strain_limit_long_range),
+                                SCHEMA["strain_limit_method"].check(strain_limit_method))
         self._k = np.array(model.stiffness, dtype=np.float64)
         self._c = np.array(model.damping, dtype=np.float64)
         self._gravity = np.array(SCHEMA["gravity"].check(gravity), dtype=np.float64)
@@ -313,7 +317,21 @@ class Simulator:
     def strain_limit_passes(self, passes: int) -> None:
         passes = SCHEMA["strain_limit_passes"].check(passes)
         self._strain.passes = passes
-        self._strain_options = (passes, self._strain_options[1])
+        self._strain_options = (passes, *self._strain_options[1:])
+
+    @property
+    def strain_limit_method(self) -> str:
+        """``"provot"`` or ``"projection"`` (:data:`~cloth_sim.model.STRAIN_LIMIT_METHODS`); live."""
+        return self._strain.method
+
+    @strain_limit_method.setter
+    def strain_limit_method(self, method: str) -> None:
+        method = SCHEMA["strain_limit_method"].check(method)
+        self._strain_options = (*self._strain_options[:2], method)
+        strain = StrainLimit(self.model, self._strain.tau, *self._strain_options)
+        strain.track_reaction = self._strain.track_reaction
+        self._strain = self.stages[0] = strain
+        self._active_stages = [s for s in self.stages if s.active]
 
     @property
     def colliders(self) -> list:
@@ -654,7 +672,7 @@ __all__ = ["ParameterError", "SimulationDiverged", "Simulator"]
 
 def compile_kernels() -> float:
     """Run every compiled (numba) kernel once, on a 4×4 cloth: each integrator with both spring
-    models, wind, drag, the strain limit, contacts with each collider shape, self-collision and the
+    models, wind, drag, the strain limit (both methods), contacts with each collider shape, self-collision and the
     energy and strain reports; returns the seconds it
     took. The kernels are compiled on first use and kept in numba's on-disk cache; a real-time loop
     calls this before it starts, so that no step compiles inside a tick (a fresh install's first
@@ -673,6 +691,8 @@ def compile_kernels() -> float:
             sim.step(2)
             sim.energy()
             sim.max_strain()
+        # the strain limit's projection method
+        Simulator(model, dt=1e-4, strain_limit=0.1, strain_limit_method="projection").step(2)
         # contacts with every collider shape, and self-collision
         from . import colliders as col
 

@@ -32,7 +32,8 @@ def time_steps(sim, seconds: float = 1.0, repeats: int = 3) -> float:
 def print_step_table(sizes, names, seconds: float = 1.0) -> list[dict]:
     scene = load_scene("hanging")
     print(f"# hanging scene ({scene.source}) resized to N×N over 1 m; k/m as in the scene, dt={scene.dt} s, "
-          f"strain limit {scene.strain_limit}; {platform.processor() or platform.machine()}, "
+          f"strain limit {scene.strain_limit} ({scene.strain_limit_method}); "
+          f"{platform.processor() or platform.machine()}, "
           f"{os.cpu_count()} cores; min of 3")
     print("| N | particles | integrator | ms/step, no strain limit | ms/step, strain limit | "
           "force evals/step |")
@@ -180,8 +181,9 @@ def _ms_per_step(sim, seconds: float, every_10=None) -> float:
 def print_strain_limit_table(sizes=(32, 64), seconds: float = 3.0, tau: float = 0.1) -> list[dict]:
     """The hanging scene at N×N (the 1 m, 10.24 kg cloth: spacing 1/(N−1), mass 10.24/N²) over
     ``seconds``: worst structural/shear strain (sampled every 10 steps) and ms/step without the strain
-    limit, with Provot's passes alone, and with long-range attachments at 20 (the default), 10 and 5
-    passes; the cost ratios to the run without, measured in one process."""
+    limit, with Provot's passes alone, with long-range attachments at 20 (the default), 10 and 5
+    passes, and with the projection method; the cost ratios to the run without, measured in one
+    process."""
     print(f"# strain limit τ = {tau} on the hanging scene, {seconds:g} s, symplectic Euler dt = 1 ms; "
           f"{platform.machine()}, {os.cpu_count()} cores")
     print("| N | method | worst strain | ms/step | × the step without |")
@@ -190,12 +192,16 @@ def print_strain_limit_table(sizes=(32, 64), seconds: float = 3.0, tau: float = 
     for n in sizes:
         base = None
         for label, kw in (("off", dict(strain_limit=None)),
-                          ("provot (20 passes)", dict(strain_limit=tau, strain_limit_long_range=False)),
-                          ("provot + long-range attachments (20 passes)", dict(strain_limit=tau)),
+                          ("provot (20 passes)", dict(strain_limit=tau, strain_limit_long_range=False,
+                                                      strain_limit_method="provot")),
+                          ("provot + long-range attachments (20 passes)",
+                           dict(strain_limit=tau, strain_limit_method="provot")),
                           ("provot + long-range attachments, 10 passes",
-                           dict(strain_limit=tau, strain_limit_passes=10)),
+                           dict(strain_limit=tau, strain_limit_passes=10, strain_limit_method="provot")),
                           ("provot + long-range attachments, 5 passes",
-                           dict(strain_limit=tau, strain_limit_passes=5))):
+                           dict(strain_limit=tau, strain_limit_passes=5, strain_limit_method="provot")),
+                          ("projection (Goldenthal et al. 2007) after the attachments",
+                           dict(strain_limit=tau, strain_limit_method="projection"))):
             sim = _hanging(n, **kw)
             samples = []
             ms = _ms_per_step(sim, seconds,

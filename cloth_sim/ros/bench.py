@@ -26,9 +26,11 @@ CLOTH_MASS = 10.24
 
 
 def measure(n: int, seconds: float, subscribe: bool, integrator: str, dt: float, rate: float,
-            passes: int | None = None, stiffness: float | None = None) -> dict:
+            passes: int | None = None, stiffness: float | None = None,
+            method: str | None = None) -> dict:
     """The hanging scene resized to ``n``×``n`` (the same 1 m, 10.24 kg cloth), with
-    ``stiffness`` (N/m) on its structural and shear springs if given."""
+    ``stiffness`` (N/m) on its structural and shear springs and the strain limit's ``method`` if
+    given."""
     overrides = [Parameter("rows", value=n), Parameter("cols", value=n),
                  Parameter("spacing", value=1.0 / (n - 1)),
                  Parameter("particle_mass", value=CLOTH_MASS / n ** 2),
@@ -36,6 +38,8 @@ def measure(n: int, seconds: float, subscribe: bool, integrator: str, dt: float,
                  Parameter("dt", value=dt), Parameter("publish_rate", value=rate)]
     if passes is not None:
         overrides.append(Parameter("strain_limit_passes", value=passes))
+    if method is not None:
+        overrides.append(Parameter("strain_limit_method", value=method))
     if stiffness is not None:
         overrides += [Parameter("stiffness.structural", value=float(stiffness)),
                       Parameter("stiffness.shear", value=float(stiffness))]
@@ -145,8 +149,9 @@ def print_scene_node_table(scene: str, seconds: float, rate: float) -> list[dict
 
 def print_node_table(sizes, seconds: float, integrator: str, dt: float, rate: float,
                      passes: int | None = None, stiffness: float | None = None,
-                     subscribed=(False, True)) -> list[dict]:
+                     subscribed=(False, True), method: str | None = None) -> list[dict]:
     limiter = "" if passes is None else f", strain_limit_passes {passes}"
+    limiter += "" if method is None else f", strain_limit_method {method}"
     material = "" if stiffness is None else f", structural and shear stiffness {stiffness:g} N/m"
     print(f"# cloth_sim_node, hanging scene resized to N×N (1 m, {CLOTH_MASS} kg), {integrator}, "
           f"dt={dt:g} s, {rate:g} Hz{limiter}{material}, {seconds:g} s per row after 2 s warm-up; "
@@ -157,7 +162,7 @@ def print_node_table(sizes, seconds: float, integrator: str, dt: float, rate: fl
     rows = []
     for n in sizes:
         for sub in subscribed:
-            r = measure(n, seconds, sub, integrator, dt, rate, passes, stiffness)
+            r = measure(n, seconds, sub, integrator, dt, rate, passes, stiffness, method)
             rows.append(r)
             print(f"| {n} | {'yes' if sub else 'no'} | {r['rtf']:.3f} | {r['ms_per_step']:.3f} | "
                   f"{r['tick_ms']:.2f} | {r['ticks_per_s']:.1f} | {r['meshes_per_s']:.1f} | "

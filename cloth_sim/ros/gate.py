@@ -227,6 +227,8 @@ class ParameterGate:
             sim.strain_limit = cand["strain_limit"] or None
         if cand["strain_limit_passes"] != cur["strain_limit_passes"]:
             sim.strain_limit_passes = cand["strain_limit_passes"]
+        if cand["strain_limit_method"] != cur["strain_limit_method"]:
+            sim.strain_limit_method = cand["strain_limit_method"]
         if cand["thickness"] != cur["thickness"]:
             sim.thickness = cand["thickness"]
         if cand["self_collision"] != cur["self_collision"]:
