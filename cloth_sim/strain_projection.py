@@ -23,13 +23,15 @@ and two diagonals of a quad lying flat ask six things of its four points' five i
 with ε = 1e-6 a crumpled cloth with every spring over its bound diverged. Each iteration leaves
 ``ε/(w_i + w_j + ε)`` of a lone spring's excess.
 
-What it costs (hanging 10.24 kg cloth, τ = 0.1, docs/BENCHMARKS.md §3): at 32×32 and 64×64 about
-6 iterations and 160 CG iterations a step over ~290 active springs — as fast as Provot's 20 passes
-or faster, for a worst strain of 0.1001 where the passes leave 0.1057 and 0.119. At 128×128 the
-active set reaches 14,000 springs at the bottom of the swing and grows by about a ring of springs
-an iteration: 20 iterations leave 0.121, 60 hold 0.1001, at 2.5–3.3× the passes' cost. The worst
-case is a crumpled cloth with every spring over: all active and redundant, 3e-4 above the bound
-after 20 iterations.
+What it costs (hanging 10.24 kg cloth, τ = 0.1, docs/BENCHMARKS.md §3): at 64×64 about 7
+iterations and 115 CG iterations a step over ~290 active springs, 0.8 ms a step against the
+passes' 1.0 ms, for a worst strain of 0.1001 where the passes leave 0.119 (32×32: 0.13 against
+0.28 ms, 0.1001 against 0.1057). At 128×128 the active set reaches 14,000 springs at the bottom of
+the swing and grows by about a ring of springs an iteration: 20 iterations (the default
+``strain_limit_passes``) leave 0.120 at 2× the passes' cost, 60 hold 0.1001. Tried: symmetric
+Gauss–Seidel as the preconditioner — 2.8× fewer CG iterations, each 3× the cost: 10 % faster,
+not kept. The worst case is a crumpled cloth with every spring over: all active and redundant,
+3e-4 above the bound after 20 iterations.
 
 Each iteration moves the particles by ``−W Jᵀ λ``, so the mass-weighted sum of the moves is zero
 where no pin takes part: the centre of mass (and the linear momentum, the velocities following the
@@ -46,8 +48,9 @@ REGULARISATION = 1e-3
 #: most conjugate-gradient iterations per solve
 MAX_CG_ITERATIONS = 400
 #: a solve stops once its residual is this fraction of the first (loose: the next iteration
-#: re-linearises anyway; hanging 64×64, 1e-4 → 0.1: 2.8 → 1.15 ms a step, the same worst 0.1001)
-CG_TOLERANCE = 0.1
+#: linearises again anyway). Hanging 64×64, side by side: 1e-4 2.8, 0.1 0.97, 0.3 0.81 ms a step, the
+#: same worst 0.1001 (128×128: 0.1 11.9, 0.3 8.7 ms)
+CG_TOLERANCE = 0.3
 #: a spring joins the active set when its strain exceeds ``τ`` by more than this (rounding aside)
 _JOIN = 1e-9
 
