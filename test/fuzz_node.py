@@ -221,6 +221,7 @@ def mismatches(node: ClothSimNode) -> list[str]:
               "thickness": sim.thickness, "self_collision": sim.self_collision,
               "strain_limit": sim.strain_limit or 0.0, "gravity": list(sim.gravity),
               "strain_limit_passes": sim.strain_limit_passes,
+              "strain_limit_method": sim.strain_limit_method,
               "rows": sim.model.rows, "cols": sim.model.cols, "model": sim.model.model}
     for f in GRID_FAMILIES:
         family = sim.model.family == sim.model.family_index(f)

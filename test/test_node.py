@@ -684,6 +684,22 @@ def test_thickness_and_self_collision_are_live_parameters(ros):
     assert node.sim.thickness == 0.01
 
 
+def test_the_strain_limit_method_is_live_and_a_bad_one_refused(ros):
+    node = ros.start(rows=12, cols=12, spacing=1.0 / 11, publish_rate=30.0)
+    assert node.sim.strain_limit_method == "projection"  # the hanging scene's
+    ros.spin_for(0.3)
+    r = ros.set_params("/cloth_sim", {"strain_limit_method": "provot"})[0]
+    assert r.successful and node.sim.strain_limit_method == "provot"
+    t = node.sim.time
+    ros.spin_for(0.3)
+    assert node.sim.time > t  # it kept running, from where it was
+    for bad in ("jacobi", "", 1.0):
+        r = ros.set_params("/cloth_sim", {"strain_limit_method": bad})[0]
+        assert not r.successful and "strain_limit_method" in r.reason
+    assert node.sim.strain_limit_method == "provot"
+    assert node.get_parameter("strain_limit_method").value == "provot"
+
+
 # ------------------------------------------------------------------ manipulation and time
 def _pose(x, y, z, frame="cloth"):
     from geometry_msgs.msg import PoseStamped
