@@ -327,11 +327,8 @@ class Simulator:
     @strain_limit_method.setter
     def strain_limit_method(self, method: str) -> None:
         method = SCHEMA["strain_limit_method"].check(method)
+        self._strain.method = method  # both read the same springs and attachments
         self._strain_options = (*self._strain_options[:2], method)
-        strain = StrainLimit(self.model, self._strain.tau, *self._strain_options)
-        strain.track_reaction = self._strain.track_reaction
-        self._strain = self.stages[0] = strain
-        self._active_stages = [s for s in self.stages if s.active]
 
     @property
     def colliders(self) -> list:
@@ -672,9 +669,8 @@ __all__ = ["ParameterError", "SimulationDiverged", "Simulator"]
 
 def compile_kernels() -> float:
     """Run every compiled (numba) kernel once, on a 4×4 cloth: each integrator with both spring
-    models, wind, drag, the strain limit (both methods), contacts with each collider shape, self-collision and the
-    energy and strain reports; returns the seconds it
-    took. The kernels are compiled on first use and kept in numba's on-disk cache; a real-time loop
+    models, wind, drag, the strain limit (both methods), contacts with each collider shape,
+    self-collision and the energy and strain reports; returns the seconds it took. The kernels are compiled on first use and kept in numba's on-disk cache; a real-time loop
     calls this before it starts, so that no step compiles inside a tick (a fresh install's first
     ``kang`` step compiled for 6 s there). About 0.3 s when the cache is warm."""
     import time

@@ -25,21 +25,22 @@ iterations a step, 128×128 11.4 → 5.3, its worst strain 0.118 → 0.1001; the
 the same to four digits, 0.01292, since no spring is pulled out). Tried and dropped: letting a spring
 within its bound whose ``λ`` came out negative (pushed out) leave the set and solving again — with
 the loose solves below ``λ``'s sign near 0 is noise, and the set cycled (64×64: 24 % of steps at the
-iteration limit, worst 0.105). The system is solved by conjugate gradients preconditioned by its diagonal,
-matrix-free, over the active springs and their particles only (a compact numbering, so a step with a
-few hundred active springs touches a few hundred), and loosely (:data:`CG_TOLERANCE`): the next
-iteration linearises again anyway. ``ε`` (:data:`REGULARISATION`, the inverse masses scaled so the
+iteration limit, worst 0.105).
+
+The system is solved by conjugate gradients preconditioned by its diagonal, matrix-free, over the
+active springs and their particles only (a compact numbering, so a step with a few hundred active
+springs touches a few hundred), and loosely (:data:`CG_TOLERANCE`): the next iteration linearises
+again anyway. ``ε`` (:data:`REGULARISATION`, the inverse masses scaled so the
 largest is 1) keeps the system definite where the active springs are redundant — the four sides
 and two diagonals of a quad lying flat ask six things of its four points' five in-plane freedoms;
 with ε = 1e-6 a crumpled cloth with every spring over its bound diverged. Each iteration leaves
 ``ε/(w_i + w_j + ε)`` of a lone spring's excess.
 
-What it costs (hanging 10.24 kg cloth, τ = 0.1, docs/BENCHMARKS.md §3): at 64×64 about 7
-iterations and 115 CG iterations a step over ~290 active springs, 0.8 ms a step against the
-passes' 1.0 ms, for a worst strain of 0.1001 where the passes leave 0.119 (32×32: 0.13 against
-0.28 ms, 0.1001 against 0.1057). At 128×128 the active set reaches 14,000 springs at the bottom of
-the swing and grows by about a ring of springs an iteration: 20 iterations (the default
-``strain_limit_passes``) leave 0.120 at 2× the passes' cost, 60 hold 0.1001. Tried: symmetric
+What it costs (hanging 10.24 kg cloth, τ = 0.1, ``tools/strain_methods.py``, docs/BENCHMARKS.md
+§3): at 64×64 4.6 iterations and 97 CG iterations a step over ~300 active springs, 0.68 ms a step
+against the passes' 0.95 ms, for a worst strain of 0.1001 where the passes leave 0.119 (32×32: 0.12
+against 0.32 ms, 0.1001 against 0.1057). At 128×128 the active set reaches 14,000 springs at the
+bottom of the swing: 5.3 iterations a step, 0.1001 at 1.5× the passes' cost. Tried: symmetric
 Gauss–Seidel as the preconditioner — 2.8× fewer CG iterations, each 3× the cost: 10 % faster,
 not kept. The worst case is a crumpled cloth with every spring over: all active and redundant,
 3e-4 above the bound after 20 iterations.
@@ -222,16 +223,11 @@ def project(x, springs, rest, w, tau, tol, max_outer, max_cg, eps, cg_tol,
             b = (1.0 + tau + _JOIN) * rest[s]
             if l2 <= b * b:
                 # within its bound: joins now only if it was in the last step's set and is near it
-                if outer == 0 and prev[s] == 1:
-                    near = (1.0 + tau - WARM_START) * rest[s]
-                    if l2 > near * near:
-                        inset[s] = 1
-                        act[k] = s
-                        k += 1
-                continue
-            over = np.sqrt(l2) / rest[s] - 1.0 - tau
-            if over > worst:
-                worst = over
+                near = (1.0 + tau - WARM_START) * rest[s]
+                if not (outer == 0 and prev[s] == 1 and l2 > near * near):
+                    continue
+            else:
+                worst = max(worst, np.sqrt(l2) / rest[s] - 1.0 - tau)
             if inset[s] == 0:
                 inset[s] = 1
                 act[k] = s
