@@ -4,16 +4,17 @@ through one.
 A post-step stage (see :mod:`cloth_sim.constraints`) over particle–triangle pairs, the triangle not
 containing the particle. Each step:
 
-1. **Candidates**, from a spatial hash of the particles at the step's start (Teschner et al. 2003:
-   one counting sort per step, cells as wide as the longest triangle side or the search radius if
-   larger), which each triangle queries over its box grown by the radius. The radius
-   ``thickness + 2·max|Δx|`` holds every pair that can come within ``thickness`` or cross over the
-   step. Measured in one run on the hanging cloth: hashing the triangles into every cell their
-   grown box overlaps and querying per particle took 2.9 ms at 64×64 (75,000 entries) and 87 ms at
-   128×128 (400,000 pairs within the radius there: a 5 mm thickness is most of that cloth's 7.9 mm
-   spacing); hashing the particles and querying per triangle, 3.4 ms and 53 ms. A bounding-volume
-   hierarchy would be refitted and traversed every step for the same answer; for cloth of
-   near-uniform triangles the hash is the usual choice.
+1. **Candidates**, from a bounding-volume hierarchy over the triangles
+   (:mod:`cloth_sim.collision_tree`: built once from the rest layout, refitted to the step's start
+   positions and traversed against itself). Each particle **reaches** half the thickness beyond its
+   own motion over the step, ``h/2 + |Δx|``; a triangle or an edge reaches as far as its farthest
+   corner. A pair is a candidate when its distance at the start is below its two reaches: farther
+   apart, it can neither come within ``h`` nor cross over the step. (A search radius of
+   ``h + 2·max|Δx|`` for every pair, the cloth's fastest particle widening everyone's search, found
+   9,800 edge pairs and 3,400 particle–triangle pairs a step on the swinging 64×64 cloth; the reach
+   of each pair's own motions keeps 800 and 260 of them. A spatial hash of the particles and of
+   the edges did the search before, 9 ms a step there, 6 ms with the reaches: it visited about 90
+   hash entries per edge for those 800 pairs; the tree, 2.5 ms. Figures in docs/BENCHMARKS.md §3c.)
    A particle is paired with every triangle it is not a corner of (Bridson et al.): excluding the
    triangles of its neighbours too was tried and lets the ``fold`` scene cross itself where a crease
    is one triangle wide. Neighbours in a flat or compressed cloth are never pushed out of its plane
@@ -31,7 +32,7 @@ containing the particle. Each step:
      — where the nearest point is an edge — kept no distance: the edge particles of a U-folded cloth
      came within 1.5–1.9 mm of the other layer at a thickness of 5 mm;
    * and **edge–edge**: two edges sharing no particle whose nearest points both lie inside them (two
-     hems crossing), from their own search (edge midpoints hashed as the particles are), pushed
+     hems crossing), found by the same traversal (each edge from its first triangle), pushed
      apart along the line between those points. In a flat cloth two edges are nearest at an end of
      one of them, so this never acts between neighbours lying flat.
 3. **No crossing**, guaranteed: the distance from a moving point to a moving triangle, with every
@@ -45,8 +46,8 @@ containing the particle. Each step:
    another. One pass suffices, because every factor only shrinks motion.
    A particle that starts touching a triangle (``d₀ = 0``) does not move that step.
 
-The cost is one hash build and one distance test per candidate pair; ``self_collision=False`` (the
-default) runs none of it.
+The cost is one refit and traversal of the tree and one distance test per pair of overlapping
+boxes; ``self_collision=False`` (the default) runs none of it.
 """
 
 from __future__ import annotations
@@ -109,157 +110,6 @@ def _distance(x, p, a, b, c):
     dy = x[p, 1] - (wa * x[a, 1] + wb * x[b, 1] + wc * x[c, 1])
     dz = x[p, 2] - (wa * x[a, 2] + wb * x[b, 2] + wc * x[c, 2])
     return math.sqrt(dx * dx + dy * dy + dz * dz), wa, wb, wc
-
-
-@numba.njit(cache=True, inline="always")
-def _cell(v, inv):
-    return np.int64(math.floor(v * inv))
-
-
-@numba.njit(cache=True, inline="always")
-def _hash(i, j, k, size):
-    h = (i * 73856093) ^ (j * 19349663) ^ (k * 83492791)
-    return h % size if h >= 0 else (-h) % size
-
-
-#: hash cell size as a fraction of the longest triangle side, unless the search radius is larger
-#: (measured at 64×64: 3.4 ms at 1.0, 7.5 ms at 0.5, 2.8 ms at 2.0 but 4× the pairs to visit in a
-#: crumpled cloth)
-CELL = 1.0
-
-
-#: the searches split their triangles (edges) into this many fixed, contiguous chunks, run on every
-#: core; each chunk's pairs are kept in order and the chunks joined in order, so the result does not
-#: depend on the thread count
-CHUNKS = 64
-
-
-@numba.njit(cache=True)
-def _particle_hash(x0, tris, radius):
-    """The particles in a spatial hash (one cell each, a counting sort): ``(inv, size, start,
-    members, cell)``, ``inv`` the inverse cell size and ``cell[p]`` particle ``p``'s cell."""
-    n, t = x0.shape[0], tris.shape[0]
-    longest = 0.0
-    for i in range(t):
-        for e in range(3):
-            a, b = tris[i, e], tris[i, (e + 1) % 3]
-            d = ((x0[a, 0] - x0[b, 0]) ** 2 + (x0[a, 1] - x0[b, 1]) ** 2
-                 + (x0[a, 2] - x0[b, 2]) ** 2)
-            longest = max(longest, d)
-    size_cell = max(radius, CELL * math.sqrt(longest))
-    inv = 1.0 / size_cell
-    size = 2 * n + 1
-    start = np.zeros(size + 1, np.int64)
-    cell = np.empty((n, 3), np.int64)
-    bucket_of = np.empty(n, np.int64)
-    for p in range(n):
-        for k in range(3):
-            cell[p, k] = _cell(x0[p, k], inv)
-        b = _hash(cell[p, 0], cell[p, 1], cell[p, 2], size)
-        bucket_of[p] = b
-        start[b + 1] += 1
-    for b in range(size):
-        start[b + 1] += start[b]
-    fill = start[:-1].copy()
-    members = np.empty(n, np.int64)
-    for p in range(n):
-        members[fill[bucket_of[p]]] = p
-        fill[bucket_of[p]] += 1
-    return inv, size, start, members, cell
-
-
-@numba.njit(cache=True, inline="always")
-def _put(pairs, dist, row, m, cap, i, j, d):
-    """Pair ``(i, j)`` at distance ``d`` as its chunk's ``m``-th (at ``row + m``) if the chunk has
-    room (``m < cap``); returns the chunk's count, ``m + 1``, either way (a count above ``cap`` makes
-    :func:`_join_chunks` search again with more rows)."""
-    if m < cap:
-        pairs[row + m, 0] = i
-        pairs[row + m, 1] = j
-        dist[row + m] = d
-    return m + 1
-
-
-@numba.njit(cache=True, parallel=True)
-def _triangle_queries(x0, tris, radius, inv, size, start, members, cell, cap, pairs, dist, counts):
-    """Each chunk of triangles (:data:`CHUNKS`) visits the cells its triangles' boxes, grown by
-    ``radius``, overlap, and writes its pairs from row ``chunk·cap`` on (``counts[chunk]``: how many
-    it found, which may exceed ``cap``: then only the first ``cap`` were written). A particle is
-    taken only from the bucket of its own cell (another cell hashed to the same bucket does not
-    count), so each is looked at once per triangle without a shared "seen" array."""
-    t = tris.shape[0]
-    per = (t + CHUNKS - 1) // CHUNKS
-    for chunk in numba.prange(CHUNKS):
-        m = 0
-        row = chunk * cap
-        for i in range(chunk * per, min(t, (chunk + 1) * per)):
-            a, b, c = tris[i, 0], tris[i, 1], tris[i, 2]
-            lo0 = min(x0[a, 0], x0[b, 0], x0[c, 0]) - radius
-            lo1 = min(x0[a, 1], x0[b, 1], x0[c, 1]) - radius
-            lo2 = min(x0[a, 2], x0[b, 2], x0[c, 2]) - radius
-            hi0 = max(x0[a, 0], x0[b, 0], x0[c, 0]) + radius
-            hi1 = max(x0[a, 1], x0[b, 1], x0[c, 1]) + radius
-            hi2 = max(x0[a, 2], x0[b, 2], x0[c, 2]) + radius
-            for ci in range(_cell(lo0, inv), _cell(hi0, inv) + 1):
-                for cj in range(_cell(lo1, inv), _cell(hi1, inv) + 1):
-                    for ck in range(_cell(lo2, inv), _cell(hi2, inv) + 1):
-                        bucket = _hash(ci, cj, ck, size)
-                        for e in range(start[bucket], start[bucket + 1]):
-                            p = members[e]
-                            if cell[p, 0] != ci or cell[p, 1] != cj or cell[p, 2] != ck:
-                                continue  # another cell's particle in this bucket
-                            if p == a or p == b or p == c:
-                                continue  # its corners are not paired with it
-                            if not (lo0 <= x0[p, 0] <= hi0 and lo1 <= x0[p, 1] <= hi1
-                                    and lo2 <= x0[p, 2] <= hi2):
-                                continue
-                            d0 = _distance(x0, p, a, b, c)[0]
-                            if d0 >= radius:
-                                continue
-                            m = _put(pairs, dist, row, m, cap, p, i, d0)
-        counts[chunk] = m
-
-
-def _join_chunks(run, rows: int, cap=None):
-    """Run a chunked search (``run(rows, pairs, dist, counts)``) with ``rows`` per chunk, again with
-    enough rows if a chunk found more, and join the chunks' pairs in chunk order. ``cap``: an
-    optional one-element integer array remembering the rows the last search needed (a stage passes
-    its own, so a step whose cloth has as many pairs as the last searches once)."""
-    if cap is not None:
-        rows = max(rows, int(cap[0]))
-    cap_rows = rows
-    while True:
-        pairs = np.empty((CHUNKS * cap_rows, 2), np.int64)
-        dist = np.empty(CHUNKS * cap_rows)
-        counts = np.zeros(CHUNKS, np.int64)
-        run(cap_rows, pairs, dist, counts)
-        most = int(counts.max())
-        if most <= cap_rows:
-            break
-        cap_rows = most + most // 4
-    if cap is not None:
-        cap[0] = most + most // 4
-    keep = (np.arange(cap_rows)[None, :] < counts[:, None]).ravel()
-    return pairs[keep], dist[keep]
-
-
-def candidate_pairs(x0, tris, radius, cap=None):
-    """``(pairs, distances)``: every (particle, triangle) pair whose start positions lie within
-    ``radius``, and that distance; the particle not a corner of the triangle; in a fixed order (by
-    triangle, then by the cells visited), the same at any thread count.
-
-    The particles go into a spatial hash (one cell each, a counting sort); each triangle visits the
-    cells its box, grown by ``radius``, overlaps; the triangles are searched in :data:`CHUNKS`
-    chunks on every core."""
-    tris = np.ascontiguousarray(tris, dtype=np.int64)
-    if len(tris) == 0 or len(x0) == 0:
-        return np.empty((0, 2), np.int64), np.empty(0)
-    hashed = _particle_hash(x0, tris, float(radius))
-
-    def run(rows, pairs, dist, counts):
-        _triangle_queries(x0, tris, float(radius), *hashed, rows, pairs, dist, counts)
-
-    return _join_chunks(run, 4 * len(x0) // CHUNKS + 16, cap)
 
 
 @numba.njit(cache=True)
@@ -351,118 +201,6 @@ def closest_on_segments(x, a, b, c, d):
         sv = min(max((bb - cc) / aa, 0.0), 1.0) if aa > 0.0 else 0.0
     px, py, pz = rx + sv * d1x - tv * d2x, ry + sv * d1y - tv * d2y, rz + sv * d1z - tv * d2z
     return sv, tv, math.sqrt(px * px + py * py + pz * pz)
-
-
-@numba.njit(cache=True)
-def _edge_hash(x0, edges, radius):
-    """The edges' boxes in a spatial hash, each in every cell it overlaps (cells as wide as the
-    longest edge or ``radius`` if larger: one to eight cells an edge): ``(inv, size, start, members,
-    lo, hi, first, entry_cell)``, ``lo``/``hi`` the boxes, ``first`` the lowest cell of each and
-    ``entry_cell`` the cell each entry of ``members`` was put there for."""
-    m = edges.shape[0]
-    longest = 0.0
-    for e in range(m):
-        a, b = edges[e, 0], edges[e, 1]
-        longest = max(longest, (x0[a, 0] - x0[b, 0]) ** 2 + (x0[a, 1] - x0[b, 1]) ** 2
-                      + (x0[a, 2] - x0[b, 2]) ** 2)
-    inv = 1.0 / max(radius, math.sqrt(longest), 1e-300)  # (half that: 1.7× slower at 64×64)
-    lo = np.empty((m, 3))
-    hi = np.empty((m, 3))
-    first = np.empty((m, 3), np.int64)
-    for e in range(m):
-        a, b = edges[e, 0], edges[e, 1]
-        for k in range(3):
-            lo[e, k] = min(x0[a, k], x0[b, k])
-            hi[e, k] = max(x0[a, k], x0[b, k])
-            first[e, k] = _cell(lo[e, k], inv)
-    size = 4 * m + 1
-    start = np.zeros(size + 1, np.int64)
-    for e in range(m):  # count the entries per bucket
-        for ci in range(first[e, 0], _cell(hi[e, 0], inv) + 1):
-            for cj in range(first[e, 1], _cell(hi[e, 1], inv) + 1):
-                for ck in range(first[e, 2], _cell(hi[e, 2], inv) + 1):
-                    start[_hash(ci, cj, ck, size) + 1] += 1
-    for q in range(size):
-        start[q + 1] += start[q]
-    fill = start[:-1].copy()
-    members = np.empty(start[size], np.int64)
-    entry_cell = np.empty((start[size], 3), np.int64)
-    for e in range(m):
-        for ci in range(first[e, 0], _cell(hi[e, 0], inv) + 1):
-            for cj in range(first[e, 1], _cell(hi[e, 1], inv) + 1):
-                for ck in range(first[e, 2], _cell(hi[e, 2], inv) + 1):
-                    bucket = _hash(ci, cj, ck, size)
-                    q = fill[bucket]
-                    members[q] = e
-                    entry_cell[q, 0], entry_cell[q, 1], entry_cell[q, 2] = ci, cj, ck
-                    fill[bucket] += 1
-    return inv, size, start, members, lo, hi, first, entry_cell
-
-
-@numba.njit(cache=True, parallel=True)
-def _edge_queries(x0, edges, radius, inv, size, start, members, lo, hi, first, entry_cell, cap,
-                  pairs, dist, counts):
-    """Each chunk of edges (:data:`CHUNKS`) visits the cells its edges' boxes, grown by ``radius``,
-    overlap, and writes its pairs from row ``chunk·cap`` on (as :func:`_triangle_queries`). An edge
-    ``f`` sits in several cells; the pair ``(e, f)`` is taken only from ``f``'s entry for the first
-    cell (lowest on each axis) that both ``e``'s grown box and ``f``'s box overlap, so once, without
-    a "seen" array (entries of other cells hashed to the same bucket, ``f``'s own included, are
-    passed over)."""
-    m_edges = edges.shape[0]
-    per = (m_edges + CHUNKS - 1) // CHUNKS
-    for chunk in numba.prange(CHUNKS):
-        n_pairs = 0
-        row = chunk * cap
-        for e in range(chunk * per, min(m_edges, (chunk + 1) * per)):
-            a, b = edges[e, 0], edges[e, 1]
-            q0 = _cell(lo[e, 0] - radius, inv)
-            q1 = _cell(lo[e, 1] - radius, inv)
-            q2 = _cell(lo[e, 2] - radius, inv)
-            for ci in range(q0, _cell(hi[e, 0] + radius, inv) + 1):
-                for cj in range(q1, _cell(hi[e, 1] + radius, inv) + 1):
-                    for ck in range(q2, _cell(hi[e, 2] + radius, inv) + 1):
-                        bucket = _hash(ci, cj, ck, size)
-                        for q in range(start[bucket], start[bucket + 1]):
-                            f = members[q]
-                            if f <= e:
-                                continue
-                            if (entry_cell[q, 0] != ci or entry_cell[q, 1] != cj
-                                    or entry_cell[q, 2] != ck):
-                                continue  # another cell's entry in this bucket
-                            if (ci != max(q0, first[f, 0]) or cj != max(q1, first[f, 1])
-                                    or ck != max(q2, first[f, 2])):
-                                continue  # not the first cell the two share
-                            c, d = edges[f, 0], edges[f, 1]
-                            if c == a or c == b or d == a or d == b:
-                                continue
-                            if (lo[f, 0] > hi[e, 0] + radius or lo[e, 0] > hi[f, 0] + radius
-                                    or lo[f, 1] > hi[e, 1] + radius or lo[e, 1] > hi[f, 1] + radius
-                                    or lo[f, 2] > hi[e, 2] + radius or lo[e, 2] > hi[f, 2] + radius):
-                                continue  # boxes farther apart than radius: no distance needed
-                            dd = closest_on_segments(x0, a, b, c, d)[2]
-                            if dd >= radius:
-                                continue
-                            n_pairs = _put(pairs, dist, row, n_pairs, cap, e, f, dd)
-        counts[chunk] = n_pairs
-
-
-def edge_pairs(x0, edges, radius, cap=None):
-    """``(pairs, distances)``: every pair of edges ``(e, f)``, ``e < f``, sharing no particle, whose
-    segments at the start lie within ``radius``, and that distance; in a fixed order (by ``e``, then
-    by the cells visited), the same at any thread count. Each edge's box goes into every cell of a
-    spatial hash it overlaps; each edge visits the cells its box grown by ``radius`` overlaps, in
-    :data:`CHUNKS` chunks on every core. (Hashing midpoints and visiting the 27 cells around them,
-    cells of the longest edge plus the radius, took 19 ms on the T-shirt lying flat, 6,814 edges and
-    35,000 pairs between its layers; this takes a fraction.)"""
-    edges = np.ascontiguousarray(edges, dtype=np.int64)
-    if len(edges) == 0:
-        return np.empty((0, 2), np.int64), np.empty(0)
-    hashed = _edge_hash(x0, edges, float(radius))
-
-    def run(rows, pairs, dist, counts):
-        _edge_queries(x0, edges, float(radius), *hashed, rows, pairs, dist, counts)
-
-    return _join_chunks(run, 2 * len(edges) // CHUNKS + 16, cap)
 
 
 @numba.njit(cache=True, inline="always")
@@ -656,11 +394,11 @@ def scale_displacements(x, x0, factor):
 
 
 @numba.njit(cache=True)
-def max_displacement(x, x0):
-    m = 0.0
+def displacements(x, x0, out):
+    """Each particle's displacement over the step, ``|x − x0|``, written into ``out``."""
     for p in range(x.shape[0]):
-        m = max(m, (x[p, 0] - x0[p, 0]) ** 2 + (x[p, 1] - x0[p, 1]) ** 2 + (x[p, 2] - x0[p, 2]) ** 2)
-    return math.sqrt(m)
+        out[p] = _disp(x, x0, p)
+    return out
 
 
 #: self-collision's thickness may be at most this fraction of the shortest triangle edge at rest
@@ -704,8 +442,9 @@ class SelfCollision:
         inv = np.where(model.pinned, 0.0, 1.0 / model.masses)
         self._inv_mass = np.ascontiguousarray(inv)
         self._factor = np.ones(model.n_particles)
+        self._moved = np.zeros(model.n_particles)
         self._no_clearance = np.full(model.n_particles, np.inf)
-        self._caps = (np.zeros(1, np.int64), np.zeros(1, np.int64))  # rows per search chunk
+        self._tree = None  # the candidate pairs' hierarchy, built at the first step
         self.last_pairs = self.last_pushed = self.last_slowed = self.last_edge_pairs = 0
 
     @property
@@ -735,25 +474,27 @@ class SelfCollision:
         held = clearance < SUPPORT * h
         if held.any():
             inv_mass = np.where(held, 0.0, inv_mass)
-        radius = h + 2.0 * max_displacement(x, x0)
+        # each particle reaches half the thickness beyond its own motion: a pair farther apart at
+        # the start than its two reaches can neither come within h nor cross over the step
+        moved = displacements(x, x0, self._moved)
+        reach = 0.5 * h + moved
         tris, (edges, tri_edge, edge_owner, edge_tris, vertex_owner, adj_ptr, adj) = \
             self._tris, self._features
-        caps = self._caps
-        pairs, dist = candidate_pairs(x0, tris, radius, caps[0])
-        e_pairs, e_dist = edge_pairs(x0, edges, radius, caps[1])
+        if self._tree is None:
+            from .collision_tree import TriangleTree  # (it measures with this module's distances)
+            self._tree = TriangleTree(tris, self.model.positions, self._features)
+        pairs, dist, e_pairs, e_dist = self._tree.pairs(x0, reach)
         free = self._inv_mass
         self.last_pushed = (proximity(x, x0, v, tris, pairs, inv_mass, free, clearance, h)
                             + proximity_features(x, x0, v, tris, pairs, inv_mass, free, clearance, h,
                                                  tri_edge, edge_owner, edge_tris, vertex_owner,
                                                  adj_ptr, adj)
                             + proximity_edges(x, x0, v, edges, e_pairs, inv_mass, free, clearance, h))
-        # a pair the no-crossing pass must see is closer at the start than the two motions
-        # together, at most twice the longest: the search covered that unless the pushes made
-        # some motion longer than radius / 2
-        grown = 2.0 * max_displacement(x, x0)
-        if grown > radius:
-            pairs, dist = candidate_pairs(x0, tris, grown, caps[0])
-            e_pairs, e_dist = edge_pairs(x0, edges, grown, caps[1])
+        # a pair the no-crossing pass must see is closer at the start than its two motions: the
+        # search covered that unless the pushes moved some particle more than h / 2 further
+        moved = displacements(x, x0, self._moved)
+        if (moved > reach).any():
+            pairs, dist, e_pairs, e_dist = self._tree.pairs(x0, moved)
         self.last_pairs, self.last_edge_pairs = len(pairs), len(e_pairs)
         displacement_factors(x, x0, tris, pairs, dist, self._factor)
         edge_displacement_factors(x, x0, edges, e_pairs, e_dist, self._factor)

@@ -349,11 +349,12 @@ def test_self_collision_refuses_a_thickness_beyond_half_an_edge():
                          "self_collision": True})
 
 
-def _brute_force_pairs(x, tris, edges, radius):
-    """Every (particle, triangle) pair within ``radius`` with its exact distance (the projection on
-    the plane when it falls inside, else the nearest of the three sides), and every (edge, edge)
-    pair sharing no particle whose distance, sampled at 401 points along the first edge, is within
-    1 % above ``radius`` — all by testing every pair with numpy."""
+def _brute_force_pairs(x, tris, edges, reach):
+    """Every (particle, triangle) pair within the particle's ``reach`` plus the triangle's (the
+    largest of its corners') with its exact distance (the projection on the plane when it falls
+    inside, else the nearest of the three sides), and every (edge, edge) pair sharing no particle
+    whose distance, sampled at 401 points along the first edge, is within 1 % above the two edges'
+    reaches — all by testing every pair with numpy."""
     def seg_point(p, a, b):
         ab = b - a
         t = np.clip(((p - a) * ab).sum(-1) / (ab * ab).sum(-1), 0.0, 1.0)
@@ -377,10 +378,12 @@ def _brute_force_pairs(x, tris, edges, radius):
         inside = (u >= 0) & (v >= 0) & (u + v <= 1)
         d = np.where(inside, np.abs(h), np.minimum.reduce([seg_point(P, A, B), seg_point(P, B, C),
                                                            seg_point(P, C, A)]))
-        for pp, dd in zip(p[d < radius], d[d < radius]):
+        within = d < reach[p] + reach[[a, b, c]].max()
+        for pp, dd in zip(p[within], d[within]):
             tri_pairs[(int(pp), i)] = dd
     edge_pairs = {}
     s = np.linspace(0.0, 1.0, 401)
+    edge_reach = reach[edges].max(axis=1)
     for e, (a, b) in enumerate(edges):
         f = np.arange(e + 1, len(edges))
         f = f[~np.isin(edges[f], [a, b]).any(axis=1)]
@@ -388,36 +391,47 @@ def _brute_force_pairs(x, tris, edges, radius):
         pts = x[a] + s[:, None] * (x[b] - x[a])  # (401, 3)
         c, d = x[edges[f, 0]], x[edges[f, 1]]
         dist = seg_point(pts[:, None, :], c[None], d[None]).min(axis=0)
-        for ff, dd in zip(f[dist < radius * 1.01], dist[dist < radius * 1.01]):
+        within = dist < (edge_reach[e] + edge_reach[f]) * 1.01
+        for ff, dd in zip(f[within], dist[within]):
             edge_pairs[(e, int(ff))] = dd
     return tri_pairs, edge_pairs
 
 
-def test_self_collision_search_finds_every_pair_within_the_radius_at_any_thread_count():
-    """The particle–triangle and edge–edge searches (hashed, in chunks on every core) against a
-    brute-force test of every pair on a crumpled cloth; the same arrays at 1 and 2 threads, and with
-    a chunk size too small for the pairs (the search runs again, larger)."""
+@pytest.mark.parametrize("reaches", ["radius", "per particle"])
+def test_self_collision_search_finds_every_pair_within_reach_at_any_thread_count(reaches):
+    """The particle–triangle and edge–edge searches (a hierarchy over the triangles, traversed in
+    tasks on every core) against a brute-force test of every pair on a crumpled cloth with a lone
+    particle in no triangle: one radius for all, or a reach per particle (a pair within the sum of
+    its sides' reaches); the same arrays at 1 and 2 threads, and with rows too few for the pairs
+    (the search runs again, larger)."""
     import numba
 
-    from cloth_sim import self_collision as S
+    from cloth_sim.collision_tree import TriangleTree
+    from cloth_sim.self_collision import _features
 
     rng = np.random.default_rng(3)
     model = ClothModel.grid(10, 10, 0.02, 0.01, stiffness=100.0)
     r, c = np.divmod(np.arange(100), 10)  # rows folded over at row 4.5, 6 mm above, jittered
     x = np.stack([0.02 * c, 0.02 * np.where(r < 5, r, 9 - r) + 0.01 * (r >= 5),
                   0.006 * (r >= 5)], axis=1) + rng.normal(scale=0.002, size=(100, 3))
-    sim = Simulator(model, thickness=0.004, self_collision=True)
-    tris, edges = sim._self_collision._tris, sim._self_collision._features[0]
-    radius = 0.012
-    tri_truth, edge_truth = _brute_force_pairs(x, tris, edges, radius)
-    assert len(tri_truth) > 200 and len(edge_truth) > 200  # plenty to find
+    tris = model.triangles[~(model.triangles == 44).any(axis=1)]  # particle 44 in no triangle
+    features = _features(tris, 100)
+    edges = features[0]
+    radius = 0.012 if reaches == "radius" else rng.uniform(0.002, 0.008, 100)
+    reach = np.full(100, radius / 2) if reaches == "radius" else radius
+    tri_truth, edge_truth = _brute_force_pairs(x, tris, edges, reach)
+    assert len(tri_truth) > 150 and len(edge_truth) > 150  # plenty to find
+    assert any(p == 44 for p, _ in tri_truth)  # the lone particle is near triangles
     threads = numba.get_num_threads()
     runs = []
     try:
-        for n_threads, cap in ((1, None), (min(2, numba.config.NUMBA_NUM_THREADS), None),
-                               (min(2, numba.config.NUMBA_NUM_THREADS), np.ones(1, np.int64))):
+        for n_threads, rows in ((1, None), (min(2, numba.config.NUMBA_NUM_THREADS), None),
+                                (min(2, numba.config.NUMBA_NUM_THREADS), 1)):
             numba.set_num_threads(n_threads)
-            runs.append((*S.candidate_pairs(x, tris, radius, cap), *S.edge_pairs(x, edges, radius, cap)))
+            tree = TriangleTree(tris, model.positions, features)
+            if rows is not None:
+                tree.caps[:] = rows
+            runs.append(tree.pairs(x, radius))
     finally:
         numba.set_num_threads(threads)
     pairs, dist, e_pairs, e_dist = runs[0]
@@ -425,13 +439,15 @@ def test_self_collision_search_finds_every_pair_within_the_radius_at_any_thread_
     assert found.keys() == tri_truth.keys()
     assert max(abs(found[k] - tri_truth[k]) for k in found) < 1e-12
     e_found = {tuple(p): d for p, d in zip(e_pairs.tolist(), e_dist)}
-    # the sampled truth is within 1 % of the radius of the exact distance: every exact pair is in
+    # the sampled truth is within 1 % of the reach of the exact distance: every exact pair is in
     # it, and what it adds lies within that band
     assert e_found.keys() <= edge_truth.keys()
-    assert all(edge_truth[k] >= radius for k in edge_truth.keys() - e_found.keys())
+    edge_reach = reach[edges].max(axis=1)
+    assert all(edge_truth[k] >= edge_reach[k[0]] + edge_reach[k[1]]
+               for k in edge_truth.keys() - e_found.keys())
     step = np.linalg.norm(x[edges[:, 1]] - x[edges[:, 0]], axis=1).max() / 400  # the sampling's
     assert all(-1e-12 <= edge_truth[k] - e_found[k] <= step for k in e_found)
     assert len(found) == len(pairs) and len(e_found) == len(e_pairs)  # each pair once
-    assert np.all(np.diff(pairs[:, 1]) >= 0) and np.all(np.diff(e_pairs[:, 0]) >= 0)  # in order
+    assert np.all(e_pairs[:, 0] < e_pairs[:, 1])
     for other in runs[1:]:
         assert all(np.array_equal(a, b) for a, b in zip(runs[0], other))
