@@ -477,6 +477,8 @@ class SelfCollision:
         # each particle reaches half the thickness beyond its own motion: a pair farther apart at
         # the start than its two reaches can neither come within h nor cross over the step
         moved = displacements(x, x0, self._moved)
+        if not np.isfinite(moved).all():
+            return  # a diverged step: the simulator's check after the stages restores the state
         reach = 0.5 * h + moved
         tris, (edges, tri_edge, edge_owner, edge_tris, vertex_owner, adj_ptr, adj) = \
             self._tris, self._features
