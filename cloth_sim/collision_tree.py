@@ -15,9 +15,10 @@ overlapping pair of leaves ``(T1, T2)`` the exact distances are measured:
   sharing no particle.
 
 A pair of primitives within reach is seen from exactly one pair of leaves (their first triangles),
-so each is found once without a "seen" array. The traversal is split into fixed tasks (the pairs of
-children and the subtrees near the root), run on every core; each task writes its pairs to its own
-rows and the tasks are joined in order, so the result is the same at any thread count.
+so each is found once without a "seen" array. The traversal is split into fixed tasks (subtrees
+against themselves and pairs of subtrees, :func:`_tasks`), run on every core; each task writes its
+pairs to its own rows and the tasks are joined in order, so the result is the same at any thread
+count.
 
 Why a tree and not the spatial hash this replaced: with a reach per primitive (the fast-moving
 bottom of a swinging cloth no longer widens every particle's search) the hash still visited every
@@ -33,11 +34,13 @@ import numpy as np
 
 from .self_collision import _distance, closest_on_segments
 
-#: the traversal is split into at least this many tasks (fewer on a cloth of fewer triangles)
+#: the traversal's tasks each hold at most 1/TASKS of the items against themselves or of all pairs
+#: of items between two subtrees (:func:`_tasks`: ~200 tasks at 64×64, fewer on a small cloth)
 TASKS = 64
 
-#: items (triangles, lone particles) a leaf holds at most; measured on the swinging 64×64 cloth
-#: (7,938 triangles): 1 → 4.7 ms a search, 4 → …, 8 → …
+#: items (triangles, lone particles) a leaf holds at most; measured on recorded states of the
+#: swinging 64×64 cloth (7,938 triangles), ms a search in two runs: 1 → 3.9–4.2, 2 → 3.4–3.8,
+#: 4 → 3.5–3.9, 8 → 3.1–3.2, 16 → 3.4–3.9
 LEAF = 8
 
 
@@ -88,25 +91,38 @@ def _build(centres, leaf):
             end[:n_nodes].copy(), (end - first)[:n_nodes].copy(), order)
 
 
-def _tasks(left, right, least: int) -> np.ndarray:
+def _tasks(left, right, size, least: int) -> np.ndarray:
     """The traversal split into independent tasks, ``(a, b)`` rows: ``(a, a)`` the subtree ``a``
-    against itself, ``(a, b)`` subtree ``a`` against ``b``. Subtrees are opened to the depth that
-    gives at least ``least`` tasks, and the tasks listed depth first (a subtree's own tasks, then its
-    children's pair), so that equal runs of the list cover equal parts of the cloth."""
-    def depth_of(a):
-        return 0 if left[a] < 0 else 1 + max(depth_of(left[a]), depth_of(right[a]))
+    against itself, ``(a, b)`` subtree ``a`` against ``b``. A subtree is split into its two halves
+    and their pair while it holds more than ``1/least`` of the items (a spread-out cloth's pairs are
+    mostly inside small subtrees), and a pair by opening its larger side while it could hold more
+    than ``1/least`` of all pairs of items (a crumpled cloth's, where most boxes overlap, are mostly
+    between subtrees); the tasks are listed depth first, so that equal runs of the list cover equal
+    parts of the cloth and every core gets a like share either way."""
+    budget = max(1, int(size[0]) * int(size[0]) // (2 * least))
+    tasks = []
 
-    def open_(a, levels):
-        if levels == 0 or left[a] < 0:
-            return [(a, a)]
-        lt, rt = int(left[a]), int(right[a])
-        return open_(lt, levels - 1) + open_(rt, levels - 1) + [(lt, rt)]
+    def visit(a, b):
+        if a == b:
+            if left[a] < 0 or int(size[a]) * least <= int(size[0]):
+                tasks.append((a, a))
+                return
+            lt, rt = int(left[a]), int(right[a])
+            visit(lt, lt)
+            visit(rt, rt)
+            visit(lt, rt)
+            return
+        if int(size[a]) * int(size[b]) <= budget or (left[a] < 0 and left[b] < 0):
+            tasks.append((a, b))
+            return
+        if left[a] >= 0 and (left[b] < 0 or size[a] >= size[b]):
+            visit(int(left[a]), b)
+            visit(int(right[a]), b)
+        else:
+            visit(a, int(left[b]))
+            visit(a, int(right[b]))
 
-    levels = 0
-    tasks = open_(0, 0)
-    while len(tasks) < least and levels < depth_of(0):
-        levels += 1
-        tasks = open_(0, levels)
+    visit(0, 0)
     return np.array(tasks, np.int64).reshape(-1, 2)
 
 
@@ -277,6 +293,22 @@ def _traverse(tasks, left, right, first, end, size, lo, hi, ilo, ihi, order, sta
         counts[k, 1] = m_ee
 
 
+@numba.njit(cache=True)
+def _join(counts, cap, pairs, dist):
+    """Each task's rows (``counts[k]`` from row ``k·cap``), joined in task order: the cost is the
+    pairs', not the rows'."""
+    total = 0
+    for k in range(counts.shape[0]):
+        total += counts[k]
+    out, out_d = np.empty((total, 2), np.int64), np.empty(total)
+    m = 0
+    for k in range(counts.shape[0]):
+        for q in range(k * cap, k * cap + counts[k]):
+            out[m, 0], out[m, 1], out_d[m] = pairs[q, 0], pairs[q, 1], dist[q]
+            m += 1
+    return out, out_d
+
+
 def _owned(tris, owner_of, slots) -> np.ndarray:
     """Per triangle, the (up to three) primitives it is the first triangle of, −1 after them."""
     own = np.full((len(tris), 3), -1, np.int64)
@@ -319,7 +351,7 @@ class TriangleTree:
         self.own_e = _owned(self.tris, edge_owner, tri_edge)
         (self.left, self.right, self.first, self.end, self.size,
          self.order) = _build(np.ascontiguousarray(centres), int(leaf))
-        self.tasks = _tasks(self.left, self.right, TASKS)
+        self.tasks = _tasks(self.left, self.right, self.size, TASKS)
         depth = np.zeros(len(self.left), np.int64)
         for node in range(len(self.left)):  # children are numbered after their parent
             if self.left[node] >= 0:
@@ -361,7 +393,4 @@ class TriangleTree:
             if most[0] <= cap_vf and most[1] <= cap_ee:
                 break
             self.caps = np.maximum(self.caps, most + most // 4)
-        rows = np.arange(max(cap_vf, cap_ee))
-        keep_vf = (rows[None, :cap_vf] < counts[:, :1]).ravel()
-        keep_ee = (rows[None, :cap_ee] < counts[:, 1:]).ravel()
-        return vf[keep_vf], vf_d[keep_vf], ee[keep_ee], ee_d[keep_ee]
+        return _join(counts[:, 0], cap_vf, vf, vf_d) + _join(counts[:, 1], cap_ee, ee, ee_d)
