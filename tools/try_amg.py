@@ -23,36 +23,12 @@ import time
 from pathlib import Path
 
 import numpy as np
-import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from cloth_sim.integrators.implicit import _assemble_baraff_witkin, cholesky
+from cloth_sim.integrators.implicit import cholesky
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from try_large_steps import hanging  # noqa: E402  (the same scene)
-
-
-def system(sim):
-    """The integrator's matrix and right-hand side at the simulator's state."""
-    integ, forces, dt = sim._integrator, sim.forces, sim.dt
-    x, v = sim.state.x, sim.state.v
-    f = forces.force(x, v)
-    kx, _, cv = forces.spring_term.jacobian_blocks(x, v, True, position_damping=False)
-    A = integ._matrix.copy()
-    rhs = np.empty((sim.model.n_particles, 3))
-    _assemble_baraff_witkin(forces.springs, kx, cv, f, v, dt, sim.model.masses + dt * forces.drag,
-                            integ._slot, integ._dslot, A.data, rhs)
-    return A.tocsr(), rhs.ravel()[integ._free_dofs].copy()
-
-
-def block_jacobi(A):
-    size = A.shape[0]
-    coo = A.tocoo()
-    own = coo.row // 3 == coo.col // 3
-    blocks = np.zeros((size // 3, 3, 3))
-    np.add.at(blocks, (coo.row[own] // 3, coo.row[own] % 3, coo.col[own] % 3), coo.data[own])
-    inv = sp.block_diag(list(np.linalg.inv(blocks)), format="csr")
-    return spla.LinearOperator(A.shape, inv.__matmul__)
+from try_large_steps import block_jacobi, hanging, system  # noqa: E402  (the same scene, matrix)
 
 
 def cg(A, b, M) -> str:
@@ -124,7 +100,8 @@ def main() -> None:
         for lag, (A, b, x) in mats.items():
             fresh = solver(A, translations).aspreconditioner(cycle="V")
             rigid = solver(A, rigid_modes(x)).aspreconditioner(cycle="V")
-            print(f"| {lag} | {cg(A, b, block_jacobi(A))} | {cg(A, b, fresh)} | {cg(A, b, rigid)} | "
+            jacobi = spla.LinearOperator(A.shape, block_jacobi(A).__matmul__)
+            print(f"| {lag} | {cg(A, b, jacobi)} | {cg(A, b, fresh)} | {cg(A, b, rigid)} | "
                   f"{cg(A, b, v_cycle)} | {cg(A, b, spla.LinearOperator(A.shape, back_substitute))} |",
                   flush=True)
 

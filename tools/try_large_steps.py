@@ -74,10 +74,9 @@ def large_steps(n: int, seconds: float = 3.0) -> None:
               f"{ms:.0f} |", flush=True)
 
 
-def preconditioners(n: int, stiffness: float) -> None:
-    k = {"structural": stiffness, "shear": stiffness, "bend": 100.0}
-    sim = hanging(n, integrator="implicit_euler", dt=1 / 60, strain_limit=None, stiffness=k)
-    sim.advance(0.5)
+def system(sim):
+    """Baraff–Witkin's matrix (CSR, the free particles' unknowns) and right-hand side at the
+    simulator's state, as its ``implicit_euler`` integrator assembles them."""
     integ, forces, dt = sim._integrator, sim.forces, sim.dt
     x, v = sim.state.x, sim.state.v
     f = forces.force(x, v)
@@ -86,15 +85,26 @@ def preconditioners(n: int, stiffness: float) -> None:
     rhs = np.empty((sim.model.n_particles, 3))
     _assemble_baraff_witkin(forces.springs, kx, cv, f, v, dt, sim.model.masses + dt * forces.drag,
                             integ._slot, integ._dslot, A.data, rhs)
-    A = A.tocsr()
-    b = rhs.ravel()[integ._free_dofs]
-    size = A.shape[0]
+    return A.tocsr(), rhs.ravel()[integ._free_dofs]
+
+
+def block_jacobi(A):
+    """The inverses of ``A``'s 3×3 diagonal blocks, as one block-diagonal CSR matrix."""
     coo = A.tocoo()
     own = coo.row // 3 == coo.col // 3
-    blocks = np.zeros((size // 3, 3, 3))
+    blocks = np.zeros((A.shape[0] // 3, 3, 3))
     np.add.at(blocks, (coo.row[own] // 3, coo.row[own] % 3, coo.col[own] % 3), coo.data[own])
-    jacobi = sp.block_diag(list(np.linalg.inv(blocks)), format="csr")
-    P = constant_system(sim.model, forces, dt)[0]
+    return sp.block_diag(list(np.linalg.inv(blocks)), format="csr")
+
+
+def preconditioners(n: int, stiffness: float) -> None:
+    k = {"structural": stiffness, "shear": stiffness, "bend": 100.0}
+    sim = hanging(n, integrator="implicit_euler", dt=1 / 60, strain_limit=None, stiffness=k)
+    sim.advance(0.5)
+    A, b = system(sim)
+    size = A.shape[0]
+    jacobi = block_jacobi(A)
+    P = constant_system(sim.model, sim.forces, sim.dt)[0]
     factor = cholesky(P)
 
     def back_substitute(r):
