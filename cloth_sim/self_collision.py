@@ -154,15 +154,11 @@ def proximity(x, x0, v, tris, pairs, held_inv_mass, free_inv_mass, clearance, h)
 
 
 @numba.njit(cache=True)
-def displacement_factors(x, x0, tris, pairs, start_distance, factor):
-    """The no-crossing factors of particle–triangle pairs (module docstring, step 3), written into
-    ``factor`` (1 = unchanged); :func:`scale_displacements` applies them."""
-    n = x.shape[0]
-    disp = np.empty(n)
-    for p in range(n):
-        disp[p] = math.sqrt((x[p, 0] - x0[p, 0]) ** 2 + (x[p, 1] - x0[p, 1]) ** 2
-                            + (x[p, 2] - x0[p, 2]) ** 2)
-        factor[p] = 1.0
+def displacement_factors(disp, tris, pairs, start_distance, factor):
+    """The no-crossing factors of particle–triangle pairs (module docstring, step 3), from each
+    particle's displacement over the step (:func:`displacements`), written into ``factor``
+    (1 = unchanged); :func:`scale_displacements` applies them."""
+    factor[:] = 1.0
     for q in range(pairs.shape[0]):
         p, i = pairs[q, 0], pairs[q, 1]
         a, b, c = tris[i, 0], tris[i, 1], tris[i, 2]
@@ -358,14 +354,14 @@ def proximity_edges(x, x0, v, edges, pairs, held_inv_mass, free_inv_mass, cleara
 
 
 @numba.njit(cache=True)
-def edge_displacement_factors(x, x0, edges, pairs, start_distance, factor):
+def edge_displacement_factors(disp, edges, pairs, start_distance, factor):
     """Step 3's factors for edge pairs, lowering those :func:`displacement_factors` wrote (it runs
     first and resets them); the positions are scaled by the caller."""
     for q in range(pairs.shape[0]):
         e, f = pairs[q, 0], pairs[q, 1]
         a, b, c, d = edges[e, 0], edges[e, 1], edges[f, 0], edges[f, 1]
-        da = max(_disp(x, x0, a), _disp(x, x0, b))
-        dc = max(_disp(x, x0, c), _disp(x, x0, d))
+        da = max(disp[a], disp[b])
+        dc = max(disp[c], disp[d])
         need = da + dc
         if need == 0.0 or start_distance[q] > need:
             continue
@@ -373,11 +369,6 @@ def edge_displacement_factors(x, x0, edges, pairs, start_distance, factor):
         for vert in (a, b, c, d):
             if r < factor[vert]:
                 factor[vert] = r
-
-
-@numba.njit(cache=True, inline="always")
-def _disp(x, x0, p):
-    return math.sqrt((x[p, 0] - x0[p, 0]) ** 2 + (x[p, 1] - x0[p, 1]) ** 2 + (x[p, 2] - x0[p, 2]) ** 2)
 
 
 @numba.njit(cache=True)
@@ -397,7 +388,8 @@ def scale_displacements(x, x0, factor):
 def displacements(x, x0, out):
     """Each particle's displacement over the step, ``|x − x0|``, written into ``out``."""
     for p in range(x.shape[0]):
-        out[p] = _disp(x, x0, p)
+        out[p] = math.sqrt((x[p, 0] - x0[p, 0]) ** 2 + (x[p, 1] - x0[p, 1]) ** 2
+                           + (x[p, 2] - x0[p, 2]) ** 2)
     return out
 
 
@@ -498,8 +490,8 @@ class SelfCollision:
         if (moved > reach).any():
             pairs, dist, e_pairs, e_dist = self._tree.pairs(x0, moved)
         self.last_pairs, self.last_edge_pairs = len(pairs), len(e_pairs)
-        displacement_factors(x, x0, tris, pairs, dist, self._factor)
-        edge_displacement_factors(x, x0, edges, e_pairs, e_dist, self._factor)
+        displacement_factors(moved, tris, pairs, dist, self._factor)
+        edge_displacement_factors(moved, edges, e_pairs, e_dist, self._factor)
         self.last_slowed = scale_displacements(x, x0, self._factor)
         if self.last_slowed:
             v *= self._factor[:, None]
