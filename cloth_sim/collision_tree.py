@@ -309,13 +309,14 @@ def _join(counts, cap, pairs, dist):
     return out, out_d
 
 
-def _owned(tris, owner_of, slots) -> np.ndarray:
-    """Per triangle, the (up to three) primitives it is the first triangle of, −1 after them."""
-    own = np.full((len(tris), 3), -1, np.int64)
-    for t in range(len(tris)):
-        mine = [int(k) for k in slots[t] if owner_of[k] == t]
-        own[t, :len(mine)] = mine
-    return own
+def _owned(slots, owner_of) -> np.ndarray:
+    """Per triangle, the (up to three) primitives of its ``slots`` it is the first triangle of, in
+    slot order, −1 after them."""
+    slots = np.asarray(slots, np.int64)
+    mine = owner_of[slots] == np.arange(len(slots))[:, None]
+    first = np.argsort(~mine, axis=1, kind="stable")  # its own primitives first, in slot order
+    return np.where(np.take_along_axis(mine, first, axis=1),
+                    np.take_along_axis(slots, first, axis=1), -1)
 
 
 def reaches(radius, n: int) -> np.ndarray:
@@ -347,8 +348,8 @@ class TriangleTree:
         self.empty = len(centres) == 0
         if self.empty:
             return
-        self.own_v = _owned(self.tris, vertex_owner, self.tris)
-        self.own_e = _owned(self.tris, edge_owner, tri_edge)
+        self.own_v = _owned(self.tris, vertex_owner)
+        self.own_e = _owned(tri_edge, edge_owner)
         (self.left, self.right, self.first, self.end, self.size,
          self.order) = _build(np.ascontiguousarray(centres), int(leaf))
         self.tasks = _tasks(self.left, self.right, self.size, TASKS)
