@@ -670,9 +670,10 @@ __all__ = ["ParameterError", "SimulationDiverged", "Simulator"]
 def compile_kernels() -> float:
     """Run every compiled (numba) kernel once, on a 4×4 cloth: each integrator with both spring
     models, wind, drag, the strain limit (both methods), contacts with each collider shape,
-    self-collision and the energy and strain reports; returns the seconds it took. The kernels are compiled on first use and kept in numba's on-disk cache; a real-time loop
-    calls this before it starts, so that no step compiles inside a tick (a fresh install's first
-    ``kang`` step compiled for 6 s there). About 0.3 s when the cache is warm."""
+    self-collision and the energy and strain reports; returns the seconds it took. The kernels are
+    compiled on first use and kept in numba's on-disk cache; a real-time loop calls this before it
+    starts, so that no step compiles inside a tick (a fresh install's first ``kang`` step compiled
+    for 6 s there). About 0.3 s when the cache is warm."""
     import time
 
     from .integrators.explicit import _combine_parallel as combine_parallel
