@@ -10,19 +10,28 @@ set-up, which ``extend_path`` below joins to this package.
 """
 
 import os
+import sys
 from pkgutil import extend_path
 
 __path__ = extend_path(__path__, __name__)
 
-# The spring forces of a cloth from ~48×48 up run in numba's OpenMP pool (GNU libgomp). Its idle
-# workers must not spin for long, or they take a core from the ROS executor (and from anything else
-# on a 2-core machine) between ticks; but put to sleep at once (OMP_WAIT_POLICY=PASSIVE) they must
-# be woken for each of a step's two parallel regions, which cost what a 128×128 cloth gains. A
-# bounded spin (10,000 rounds: ~0.1 ms of CPU per idle spell, measured, against 49 ms per 50 ms with
-# ACTIVE) keeps them awake from one region and step to the next within a tick, then lets them sleep:
-# the gather is then 1.6× the serial loop at 64×64 and 128×128 (with PASSIVE: 0.58× at 64×64,
-# 1.08× at 128×128). A user's own OMP_WAIT_POLICY or GOMP_SPINCOUNT wins. Read when the
-# OpenMP runtime starts, so set before any parallel kernel runs.
+# numba's threading layer: fork-safe. Its default on Linux is GNU OpenMP, and a process that forked
+# after a parallel kernel ran (Gymnasium's async vector envs, multiprocessing's fork pools, data
+# loaders) had its children killed ("fork() called from a process already using GNU OpenMP").
+# "forksafe" takes Intel TBB (the ``tbb`` wheel, pinned in requirements.txt: as fast as OpenMP here,
+# docs/BENCHMARKS.md) and falls back to numba's own workqueue where TBB cannot be loaded. A user's
+# own NUMBA_THREADING_LAYER wins. Read when the first parallel kernel loads: set before that, and
+# inherited by the processes this one starts (Ray's workers, a vector env's workers).
+os.environ.setdefault("NUMBA_THREADING_LAYER", "forksafe")
+if "numba" in sys.modules and sys.modules["numba"].config.THREADING_LAYER == "default":
+    # numba was imported first (its configuration read the environment then): tell it directly
+    sys.modules["numba"].config.THREADING_LAYER = os.environ["NUMBA_THREADING_LAYER"]
+
+# For a user who chooses OpenMP (NUMBA_THREADING_LAYER=omp): its idle workers must not spin for long,
+# or they take a core from the ROS executor between ticks; put to sleep at once (OMP_WAIT_POLICY=
+# PASSIVE) they must be woken for each of a step's parallel regions. A bounded spin (10,000 rounds)
+# keeps them awake within a tick, then lets them sleep. A user's OMP_WAIT_POLICY or GOMP_SPINCOUNT
+# wins. Read when the OpenMP runtime starts.
 if "OMP_WAIT_POLICY" not in os.environ:
     os.environ.setdefault("GOMP_SPINCOUNT", "10000")
 

@@ -140,6 +140,13 @@ def _bench_strain(args) -> int:
     return 0
 
 
+def _bench_threading(args) -> int:
+    from .bench.threading_layers import print_table
+
+    print_table(args.size, args.seconds, args.rounds)
+    return 0
+
+
 def _bench_peers(args) -> int:
     from .bench.peers import print_peer_table
 
@@ -232,6 +239,12 @@ def build_parser() -> argparse.ArgumentParser:
     ct.add_argument("--sizes", type=int, nargs="+", default=[32, 64])
     ct.add_argument("--seconds", type=float, default=1.5, help="simulated time per run")
     ct.set_defaults(func=_bench_contacts)
+    th = bsub.add_parser("threading", help="ms/step of the hanging cloth under each of numba's threading "
+                                           "layers (OpenMP, TBB, workqueue), each in its own process")
+    th.add_argument("--size", type=int, default=64)
+    th.add_argument("--seconds", type=float, default=0.5, help="simulated time per run")
+    th.add_argument("--rounds", type=int, default=3, help="rounds the layers take turns (median)")
+    th.set_defaults(func=_bench_threading)
     pp = bsub.add_parser("peers", help="NVIDIA Warp's CPU cloth kernel beside symplectic Euler and RK4 "
                                       "(needs the optional warp-lang: make bench-peers)")
     pp.add_argument("--sizes", type=int, nargs="+", default=[32, 64, 128])
