@@ -11,10 +11,12 @@ from __future__ import annotations
 import json
 import math
 import os
+import shutil
 import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -47,15 +49,16 @@ def write_spec(path: Path, data: dict) -> Path:
     return path
 
 
-def sweep_cmd(*args, **kw) -> subprocess.Popen:
-    env = dict(os.environ, RAY_AUTH_MODE="disabled", PYTHONUNBUFFERED="1")
+def sweep_cmd(*args, env=None, **kw) -> subprocess.Popen:
+    env = env or dict(os.environ, RAY_AUTH_MODE="disabled")
+    env = dict(env, PYTHONUNBUFFERED="1")
     return subprocess.Popen([str(BIN / "cloth-sim"), "sweep", *map(str, args), "--no-progress"],
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True, **kw)
 
 
-def run_sweep(*args, timeout=240):
-    proc = sweep_cmd(*args)
+def run_sweep(*args, timeout=240, env=None):
+    proc = sweep_cmd(*args, env=env)
     try:
         out, err = proc.communicate(timeout=timeout)
     finally:
@@ -333,6 +336,51 @@ def test_a_two_node_ray_cluster_runs_a_sweep_through_address(reference, tmp_path
     assert tree_bytes(tmp_path / "cluster" / "runs") == tree_bytes(two / "runs")
     workers = {json.loads(p.read_text())["worker"] for p in (tmp_path / "cluster" / "timings").iterdir()}
     assert len(workers) >= 2  # both nodes ran runs
+
+
+def test_a_cluster_that_ray_start_made_with_a_token_is_joined_by_address(reference, tmp_path):
+    """Ray 2.60 starts a head node with token authentication where a token exists (a local
+    ``ray.init()`` writes one to ~/.ray/auth_token). A sweep joins it by --address with nothing set
+    (the token from ~/.ray/auth_token, as Ray's documentation asks), and a driver with no token
+    is refused with one line saying what to set. The head stays on loopback (Ray's single-machine
+    mode)."""
+    spec_path, two = reference
+    ray = str(BIN / "ray")
+    home = tmp_path / "home"
+    home.mkdir()
+    env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_AUTH")}
+    # (Ray's socket paths must stay short: its temporary directory is not under pytest's tmp_path)
+    env.update(HOME=str(home), RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER="0",
+               RAY_TMPDIR=tempfile.mkdtemp(prefix="ray", dir="/tmp"))
+    subprocess.run([ray, "get-auth-token", "--generate"], env=env, check=True, capture_output=True)
+    port = _free_port()
+    head = subprocess.Popen([ray, "start", "--head", f"--port={port}", "--include-dashboard=false",
+                             "--num-cpus=2", "--block", "--disable-usage-stats"], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            start_new_session=True)
+    address = f"127.0.0.1:{port}"
+    try:
+        end = time.monotonic() + 60
+        while subprocess.run([ray, "status", f"--address={address}"], env=dict(env, RAY_AUTH_MODE="token"),
+                             capture_output=True).returncode:
+            assert time.monotonic() < end, "the head node did not start"
+            time.sleep(0.5)
+        proc = sweep_cmd(spec_path, "-o", tmp_path / "joined", "--address", address, env=env)
+        out, err = proc.communicate(timeout=240)
+        assert proc.returncode == 0, err[-3000:]
+        assert "with token authentication" in err and str(home / ".ray" / "auth_token") in err
+        assert tree_bytes(tmp_path / "joined" / "runs") == tree_bytes(two / "runs")
+        # no token here: refused, saying where a token goes (Ray's 20 connection tries cut to 2)
+        stranger = dict(env, HOME=str(tmp_path), RAY_gcs_server_port_wait_time_s="2")
+        proc = sweep_cmd(spec_path, "-o", tmp_path / "refused", "--address", address, env=stranger)
+        out, err = proc.communicate(timeout=120)
+        assert proc.returncode == 2
+        last = err.strip().splitlines()[-1]
+        assert last.startswith("cloth-sim: error: --address") and "refused" in last
+        assert "~/.ray/auth_token" in last and "RAY_AUTH_TOKEN" in last
+    finally:
+        _kill_group(head)
+        shutil.rmtree(env["RAY_TMPDIR"], ignore_errors=True)
 
 
 def test_the_bags_cdr_is_what_rclpy_reads_and_what_rosbags_writes():

@@ -25,6 +25,7 @@ import sys
 from collections import Counter
 from pathlib import Path
 
+from . import cluster
 from .run import STATUSES, execute, read_row
 from .spec import Spec, SpecError, load_spec, run_id
 
@@ -95,6 +96,7 @@ def sweep(spec_path, out, workers: int | None = None, address: str | None = None
 
 
 def _run_on_ray(spec, out, pending, total, counts, workers, address, progress) -> None:
+    source = cluster.prepare_join(address) if not _ray_running() else None
     import ray
     from tqdm import tqdm
 
@@ -104,7 +106,16 @@ def _run_on_ray(spec, out, pending, total, counts, workers, address, progress) -
         kw = dict(include_dashboard=False, logging_level=logging.WARNING,
                   runtime_env={"env_vars": env})
         if address:
-            ray.init(address=address, **kw)
+            if source:
+                print(f"joining {address} with token authentication (the token from {source})",
+                      file=sys.stderr)
+            try:
+                ray.init(address=address, **kw)
+            except Exception as e:  # Ray raises ConnectionError, with the AuthenticationError as cause
+                message = cluster.join_error(address, e)
+                if message is None:
+                    raise
+                raise SpecError(message) from None
         else:
             ray.init(address="local", num_cpus=workers or os.cpu_count(), **kw)
     try:
@@ -137,6 +148,12 @@ def _run_on_ray(spec, out, pending, total, counts, workers, address, progress) -
     finally:
         if started:
             ray.shutdown()
+
+
+def _ray_running() -> bool:
+    """Whether this process is already connected to Ray (then the sweep uses that connection)."""
+    ray = sys.modules.get("ray")
+    return ray is not None and ray.is_initialized()
 
 
 def _postfix(counts: Counter) -> dict:
