@@ -52,11 +52,14 @@ def _run(args) -> int:
           f"{sim.integrator}, dt={sim.dt:g} s, stable_dt={sim.stable_dt():.4g} s, "
           f"terms: {', '.join(sim.active_terms)}", flush=True)
     t_wall = time.perf_counter()
-    second = 1
-    while second <= args.duration:
+    # a line per simulated second, and one at the end of a duration that is not a whole number
+    ends = [float(k) for k in range(1, int(args.duration) + 1)]
+    if not ends or ends[-1] < args.duration:
+        ends.append(float(args.duration))
+    for end in ends:
         start = time.perf_counter()
         try:
-            n = sim.advance(float(second))
+            n = sim.advance(end)
         except SimulationDiverged as e:
             print(f"error: {e}", file=sys.stderr)
             return 1
@@ -65,7 +68,6 @@ def _run(args) -> int:
         print(f"t={sim.time:6.2f} s  {sim.integrator}  dt={sim.dt:g}  max_strain={sim.max_strain():+.4f}  "
               f"E_kin={e['kinetic']:.4f} J  E_spring={e['spring']:.4f} J  E_grav={e['gravity']:.4f} J  "
               f"({1e3 * wall / max(n, 1):.3f} ms/step)", flush=True)
-        second += 1
     print(f"done: {sim.steps_taken} steps in {time.perf_counter() - t_wall:.2f} s wall")
     return 0
 

@@ -464,11 +464,16 @@ class Contacts:
             raise ValueError(f"collider index must be an integer in [0, {n - 1}], got {i!r}"
                              if n else f"there are no colliders to {doing}")
 
-    def set_pose(self, i: int, position, orientation=(1.0, 0.0, 0.0, 0.0)) -> None:
+    def set_pose(self, i: int, position, orientation=(1.0, 0.0, 0.0, 0.0), teleport: bool = False) -> None:
+        """Collider ``i``'s pose at the end of the next step (it sweeps there from where it is), or,
+        with ``teleport``, at its start too (it stands there)."""
         self._index(i, "move")
         self.colliders[i].set_pose(position, orientation)
         self._pos[i] = self.colliders[i].position
         self._rot[i] = self.colliders[i].rotation
+        if teleport:
+            self._pos0[i] = self._pos[i]
+            self._rot0[i] = self._rot[i]
 
     def apply(self, state, start, dt, velocity_follow):
         self.last_touching = resolve_contacts(state.x, state.v, start.x, self._pinned, self._kinds,

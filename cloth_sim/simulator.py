@@ -335,12 +335,17 @@ class Simulator:
         """The colliders, in the order given (move one with :meth:`set_collider_pose`)."""
         return list(self._contacts.colliders)
 
-    def set_collider_pose(self, i: int, position, orientation=(1.0, 0.0, 0.0, 0.0)) -> None:
+    def set_collider_pose(self, i: int, position, orientation=(1.0, 0.0, 0.0, 0.0),
+                          teleport: bool = False) -> None:
         """Move collider ``i`` to ``position`` with ``orientation`` (a unit quaternion ``(w, x, y,
-        z)``; see :mod:`cloth_sim.colliders` for what they mean per shape). The next step moves it
+        z)``; see :mod:`cloth_sim.colliders` for what they mean per shape). The next step sweeps it
         there: its velocity over that step is the pose change divided by ``dt``, so friction drags
-        what rests on it. A bad index or a non-finite pose raises ``ValueError`` and moves nothing."""
-        self._contacts.set_pose(i, position, orientation)
+        what rests on it and nothing it meets on the way passes through. With ``teleport`` it is
+        there now, at rest: the next step sees it standing at the new pose, drags nothing, and
+        pushes out of it whatever it now overlaps (the ROS simulation standard's
+        ``set_entity_state``). A bad index or a non-finite pose raises ``ValueError`` and moves
+        nothing."""
+        self._contacts.set_pose(i, position, orientation, teleport=teleport)
 
     def add_collider(self, collider) -> int:
         """Add a collider (a shape of :mod:`cloth_sim.colliders`, its name not in use) from the next
@@ -512,11 +517,22 @@ class Simulator:
         self._set_held()
         return idx.copy()
 
-    def set_gripper_pose(self, name: str, position, orientation=(1.0, 0.0, 0.0, 0.0)) -> None:
+    def set_gripper_pose(self, name: str, position, orientation=(1.0, 0.0, 0.0, 0.0),
+                         teleport: bool = False) -> None:
         """Move gripper ``name`` to ``position`` with ``orientation`` (a unit quaternion ``(w, x,
-        y, z)``) over the next step. An unknown name or a non-finite pose raises ``ValueError``."""
+        y, z)``) over the next step: the particles it holds move with the velocity that takes them
+        there. With ``teleport`` it and its particles are there now, at rest (the rest of the cloth
+        follows by its springs). An unknown name or a non-finite pose raises ``ValueError``."""
         g = self._gripper(name)
-        g.target = check_pose(position, orientation)
+        pose = check_pose(position, orientation)
+        if not teleport:
+            g.target = pose
+            return
+        g.position, g.orientation, g.rotation = pose
+        g.target, g.goal, g.moving = None, None, False
+        self.state.x[g.indices] = g.places(g.position, g.rotation)
+        self.state.v[g.indices] = 0.0
+        self._integrator.pins_moved(self.state)
 
     def gripper_pose(self, name: str) -> tuple[np.ndarray, np.ndarray]:
         """``(position, orientation)`` of gripper ``name`` now."""

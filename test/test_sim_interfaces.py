@@ -10,7 +10,8 @@ from geometry_msgs.msg import WrenchStamped
 from rclpy.action import ActionClient
 from simulation_interfaces import srv
 from simulation_interfaces.action import SimulateSteps
-from simulation_interfaces.msg import EntityCategory, Result, SimulationState, SimulatorFeatures
+from simulation_interfaces.msg import (EntityCategory, EntityInfo, Result, SimulationState,
+                                       SimulatorFeatures)
 
 from cloth_sim.msg import Stats
 from cloth_sim.ros.sim_interfaces import FEATURES, UNSUPPORTED
@@ -138,11 +139,14 @@ def test_entities_states_bounds_and_bad_requests(ros):
     bad.filters.filter = "("
     r = ros.call(srv.GetEntities, f"{NS}/get_entities", bad).result
     assert r.result == Result.RESULT_OPERATION_FAILED and "regular expression" in r.error_message
-    # the sphere's bounds are its own; the cloth's box holds every particle
+    # the sphere's bounds are its box (TYPE_BOX, as GetEntityBounds.srv asks); the cloth's box
+    # holds every particle
     sphere = next(n for n in names if n.startswith("collider/"))
     b = call(ros, srv.GetEntityBounds, "get_entity_bounds", entity=sphere).bounds
     c = node.sim.colliders[0]
-    assert b.type == b.TYPE_SPHERE and b.points[1].x == pytest.approx(c.radius)
+    assert b.type == b.TYPE_BOX
+    assert [b.points[0].x, b.points[0].z, b.points[1].y] == pytest.approx(
+        [c.center[0] - c.radius, c.center[2] - c.radius, c.center[1] + c.radius])
     b = call(ros, srv.GetEntityBounds, "get_entity_bounds", entity="cloth").bounds
     lo, hi = node.sim.positions.min(0), node.sim.positions.max(0)
     assert b.type == b.TYPE_BOX and [b.points[0].x, b.points[1].z] == pytest.approx([lo[0], hi[2]])
@@ -271,7 +275,7 @@ def test_a_spawned_sphere_is_hit_by_the_cloth_and_a_deleted_one_no_longer_is(ros
             ({"uri": "cloth_sim://box", "name": "9lives"}, R.NAME_INVALID, "name")]:
         r = ros.call(srv.SpawnEntity, f"{NS}/spawn_entity", srv.SpawnEntity.Request(**fields)).result
         assert r.result == code and words in r.error_message, (fields, r.error_message)
-    bad = srv.SpawnEntity.Request(uri="cloth_sim://sphere?radius=0.05")
+    bad = srv.SpawnEntity.Request(name="nan_ball", uri="cloth_sim://sphere?radius=0.05")
     bad.initial_pose.pose.position.x = math.nan
     r = ros.call(srv.SpawnEntity, f"{NS}/spawn_entity", bad).result
     assert r.result == R.INVALID_POSE and "initial_pose.pose.position" in r.error_message
@@ -362,6 +366,15 @@ def test_a_twist_keeps_a_kinematic_collider_moving_and_drags_what_rests_on_it(ro
     (req.state.pose.orientation.w, req.state.pose.orientation.x, req.state.pose.orientation.y,
      req.state.pose.orientation.z) = q0
     req.state.twist.linear.y = 0.2
+    # a collider is a STATIC_OBJECT: the standard refuses it a twist, and nothing changes
+    r = ros.call(srv.SetEntityState, f"{NS}/set_entity_state", req).result
+    assert r.result == Result.RESULT_OPERATION_FAILED and "DYNAMIC_OBJECT" in r.error_message
+    call(ros, srv.StepSimulation, "step_simulation", steps=10)
+    np.testing.assert_array_equal(table.position, p0)
+    # made a DYNAMIC_OBJECT (a kinematic obstacle), it takes the twist
+    info = EntityInfo(category=EntityCategory(category=EntityCategory.CATEGORY_DYNAMIC_OBJECT))
+    assert call(ros, srv.SetEntityInfo, "set_entity_info", entity=f"collider/{table.name}",
+                info=info).result.result == Result.RESULT_OK
     assert ros.call(srv.SetEntityState, f"{NS}/set_entity_state", req).result.result == Result.RESULT_OK
     state = call(ros, srv.GetEntityState, "get_entity_state", entity=f"collider/{table.name}").state
     assert state.twist.linear.y == 0.2

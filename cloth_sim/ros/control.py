@@ -20,13 +20,18 @@ CHECKPOINTS = 20
 class SimulationControl:
     """Pause, reset, step and recover (a mixin of :class:`~cloth_sim.ros.node.ClothSimNode`)."""
 
-    def reset_simulation(self, keep_paused: bool = False) -> None:
-        """The scene's initial shape at rest, time 0, its own grippers holding again; running
-        afterwards unless ``keep_paused`` (``~/reset`` runs, the standard's reset keeps the state)."""
+    def reset_simulation(self, keep_paused: bool = False, spawned: dict | None = None) -> set[str]:
+        """The scene as it starts: the cloth's initial shape at rest, time 0, its own grippers
+        holding again, its own colliders back where it puts them and at rest (moved, deleted or set
+        moving since); colliders spawned since stay only if named in ``spawned`` (``{name:
+        (position, orientation)}``: back at that pose, at rest), the others are removed (all of
+        them by default). Running afterwards unless ``keep_paused`` (``~/reset`` runs, the
+        standard's reset keeps the state). Returns the names of the spawned colliders kept."""
         self.sim.reset()  # releases every gripper
         self._drop_grippers()
         self.scene.apply_grippers(self.sim)  # the scene's own grippers hold again
         self._adopt_grippers()
+        kept = self._restore_colliders(spawned or {})
         self._checkpoints.clear()
         self._change_checkpoint = None
         self._carry = 0.0
@@ -35,6 +40,25 @@ class SimulationControl:
         if not keep_paused:
             self.paused = False
             self.interfaces.stopped = False
+        return kept
+
+    def _restore_colliders(self, spawned: dict) -> set[str]:
+        """The scene's colliders as the scene makes them, then the ``spawned`` ones at their poses
+        (one whose name a scene collider has taken back is dropped); none moving. Returns the
+        names of the spawned ones kept."""
+        sim = self.sim
+        own = self.scene.make_colliders()
+        names = {c.name for c in own}
+        kept = [c for c in sim.colliders if c.name in spawned and c.name not in names]
+        for i in reversed(range(len(sim.colliders))):
+            sim.remove_collider(i)
+        for c in own + kept:
+            i = sim.add_collider(c)  # it stands where it is added: no sweep from an old pose
+            if c.name in spawned:
+                sim.set_collider_pose(i, *spawned[c.name], teleport=True)
+        self.stop_colliders()
+        self.colliders_changed()
+        return {c.name for c in kept}
 
     def set_paused(self, paused: bool) -> None:
         if not paused and self.error:
@@ -45,7 +69,8 @@ class SimulationControl:
         self._history.clear()
 
     def _on_reset(self, request, response):
-        self.reset_simulation()
+        self.reset_simulation()  # the scene as it starts: what was spawned is gone
+        self.interfaces.restarted()
         response.success = True
         response.message = f"reset {self.scene.name} to its initial shape at rest, time 0"
         return response
@@ -71,7 +96,7 @@ class SimulationControl:
             self._recover(e)
             return False, self.error or str(e)
         self._publish(t0, steps, wall, longest)
-        return True, f"{steps} steps"
+        return True, f"{steps} step{'s' if steps != 1 else ''}"
 
     def step_within(self, n: int, t0: float, budget: float) -> tuple:
         """Up to ``n`` steps while paused within a tick's ``budget`` (the standard's

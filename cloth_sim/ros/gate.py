@@ -172,7 +172,7 @@ class ParameterGate:
         if scene is not None:
             self.sim = self._build_simulator(cand, model, scene)
             self.scene = scene
-            self.interfaces.spawned.clear()  # the new simulation has the scene's colliders only
+            self.interfaces.restarted()  # the new simulation has the scene's colliders only
             self._drop_grippers()
             self._adopt_grippers()
             self._subscribe_colliders()

@@ -31,6 +31,15 @@ class Manipulation:
             twists.pop((kind, name), None)
         self._twists = twists
 
+    def pose_frames(self) -> tuple[str, str]:
+        """The frames a pose may be given in: ``frame_id``, and ``world_frame_id`` (the same frame:
+        ``/tf_static`` publishes the identity between them)."""
+        return self.cfg["frame_id"], self.cfg["world_frame_id"]
+
+    def stop_colliders(self) -> None:
+        """No collider moves at a twist any more (a reset: the scene's colliders stand still)."""
+        self._twists = {k: v for k, v in self._twists.items() if k[0] != "collider"}
+
     def twist(self, kind: str, name: str):
         """``(linear, angular)`` the entity moves at (zeros when it is not moving by a twist)."""
         return self._twists.get((kind, name), (np.zeros(3), np.zeros(3)))
@@ -126,6 +135,13 @@ class Manipulation:
                 PoseStamped, topic, lambda msg, i=i, topic=topic: self._on_pose(("collider", i), topic, msg),
                 10))
 
+    def forget_pose_target(self, kind: str, name: str) -> None:
+        """Drop a pose received on the topic of collider or gripper ``name`` and not yet reached
+        (a pose set since overtakes it)."""
+        if kind == "collider":
+            name = next((i for i, c in enumerate(self.sim.colliders) if c.name == name), None)
+        self._pose_targets.pop((kind, name), None)
+
     def colliders_changed(self) -> None:
         """After a collider was spawned or deleted: the pose topics follow the new list."""
         self._subscribe_colliders()
@@ -135,7 +151,7 @@ class Manipulation:
         field, and ignored), reached over the next tick's steps (its velocity is the pose change
         over them)."""
         position, orientation, problem = messages.checked_pose(msg.pose, msg.header.frame_id,
-                                                               self.cfg["frame_id"])
+                                                               self.pose_frames())
         if problem:
             self.get_logger().warning(f"{topic} ignored: {problem}", throttle_duration_sec=1.0)
             return

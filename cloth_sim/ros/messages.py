@@ -231,19 +231,22 @@ def entity_frames(sim, frame_id: str, stamp) -> list:
     return out
 
 
-def checked_pose(pose, frame: str, node_frame: str, prefix: str = ""):
+def checked_pose(pose, frame: str, frames, prefix: str = ""):
     """``(position, unit quaternion (w, x, y, z), None)`` from a ``geometry_msgs/Pose`` given in
     ``frame``, or ``(None, None, problem)`` naming the field (``prefix`` + its name) and what is
-    expected: a frame other than ``node_frame`` (or empty), a non-finite position, a zero or
-    non-finite quaternion."""
+    expected: a frame not in ``frames`` (the node's ``frame_id`` and its ``world_frame_id``, which
+    ``/tf_static`` makes the same frame) and not empty (the standard's default), a non-finite
+    position, a zero or non-finite quaternion."""
     import numpy as np
 
     p, q = pose.position, pose.orientation
     position = np.array([p.x, p.y, p.z])
     orientation = np.array([q.w, q.x, q.y, q.z])
-    if frame not in ("", node_frame):
-        return None, None, (f"{prefix}header.frame_id = {frame!r}: expected {node_frame!r} (the node's "
-                            f"frame_id; the node does not transform poses)")
+    if frame and frame not in frames:
+        return None, None, (f"{prefix}header.frame_id = {frame!r}: expected "
+                            f"{' or '.join(repr(f) for f in dict.fromkeys(frames))} (the node's "
+                            f"frame_id and world_frame_id, one frame on /tf_static), or empty; the "
+                            f"node does not look poses up in TF")
     if not np.all(np.isfinite(position)):
         return None, None, f"{prefix}pose.position = {position.tolist()}: expected 3 finite numbers"
     if not (np.all(np.isfinite(orientation)) and np.linalg.norm(orientation) > 1e-6):

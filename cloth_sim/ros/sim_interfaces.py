@@ -8,17 +8,28 @@ node's own operations (pause, reset, step, poses), so the package's services (``
 supported (:data:`FEATURES`); every other service of the standard exists too and answers
 ``RESULT_FEATURE_UNSUPPORTED`` with a message, never a time-out.
 
-Entities: ``cloth`` (the cloth itself, CATEGORY_OBJECT), ``collider/<name>`` (the scene's
-colliders, CATEGORY_STATIC_OBJECT: kinematic, moved by pose or at a set twist) and ``gripper/<name>`` (each gripper
-holding the cloth, CATEGORY_ROBOT). States are in the node's ``frame_id``.
+Entities, their names, categories and bounds: :mod:`cloth_sim.ros.entities`. A client may address
+an entity by the name it gave at spawn or by the full name the response returned. States are in the
+node's ``frame_id``; a pose may also be given in its ``world_frame_id`` (``/tf_static`` makes them one
+frame) or with an empty frame (the standard's default).
+
+``set_entity_state`` sets a state, as the standard says: a pose is a teleport (the entity is there
+at once and at rest; the cloth is not dragged, and what a collider now overlaps is pushed out at the
+next step), a twist is what the entity then moves at — refused for a static object (a collider
+unless ``set_entity_info`` made it, say, a DYNAMIC_OBJECT). Streaming poses on
+``~/colliders/<name>/pose`` keeps its swept motion (friction drags what rests on the collider).
 
 Simulation states: PLAYING (ticking), PAUSED (``~/pause``), STOPPED (reset to the start and paused;
 from there PLAYING or a step goes on, PAUSED is an incorrect transition, as the standard defines).
 ``step_simulation`` and the ``simulate_steps`` action step only while paused or stopped.
+``reset_simulation`` returns the scene: the cloth, its grippers, its colliders where it puts them
+(moved, deleted or set moving since), without twists; SCOPE_SPAWNED removes the spawned colliders,
+SCOPE_STATE alone puts them back where they were spawned.
 """
 
 from __future__ import annotations
 
+import itertools
 import re
 
 import numpy as np
@@ -26,6 +37,7 @@ from geometry_msgs.msg import Vector3
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.task import Future
 
+from .entities import CLOTH, Entities
 from .messages import checked_pose
 from simulation_interfaces import srv
 from simulation_interfaces.action import SimulateSteps
@@ -34,22 +46,23 @@ from simulation_interfaces.msg import (Bounds, EntityCategory, EntityInfo, Entit
 
 F = SimulatorFeatures
 #: what cloth_sim supports of the standard (get_simulator_features)
-FEATURES = (F.SPAWNING, F.SPAWNING_RESOURCE_STRING, F.DELETING, F.SPAWNABLES,
-            F.SIMULATION_RESET_SPAWNED, F.ENTITY_STATE_GETTING, F.ENTITY_STATE_SETTING, F.ENTITY_BOUNDS, F.ENTITY_CATEGORIES,
-            F.ENTITY_INFO_GETTING, F.SIMULATION_RESET, F.SIMULATION_RESET_TIME,
-            F.SIMULATION_RESET_STATE, F.SIMULATION_STATE_GETTING, F.SIMULATION_STATE_SETTING,
+FEATURES = (F.SPAWNING, F.SPAWNING_ENTITIES, F.DELETING, F.ENTITY_TAGS, F.ENTITY_BOUNDS, F.ENTITY_BOUNDS_BOX,
+            F.ENTITY_CATEGORIES, F.SPAWNING_RESOURCE_STRING, F.ENTITY_STATE_GETTING,
+            F.ENTITY_STATE_SETTING, F.ENTITY_INFO_GETTING, F.ENTITY_INFO_SETTING, F.SPAWNABLES,
+            F.SIMULATION_RESET, F.SIMULATION_RESET_TIME, F.SIMULATION_RESET_STATE,
+            F.SIMULATION_RESET_SPAWNED, F.SIMULATION_STATE_GETTING, F.SIMULATION_STATE_SETTING,
             F.SIMULATION_STATE_PAUSE, F.STEP_SIMULATION_SINGLE, F.STEP_SIMULATION_MULTIPLE,
             F.STEP_SIMULATION_ACTION)
-#: the services of the standard cloth_sim does not support (yet): they answer FEATURE_UNSUPPORTED
+#: the services of the standard cloth_sim does not support (a cloth simulator has no worlds or
+#: named poses): they answer FEATURE_UNSUPPORTED
 UNSUPPORTED = {
-    "spawn_entities": srv.SpawnEntities, "set_entity_info": srv.SetEntityInfo, "get_named_poses": srv.GetNamedPoses,
+    "get_named_poses": srv.GetNamedPoses,
     "get_named_pose_bounds": srv.GetNamedPoseBounds, "load_world": srv.LoadWorld,
     "unload_world": srv.UnloadWorld, "get_current_world": srv.GetCurrentWorld,
     "get_available_worlds": srv.GetAvailableWorlds,
 }
 #: the standard's reset scopes cloth_sim takes
 SCOPE_ALL = srv.ResetSimulation.Request.SCOPE_ALL
-CLOTH = "cloth"
 #: spawn_entity's URI scheme: ``cloth_sim://<shape>?<field>=<value>&…`` (a vector as ``x,y,z``)
 SCHEME = "cloth_sim"
 #: what each shape needs besides its pose (initial_pose places it), with the defaults used when
@@ -75,9 +88,13 @@ class SimulationInterfaces:
 
     def __init__(self, node):
         self.node = node
+        self.entities = Entities(node)
         self.stopped = False
-        #: names of the colliders spawned through spawn_entity (reset with SCOPE_SPAWNED removes them)
-        self.spawned: set[str] = set()
+        #: the colliders spawned through spawn_entity: ``{name: (position, orientation) at spawn}``
+        #: (reset with SCOPE_SPAWNED removes them; SCOPE_STATE alone puts them back there)
+        self.spawned: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        #: per shape, the serial number of the next generated name (never one used before)
+        self._serials: dict[str, itertools.count] = {}
         self._goal = None  # (goal handle, remaining steps, completed, future) of simulate_steps
         handlers = {
             "get_simulator_features": (srv.GetSimulatorFeatures, self.get_simulator_features),
@@ -91,7 +108,9 @@ class SimulationInterfaces:
             "set_entity_state": (srv.SetEntityState, self.set_entity_state),
             "get_entity_bounds": (srv.GetEntityBounds, self.get_entity_bounds),
             "get_entity_info": (srv.GetEntityInfo, self.get_entity_info),
+            "set_entity_info": (srv.SetEntityInfo, self.set_entity_info),
             "spawn_entity": (srv.SpawnEntity, self.spawn_entity),
+            "spawn_entities": (srv.SpawnEntities, self.spawn_entities),
             "delete_entity": (srv.DeleteEntity, self.delete_entity),
             "get_spawnables": (srv.GetSpawnables, self.get_spawnables),
         }
@@ -103,15 +122,24 @@ class SimulationInterfaces:
                                    goal_callback=lambda goal: GoalResponse.ACCEPT,
                                    cancel_callback=lambda handle: CancelResponse.ACCEPT)
 
+    def restarted(self) -> None:
+        """The simulation is at its scene's start (a new scene, ``~/reset``): nothing spawned,
+        nothing set by set_entity_info."""
+        self.spawned.clear()
+        self.entities.forget()
+
     # ------------------------------------------------------------------ features and state
     def get_simulator_features(self, request, response):
-        response.features.features = list(FEATURES)
+        response.features.features = sorted(FEATURES)
         response.features.spawn_formats = ["cloth_sim_collider"]
         response.features.custom_info = ("cloth_sim: a mass-spring cloth; entities are 'cloth', "
-                                         "'collider/<name>' and 'gripper/<name>'; spawn_entity takes a "
+                                         "'collider/<name>' and 'gripper/<name>' (a collider or "
+                                         "gripper also by its own name); spawn_entity takes a "
                                          "collider: uri cloth_sim://<plane|sphere|box|capsule>?"
                                          "<field>=<value>&… or resource_string, a scene's collider "
-                                         "mapping in YAML; initial_pose places it")
+                                         "mapping in YAML; initial_pose places it. No worlds, no "
+                                         "named poses, no rigid-body dynamics: colliders are "
+                                         "kinematic")
         return response
 
     def state(self) -> int:
@@ -127,8 +155,10 @@ class SimulationInterfaces:
     def set_simulation_state(self, request, response):
         S, R = SimulationState, srv.SetSimulationState.Response
         target, now = request.state.state, self.state()
+        names = {S.STATE_STOPPED: "STATE_STOPPED", S.STATE_PLAYING: "STATE_PLAYING",
+                 S.STATE_PAUSED: "STATE_PAUSED", S.STATE_QUITTING: "STATE_QUITTING"}
         if target == now:
-            response.result = result(R.ALREADY_IN_TARGET_STATE, f"already in state {target}")
+            response.result = result(R.ALREADY_IN_TARGET_STATE, f"already {names[target]}")
         elif target == S.STATE_PLAYING:
             self.stopped = False
             self.node.set_paused(False)
@@ -141,7 +171,7 @@ class SimulationInterfaces:
                 self.node.set_paused(True)
                 response.result = result()
         elif target == S.STATE_STOPPED:
-            self.node.reset_simulation(keep_paused=False)
+            self._reset_state()
             self.node.set_paused(True)
             self.stopped = True
             response.result = result()
@@ -149,10 +179,24 @@ class SimulationInterfaces:
             response.result = result(Result.RESULT_FEATURE_UNSUPPORTED,
                                      "cloth_sim does not quit through this service: stop its process "
                                      "(SIGINT, as ros2 launch does)")
+        elif target in (S.STATE_NO_WORLD, S.STATE_LOADING_WORLD):
+            response.result = result(Result.RESULT_FEATURE_UNSUPPORTED,
+                                     f"state.state = {target}: cloth_sim has no worlds to unload or "
+                                     f"load (its scene is a node parameter)")
         else:
-            response.result = result(R.INCORRECT_TRANSITION,
-                                     f"state {target}: cloth_sim has no worlds to load or unload")
+            response.result = result(Result.RESULT_OPERATION_FAILED,
+                                     f"state.state = {target}: not a simulation state; expected "
+                                     f"{', '.join(f'{v} ({n})' for v, n in sorted(names.items()))}")
         return response
+
+    def _reset_state(self, spawned: dict | None = None) -> None:
+        """The scene's state again (the node's reset), keeping the spawned colliders at their
+        spawn poses unless ``spawned`` says which; what set_entity_info set of the scene's own
+        entities is forgotten (a spawned collider that stays keeps it)."""
+        kept = self.node.reset_simulation(keep_paused=True,
+                                          spawned=self.spawned if spawned is None else spawned)
+        self.spawned = {n: pose for n, pose in self.spawned.items() if n in kept}
+        self.entities.forget(keep={f"collider/{n}" for n in self.spawned})
 
     def reset_simulation(self, request, response):
         R = srv.ResetSimulation.Request
@@ -163,17 +207,19 @@ class SimulationInterfaces:
                                      f"scope {request.scope}: cloth_sim resets SCOPE_DEFAULT, "
                                      f"SCOPE_ALL and any of SCOPE_TIME, SCOPE_STATE, SCOPE_SPAWNED")
             return response
-        if scope & R.SCOPE_SPAWNED:
-            for name in sorted(self.spawned):
-                self._remove_collider(name)
+        despawn = bool(scope & R.SCOPE_SPAWNED)
         sim = self.node.sim
         if scope & R.SCOPE_STATE:
             t = sim.time
-            self.node.reset_simulation(keep_paused=True)
+            self._reset_state(spawned={} if despawn else None)
             if not scope & R.SCOPE_TIME:
                 sim.set_time(t)
-        elif scope & R.SCOPE_TIME:
-            sim.set_time(0.0)
+        else:
+            if despawn:
+                for name in sorted(self.spawned):
+                    self._remove_collider(name)
+            if scope & R.SCOPE_TIME:
+                sim.set_time(0.0)
         response.result = result()
         return response
 
@@ -245,54 +291,23 @@ class SimulationInterfaces:
         done.set_result(out)
 
     # ------------------------------------------------------------------ entities
-    def entities(self) -> dict:
-        """``{name: (category, description)}`` of every entity now."""
-        sim = self.node.sim
-        out = {CLOTH: (EntityCategory.CATEGORY_OBJECT,
-                       f"the cloth: {sim.model.n_particles} particles, {len(sim.model.triangles)} "
-                       f"triangles")}
-        for c in sim.colliders:
-            out[f"collider/{c.name}"] = (EntityCategory.CATEGORY_STATIC_OBJECT,
-                                         f"a {type(c).__name__.lower()} collider (kinematic)")
-        for name in sim.grippers:
-            out[f"gripper/{name}"] = (EntityCategory.CATEGORY_ROBOT,
-                                      f"a gripper holding {len(sim.grippers[name])} particles")
-        return out
-
-    def _matching(self, filters) -> tuple[list[str] | None, Result]:
-        if filters.tags.tags:
-            return None, result(Result.RESULT_FEATURE_UNSUPPORTED, "cloth_sim's entities have no tags")
-        if filters.bounds.type != Bounds.TYPE_EMPTY or filters.bounds.points:
-            return None, result(Result.RESULT_FEATURE_UNSUPPORTED,
-                                "filtering by bounds is not supported (get_entity_bounds is)")
-        try:
-            pattern = re.compile(filters.filter)
-        except re.error as e:
-            return None, result(Result.RESULT_OPERATION_FAILED,
-                                f"filters.filter = {filters.filter!r} is not a regular expression ({e})")
-        categories = {c.category for c in filters.categories}
-        names = [n for n, (cat, _) in self.entities().items()
-                 if pattern.search(n) and (not categories or cat in categories)]
-        return names, result()
+    def _named(self, name: str, response) -> str | None:
+        """The full name ``name`` stands for; else ``None``, with NOT_FOUND in ``response``."""
+        full = self.entities.resolve(name)
+        if full is None:
+            response.result = self.entities.unknown(name)
+        return full
 
     def get_entities(self, request, response):
-        names, response.result = self._matching(request.filters)
+        names, response.result = self.entities.matching(request.filters)
         response.entities = names or []
         return response
 
     def get_entities_states(self, request, response):
-        names, response.result = self._matching(request.filters)
+        names, response.result = self.entities.matching(request.filters)
         response.entities = names or []
         response.states = [self._state(n) for n in response.entities]
         return response
-
-    def _collider_index(self, name: str) -> int | None:
-        """The index in ``sim.colliders`` of the collider called ``name`` (``None``: none is)."""
-        return next((i for i, c in enumerate(self.node.sim.colliders) if c.name == name), None)
-
-    def _unknown(self, name: str) -> Result:
-        return result(Result.RESULT_NOT_FOUND, f"no entity {name!r}; entities: "
-                      f"{', '.join(self.entities())}")
 
     def _state(self, name: str) -> EntityState:
         sim, node = self.node.sim, self.node
@@ -303,11 +318,11 @@ class SimulationInterfaces:
             m = sim.model.masses
             v = (m @ sim.velocities) / m.sum()
             state.pose.orientation.w = 1.0
-            state.twist.linear = Vector3(x=float(v[0]), y=float(v[1]), z=float(v[2]))
+            state.twist.linear = _vec(v)
             return state
         kind, _, key = name.partition("/")
         if kind == "collider":
-            c = sim.colliders[self._collider_index(key)]
+            c = self.entities.collider(key)
             p, q = c.position, c.orientation
         else:
             p, q = sim.gripper_pose(key)
@@ -320,26 +335,27 @@ class SimulationInterfaces:
         return state
 
     def get_entity_state(self, request, response):
-        if request.entity not in self.entities():
-            response.result = self._unknown(request.entity)
-            return response
-        response.state = self._state(request.entity)
-        response.result = result()
+        name = self._named(request.entity, response)
+        if name is not None:
+            response.state = self._state(name)
+            response.result = result()
         return response
 
     def set_entity_state(self, request, response):
-        name, state = request.entity, request.state
-        if name not in self.entities():
-            response.result = self._unknown(name)
+        """The pose now (a teleport), then the twist it moves at; refused for the cloth, and a
+        twist or acceleration for a static object."""
+        name = self._named(request.entity, response)
+        if name is None:
             return response
+        state = request.state
         if name == CLOTH:
             response.result = result(Result.RESULT_OPERATION_FAILED,
                                      "the cloth's state is its particles': move it with its grippers "
                                      "(gripper/<name>) or grasp it (~/grasp)")
             return response
         position, orientation, problem = checked_pose(state.pose, state.header.frame_id,
-                                                      self.node.cfg["frame_id"], prefix="state.")
-        t = state.twist
+                                                      self.node.pose_frames(), prefix="state.")
+        t, a = state.twist, state.acceleration
         linear = np.array([t.linear.x, t.linear.y, t.linear.z])
         angular = np.array([t.angular.x, t.angular.y, t.angular.z])
         if problem is None and not (np.all(np.isfinite(linear)) and np.all(np.isfinite(angular))):
@@ -348,32 +364,64 @@ class SimulationInterfaces:
         if problem:
             response.result = result(srv.SetEntityState.Response.INVALID_POSE, problem)
             return response
+        moving = bool(np.any(linear) or np.any(angular))
+        accel = any((a.linear.x, a.linear.y, a.linear.z, a.angular.x, a.angular.y, a.angular.z))
+        if (moving or accel) and self.entities.is_static(name):
+            what = "twist" if moving else "acceleration"
+            response.result = result(Result.RESULT_OPERATION_FAILED,
+                                     f"state.{what}: {name} is a STATIC_OBJECT, which the standard "
+                                     f"does not let move; set_entity_info with category "
+                                     f"DYNAMIC_OBJECT ({EntityCategory.CATEGORY_DYNAMIC_OBJECT}) "
+                                     f"makes it a kinematic obstacle that moves at a twist; nothing "
+                                     f"was changed")
+            return response
         kind, _, key = name.partition("/")
         sim = self.node.sim
+        self.node.forget_pose_target(kind, key)  # a pose streamed before this one is overtaken
         if kind == "collider":
-            sim.set_collider_pose(self._collider_index(key), position, orientation)
+            index = next(i for i, c in enumerate(sim.colliders) if c.name == key)
+            sim.set_collider_pose(index, position, orientation, teleport=True)
         else:
-            sim.set_gripper_pose(key, position, orientation)
+            sim.set_gripper_pose(key, position, orientation, teleport=True)
         self.node.set_twist(kind, key, linear, angular)  # kinematic: it keeps this velocity
-        response.result = result()
+        response.result = result(Result.RESULT_OK, "" if not accel else
+                                 "state.acceleration ignored: kinematic entities move at their twist")
         return response
 
     def spawn_entity(self, request, response):
         """A collider from ``uri`` (``cloth_sim://<shape>?…``) or ``resource_string`` (YAML: a
         scene's collider mapping), placed at ``initial_pose``."""
-        code, message, collider = self._collider_from(request)
-        if collider is None:
-            response.result = result(code, message)
-            return response
-        self.node.sim.add_collider(collider)
-        self.spawned.add(collider.name)
-        self.node.colliders_changed()
-        response.entity_name = f"collider/{collider.name}"
-        response.result = result(Result.RESULT_OK, f"spawned {type(collider).__name__.lower()} "
-                                 f"{response.entity_name}")
+        response.result, response.entity_name = self._spawn(request)
         return response
 
-    def _collider_from(self, request):
+    def spawn_entities(self, request, response):
+        """Each request as ``spawn_entity`` would take it, in order; ENTITIES_SPAWN_FAILED when any
+        failed (the others are spawned all the same, as the standard says)."""
+        from simulation_interfaces.msg import SpawnResult
+
+        for one in request.spawn_requests:
+            r, name = self._spawn(one, one.entity_resource)
+            response.results.append(SpawnResult(result=r, entity_name=name))
+        failed = [i for i, r in enumerate(response.results) if r.result.result != Result.RESULT_OK]
+        response.result = result() if not failed else result(
+            srv.SpawnEntities.Response.ENTITIES_SPAWN_FAILED,
+            f"spawn_requests {failed} failed (see results)")
+        return response
+
+    def _spawn(self, request, resource=None) -> tuple[Result, str]:
+        """``(result, entity name)`` of spawning what ``request`` describes (its ``uri`` and
+        ``resource_string``, or those of ``resource``)."""
+        code, message, collider = self._collider_from(request, resource or request)
+        if collider is None:
+            return result(code, message), ""
+        self.node.sim.add_collider(collider)
+        self.spawned[collider.name] = (collider.position.copy(), collider.orientation.copy())
+        self.node.colliders_changed()
+        name = f"collider/{collider.name}"
+        return result(Result.RESULT_OK, f"spawned {type(collider).__name__.lower()} {name} (also "
+                      f"addressed as {collider.name!r})"), name
+
+    def _collider_from(self, request, resource):
         """``(code, message, collider)``: the collider a spawn request describes, or the standard's
         code and the reason (collider ``None``)."""
         import yaml
@@ -382,18 +430,19 @@ class SimulationInterfaces:
         from ..scene import SceneError, _Validator
 
         R = srv.SpawnEntity.Response
-        if not request.uri and not request.resource_string:
+        if not resource.uri and not resource.resource_string:
             return R.NO_RESOURCE, "give uri (cloth_sim://<shape>?…) or resource_string (YAML)", None
         if request.entity_namespace:
-            return (R.NAMESPACE_INVALID, f"entity_namespace = {request.entity_namespace!r}: a "
-                    f"collider has no interfaces to put under a namespace; leave it empty", None)
-        if request.uri:
-            spec = _parse_uri(request.uri)
+            return (Result.RESULT_FEATURE_UNSUPPORTED, f"entity_namespace = "
+                    f"{request.entity_namespace!r}: cloth_sim's colliders have no ROS interfaces "
+                    f"of their own to put under a namespace; leave it empty", None)
+        if resource.uri:
+            spec = _parse_uri(resource.uri)
             if isinstance(spec, str):
                 return R.UNSUPPORTED_FORMAT, spec, None
         else:
             try:
-                spec = yaml.safe_load(request.resource_string)
+                spec = yaml.safe_load(resource.resource_string)
             except yaml.YAMLError as e:
                 return R.RESOURCE_PARSE_ERROR, f"resource_string is not YAML ({e})", None
             if not isinstance(spec, dict) or spec.get("type") not in SPAWN_DEFAULTS:
@@ -401,25 +450,31 @@ class SimulationInterfaces:
                         "sphere, box or capsule, and that shape's fields", None)
         kind = spec["type"]
         spec = {**SPAWN_DEFAULTS[kind], **spec}
-        names = {c.name for c in self.node.sim.colliders}
-        name = request.name or f"{kind}_{len(names)}"
-        if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]{0,63}", name):
+        # the name: the request's, else the resource's own (as the standard says)
+        name = request.name or (spec.get("name") if isinstance(spec.get("name"), str) else "")
+        if name and not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]{0,63}", name):
             return (R.NAME_INVALID, f"name = {name!r}: expected ASCII letters, digits and _ (not "
                     f"starting with a digit, at most 64): it names the collider's topic and frame", None)
-        if name in names:
-            if not request.allow_renaming:
-                return R.NAME_NOT_UNIQUE, f"a collider named {name!r} exists (allow_renaming: false)", None
-            name = next(f"{name}_{k}" for k in range(1, len(names) + 2) if f"{name}_{k}" not in names)
-        spec["name"] = name
         try:
-            kind, kw = _Validator("spawn_entity").collider(0, spec)
+            kind, kw = _Validator("spawn_entity").collider(0, {**spec, "name": name or kind})
         except SceneError as e:
             return R.RESOURCE_PARSE_ERROR, str(e).replace("colliders[0].", ""), None
         position, orientation, problem = checked_pose(request.initial_pose.pose,
                                                       request.initial_pose.header.frame_id,
-                                                      self.node.cfg["frame_id"], prefix="initial_pose.")
+                                                      self.node.pose_frames(), prefix="initial_pose.")
         if problem:
             return R.INVALID_POSE, problem, None
+        if not name and not request.allow_renaming:
+            return (R.NAME_INVALID, "name is empty (and the resource names none) while "
+                    "allow_renaming is false: give a name, or allow_renaming: true for a generated "
+                    "one", None)
+        taken = set(self.entities.names()) | {n.partition("/")[2] for n in self.entities.names()}
+        if name in taken and not request.allow_renaming:
+            return R.NAME_NOT_UNIQUE, f"an entity named {name!r} exists (allow_renaming: false)", None
+        if not name or name in taken:  # a name never given before: <name or shape>_<k>
+            serial = self._serials.setdefault(name or kind, itertools.count(1))
+            name = next(c for c in (f"{name or kind}_{k}" for k in serial) if c not in taken)
+        kw["name"] = name
         collider = KINDS[kind](**kw)
         # the pose: a sphere's or box's centre, a capsule's midpoint, a point on a plane (the
         # identity orientation keeps a plane's normal and a capsule's segment as built)
@@ -427,11 +482,10 @@ class SimulationInterfaces:
         return Result.RESULT_OK, "", collider
 
     def delete_entity(self, request, response):
-        name = request.entity
-        entities = self.entities()
-        if name not in entities:
-            response.result = self._unknown(name)
-        elif name == CLOTH:
+        name = self._named(request.entity, response)
+        if name is None:
+            return response
+        if name == CLOTH:
             response.result = result(Result.RESULT_OPERATION_FAILED, "the cloth cannot be deleted "
                                      "(a scene change replaces it)")
         elif name.startswith("gripper/"):
@@ -444,59 +498,55 @@ class SimulationInterfaces:
 
     def _remove_collider(self, name: str) -> None:
         sim = self.node.sim
-        index = self._collider_index(name)
+        index = next((i for i, c in enumerate(sim.colliders) if c.name == name), None)
         if index is not None:
             sim.remove_collider(index)
+            self.node.set_twist("collider", name, 0, 0)
             self.node.colliders_changed()
-        self.spawned.discard(name)
+        self.spawned.pop(name, None)
 
     def get_spawnables(self, request, response):
         from simulation_interfaces.msg import Spawnable
 
-        if request.sources:
-            response.result = result(Result.RESULT_FEATURE_UNSUPPORTED,
-                                     "cloth_sim's spawnables are its collider shapes: no sources")
-            return response
         response.spawnables = [Spawnable(uri=uri, description=f"a {kind} collider (fields as in a "
                                          f"scene file; initial_pose places it)")
                                for kind, uri in SPAWNABLES.items()]
-        response.result = result()
+        # sources the simulator does not know are named, and do not hinder success (the standard)
+        response.result = result(Result.RESULT_OK, "" if not request.sources else (
+            f"sources not recognised: {', '.join(request.sources)} (cloth_sim's spawnables are its "
+            f"collider shapes)"))
         return response
 
     def get_entity_bounds(self, request, response):
-        name = request.entity
-        if name not in self.entities():
-            response.result = self._unknown(name)
+        name = self._named(request.entity, response)
+        if name is None:
             return response
-        sim = self.node.sim
-        kind, _, key = name.partition("/")
+        box = self.entities.box(name)
         b = Bounds()
-        if name == CLOTH:
-            pts = sim.positions
-        elif kind == "gripper":
-            pts = sim.positions[sim.grippers[key]]
-        else:
-            pts = collider_extent(sim.colliders[self._collider_index(key)])
-        if pts is None:
-            b.type = Bounds.TYPE_EMPTY  # an infinite plane
-        elif isinstance(pts, tuple):  # a sphere: centre, then (radius, 0, 0)
-            b.type = Bounds.TYPE_SPHERE
-            b.points = [_vec(pts[0]), Vector3(x=float(pts[1]))]
+        if box is None:
+            b.type = Bounds.TYPE_EMPTY  # an infinite plane: unbounded
         else:
             b.type = Bounds.TYPE_BOX
-            b.points = [_vec(pts.min(axis=0)), _vec(pts.max(axis=0))]
+            b.points = [_vec(box[0]), _vec(box[1])]
         response.bounds = b
         response.result = result()
         return response
 
     def get_entity_info(self, request, response):
-        entities = self.entities()
-        if request.entity not in entities:
-            response.result = self._unknown(request.entity)
-            return response
-        category, description = entities[request.entity]
-        response.info = EntityInfo(category=EntityCategory(category=category), description=description)
-        response.result = result()
+        name = self._named(request.entity, response)
+        if name is not None:
+            category, description, tags = self.entities.info(name)
+            response.info = EntityInfo(category=EntityCategory(category=category),
+                                       description=description, tags=list(tags))
+            response.result = result()
+        return response
+
+    def set_entity_info(self, request, response):
+        name = self._named(request.entity, response)
+        if name is not None:
+            info = request.info
+            response.result = self.entities.set_info(name, info.category.category, info.description,
+                                                     info.tags)
         return response
 
     @staticmethod
@@ -507,22 +557,6 @@ class SimulationInterfaces:
                                      f"lists what is)")
             return response
         return handler
-
-
-def collider_extent(c):
-    """Points whose box bounds the collider, ``(centre, radius)`` for a sphere, ``None`` for a
-    plane (unbounded)."""
-    from ..colliders import Box, Capsule, Sphere
-
-    if isinstance(c, Sphere):
-        return (c.center, c.radius)
-    if isinstance(c, Box):
-        corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-        return (corners * c.half_extents) @ c.rotation.T + c.center
-    if isinstance(c, Capsule):
-        ends = np.stack([c.a, c.b])
-        return np.concatenate([ends - c.radius, ends + c.radius])
-    return None
 
 
 def _vec(a) -> Vector3:
