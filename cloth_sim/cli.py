@@ -364,7 +364,8 @@ def _sweep(args) -> int:
                           progress=not args.no_progress)
     total = sum(counts.values())
     print(f"sweep {args.output}: {total} runs, " + ", ".join(
-        f"{counts[s]} {s}" for s in ("ok", "diverged", "refused", "failed") if counts[s] or s == "ok")
+        f"{counts[s]} {s}" for s in ("ok", "unstable", "diverged", "refused", "failed")
+        if counts[s] or s == "ok")
         + f"; {time.perf_counter() - t:.1f} s; {Path(args.output) / 'runs.parquet'}")
     return 0
 

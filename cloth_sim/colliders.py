@@ -106,7 +106,7 @@ class Collider:
         pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
         out = np.empty(len(pts))
         for i, p in enumerate(pts):
-            out[i] = _sdf(self.kind, self.position, self.rotation, self.geometry, p[0], p[1], p[2])[0]
+            out[i] = sdf(self.kind, self.position, self.rotation, self.geometry, p[0], p[1], p[2])[0]
         return out
 
     def __repr__(self):
@@ -211,7 +211,7 @@ KINDS = {"plane": Plane, "sphere": Sphere, "box": Box, "capsule": Capsule}
 
 # ---------------------------------------------------------------------------- kernels
 @numba.njit(cache=True, inline="always")
-def _sdf(kind, p, R, g, x, y, z):
+def sdf(kind, p, R, g, x, y, z):
     """Signed distance of the point ``(x, y, z)`` from a collider and the outward unit normal
     there (the distance's gradient)."""
     dx, dy, dz = x - p[0], y - p[1], z - p[2]
@@ -273,7 +273,7 @@ def _sdf(kind, p, R, g, x, y, z):
 
 
 @numba.njit(cache=True, inline="always")
-def _carried(p_old, R_old, p_new, R_new, x, y, z):
+def carried(p_old, R_old, p_new, R_new, x, y, z):
     """Where the point ``(x, y, z)`` attached to the collider's new pose was at its old pose."""
     dx, dy, dz = x - p_new[0], y - p_new[1], z - p_new[2]
     lx = R_new[0, 0] * dx + R_new[1, 0] * dy + R_new[2, 0] * dz
@@ -313,12 +313,12 @@ def resolve_contacts(x, v, x0, pinned, kinds, pos, rot, pos0, rot0, geo, mu, h, 
         for c in range(kinds.shape[0]):
             k = kinds[c]
             # the start, carried with the collider to its new pose (equal to x0 for a static one)
-            sx, sy, sz = _carried(pos[c], rot[c], pos0[c], rot0[c], x0[p, 0], x0[p, 1], x0[p, 2])
+            sx, sy, sz = carried(pos[c], rot[c], pos0[c], rot0[c], x0[p, 0], x0[p, 1], x0[p, 2])
             # where the collider's point under x[p] was at the start: its displacement over the step
-            cx, cy, cz = _carried(pos0[c], rot0[c], pos[c], rot[c], x[p, 0], x[p, 1], x[p, 2])
+            cx, cy, cz = carried(pos0[c], rot0[c], pos[c], rot[c], x[p, 0], x[p, 1], x[p, 2])
             ux, uy, uz = x[p, 0] - cx, x[p, 1] - cy, x[p, 2] - cz
             # (1) continuous detection from a start outside the skin
-            d0, mx, my, mz = _sdf(k, pos[c], rot[c], geo[c], sx, sy, sz)
+            d0, mx, my, mz = sdf(k, pos[c], rot[c], geo[c], sx, sy, sz)
             d0 -= h
             ex, ey, ez = x[p, 0] - sx, x[p, 1] - sy, x[p, 2] - sz
             length = math.sqrt(ex * ex + ey * ey + ez * ez)
@@ -326,14 +326,14 @@ def resolve_contacts(x, v, x0, pinned, kinds, pos, rot, pos0, rot0, geo, mu, h, 
                 # a start touching the surface: the end is projected below, unless the path went
                 # past the middle of the solid or through it (the normal at the end points the
                 # other way: a straight path between opposite sides crosses the solid): stay
-                de, fx, fy, fz = _sdf(k, pos[c], rot[c], geo[c], x[p, 0], x[p, 1], x[p, 2])
+                de, fx, fy, fz = sdf(k, pos[c], rot[c], geo[c], x[p, 0], x[p, 1], x[p, 2])
                 if fx * mx + fy * my + fz * mz < 0.0:
                     x[p, 0], x[p, 1], x[p, 2] = sx, sy, sz
             elif length > d0:
                 t = 0.0
                 hit = False
                 for _ in range(_MARCH_STEPS):
-                    d = _sdf(k, pos[c], rot[c], geo[c], sx + t * ex, sy + t * ey, sz + t * ez)[0] - h
+                    d = sdf(k, pos[c], rot[c], geo[c], sx + t * ex, sy + t * ey, sz + t * ez)[0] - h
                     if d <= 1e-3 * h:
                         hit = True
                         break
@@ -345,7 +345,7 @@ def resolve_contacts(x, v, x0, pinned, kinds, pos, rot, pos0, rot0, geo, mu, h, 
                 if hit:
                     x[p, 0], x[p, 1], x[p, 2] = sx + t * ex, sy + t * ey, sz + t * ez
             # (2) projection with friction on the motion relative to the collider
-            d, nx, ny, nz = _sdf(k, pos[c], rot[c], geo[c], x[p, 0], x[p, 1], x[p, 2])
+            d, nx, ny, nz = sdf(k, pos[c], rot[c], geo[c], x[p, 0], x[p, 1], x[p, 2])
             clearance[p] = min(clearance[p], max(d - h, 0.0))  # (0 once projected onto the skin)
             if d >= h * (1.0 + CONTACT_TOLERANCE):
                 continue
@@ -480,6 +480,15 @@ class Contacts:
                                               self._pos, self._rot, self._pos0, self._rot0,
                                               self._geo, self._mu, self.thickness, dt, self.touching,
                                               self.clearance)
-        # the poses this step ended at are where the next one starts
+        self.end_step()
+
+    def end_step(self) -> None:
+        """The poses this step ended at are where the next one starts."""
         np.copyto(self._pos0, self._pos)
         np.copyto(self._rot0, self._rot)
+
+    def packed(self) -> tuple:
+        """``(kinds, positions, rotations, positions at the step's start, rotations there,
+        geometry, friction)``: the colliders as the contact kernels read them (an integrator that
+        resolves contacts inside its step reads them here)."""
+        return self._kinds, self._pos, self._rot, self._pos0, self._rot0, self._geo, self._mu

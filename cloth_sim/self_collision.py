@@ -175,12 +175,13 @@ def displacement_factors(disp, tris, pairs, start_distance, factor):
 
 
 @numba.njit(cache=True, inline="always")
-def closest_on_segments(x, a, b, c, d):
-    """``(s, t, distance)``: the nearest points ``a + s(b − a)`` and ``c + t(d − c)`` of two segments
-    (Ericson, Real-Time Collision Detection, 5.1.9; a parallel pair takes ``s = 0``)."""
-    d1x, d1y, d1z = x[b, 0] - x[a, 0], x[b, 1] - x[a, 1], x[b, 2] - x[a, 2]
-    d2x, d2y, d2z = x[d, 0] - x[c, 0], x[d, 1] - x[c, 1], x[d, 2] - x[c, 2]
-    rx, ry, rz = x[a, 0] - x[c, 0], x[a, 1] - x[c, 1], x[a, 2] - x[c, 2]
+def closest_on_segment_pair(ax, ay, az, bx, by, bz, cx, cy, cz, dx, dy, dz):
+    """``(s, t)``: the nearest points ``a + s(b − a)`` and ``c + t(d − c)`` of two segments given by
+    their ends' coordinates (Ericson, Real-Time Collision Detection, 5.1.9; a parallel pair takes
+    ``s = 0``)."""
+    d1x, d1y, d1z = bx - ax, by - ay, bz - az
+    d2x, d2y, d2z = dx - cx, dy - cy, dz - cz
+    rx, ry, rz = ax - cx, ay - cy, az - cz
     aa = d1x * d1x + d1y * d1y + d1z * d1z
     ee = d2x * d2x + d2y * d2y + d2z * d2z
     ff = d2x * rx + d2y * ry + d2z * rz
@@ -195,6 +196,18 @@ def closest_on_segments(x, a, b, c, d):
     elif tv > 1.0:
         tv = 1.0
         sv = min(max((bb - cc) / aa, 0.0), 1.0) if aa > 0.0 else 0.0
+    return sv, tv
+
+
+@numba.njit(cache=True, inline="always")
+def closest_on_segments(x, a, b, c, d):
+    """``(s, t, distance)``: the nearest points ``a + s(b − a)`` and ``c + t(d − c)`` of two segments
+    (:func:`closest_on_segment_pair` of the particles ``a``, ``b``, ``c``, ``d``)."""
+    sv, tv = closest_on_segment_pair(x[a, 0], x[a, 1], x[a, 2], x[b, 0], x[b, 1], x[b, 2],
+                                     x[c, 0], x[c, 1], x[c, 2], x[d, 0], x[d, 1], x[d, 2])
+    d1x, d1y, d1z = x[b, 0] - x[a, 0], x[b, 1] - x[a, 1], x[b, 2] - x[a, 2]
+    d2x, d2y, d2z = x[d, 0] - x[c, 0], x[d, 1] - x[c, 1], x[d, 2] - x[c, 2]
+    rx, ry, rz = x[a, 0] - x[c, 0], x[a, 1] - x[c, 1], x[a, 2] - x[c, 2]
     px, py, pz = rx + sv * d1x - tv * d2x, ry + sv * d1y - tv * d2y, rz + sv * d1z - tv * d2z
     return sv, tv, math.sqrt(px * px + py * py + pz * pz)
 
@@ -443,6 +456,19 @@ class SelfCollision:
     def active(self) -> bool:
         return self.enabled
 
+    @property
+    def edges(self) -> np.ndarray:
+        """``(e, 2)``: the cloth's unique edges (the edge–edge pairs' indices)."""
+        return self._features[0]
+
+    def candidates(self, x0, reach):
+        """``(vf, vf_distance, ee, ee_distance)``: the particle–triangle and edge–edge pairs within
+        ``reach`` of each other at ``x0`` (:meth:`cloth_sim.collision_tree.TriangleTree.pairs`)."""
+        if self._tree is None:
+            from .collision_tree import TriangleTree  # (it measures with this module's distances)
+            self._tree = TriangleTree(self._tris, self.model.positions, self._features)
+        return self._tree.pairs(x0, reach)
+
     def set_enabled(self, on: bool) -> None:
         """Turn it on or off; on needs the model's triangles and a thickness it can use
         (``ValueError`` otherwise, and nothing changes)."""
@@ -474,10 +500,7 @@ class SelfCollision:
         reach = 0.5 * h + moved
         tris, (edges, tri_edge, edge_owner, edge_tris, vertex_owner, adj_ptr, adj) = \
             self._tris, self._features
-        if self._tree is None:
-            from .collision_tree import TriangleTree  # (it measures with this module's distances)
-            self._tree = TriangleTree(tris, self.model.positions, self._features)
-        pairs, dist, e_pairs, e_dist = self._tree.pairs(x0, reach)
+        pairs, dist, e_pairs, e_dist = self.candidates(x0, reach)
         free = self._inv_mass
         self.last_pushed = (proximity(x, x0, v, tris, pairs, inv_mass, free, clearance, h)
                             + proximity_features(x, x0, v, tris, pairs, inv_mass, free, clearance, h,

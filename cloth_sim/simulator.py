@@ -131,6 +131,7 @@ class Simulator:
         self._limited = (np.ascontiguousarray(model.springs[sel]),
                          np.ascontiguousarray(model.rest_lengths[sel]))
         self._contacts = Contacts(model, colliders or (), thickness)
+        self._integrator = None  # (made below: the stages are built first)
         self._build_stages(model, None, self_collision)
         self.strain_limit = strain_limit
         self._evaluations_before = 0
@@ -138,6 +139,7 @@ class Simulator:
         self.forces = self._build_forces()
         self._integrator = integrators.get(integrator)(model, **(integrator_options or {}))
         self._integrator.reset(self.state, self.forces, self._dt)
+        self._refresh_stages()
 
     # ------------------------------------------------------------------ state
     @property
@@ -251,6 +253,7 @@ class Simulator:
         new.reset(self.state, self.forces, self._dt)
         self._integrator = new
         self._integrator_options = dict(options)
+        self._refresh_stages()
 
     @property
     def integrator_stats(self) -> dict:
@@ -305,7 +308,7 @@ class Simulator:
     @strain_limit.setter
     def strain_limit(self, tau: float | None) -> None:
         self._strain.set_tau(None if tau is None else SCHEMA["strain_limit"].check(tau))
-        self._active_stages = [s for s in self.stages if s.active]
+        self._refresh_stages()
 
     @property
     def strain_limit_passes(self) -> int:
@@ -352,14 +355,14 @@ class Simulator:
         step on; returns its index in :attr:`colliders`. A bad shape or a name in use raises
         ``ValueError`` and changes nothing."""
         i = self._contacts.add(collider)
-        self._active_stages = [s for s in self.stages if s.active]
+        self._refresh_stages()
         return i
 
     def remove_collider(self, i: int):
         """Remove collider ``i`` (the later ones move up by one); returns it. A bad index raises
         ``ValueError``."""
         c = self._contacts.remove(i)
-        self._active_stages = [s for s in self.stages if s.active]
+        self._refresh_stages()
         return c
 
     @property
@@ -383,7 +386,7 @@ class Simulator:
         if not isinstance(on, (bool, np.bool_)):
             raise ValueError(f"self_collision must be true or false, got {on!r}")
         self._self_collision.set_enabled(on)
-        self._active_stages = [s for s in self.stages if s.active]
+        self._refresh_stages()
 
     @property
     def active_stages(self) -> tuple[str, ...]:
@@ -420,6 +423,8 @@ class Simulator:
                 np.copyto(self._prestage.v, state.v)
             for stage in stages:
                 stage.apply(state, checkpoint, dt, follow)
+            if self._contacts_inside:  # the colliders' poses this step ended at start the next
+                self._contacts.end_step()
             if grippers:
                 self._grippers_after_step()
             if not _state_ok(state.x, state.v, vmax2, xmax):
@@ -598,6 +603,7 @@ class Simulator:
         self._analysis = None
         self._integrator = integrators.get(self.integrator)(model, **self._integrator_options)
         self._integrator.reset(self.state, self.forces, self._dt)
+        self._refresh_stages()
 
     def _grippers_before_step(self) -> None:
         """Held particles get the velocity that takes them to their places at the gripper's target
@@ -641,7 +647,18 @@ class Simulator:
         #: the post-step stages, in order; only the active ones run. Self-collision is last: its
         #: no-crossing guarantee is about the motion every other stage has shaped.
         self.stages = [self._strain, self._contacts, self._self_collision]
-        self._active_stages = [s for s in self.stages if s.active]
+        self._refresh_stages()
+
+    def _refresh_stages(self) -> None:
+        """The stages that run after each step: the active ones the integrator does not resolve
+        inside its own step (:attr:`~cloth_sim.integrators.base.Integrator.handles`), which it is
+        given (:meth:`~cloth_sim.integrators.base.Integrator.attach`)."""
+        integ = self._integrator
+        handled = integ.handles if integ is not None else frozenset()
+        self._active_stages = [s for s in self.stages if s.active and s.name not in handled]
+        self._contacts_inside = "contacts" in handled and self._contacts.active
+        if integ is not None:
+            integ.attach(self._contacts, self._self_collision)
 
     def _build_forces(self) -> Forces:
         return Forces(self.model, self._k, self._c, self._gravity, self._wind, self._drag)

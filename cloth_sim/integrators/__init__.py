@@ -35,5 +35,6 @@ def get(name: str) -> type[Integrator]:
 
 
 from . import explicit, implicit, local_global, xpbd  # noqa: E402,F401  (registers the methods, in this order)
+from . import vbd  # noqa: E402,F401  (after xpbd: the registry lists the methods in the order they came)
 
 __all__ = ["Integrator", "available", "get", "register"]

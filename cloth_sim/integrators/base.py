@@ -13,6 +13,8 @@ one place. A method is constructed for one model (``cls(model, **options)``) and
   next step (grippers);
 * ``parameters_changed(changed)`` — a set of names from :data:`CHANGES` saying what changed, so a
   method refactorises only when it must;
+* ``attach(contacts, self_collision)`` — the contact stages, for a method that resolves them inside
+  its step (it declares which in ``handles``; the simulator then skips them after the step);
 * ``stable_dt(analysis)`` — the largest stable ``dt`` by its :class:`Stability` class, from a
   :class:`~cloth_sim.stability.Analysis` of the material (computed once per material and kept).
 
@@ -72,6 +74,9 @@ class Integrator:
     conserves_momentum: bool = True
     #: Names of the counters the method keeps in :attr:`counters`.
     counter_names: tuple[str, ...] = ()
+    #: Names of the post-step stages (``contacts``, ``self_collision``) the method resolves inside
+    #: its own step: the simulator does not run them after it, and gives them to :meth:`attach`.
+    handles: frozenset = frozenset()
 
     def __init__(self, model):
         self.model = model
@@ -94,6 +99,11 @@ class Integrator:
 
     def parameters_changed(self, changed: frozenset) -> None:
         """Some of :data:`CHANGES` changed (no-op by default)."""
+
+    def attach(self, contacts, self_collision) -> None:
+        """The simulator's contact stage (:class:`~cloth_sim.colliders.Contacts`) and self-collision
+        stage (:class:`~cloth_sim.self_collision.SelfCollision`), for a method that resolves them
+        (:attr:`handles`); called whenever they or the method change (no-op by default)."""
 
     # ------------------------------------------------------------------ stability
     @classmethod

@@ -44,7 +44,7 @@ import numba
 import numpy as np
 import scipy.sparse as sp
 
-from ..forces import BUCKLE_TABLE, GravityTerm, WindTerm, _axial, spring_vector
+from ..forces import BUCKLE_TABLE, GravityTerm, WindTerm, axial, spring_vector
 from . import register
 from .base import Integrator, Stability
 from .implicit import _graph_product, cholesky, constant_system, same_system, system_key
@@ -65,7 +65,7 @@ def _local_global_rhs(x, springs, rest, k, w, kind, tab, h2, base, rhs):
         dx, dy, dz, l = spring_vector(x, i, j)
         if l < 1e-300:
             continue
-        _, de, _ = _axial(l, rest[s], k[s], kind[s], tab)
+        _, de, _ = axial(l, rest[s], k[s], kind[s], tab)
         # w·d = (w·l − E'(l))·x_ij/l
         scale = h2 * (ws * l - de) / l
         rhs[i, 0] -= scale * dx

@@ -33,7 +33,7 @@ import numba
 import numpy as np
 
 from .. import stability as stab
-from ..forces import BUCKLE_TABLE, GravityTerm, WindTerm, _axial, spring_vector
+from ..forces import BUCKLE_TABLE, GravityTerm, WindTerm, axial, spring_vector
 from . import register
 from .base import Integrator, Stability
 
@@ -56,7 +56,7 @@ def _project(p, x, springs, rest, k, w, c, kind, tab, inv_mass, h, lam):
         if l < 1e-300:
             continue
         ux, uy, uz = dx / l, dy / l, dz / l
-        _, de, _ = _axial(l, rest[s], k[s], kind[s], tab)
+        _, de, _ = axial(l, rest[s], k[s], kind[s], tab)
         # the relative displacement over the substep along the spring: ∇C·(p − x)
         rel = ((p[j, 0] - x[j, 0]) - (p[i, 0] - x[i, 0])) * ux \
             + ((p[j, 1] - x[j, 1]) - (p[i, 1] - x[i, 1])) * uy \

@@ -32,6 +32,7 @@ class SimulationControl:
         self.scene.apply_grippers(self.sim)  # the scene's own grippers hold again
         self._adopt_grippers()
         kept = self._restore_colliders(spawned or {})
+        self.balance.clear()
         self._checkpoints.clear()
         self._change_checkpoint = None
         self._carry = 0.0
@@ -131,6 +132,7 @@ class SimulationControl:
             sim.restore_state(saved)
         self._checkpoints.clear()
         self._change_checkpoint = None
+        self.balance.restart()  # back at a state from before the run-away
         self.error = str(error)
         self.paused = True
         self._carry = 0.0

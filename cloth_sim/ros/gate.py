@@ -14,6 +14,7 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.parameter import Parameter
 
 from .. import settings
+from ..energy_balance import EnergyBalance
 from ..parameters import SCHEMA
 from ..scene import SceneError, load_scene
 from ..settings import MODEL_KEYS
@@ -171,6 +172,7 @@ class ParameterGate:
         self._validated = None
         if scene is not None:
             self.sim = self._build_simulator(cand, model, scene)
+            self.balance = EnergyBalance(self.sim)
             self.scene = scene
             self.interfaces.restarted()  # the new simulation has the scene's colliders only
             self._drop_grippers()
@@ -185,6 +187,7 @@ class ParameterGate:
             if cand != self.cfg:
                 self._change_checkpoint = (self.sim.time, self.sim.save_state())
             self._apply_live(cand)
+            self.balance.restart()  # what the energy means may have changed (stiffness, gravity)
         if cand["real_time_factor"] != self.cfg["real_time_factor"]:
             self._carry = 0.0  # a backlog owed at the old pace is not owed at the new one
             self._history.clear()

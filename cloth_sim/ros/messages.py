@@ -100,9 +100,11 @@ def stats(Stats, *, stamp, frame_id: str, integrator: str, dt: float, steps: int
 
 def diagnostic_status(*, error: str | None, paused: bool, rtf: float, rtf_known: bool,
                       rtf_warn: float, dt: float, stable_dt: float | None, warn_margin: float,
-                      values: dict) -> DiagnosticStatus:
+                      values: dict, energy: str | None = None) -> DiagnosticStatus:
     """``cloth_sim: simulation``: ERROR after a blow-up, WARN when the real-time factor is below
-    ``rtf_warn`` (while running; 0 when the node runs as fast as it can) or dt is above ``warn_margin`` of stable_dt, OK otherwise."""
+    ``rtf_warn`` (while running; 0 when the node runs as fast as it can), dt is above
+    ``warn_margin`` of stable_dt, or ``energy`` says the energy balance found energy no source put
+    in (:mod:`cloth_sim.energy_balance`), OK otherwise."""
     level, message = DiagnosticStatus.OK, "running"
     if error:
         level, message = DiagnosticStatus.ERROR, f"simulation diverged and is paused: {error}"
@@ -112,6 +114,8 @@ def diagnostic_status(*, error: str | None, paused: bool, rtf: float, rtf_known:
             problems.append(f"real-time factor {rtf:.2f} below the target")
         if stable_dt is not None and math.isfinite(stable_dt) and dt > warn_margin * stable_dt:
             problems.append(f"dt={dt:g} s is above {warn_margin:.0%} of stable_dt={stable_dt:.4g} s")
+        if energy:
+            problems.append(energy)
         if problems:
             level, message = DiagnosticStatus.WARN, "; ".join(problems)
         elif paused:

@@ -41,6 +41,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from .. import settings
 from ..parameters import SCHEMA
 from ..scene import SceneError, load_scene
+from ..energy_balance import EnergyBalance
 from ..simulator import SimulationDiverged, compile_kernels
 from . import params as P
 from .camera_publisher import CameraPublisher
@@ -115,6 +116,7 @@ class ClothSimNode(ParameterGate, SimulationControl, Manipulation, Publishing, N
         if reason:
             raise StartupError(reason)
         self.sim = self._build_simulator(self.cfg, model, self.scene)
+        self.balance = EnergyBalance(self.sim)  # energy no source put in: WARN on /diagnostics
         # every kernel compiled (or loaded from numba's cache) now, not in the tick that first
         # needs it: switching to kang live once stalled the node for 6 s
         kernels = compile_kernels()
@@ -221,6 +223,7 @@ class ClothSimNode(ParameterGate, SimulationControl, Manipulation, Publishing, N
                         self.dropped += self._carry - MAX_BACKLOG * max(target, 1.0)
                         self._carry = MAX_BACKLOG * max(target, 1.0)
                 self._keep_checkpoint()
+                self.balance.sample()
             except SimulationDiverged as e:
                 self._recover(e)
         elif self.interfaces.busy:  # a simulate_steps goal steps the paused simulation

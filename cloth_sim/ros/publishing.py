@@ -116,11 +116,12 @@ class Publishing:
             "dropped_sim_time": f"{self.dropped:.4f}",
             "target_real_time_factor": f"{self.cfg['real_time_factor']:g}",
             "grippers": ", ".join(self._grippers) or "none",
+            "energy_excess": f"{self.balance.excess:.4g}",
         }
         return messages.diagnostic_status(
             error=self.error, paused=self.paused, rtf=rtf, rtf_known=len(self._history) >= 2,
             rtf_warn=RTF_WARN * self.cfg["real_time_factor"], dt=sim.dt, stable_dt=self._stable_dt, warn_margin=WARN_MARGIN,
-            values=values)
+            values=values, energy=self.balance.message() if self.balance.unstable else None)
 
     def _publish_diagnostics(self) -> None:
         self.diag_pub.publish(messages.diagnostic_array(self.diagnostic_status(),

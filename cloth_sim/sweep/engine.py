@@ -157,7 +157,7 @@ def _ray_running() -> bool:
 
 
 def _postfix(counts: Counter) -> dict:
-    return {"diverged": counts["diverged"], "refused": counts["refused"],
+    return {"unstable": counts["unstable"], "diverged": counts["diverged"], "refused": counts["refused"],
             **({"failed": counts["failed"]} if counts["failed"] else {})}
 
 
@@ -218,7 +218,7 @@ def summary(out) -> str:
         state = f"incomplete: {len(rows)} of {total} runs done; run the same command again to finish"
     counts = Counter(r["status"] for r in rows)
     lines = [f"sweep {out}: {total} runs ({state})"]
-    lines += [f"  {s:9s} {counts[s]}" for s in STATUSES if counts[s] or s in ("ok", "diverged", "refused")]
+    lines += [f"  {s:9s} {counts[s]}" for s in STATUSES if counts[s] or s in ("ok", "unstable", "diverged", "refused")]
     wall = sum(r["wall_s"] for r in rows)
     lines.append(f"  run time {wall:.1f} s in all, {wall / max(len(rows), 1):.3f} s per run")
     slow = sorted(rows, key=lambda r: -r["wall_s"])[:5]

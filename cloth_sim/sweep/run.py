@@ -30,11 +30,14 @@ from pathlib import Path
 from .. import settings
 from ..bag import cdr
 from ..bag.store import BagWriter
+from ..energy_balance import EnergyBalance
 from ..simulator import SimulationDiverged
 from .script import Script, ScriptError
 from .spec import Spec, resolve, run_id
 
-STATUSES = ("ok", "diverged", "refused", "failed")
+#: a run's fate: ``unstable`` is a run that stayed finite but holds energy no source put in
+#: (:mod:`cloth_sim.energy_balance`): a step past its limit that chatters instead of blowing up
+STATUSES = ("ok", "unstable", "diverged", "refused", "failed")
 #: what a run measures rather than computes: kept beside its directory (``OUT/timings/<run>.json``),
 #: so that the directory's bytes depend on the run's values alone
 TIMINGS = ("wall_s", "worker")
@@ -94,6 +97,7 @@ def _simulate(spec: Spec, run: dict, rid: str, tmp: Path) -> dict:
     frame_times = ([k / spec.frames for k in range(int(math.floor(spec.duration * spec.frames + 1e-9)) + 1)]
                    if bag else [])
     next_frame = 0
+    balance = EnergyBalance(sim)
     try:
         for _ in range(n_steps):
             while next_frame < len(frame_times) and frame_times[next_frame] <= sim.time + 1e-12:
@@ -101,6 +105,7 @@ def _simulate(spec: Spec, run: dict, rid: str, tmp: Path) -> dict:
                 next_frame += 1
             script.before_step(sim)
             sim.step(1)
+            balance.sample()
         while next_frame < len(frame_times) and frame_times[next_frame] <= sim.time + 1e-9:
             bag.frame(sim)
             next_frame += 1
@@ -113,6 +118,8 @@ def _simulate(spec: Spec, run: dict, rid: str, tmp: Path) -> dict:
     finally:
         if bag is not None:
             row["frames"] = bag.close()
+    if row["status"] == "ok" and balance.unstable:
+        row.update(status="unstable", message=balance.message())
     energy = sim.energy()
     row.update(steps=int(sim.steps_taken), sim_time=float(sim.time), max_strain=float(sim.max_strain()),
                kinetic=float(energy["kinetic"]), potential=float(energy["spring"] + energy["gravity"]),
