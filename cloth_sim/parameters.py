@@ -153,6 +153,13 @@ def _schema() -> dict[str, Param]:
         P("dt", float, "s", "Simulation time step. A conditionally stable method refuses a dt above "
           "its stable_dt unless allow_unstable is true.", lo=1e-7, hi=1.0, scene_key="dt"),
         P("allow_unstable", bool, "", "Accept a dt above the method's stable_dt.", apply="node"),
+        P("vbd.iterations", int, "", "Iterations per step of the vbd integrator (Vertex Block "
+          "Descent): more is closer to backward Euler's step, any count gives a usable state.",
+          lo=1, hi=10_000, scene_key="vbd.iterations"),
+        P("vbd.fit_tick", bool, "", "vbd fits its iterations into the node's tick (at most "
+          "vbd.iterations a step, at least one, each step its share of the tick's budget): the "
+          "node keeps real time, and its results depend on the machine. Off: the same bits "
+          "anywhere.", apply="node"),
         P("publish_rate", float, "Hz", "Ticks per second: each tick advances 1/publish_rate of "
           "simulated time in whole steps of dt and publishes.", lo=0.1, hi=1000.0, apply="node"),
         *[P(f"stiffness.{f}", float, "N/m", f"Spring stiffness of the {f} springs.", lo=0.0, hi=1e9,

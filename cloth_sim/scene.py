@@ -95,6 +95,8 @@ class Scene:
     strain_limit: float | None = None
     strain_limit_method: str = "provot"
     integrator: str = "symplectic_euler"
+    #: the vbd integrator's iterations a step (``vbd: {iterations: N}``)
+    vbd_iterations: int = 10
     dt: float = 1e-3
     origin: tuple = (0.0, 0.0, 0.0)
     thickness: float = 0.005
@@ -208,6 +210,8 @@ class Scene:
         for key in self.SIMULATOR_OPTIONS:
             if key in override:
                 sim_kw[key] = override.pop(key)
+        if sim_kw["integrator"] == "vbd" and "integrator_options" not in sim_kw:
+            sim_kw["integrator_options"] = {"iterations": self.vbd_iterations}
         sim = Simulator(self.build_model(**override), **sim_kw)
         self.apply_grippers(sim)
         return sim
@@ -331,7 +335,7 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
         v.fail("(top level)", "a mapping of scene fields", data)
     known = {"name", "grid", "mesh", "model", "particle_mass", "stiffness", "damping", "pinned",
              "pinned_edges", "pinned_box", "gravity", "wind", "drag", "strain_limit",
-             "strain_limit_method", "integrator",
+             "strain_limit_method", "integrator", "vbd",
              "dt", "thickness", "self_collision", "colliders", "grippers", "camera"}
     v.known("", data, known)
     if "mesh" in data:
@@ -354,6 +358,11 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
     s.strain_limit = None if sl is None else v.param("strain_limit", sl)
     s.strain_limit_method = v.param("strain_limit_method", data.get("strain_limit_method", "provot"))
     s.integrator = v.param("integrator", data.get("integrator", s.integrator))
+    vbd = data.get("vbd", {}) or {}
+    if not isinstance(vbd, dict):
+        v.fail("vbd", "a mapping with iterations", vbd)
+    v.known("vbd.", vbd, {"iterations"})
+    s.vbd_iterations = v.param("vbd.iterations", vbd.get("iterations", s.vbd_iterations))
     s.dt = v.param("dt", data.get("dt", s.dt))
     s.thickness = v.param("thickness", data.get("thickness", s.thickness))
     s.self_collision = v.param("self_collision", data.get("self_collision", False))

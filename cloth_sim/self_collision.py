@@ -457,6 +457,12 @@ class SelfCollision:
         return self.enabled
 
     @property
+    def features(self) -> tuple:
+        """The topology the contacts read: ``(edges, tri_edge, edge_owner, edge_tris,
+        vertex_owner, adj_ptr, adj)`` (:func:`_features`)."""
+        return self._features
+
+    @property
     def edges(self) -> np.ndarray:
         """``(e, 2)``: the cloth's unique edges (the edge–edge pairs' indices)."""
         return self._features[0]

@@ -49,6 +49,7 @@ def scene_values(scene: Scene) -> dict:
         "strain_limit_method": scene.strain_limit_method,
         "model": scene.model, "thickness": float(scene.thickness),
         "self_collision": bool(scene.self_collision),
+        "vbd.iterations": int(scene.vbd_iterations),
     }
     if scene.mesh is not None:
         values["density"] = float(scene.mesh["density"])
@@ -67,7 +68,8 @@ def defaults(scene: Scene) -> dict:
     """Every parameter's value on ``scene`` before anything is set."""
     values = {"scene": scene.name, "allow_unstable": False, "publish_rate": 60.0, "frame_id": "cloth",
               "world_frame_id": "world", "publish_clock": False, "real_time_factor": 1.0,
-              "strain_limit_passes": DEFAULT_STRAIN_LIMIT_PASSES}
+              "strain_limit_passes": DEFAULT_STRAIN_LIMIT_PASSES,
+              "vbd.fit_tick": False}
     values.update(UNUSED_VALUES)
     values.update(scene_values(scene))
     return values
@@ -129,10 +131,17 @@ def build_model(cfg: dict, scene: Scene):
                              damping={f: cfg[f"damping.{f}"] for f in scene.families})
 
 
+def integrator_options(cfg: dict) -> dict:
+    """The options of ``cfg``'s integrator that parameters set (vbd's iterations; the node adds a
+    time budget under ``vbd.fit_tick``)."""
+    return {"iterations": cfg["vbd.iterations"]} if cfg["integrator"] == "vbd" else {}
+
+
 def build_simulator(cfg: dict, model, scene: Scene) -> Simulator:
     """A simulator of ``model`` (built for ``scene``) with ``cfg``'s live values, the scene's
     colliders and grippers."""
     sim = Simulator(model, integrator=cfg["integrator"], dt=cfg["dt"], gravity=cfg["gravity"],
+                    integrator_options=integrator_options(cfg),
                     wind=wind(cfg), drag=cfg["drag"], strain_limit=cfg["strain_limit"] or None,
                     strain_limit_passes=cfg["strain_limit_passes"],
                     strain_limit_method=cfg["strain_limit_method"],

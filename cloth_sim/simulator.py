@@ -256,6 +256,11 @@ class Simulator:
         self._refresh_stages()
 
     @property
+    def integrator_options(self) -> dict:
+        """The current method's options (as given to :meth:`set_integrator` or the constructor)."""
+        return dict(self._integrator_options)
+
+    @property
     def integrator_stats(self) -> dict:
         """The current method's counters since it was selected: ``solves``, ``cg_iterations`` /
         ``last_cg_iterations`` / ``direct_fallbacks`` (``implicit_euler``), ``factorizations``

@@ -419,7 +419,9 @@ def test_the_bags_cdr_is_what_rclpy_reads_and_what_rosbags_writes():
     data = cdr.stats(stamp_ns=ns, frame_id="cloth", integrator="rk4", dt=0.001, steps=3,
                      step_time_mean=0.1, step_time_max=0.2, tick_wall_time=0.5, real_time_factor=1.0,
                      sim_time=2.0, kinetic_energy=1.0, potential_energy=5.0, max_strain=0.1,
-                     overruns=4, stability_margin=0.5, paused=True)
+                     overruns=4, stability_margin=0.5, paused=True, solver_iterations=7,
+                     solver_residual=2.5e-4)
     msg = deserialize_message(data, Stats)
     assert (msg.header.stamp, msg.integrator, msg.steps, msg.step_time_mean, msg.potential_energy,
-            msg.overruns, msg.stability_margin, msg.paused) == (stamp, "rk4", 3, 0.1, 5.0, 4, 0.5, True)
+            msg.overruns, msg.stability_margin, msg.paused, msg.solver_iterations,
+            msg.solver_residual) == (stamp, "rk4", 3, 0.1, 5.0, 4, 0.5, True, 7, 2.5e-4)

@@ -147,7 +147,7 @@ def stats(*, stamp_ns: int, frame_id: str, integrator: str, dt: float, steps: in
           step_time_mean: float, step_time_max: float, tick_wall_time: float,
           real_time_factor: float, sim_time: float, kinetic_energy: float,
           potential_energy: float, max_strain: float, overruns: int, stability_margin: float,
-          paused: bool) -> bytes:
+          paused: bool, solver_iterations: int = 0, solver_residual: float = 0.0) -> bytes:
     """``cloth_sim/msg/Stats`` (msg/Stats.msg), field for field."""
     w = CdrWriter()
     w.header(stamp_ns, frame_id)
@@ -160,4 +160,6 @@ def stats(*, stamp_ns: int, frame_id: str, integrator: str, dt: float, steps: in
     w.u64(overruns)
     w.f64(stability_margin)
     w.boolean(paused)
+    w.u32(solver_iterations)
+    w.f64(solver_residual)
     return w.getvalue()

@@ -69,6 +69,12 @@ from .base import Integrator, Stability
 
 #: the share of the nearest found distance a vertex may move between two candidate searches
 GAMMA = 0.45
+#: how far a vertex may move between two searches besides that bound: (a, b) for a·τ + b·|its
+#: inertial motion over the step| (a search then serves the next steps while they stay within)
+ALLOWANCE = (0.1, 1.0)
+#: a search serves the next step while at most this share of the free vertices would move more
+#: than half their bound on inertia alone (those are held to their bound until the next search)
+REUSE_OVER = 0.02
 #: IPC's friction smoothing: relative tangential motion below EPS_V·h (m) is static
 EPS_V = 1e-3
 #: vertices per colour below which a colour is updated on one core (the pool's wake-up costs more)
@@ -276,48 +282,37 @@ def _pick(x, xs, colour, i, p):
 
 
 @numba.njit(cache=True, inline="always")
-def _self_contacts_at(i, x, xs, colour, rec_ptr, rec, vt, ee, tris, edges, tau, ks,
-                      f0, f1, f2, h0, h1, h2, h3, h4, h5):
-    """Vertex ``i``'s self-contacts: ``½ k (τ − d)²`` on the distance ``d`` of each vertex–triangle
-    pair it is the vertex or a corner of and each edge pair it is an end of (the partners' positions
-    by :func:`_pick`: Gauss–Seidel across colours, the same bits at any thread count)."""
+def _self_contacts_at(i, x, xs, xt, colour, rec_ptr, rec, pidx, pcoef, pnrm, tau, ks, mu, eps,
+                      rec_d, f0, f1, f2, h0, h1, h2, h3, h4, h5):
+    """Vertex ``i``'s self-contacts: ``½ k (τ − d)²`` on each pair's distance ``d`` along the normal
+    the search found, ``d = n·Σ_k w_k x_k`` over the pair's four vertices (:func:`contact_pairs`:
+    the normal and the nearest points' weights held between two searches), for the pairs ``i`` is
+    in (its records ``4·pair + slot``); and friction ``μ`` between the two sides as on a collider
+    (IPC's smoothed, lagged friction on their relative tangential motion over the step, ``Σ_k w_k
+    (x_k − x_k^t)``, with the pressing force of the iterate). The partners' positions by
+    :func:`_pick`."""
     for q in range(rec_ptr[i], rec_ptr[i + 1]):
         r = rec[q]
-        pair = r // 2
-        if r % 2 == 0:  # vertex–triangle
-            p = vt[pair, 0]
-            t = vt[pair, 1]
-            a, b, cc = tris[t, 0], tris[t, 1], tris[t, 2]
-            px, py, pz = _pick(x, xs, colour, i, p)
-            ax, ay, az = _pick(x, xs, colour, i, a)
-            bx, by, bz = _pick(x, xs, colour, i, b)
-            cx, cy, cz = _pick(x, xs, colour, i, cc)
-            wa, wb, wc = closest_on_triangle(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz)
-            nx = px - (wa * ax + wb * bx + wc * cx)
-            ny = py - (wa * ay + wb * by + wc * cy)
-            nz = pz - (wa * az + wb * bz + wc * cz)
-            w = 1.0 if p == i else (-wa if a == i else (-wb if b == i else -wc))
-        else:  # edge–edge
-            e = ee[pair, 0]
-            f = ee[pair, 1]
-            a, b, cc, dd = edges[e, 0], edges[e, 1], edges[f, 0], edges[f, 1]
-            ax, ay, az = _pick(x, xs, colour, i, a)
-            bx, by, bz = _pick(x, xs, colour, i, b)
-            cx, cy, cz = _pick(x, xs, colour, i, cc)
-            dx, dy, dz = _pick(x, xs, colour, i, dd)
-            sv, tv = closest_on_segment_pair(ax, ay, az, bx, by, bz, cx, cy, cz, dx, dy, dz)
-            nx = (ax + sv * (bx - ax)) - (cx + tv * (dx - cx))
-            ny = (ay + sv * (by - ay)) - (cy + tv * (dy - cy))
-            nz = (az + sv * (bz - az)) - (cz + tv * (dz - cz))
-            w = 1.0 - sv if a == i else (sv if b == i else (tv - 1.0 if cc == i else -tv))
-        d = math.sqrt(nx * nx + ny * ny + nz * nz)
-        if d >= tau or d < 1e-300 or w == 0.0:
+        pair = r // 4
+        w = pcoef[pair, r % 4]
+        nx, ny, nz = pnrm[pair, 0], pnrm[pair, 1], pnrm[pair, 2]
+        d = 0.0
+        ux = uy = uz = 0.0
+        for slot in range(4):
+            cw = pcoef[pair, slot]
+            if cw != 0.0:
+                v = pidx[pair, slot]
+                px, py, pz = _pick(x, xs, colour, i, v)
+                d += cw * (nx * px + ny * py + nz * pz)
+                ux += cw * (px - xt[v, 0])
+                uy += cw * (py - xt[v, 1])
+                uz += cw * (pz - xt[v, 2])
+        rec_d[q] = d  # (for _onset, after the step is solved)
+        if d >= tau:
             continue
-        nx /= d
-        ny /= d
-        nz /= d
         # ∂d/∂x_i = w n: the force pushes the pair apart along n
-        mag = ks * (tau - d) * w
+        lam = ks * (tau - d)
+        mag = lam * w
         f0 += mag * nx
         f1 += mag * ny
         f2 += mag * nz
@@ -328,22 +323,206 @@ def _self_contacts_at(i, x, xs, colour, rec_ptr, rec, vt, ee, tris, edges, tau, 
         h3 += s * ny * ny
         h4 += s * ny * nz
         h5 += s * nz * nz
+        if mu <= 0.0:
+            continue
+        un = ux * nx + uy * ny + uz * nz
+        tx, ty, tz = ux - un * nx, uy - un * ny, uz - un * nz
+        tl = math.sqrt(tx * tx + ty * ty + tz * tz)
+        g = 1.0 / tl if tl > eps else (2.0 - tl / eps) / eps
+        sf = mu * lam * g
+        f0 -= sf * w * tx
+        f1 -= sf * w * ty
+        f2 -= sf * w * tz
+        s = sf * w * w  # s (I − n nᵀ), the normal held
+        h0 += s - s * nx * nx
+        h1 -= s * nx * ny
+        h2 -= s * nx * nz
+        h3 += s - s * ny * ny
+        h4 -= s * ny * nz
+        h5 += s - s * nz * nz
     return f0, f1, f2, h0, h1, h2, h3, h4, h5
+
+
+@numba.njit(cache=True, parallel=True)
+def contact_pairs(x, vt, ee, tris, edges, tri_edge, edge_owner, vertex_owner):
+    """Every candidate pair as its four vertices, the weights of its nearest points and the unit
+    normal between them at ``x``: a vertex–triangle pair ``(p; a, b, c)`` with weights
+    ``(1, −w_a, −w_b, −w_c)``, an edge pair ``(a, b; c, d)`` with ``(1 − s, s, −(1 − t), −t)``, so
+    that ``n·Σ_k w_k x_k`` is their distance along ``n`` (where the two touch, the triangle's normal
+    or the normal to both edges); and whether the pair carries the contact energy.
+
+    Every pair bounds its vertices' motion (:func:`_truncate`); the energy is carried by each
+    contact once, as Bridson, Fedkiw & Anderson (2002) count them: a vertex against the inside of a
+    triangle's face, or against an edge or a corner of the other cloth only from the triangle that
+    owns it (its first), and two edges whose nearest points lie inside both. Counting a vertex
+    against every triangle within reach (two layers lying together have six of the other layer
+    near each vertex) made a T-shirt's contact 4× the work; counting only faces left a vertex
+    sliding over an edge of the other layer without support for a step."""
+    nv = vt.shape[0]
+    m = nv + ee.shape[0]
+    idx = np.zeros((m, 4), np.int64)
+    coef = np.zeros((m, 4))
+    nrm = np.zeros((m, 3))
+    energy = np.zeros(m, np.bool_)
+    for q in numba.prange(m):  # each candidate in its own row (the same rows at any thread count)
+        if q < nv:
+            p, t = vt[q, 0], vt[q, 1]
+            a, b, c = tris[t, 0], tris[t, 1], tris[t, 2]
+            wa, wb, wc = closest_on_triangle(x[p, 0], x[p, 1], x[p, 2], x[a, 0], x[a, 1], x[a, 2],
+                                             x[b, 0], x[b, 1], x[b, 2], x[c, 0], x[c, 1], x[c, 2])
+            if wa > 0.0 and wb > 0.0 and wc > 0.0:
+                energy[q] = True
+            elif wa >= 1.0 or wb >= 1.0 or wc >= 1.0:  # nearest a corner: from its owner only
+                energy[q] = vertex_owner[a if wa >= 1.0 else (b if wb >= 1.0 else c)] == t
+            else:  # nearest an edge: from its owner only
+                energy[q] = edge_owner[tri_edge[t, 0 if wc == 0.0 else (1 if wa == 0.0 else 2)]] == t
+            dx = x[p, 0] - (wa * x[a, 0] + wb * x[b, 0] + wc * x[c, 0])
+            dy = x[p, 1] - (wa * x[a, 1] + wb * x[b, 1] + wc * x[c, 1])
+            dz = x[p, 2] - (wa * x[a, 2] + wb * x[b, 2] + wc * x[c, 2])
+            ux, uy, uz = x[b, 0] - x[a, 0], x[b, 1] - x[a, 1], x[b, 2] - x[a, 2]
+            vx, vy, vz = x[c, 0] - x[a, 0], x[c, 1] - x[a, 1], x[c, 2] - x[a, 2]
+            idx[q, 0], idx[q, 1], idx[q, 2], idx[q, 3] = p, a, b, c
+            coef[q, 0], coef[q, 1], coef[q, 2], coef[q, 3] = 1.0, -wa, -wb, -wc
+        else:
+            e = q - nv
+            a, b = edges[ee[e, 0], 0], edges[ee[e, 0], 1]
+            c, d_ = edges[ee[e, 1], 0], edges[ee[e, 1], 1]
+            sv, tv = closest_on_segment_pair(x[a, 0], x[a, 1], x[a, 2], x[b, 0], x[b, 1], x[b, 2],
+                                             x[c, 0], x[c, 1], x[c, 2], x[d_, 0], x[d_, 1], x[d_, 2])
+            energy[q] = 0.0 < sv < 1.0 and 0.0 < tv < 1.0
+            dx = (x[a, 0] + sv * (x[b, 0] - x[a, 0])) - (x[c, 0] + tv * (x[d_, 0] - x[c, 0]))
+            dy = (x[a, 1] + sv * (x[b, 1] - x[a, 1])) - (x[c, 1] + tv * (x[d_, 1] - x[c, 1]))
+            dz = (x[a, 2] + sv * (x[b, 2] - x[a, 2])) - (x[c, 2] + tv * (x[d_, 2] - x[c, 2]))
+            ux, uy, uz = x[b, 0] - x[a, 0], x[b, 1] - x[a, 1], x[b, 2] - x[a, 2]
+            vx, vy, vz = x[d_, 0] - x[c, 0], x[d_, 1] - x[c, 1], x[d_, 2] - x[c, 2]
+            idx[q, 0], idx[q, 1], idx[q, 2], idx[q, 3] = a, b, c, d_
+            coef[q, 0], coef[q, 1], coef[q, 2], coef[q, 3] = 1.0 - sv, sv, -(1.0 - tv), -tv
+        d = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if d < 1e-12:  # touching: the triangle's normal, or the normal to both edges
+            dx, dy, dz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+            d = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if d > 0.0:
+            nrm[q, 0], nrm[q, 1], nrm[q, 2] = dx / d, dy / d, dz / d
+    return idx, coef, nrm, energy
+
+
+@numba.njit(cache=True)
+def contact_records(n, idx, coef, use):
+    """Per vertex, the pairs ``use`` marks that it is in (CSR of ``4·pair + slot``, in pair order):
+    a counting sort."""
+    ptr = np.zeros(n + 1, np.int64)
+    for q in range(idx.shape[0]):
+        if not use[q]:
+            continue
+        for slot in range(4):
+            if coef[q, slot] != 0.0:
+                ptr[idx[q, slot] + 1] += 1
+    for i in range(n):
+        ptr[i + 1] += ptr[i]
+    fill = ptr[:-1].copy()
+    rec = np.empty(ptr[n], np.int64)
+    for q in range(idx.shape[0]):
+        if not use[q]:
+            continue
+        for slot in range(4):
+            if coef[q, slot] != 0.0:
+                v = idx[q, slot]
+                rec[fill[v]] = 4 * q + slot
+                fill[v] += 1
+    return ptr, rec
+
+
+@numba.njit(cache=True, inline="always")
+def _truncate(i, px, py, pz, x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, gamma):
+    """Vertex ``i`` moved to ``p``, held within its bounds from where the last search was made
+    (``x_cd``): its displacement scaled down (whole: every bound is linear in it) so that it moves
+    at most ``allow[i]`` (the pairs the search did not find, the far side of a collider) and, for
+    each pair the search found (its records ``grec``), approaches the pair's other side along the
+    pair's normal by at most ``γ`` times their distance (Newton's planar truncation of the paper's
+    bound: moving away, or sideways, costs nothing). Both sides of a pair approach by at most
+    ``γ·d`` each, ``γ < ½``, and the normal separates them by ``d`` at the search (the nearest
+    points' direction: every point of the one primitive is at least ``d`` from every point of the
+    other along it), so no pair crosses. ``dmin``: each vertex's nearest pair at the search (a
+    displacement below ``γ·dmin`` needs no look at its pairs). Returns the position and whether it
+    was cut."""
+    ex, ey, ez = px - x_cd[i, 0], py - x_cd[i, 1], pz - x_cd[i, 2]
+    t = 1.0
+    el = math.sqrt(ex * ex + ey * ey + ez * ez)
+    if el > allow[i]:
+        t = allow[i] / el
+    if el * t <= gamma * dmin[i]:  # it approaches nothing by more than that: no pair to look at
+        if t >= 1.0:
+            return px, py, pz, False
+        return x_cd[i, 0] + t * ex, x_cd[i, 1] + t * ey, x_cd[i, 2] + t * ez, True
+    for q in range(gptr[i], gptr[i + 1]):
+        r = grec[q]
+        pair = r // 4
+        w = pcoef[pair, r % 4]
+        # its approach to the other side: along −n for the side with positive weights
+        toward = -(pnrm[pair, 0] * ex + pnrm[pair, 1] * ey + pnrm[pair, 2] * ez)
+        if w < 0.0:
+            toward = -toward
+        room = gamma * pdist[pair]
+        if toward * t > room:
+            t = room / toward
+    if t >= 1.0:
+        return px, py, pz, False
+    return x_cd[i, 0] + t * ex, x_cd[i, 1] + t * ey, x_cd[i, 2] + t * ez, True
+
+
+@numba.njit(cache=True, inline="always")
+def _onset(i, sx, sy, sz, x, rec_ptr, rec, rec_d, pcoef, pnrm, tau, ckind, cpos, crot, cgeo):
+    """Vertex ``i``'s step ``s`` with the part that would press a contact not yet pressed
+    (distance at least ``τ``: not in the step's Hessian) taken off along that contact's normal, so
+    that it stops at its onset (the next iteration sees it); the motion along the surface stays.
+    The self-contact pairs by their linear distance, the colliders by their signed distance along
+    their normal."""
+    for q in range(rec_ptr[i], rec_ptr[i + 1]):
+        d = rec_d[q]  # (its distance as _self_contacts_at found it for this step)
+        if d < tau:
+            continue
+        r = rec[q]
+        pair = r // 4
+        w = pcoef[pair, r % 4]
+        nx, ny, nz = w * pnrm[pair, 0], w * pnrm[pair, 1], w * pnrm[pair, 2]
+        over = (tau - d) - (nx * sx + ny * sy + nz * sz)  # how far past the onset d would go
+        if over > 0.0:
+            f = over / (nx * nx + ny * ny + nz * nz)
+            sx, sy, sz = sx + f * nx, sy + f * ny, sz + f * nz
+    for c in range(ckind.shape[0]):
+        d, nx, ny, nz = sdf(ckind[c], cpos[c], crot[c], cgeo[c], x[i, 0], x[i, 1], x[i, 2])
+        if d < tau:
+            continue
+        over = (tau - d) - (nx * sx + ny * sy + nz * sz)
+        if over > 0.0:
+            sx, sy, sz = sx + over * nx, sy + over * ny, sz + over * nz
+    return sx, sy, sz
+
+
+@numba.njit(cache=True)
+def _nearest(ptr, rec, dist):
+    """Each vertex's nearest pair distance over its records (``inf``: none)."""
+    n = ptr.shape[0] - 1
+    out = np.full(n, np.inf)
+    for i in range(n):
+        for q in range(ptr[i], ptr[i + 1]):
+            out[i] = min(out[i], dist[rec[q] // 4])
+    return out
 
 
 # ---------------------------------------------------------------------------- the iteration
 @numba.njit(cache=True)
-def _sweep(verts, lo, hi, x, xt, y, xs, m_h2, sp, inv_h, drag_h, co, tau, kc, eps, sc, ks, x_cd,
-           bound, stepped, cut, touch):
+def _sweep(verts, lo, hi, x, xt, y, xs, m_h2, sp, inv_h, drag_h, co, tau, kc, eps, sc, ks, mu_self,
+           x_cd, allow, gamma, near, stepped, cut, touch):
     """The Newton steps of vertices ``verts[lo:hi]`` in order, each on the incremental potential,
-    written to its row of ``x``, within its conservative bound. ``sp``: each vertex's springs (CSR:
+    written to its row of ``x``, within its bounds (:func:`_truncate`). ``sp``: each vertex's springs (CSR:
     the other end, rest length, k, c, kind, in the vertex's order) and Choi–Ko's table; ``co``: the
     colliders (:meth:`~cloth_sim.colliders.Contacts.packed`); ``sc``: the self-contact records, pairs
     and topology. (The arrays are unpacked here, once a chunk: unpacked per vertex, or passed one
     by one to a function per vertex, their reference counting cost more than the vertex's work.)"""
     inc_ptr, nbr, rest, k, c, kind, tab, nonsmooth = sp
     ckind, cpos, crot, cpos0, crot0, cgeo, cmu = co
-    rec_ptr, rec, vt, ee, tris, edges, colour = sc
+    rec_ptr, rec, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d, colour = sc
     for q in range(lo, hi):
         i = verts[q]
         m = m_h2[i] + drag_h  # the inertia's m/h², and the drag's d/h
@@ -355,7 +534,7 @@ def _sweep(verts, lo, hi, x, xt, y, xs, m_h2, sp, inv_h, drag_h, co, tau, kc, ep
                                                                 kind, tab, inv_h, f0, f1, f2, h0, h1,
                                                                 h2, h3, h4, h5)
         touch[i] = 0
-        if ckind.shape[0]:
+        if ckind.shape[0] and near[i]:
             f0, f1, f2, h0, h1, h2, h3, h4, h5, touched = _colliders_at(i, x, xt, ckind, cpos, crot, cpos0,
                                                                crot0, cgeo, cmu, tau, kc, eps, f0, f1,
                                                                f2, h0, h1, h2, h3, h4, h5)
@@ -363,10 +542,16 @@ def _sweep(verts, lo, hi, x, xt, y, xs, m_h2, sp, inv_h, drag_h, co, tau, kc, ep
                 touch[i] = 1
         if rec_ptr[i + 1] > rec_ptr[i]:
             touch[i] = 1
-            f0, f1, f2, h0, h1, h2, h3, h4, h5 = _self_contacts_at(i, x, xs, colour, rec_ptr, rec, vt, ee,
-                                                                   tris, edges, tau, ks, f0, f1, f2,
-                                                                   h0, h1, h2, h3, h4, h5)
+            f0, f1, f2, h0, h1, h2, h3, h4, h5 = _self_contacts_at(
+                i, x, xs, xt, colour, rec_ptr, rec, pidx, pcoef, pnrm, tau, ks, mu_self, eps, rec_d,
+                f0, f1, f2, h0, h1, h2, h3, h4, h5)
         sx, sy, sz = _solve3(h0, h1, h2, h3, h4, h5, f0, f1, f2)
+        if touch[i] or near[i]:
+            # a contact not yet pressed is not in the Hessian: a step past its onset would land
+            # deep inside (the next iteration pushing back out: the iterations cycled); the step
+            # stops at its onset, where the next iteration sees it
+            sx, sy, sz = _onset(i, sx, sy, sz, x, rec_ptr, rec, rec_d, pcoef, pnrm, tau,
+                                ckind if near[i] else ckind[:0], cpos, crot, cgeo)
         if rough or nonsmooth:
             # Choi–Ko's energies are not smooth at the rest length (a buckling pair's force jumps
             # at the onset, a tension-only pair's stiffness vanishes): Newton's step may overshoot.
@@ -384,14 +569,10 @@ def _sweep(verts, lo, hi, x, xt, y, xs, m_h2, sp, inv_h, drag_h, co, tau, kc, ep
                 sx, sy, sz = 0.5 * sx, 0.5 * sy, 0.5 * sz
         nx, ny, nz = x[i, 0] + sx, x[i, 1] + sy, x[i, 2] + sz
         stepped[i] = sx * sx + sy * sy + sz * sz
-        b = bound[i]
-        if b < math.inf:
-            ex, ey, ez = nx - x_cd[i, 0], ny - x_cd[i, 1], nz - x_cd[i, 2]
-            el = math.sqrt(ex * ex + ey * ey + ez * ez)
-            if el > b:
-                f = b / el
-                nx, ny, nz = x_cd[i, 0] + f * ex, x_cd[i, 1] + f * ey, x_cd[i, 2] + f * ez
-                cut[i] = 1
+        nx, ny, nz, was_cut = _truncate(i, nx, ny, nz, x_cd, allow, gptr, grec, pidx, pcoef, pnrm,
+                                        pdist, dmin, gamma)
+        if was_cut:
+            cut[i] = 1
         x[i, 0] = nx
         x[i, 1] = ny
         x[i, 2] = nz
@@ -405,7 +586,7 @@ CHUNKS = 16
 
 @numba.njit(cache=True, parallel=True)
 def _iterate_parallel(verts, cptr, x, xt, y, xs, m_h2, sp, inv_h, drag_h, co, tau, kc, eps, sc, ks,
-                      x_cd, bound, stepped, cut, touch):
+                      mu_self, x_cd, allow, gamma, near, stepped, cut, touch):
     """One iteration: the colours in order, each colour's vertices at once, in chunks (each vertex
     writes only its own row; a colour reads other colours' rows and, for contacts, ``xs``)."""
     for col in range(cptr.shape[0] - 1):
@@ -414,7 +595,7 @@ def _iterate_parallel(verts, cptr, x, xt, y, xs, m_h2, sp, inv_h, drag_h, co, ta
         for b in numba.prange(CHUNKS):
             a = lo + b * size
             _sweep(verts, a, min(a + size, hi), x, xt, y, xs, m_h2, sp, inv_h, drag_h, co, tau, kc,
-                   eps, sc, ks, x_cd, bound, stepped, cut, touch)
+                   eps, sc, ks, mu_self, x_cd, allow, gamma, near, stepped, cut, touch)
 
 
 def _iterate_serial(verts, cptr, *args):
@@ -423,55 +604,40 @@ def _iterate_serial(verts, cptr, *args):
 
 
 @numba.njit(cache=True)
-def _chebyshev(x, x_prev2, omega, free, x_cd, bound, cut, touch):
+def _chebyshev(x, x_prev2, omega, free, x_cd, allow, gamma, sc, cut, touch):
     """``x ← ω (x − x_prev2) + x_prev2`` on the free vertices not in contact (extrapolated, a
-    contact's penalty made the cloth chatter on a table), within their bounds."""
+    contact's penalty made the cloth chatter on a table), within their bounds (:func:`_truncate`);
+    ``ω = 1`` only holds them there."""
+    _, _, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, _, _ = sc
     for i in range(x.shape[0]):
         if not free[i] or touch[i]:
             continue
-        for d in range(3):
-            x[i, d] = omega * (x[i, d] - x_prev2[i, d]) + x_prev2[i, d]
-        b = bound[i]
-        if b < math.inf:
-            ex, ey, ez = x[i, 0] - x_cd[i, 0], x[i, 1] - x_cd[i, 1], x[i, 2] - x_cd[i, 2]
-            el = math.sqrt(ex * ex + ey * ey + ez * ez)
-            if el > b:
-                f = b / el
-                x[i, 0] = x_cd[i, 0] + f * ex
-                x[i, 1] = x_cd[i, 1] + f * ey
-                x[i, 2] = x_cd[i, 2] + f * ez
-                cut[i] = 1
+        px = omega * (x[i, 0] - x_prev2[i, 0]) + x_prev2[i, 0]
+        py = omega * (x[i, 1] - x_prev2[i, 1]) + x_prev2[i, 1]
+        pz = omega * (x[i, 2] - x_prev2[i, 2]) + x_prev2[i, 2]
+        px, py, pz, was_cut = _truncate(i, px, py, pz, x_cd, allow, gptr, grec, pidx, pcoef, pnrm,
+                                        pdist, dmin, gamma)
+        x[i, 0], x[i, 1], x[i, 2] = px, py, pz
+        if was_cut:
+            cut[i] = 1
 
 
 @numba.njit(cache=True)
-def _bounds(n, x, vt, vt_d, ee, ee_d, tris, edges, vtri_ptr, vtri, vedge_ptr, vedge, allowance,
-            ckind, cpos, crot, cgeo, cdepth, tau, gamma, bound):
-    """Each vertex's conservative bound: ``γ`` times the smallest distance found between its
-    primitives (itself, its triangles, its edges) and any other, at most its allowance, and short
-    of the far side of any collider near it."""
-    d_v = np.full(n, np.inf)
-    d_t = np.full(tris.shape[0], np.inf)
-    d_e = np.full(edges.shape[0], np.inf)
-    for q in range(vt.shape[0]):
-        p, t, d = vt[q, 0], vt[q, 1], vt_d[q]
-        d_v[p] = min(d_v[p], d)
-        d_t[t] = min(d_t[t], d)
-    for q in range(ee.shape[0]):
-        d = ee_d[q]
-        d_e[ee[q, 0]] = min(d_e[ee[q, 0]], d)
-        d_e[ee[q, 1]] = min(d_e[ee[q, 1]], d)
-    for i in range(n):
-        m = d_v[i]
-        for q in range(vtri_ptr[i], vtri_ptr[i + 1]):
-            m = min(m, d_t[vtri[q]])
-        for q in range(vedge_ptr[i], vedge_ptr[i + 1]):
-            m = min(m, d_e[vedge[q]])
-        b = min(gamma * m, allowance[i])
+def _allowances(x, allowance, ckind, cpos, crot, cgeo, cdepth, tau, allow, near):
+    """How far each vertex may move from ``x`` before the next search whatever the pairs found
+    (its ``allowance``, and short of the far side of any collider near it), and whether it can come
+    within the thickness of a collider meanwhile (``near``: the iterations look at the colliders
+    only for those)."""
+    for i in range(x.shape[0]):
+        b = allowance[i]
+        nearest = math.inf
         for c in range(ckind.shape[0]):
+            d = sdf(ckind[c], cpos[c], crot[c], cgeo[c], x[i, 0], x[i, 1], x[i, 2])[0]
+            nearest = min(nearest, d)
             if cdepth[c] < math.inf:
-                d = sdf(ckind[c], cpos[c], crot[c], cgeo[c], x[i, 0], x[i, 1], x[i, 2])[0]
                 b = min(b, max(d, 0.0) + 0.9 * cdepth[c])
-        bound[i] = b
+        allow[i] = b
+        near[i] = nearest - b < tau * 1.01
 
 
 @register
@@ -485,7 +651,8 @@ class VBD(Integrator):
     is the best of 0.5, 0.8, 0.9 and 0.95 at 1/240 s, 15× closer to the converged step than none
     after 10 iterations; docs/BENCHMARKS.md); ``contact_stiffness`` (N/m, default 1e4);
     ``collision_interval`` (default 5): iterations between candidate searches when the cloth
-    self-collides; ``time_budget`` (s, default None): when set, iterate until that much wall time
+    self-collides and a vertex met its bound; ``self_friction`` (default 0.5): Coulomb's μ between
+    the cloth's own layers; ``time_budget`` (s, default None): when set, iterate until that much wall time
     has passed (at least one iteration, at most ``iterations``) — a node that must keep its tick,
     whose results then depend on the machine.
 
@@ -511,7 +678,8 @@ class VBD(Integrator):
     handles = frozenset({"self_collision"})
 
     def __init__(self, model, iterations: int = 10, rho: float = 0.8, contact_stiffness: float = 1e4,
-                 collision_interval: int = 5, time_budget: float | None = None):
+                 collision_interval: int = 5, time_budget: float | None = None,
+                 self_friction: float = 0.5):
         super().__init__(model)
         for name, value, hi in (("iterations", iterations, 10_000),
                                 ("collision_interval", collision_interval, 10_000)):
@@ -525,6 +693,9 @@ class VBD(Integrator):
                                             and 0 < time_budget < math.inf):
             raise ValueError(f"time_budget must be None or a positive number of seconds, "
                              f"got {time_budget!r}")
+        if not (isinstance(self_friction, (int, float)) and 0.0 <= self_friction < math.inf):
+            raise ValueError(f"self_friction must be a number >= 0 (Coulomb's μ), got {self_friction!r}")
+        self.self_friction = float(self_friction)
         self.iterations = int(iterations)
         self.rho = float(rho)
         self.contact_stiffness = float(contact_stiffness)
@@ -541,11 +712,18 @@ class VBD(Integrator):
         self._cut = np.zeros(n, np.int8)
         self._touch = np.zeros(n, np.int8)  # in contact in the last iteration: not extrapolated
         self._no_touch = np.zeros(n, np.int8)
-        self._bound = np.full(n, np.inf)
+        self._allow = np.full(n, np.inf)  # how far each vertex may move from the last search
+        self._near = np.ones(n, np.bool_)  # may touch a collider before the next search
+        self._candidates = False  # whether the last search's pairs serve self-contact
+        self._cd_colliders = None
+        self._cut_last = False
         tris = np.ascontiguousarray(model.triangles, dtype=np.int64).reshape(-1, 3)
         self._tris = tris
-        self._no_rec = (np.zeros(n + 1, np.int64), np.zeros(0, np.int64), np.zeros((0, 2), np.int64),
-                        np.zeros((0, 2), np.int64))
+        self._no_rec = (np.zeros(n + 1, np.int64), np.zeros(0, np.int64),
+                        np.zeros(n + 1, np.int64), np.zeros(0, np.int64), np.zeros((0, 4), np.int64),
+                        np.zeros((0, 4)), np.zeros((0, 3)), np.zeros(0), np.full(n, np.inf),
+                        np.zeros(0))
+        self._rec = self._no_rec
         self._no_colliders = (np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3)),
                               np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros((0, 4)), np.zeros(0))
 
@@ -556,6 +734,7 @@ class VBD(Integrator):
 
     def reset(self, state, forces, dt):
         self._a_prev[:] = 0.0
+        self._candidates = False  # the state was set: search again
 
     def _layout(self, forces):
         """Per force pipeline: each vertex's springs (CSR of the other end and the spring's
@@ -632,14 +811,18 @@ class VBD(Integrator):
         self_contact = sc is not None and sc.active
         if self_contact:
             tau = sc.thickness
-        rec = self._no_rec
         x_cd = self._buffer("_x_cd", x)
-        bound = self._bound
-        bound[:] = np.inf
+        allow = self._allow
         if self_contact or len(colliders[0]):
-            rec = self._detect(xt, y, colliders, tau, self_contact, x_cd)
+            if not self._detection_holds(y, colliders, tau, self_contact):
+                self._detect(xt, y, colliders, tau, self_contact, x_cd)
             # the initial guess within the bounds
-            _chebyshev(x, x_cd, 1.0, free, x_cd, bound, self._cut, self._no_touch)
+            _chebyshev(x, x_cd, 1.0, free, x_cd, allow, GAMMA, (*self._rec, self._colour),
+                       self._cut, self._no_touch)
+        else:
+            allow[:] = np.inf
+            self._rec = self._no_rec
+            self._candidates = False
         xs = self._buffer("_xs", x)
         prev2 = self._buffer("_prev2", x)
         np.copyto(prev2, x)
@@ -654,11 +837,14 @@ class VBD(Integrator):
         budget_end = None if self.time_budget is None else time.perf_counter() + self.time_budget
         done = 0
         for it in range(self.iterations):
-            if self_contact and it > 0 and it % self.collision_interval == 0:
-                rec = self._detect(x, y, colliders, tau, self_contact, x_cd)
+            if self_contact and it > 0 and it % self.collision_interval == 0 and cut.any():
+                # a vertex hit its bound: search again from here, for room to move on
+                self._detect(x, y, colliders, tau, self_contact, x_cd)
+                cut[:] = 0
+            sc_arrays = (*self._rec, self._colour)
             np.copyto(xs, x)
             run(verts, cptr, x, xt, y, xs, m_h2, sp, 1.0 / h, drag_h, colliders, tau, kc, eps,
-                (*rec, self._tris, self._edges(), self._colour), ks, x_cd, bound, stepped, cut,
+                sc_arrays, ks, self.self_friction, x_cd, allow, GAMMA, self._near, stepped, cut,
                 touch)
             done += 1
             if self.rho > 0.0:
@@ -666,7 +852,7 @@ class VBD(Integrator):
                 omega = 1.0 if it == 0 else (2.0 / (2.0 - self.rho ** 2) if it == 1
                                              else 4.0 / (4.0 - self.rho ** 2 * omega))
                 if it > 0:
-                    _chebyshev(x, prev2, omega, free, x_cd, bound, cut, touch)
+                    _chebyshev(x, prev2, omega, free, x_cd, allow, GAMMA, sc_arrays, cut, touch)
                 np.copyto(prev2, xs)
             if budget_end is not None and time.perf_counter() >= budget_end:
                 break
@@ -682,56 +868,68 @@ class VBD(Integrator):
         nf = int(free.sum())
         c["last_residual"] = float(math.sqrt(stepped[free].sum() / nf)) if nf else 0.0
         c["truncated"] += int(cut.sum())
+        self._cut_last = bool(cut.any())
 
     def _edges(self):
         sc = self._self_collision
         return sc.edges if sc is not None else np.zeros((0, 2), np.int64)
 
-    def _detect(self, x, y, colliders, tau, self_contact, x_cd):
-        """Candidate search from ``x`` (kept in ``x_cd``): the self-contact records and every
-        vertex's conservative bound. Returns the records' arrays."""
+    def _detect(self, x, y, colliders, tau, self_contact, x_cd) -> None:
+        """Candidate search from ``x`` (kept in ``x_cd``): the self-contact pairs and records
+        (:attr:`_rec`), every vertex's allowance and whether it may touch a collider."""
         np.copyto(x_cd, x)
         n = len(x)
-        allowance = 0.5 * tau + 1.5 * np.linalg.norm(y - x, axis=1)
+        allowance = ALLOWANCE[0] * tau + ALLOWANCE[1] * np.linalg.norm(y - x, axis=1)
         c = self.counters
         c["detections"] += 1
-        rec = self._no_rec
-        vt = ee = rec[2]
-        vt_d = ee_d = np.zeros(0)
+        self._rec = self._no_rec
+        self._energy_pairs = 0
         sc = self._self_collision
         if self_contact:
             # each vertex reaches τ/2 and its allowance: a pair not found stays beyond τ
             vt, vt_d, ee, ee_d = sc.candidates(x, 0.5 * tau + allowance)
-            rec = self._records(n, vt, ee, sc.edges)
-        self._adjacency(sc)
-        depth = self._depths(colliders)
-        _bounds(n, x, vt, vt_d, ee, ee_d, self._tris, self._edges(), *self._vtri, *self._vedge,
-                allowance if self_contact else np.full(n, np.inf), colliders[0], colliders[1],
-                colliders[2], colliders[5], depth, tau, GAMMA, self._bound)
-        self._bound[~self.free] = np.inf
-        c["last_contacts"] = len(vt) + len(ee)
-        return rec
+            self._rec = self._records(n, x, vt, vt_d, ee, ee_d, sc)
+        else:
+            allowance[:] = np.inf
+        _allowances(x, allowance, colliders[0], colliders[1], colliders[2], colliders[5],
+                    self._depths(colliders), tau, self._allow, self._near)
+        self._allow[~self.free] = np.inf
+        c["last_contacts"] = self._energy_pairs
+        self._candidates = self_contact
+        self._cd_colliders = (colliders[1].copy(), colliders[2].copy(), tau)
 
-    def _records(self, n, vt, ee, edges):
-        """Per vertex, its self-contact records (``2·pair`` for a vertex–triangle pair,
-        ``2·pair + 1`` for an edge pair), as CSR."""
-        tris = self._tris
-        owners = [vt[:, 0], tris[vt[:, 1]].ravel(), edges[ee[:, 0]].ravel(), edges[ee[:, 1]].ravel()]
-        items = [2 * np.arange(len(vt)), np.repeat(2 * np.arange(len(vt)), 3),
-                 np.repeat(2 * np.arange(len(ee)) + 1, 2), np.repeat(2 * np.arange(len(ee)) + 1, 2)]
-        owner = np.concatenate(owners).astype(np.int64)
-        item = np.concatenate(items).astype(np.int64)
-        ptr, rec = _csr(owner, item, n)
-        return ptr, rec, np.ascontiguousarray(vt, dtype=np.int64), np.ascontiguousarray(ee, dtype=np.int64)
+    def _detection_holds(self, y, colliders, tau, self_contact) -> bool:
+        """Whether the last candidate search serves this step too: it was made for self-contact,
+        no collider moved and the thickness is the same, and all but :data:`REUSE_OVER` of the
+        free vertices' inertial motions from where the search was made stay within half their
+        allowances. Its pairs, normals and bounds then still hold (they are taken from the
+        search's positions, and so are the bounds), and the search costs most of a contact-rich
+        step."""
+        if not self_contact or not self._candidates:
+            return False
+        pos, rot, tau0 = self._cd_colliders
+        if tau0 != tau or pos.shape != colliders[1].shape or not (
+                np.array_equal(pos, colliders[1]) and np.array_equal(rot, colliders[2])):
+            return False
+        free = self.free
+        moved = np.linalg.norm(y[free] - self._x_cd[free], axis=1)
+        return bool(np.count_nonzero(moved > 0.5 * self._allow[free]) <= REUSE_OVER * len(moved))
 
-    def _adjacency(self, sc):
-        """Each vertex's triangles and edges (CSR), once."""
-        if getattr(self, "_vtri", None) is None:
-            n = self.model.n_particles
-            tris = self._tris
-            self._vtri = _csr(tris.ravel(), np.repeat(np.arange(len(tris)), 3), n)
-            edges = self._edges()
-            self._vedge = _csr(edges.ravel(), np.repeat(np.arange(len(edges)), 2), n)
+    def _records(self, n, x, vt, vt_d, ee, ee_d, sc):
+        """The candidate pairs at ``x`` (:func:`contact_pairs`) and each vertex's records of them:
+        ``(energy ptr, energy records, bound ptr, bound records, vertices, weights, normals,
+        distances, each vertex's nearest distance, each energy record's distance in the current
+        iteration)``."""
+        _, tri_edge, edge_owner, _, vertex_owner = sc.features[:5]
+        idx, coef, nrm, energy = contact_pairs(x, np.ascontiguousarray(vt, dtype=np.int64),
+                                               np.ascontiguousarray(ee, dtype=np.int64), self._tris,
+                                               sc.edges, tri_edge, edge_owner, vertex_owner)
+        dist = np.concatenate([vt_d, ee_d]).astype(np.float64)
+        self._energy_pairs = int(energy.sum())
+        ptr, rec = contact_records(n, idx, coef, energy)
+        gptr, grec = contact_records(n, idx, coef, np.ones(len(idx), np.bool_))
+        return (ptr, rec, gptr, grec, idx, coef, nrm, dist, _nearest(gptr, grec, dist),
+                np.zeros(len(rec)))
 
     @staticmethod
     def _depths(colliders):

@@ -22,6 +22,8 @@ from . import params as P
 
 #: a publish_rate is refused only when the measured cost exceeds the time available this many times
 RATE_REFUSAL_LOAD = 10.0
+#: the share of a step's part of the tick that vbd's iterations may take under vbd.fit_tick
+FIT_SHARE = 0.6
 
 
 def _settle_garbage() -> None:
@@ -65,6 +67,19 @@ class ParameterGate:
         return model
 
     _build_simulator = staticmethod(settings.build_simulator)
+
+    def _fit_solver(self, cfg: dict) -> None:
+        """vbd's options from ``cfg``: its iterations, and under ``vbd.fit_tick`` a time budget a
+        step (:data:`FIT_SHARE` of a step's share of the tick at the target real-time factor; the
+        rest of the step, its stages and the publishing take the other part)."""
+        sim = self.sim
+        if sim.integrator != "vbd":
+            return
+        options = settings.integrator_options(cfg)
+        if cfg["vbd.fit_tick"] and cfg["real_time_factor"] > 0:
+            options["time_budget"] = FIT_SHARE * cfg["dt"] / cfg["real_time_factor"]
+        if options != sim.integrator_options:
+            sim.set_integrator("vbd", **options)
 
     def _pre_set(self, parameters: list[Parameter]) -> list[Parameter]:
         """The gate every value passes first (it runs before rclpy's own type and range checks,
@@ -191,6 +206,7 @@ class ParameterGate:
         if cand["real_time_factor"] != self.cfg["real_time_factor"]:
             self._carry = 0.0  # a backlog owed at the old pace is not owed at the new one
             self._history.clear()
+        self._fit_solver(cand)
         self._rates_run.add(cand["publish_rate"])
         rate_changed = cand["publish_rate"] != self.cfg["publish_rate"]
         self.cfg = cand

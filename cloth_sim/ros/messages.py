@@ -76,8 +76,10 @@ def stability_margin(dt: float, stable_dt: float | None) -> float:
 
 def stats(Stats, *, stamp, frame_id: str, integrator: str, dt: float, steps: int, step_wall: float,
           step_max: float, tick_wall: float, rtf: float, sim_time: float, energy: dict,
-          max_strain: float, overruns: int, stable_dt: float | None, paused: bool):
-    """The package's ``Stats`` message (``Stats`` is the generated type)."""
+          max_strain: float, overruns: int, stable_dt: float | None, paused: bool,
+          solver: dict | None = None):
+    """The package's ``Stats`` message (``Stats`` is the generated type); ``solver``: the
+    integrator's counters (``last_iterations`` and ``last_residual`` of an iterative method)."""
     msg = Stats()
     msg.header.stamp = stamp
     msg.header.frame_id = frame_id
@@ -95,6 +97,8 @@ def stats(Stats, *, stamp, frame_id: str, integrator: str, dt: float, steps: int
     msg.overruns = overruns
     msg.stability_margin = stability_margin(dt, stable_dt)
     msg.paused = paused
+    msg.solver_iterations = int((solver or {}).get("last_iterations", 0))
+    msg.solver_residual = float((solver or {}).get("last_residual", 0.0))
     return msg
 
 

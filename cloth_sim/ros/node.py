@@ -116,6 +116,7 @@ class ClothSimNode(ParameterGate, SimulationControl, Manipulation, Publishing, N
         if reason:
             raise StartupError(reason)
         self.sim = self._build_simulator(self.cfg, model, self.scene)
+        self._fit_solver(self.cfg)
         self.balance = EnergyBalance(self.sim)  # energy no source put in: WARN on /diagnostics
         # every kernel compiled (or loaded from numba's cache) now, not in the tick that first
         # needs it: switching to kang live once stalled the node for 6 s

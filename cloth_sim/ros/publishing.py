@@ -67,7 +67,7 @@ class Publishing:
             steps=steps, step_wall=step_wall, step_max=step_max,
             tick_wall=time.perf_counter() - t0, rtf=self.real_time_factor(), sim_time=sim.time,
             energy=sim.energy(), max_strain=sim.max_strain(), overruns=self.overruns,
-            stable_dt=self._stable_dt, paused=self.paused))
+            stable_dt=self._stable_dt, paused=self.paused, solver=sim.integrator_stats))
         self._tick_costs.append((steps, step_wall, time.perf_counter() - t1))
         if wall_now - self._last_status >= STATUS_PERIOD:
             self._last_status = wall_now

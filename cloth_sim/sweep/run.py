@@ -169,7 +169,9 @@ class _Bag:
             steps=int(sim.steps_taken - self.last_steps), step_time_mean=0.0, step_time_max=0.0,
             tick_wall_time=0.0, real_time_factor=0.0, sim_time=sim.time,
             kinetic_energy=energy["kinetic"], potential_energy=energy["spring"] + energy["gravity"],
-            max_strain=sim.max_strain(), overruns=0, stability_margin=self.margin, paused=False))
+            max_strain=sim.max_strain(), overruns=0, stability_margin=self.margin, paused=False,
+            solver_iterations=int(sim.integrator_stats.get("last_iterations", 0)),
+            solver_residual=float(sim.integrator_stats.get("last_residual", 0.0))))
         self.last_steps = sim.steps_taken
         if self.camera is not None:
             f = self.camera.render(sim)
