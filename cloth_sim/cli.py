@@ -10,9 +10,11 @@
     Print how long a step that diverges holds the caller (guard, restore, message), per integrator.
 ``cloth-sim bench params [--size 32] [--rate 60]``
     Print the ~/stats gap while a 26-parameter file is loaded the way `ros2 param load` does (needs rclpy).
-``cloth-sim bench node [--sizes 32 64] [--seconds 10]`` (or ``--scene tshirt``)
+``cloth-sim bench node [--sizes 32 64] [--seconds 10]`` (or ``--scene tshirt``, or ``--scene hanging
+drape … --grid 64``)
 
 ``cloth-sim bench peers [--sizes 32 64 128] [--rounds 9]`` (NVIDIA Warp's CPU cloth kernel beside ours)
+``cloth-sim bench vbd-peers [--sizes 32 64] [--device cpu]`` (Newton's VBD beside ours, and its cloth twist)
 
 ``cloth-sim bench strain [--sizes 32 64] [--seconds 3]`` (worst strain and cost of the strain limit)
 ``cloth-sim bench contacts [--sizes 32 64] [--seconds 1.5]`` (cost of colliders and self-collision)
@@ -97,9 +99,13 @@ def _bench_params(args) -> int:
 
 
 def _bench_node(args) -> int:
-    from .ros.bench import print_node_table, print_scene_node_table
+    from .ros.bench import print_grid_scene_table, print_node_table, print_scene_node_table
     if args.scene:
-        print_scene_node_table(args.scene, args.seconds, args.rate)
+        if args.grid is not None:
+            print_grid_scene_table(args.scene, args.grid, args.seconds, args.rate)
+            return 0
+        for scene in args.scene:
+            print_scene_node_table(scene, args.seconds, args.rate)
         return 0
     print_node_table(args.sizes, args.seconds, args.integrator, args.dt, args.rate,
                      args.strain_limit_passes, args.stiffness,
@@ -153,6 +159,12 @@ def _bench_peers(args) -> int:
     from .bench.peers import print_peer_table
 
     return print_peer_table(tuple(args.sizes), rounds=args.rounds)
+
+
+def _bench_vbd_peers(args) -> int:
+    from .bench.vbd_peers import print_vbd_peer_table
+
+    return print_vbd_peer_table(tuple(args.sizes), args.seconds, args.twist_seconds, args.device)
 
 
 def _bench_record(args) -> int:
@@ -252,6 +264,15 @@ def build_parser() -> argparse.ArgumentParser:
     pp.add_argument("--sizes", type=int, nargs="+", default=[32, 64, 128])
     pp.add_argument("--rounds", type=int, default=9, help="alternating bursts per size (median)")
     pp.set_defaults(func=_bench_peers)
+    vp = bsub.add_parser("vbd-peers", help="Newton's SolverVBD beside vbd: the hanging cloth's springs, "
+                                          "and Newton's cloth twist (needs the optional newton: make "
+                                          "bench-peers)")
+    vp.add_argument("--sizes", type=int, nargs="+", default=[32, 64])
+    vp.add_argument("--seconds", type=float, default=2.0, help="simulated time of the hanging runs")
+    vp.add_argument("--twist-seconds", type=float, default=5.0,
+                    help="simulated time of the twist (Newton's example runs 300 frames: 5 s); 0: none")
+    vp.add_argument("--device", default="cpu", help="Warp device of Newton's side (cpu, cuda:0)")
+    vp.set_defaults(func=_bench_vbd_peers)
     bb = bsub.add_parser("blowup", help="how long a diverging step holds the caller, per integrator")
     bb.add_argument("--size", type=int, default=32, help="cloth N×N (default 32)")
     bb.set_defaults(func=_bench_blowup)
@@ -261,8 +282,12 @@ def build_parser() -> argparse.ArgumentParser:
     bp.set_defaults(func=_bench_params)
     nb = bsub.add_parser("node", help="real-time factor of cloth_sim_node (needs rclpy)")
     nb.add_argument("--sizes", type=int, nargs="+", default=[32, 64])
-    nb.add_argument("--scene", default=None, help="a scene as it ships (e.g. tshirt), self-collision "
-                    "off and on, instead of the hanging scene at --sizes")
+    nb.add_argument("--scene", default=None, nargs="+",
+                    help="scenes as they ship (e.g. tshirt): self-collision off and on, instead of the "
+                    "hanging scene at --sizes; with --grid N, each grid scene as the node runs it under "
+                    "-p rows:=N -p cols:=N")
+    nb.add_argument("--grid", type=int, default=None, help="with --scene: rows and cols of the grid "
+                    "scenes (their spacing and particle mass kept: a larger cloth)")
     nb.add_argument("--seconds", type=float, default=10.0, help="measured wall time per row")
     nb.add_argument("--integrator", default="symplectic_euler", choices=integrators.available())
     nb.add_argument("--dt", type=float, default=1e-3)

@@ -60,3 +60,10 @@ def check_name(name) -> str:
 
 def check_grasp(point, radius) -> tuple[np.ndarray, float]:
     return _vector("point", point), _positive("radius", radius)
+
+
+def check_box(lo, hi) -> tuple[np.ndarray, np.ndarray]:
+    lo, hi = _vector("box min", lo), _vector("box max", hi)
+    if np.any(lo > hi):
+        raise ValueError(f"box: min {lo.tolist()} must not exceed max {hi.tolist()} on any axis")
+    return lo, hi

@@ -18,7 +18,8 @@ A scene is a YAML mapping (see ``config/scenes/*.yaml``)::
     thickness: 0.005               # kept from colliders (and from itself with self_collision)
     self_collision: false
     grippers:                      # holding the cloth from the start (moved by ~/grippers/<name>/pose)
-      - {name: left, point: [0, 0, 0], radius: 0.02}
+      - {name: left, point: [0, 0, 0], radius: 0.02}         # the particles within radius of point
+      - {name: edge, box: {min: [x, y, z], max: [x, y, z]}}  # or every particle inside a box
     colliders:                     # each with an optional name and friction (Coulomb's μ, default 0)
       - {type: plane, normal: [0, 0, 1], offset: 0.0, friction: 0.5}
       - {type: sphere, center: [0.5, 0.5, -0.3], radius: 0.2}
@@ -103,7 +104,8 @@ class Scene:
     self_collision: bool = False
     #: validated collider specifications: (type, keyword arguments); see :meth:`make_colliders`
     colliders: list = field(default_factory=list)
-    #: grippers holding the cloth from the start: (name, point, radius)
+    #: grippers holding the cloth from the start: (name, point, radius, box), box ``(lo, hi)`` for
+    #: a gripper holding what a box holds (point and radius then None), else None
     grippers: list = field(default_factory=list)
     source: str = "<dict>"
     #: a mesh scene: ``{file (Path), scale, density, position, orientation}``; ``None`` for a grid
@@ -121,7 +123,10 @@ class Scene:
     def apply_grippers(self, sim) -> None:
         """Grasp with the scene's grippers; one whose radius reaches no particle (a coarser grid
         than the scene's) holds the particle nearest its point."""
-        for name, point, radius in self.grippers:
+        for name, point, radius, box in self.grippers:
+            if box is not None:
+                sim.grasp_box(name, *box)
+                continue
             try:
                 sim.grasp(name, point, radius)
             except ValueError:
@@ -389,23 +394,37 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
             v.fail(f"colliders[{i}].name", "unique (it names the collider's pose topic)", n)
     grips = data.get("grippers", []) or []
     if not isinstance(grips, list) or len(grips) > MAX_GRIPPERS:
-        v.fail("grippers", f"a list of at most {MAX_GRIPPERS} {{name, point, radius}} mappings", grips)
+        v.fail("grippers", f"a list of at most {MAX_GRIPPERS} {{name, point, radius}} or {{name, box}} "
+               "mappings", grips)
     for i, g in enumerate(grips):
         where = f"grippers[{i}]"
         if not isinstance(g, dict):
-            v.fail(where, "a mapping with name, point and radius", g)
-        v.known(f"{where}.", g, {"name", "point", "radius"})
+            v.fail(where, "a mapping with name, and point and radius or box", g)
+        v.known(f"{where}.", g, {"name", "point", "radius", "box"})
         name = g.get("name")
         if not (isinstance(name, str) and GRIPPER_NAME.fullmatch(name)):
             v.fail(f"{where}.name", "a name of ASCII letters, digits and _ (at most 64, not starting "
                    "with a digit)", name)
-        if name in [n for n, _, _ in s.grippers]:
+        if name in [n for n, *_ in s.grippers]:
             v.fail(f"{where}.name", "unique (it names the gripper's topics)", name)
+        if "box" in g:
+            box = g["box"]
+            if "point" in g or "radius" in g:
+                v.fail(where, "either point and radius or box, not both", g)
+            if not isinstance(box, dict):
+                v.fail(f"{where}.box", "a mapping {min: [x, y, z], max: [x, y, z]}", box)
+            v.known(f"{where}.box.", box, {"min", "max"})
+            lo = v.vector(f"{where}.box.min", box.get("min"), 3)
+            hi = v.vector(f"{where}.box.max", box.get("max"), 3)
+            if any(a > b for a, b in zip(lo, hi)):
+                v.fail(f"{where}.box", "min <= max on every axis", box)
+            s.grippers.append((name, None, None, (lo, hi)))
+            continue
         point = v.vector(f"{where}.point", g.get("point"), 3)
         radius = v.number(f"{where}.radius", g.get("radius"), lo=0.0)
         if radius <= 0:
             v.fail(f"{where}.radius", "a finite number > 0", radius)
-        s.grippers.append((name, point, radius))
+        s.grippers.append((name, point, radius, None))
     return s
 
 

@@ -34,7 +34,7 @@ from .forces import (GATHER_ACCELERATION, GATHER_FORCE, GATHER_KICK_DRIFT,
                      spring_forces_gather, spring_strains)
 from .model import ClothModel
 from .parameters import SCHEMA, ParameterError
-from .grippers import Gripper, check_grasp, check_name, check_pose
+from .grippers import Gripper, check_box, check_grasp, check_name, check_pose
 from .self_collision import SelfCollision, check_thickness
 from .state import State
 
@@ -508,11 +508,8 @@ class Simulator:
         """Hold every free particle within ``radius`` of ``point`` with a gripper called ``name``,
         placed at ``point`` with the identity orientation; returns their indices. A name in use,
         a bad point or radius, or no particle in reach raises ``ValueError`` and changes nothing."""
-        name = check_name(name)
+        name = self._new_gripper(name)
         point, radius = check_grasp(point, radius)
-        if name in self._grippers:
-            raise ValueError(f"gripper {name!r} already holds {len(self._grippers[name].indices)} "
-                             f"particles: release it first")
         held = self.model.pinned
         d = np.linalg.norm(self.state.x - point, axis=1)
         idx = np.flatnonzero((d <= radius) & ~held)
@@ -520,6 +517,30 @@ class Simulator:
             near = float(d[~held].min()) if (~held).any() else float("nan")
             raise ValueError(f"grasp {name!r}: no free particle within radius {radius:g} m of point "
                              f"{point.tolist()} (the nearest is {near:.4g} m away)")
+        return self._hold(name, idx, point)
+
+    def grasp_box(self, name: str, lo, hi) -> np.ndarray:
+        """Hold every free particle inside the axis-aligned box ``[lo, hi]`` (a whole edge of a
+        cloth, say) with a gripper called ``name``, placed at the box's centre with the identity
+        orientation; returns their indices. Errors as :meth:`grasp`, and a box with ``lo > hi``
+        on an axis."""
+        name = self._new_gripper(name)
+        lo, hi = check_box(lo, hi)
+        held = self.model.pinned
+        idx = np.flatnonzero(np.all((self.state.x >= lo) & (self.state.x <= hi), axis=1) & ~held)
+        if len(idx) == 0:
+            raise ValueError(f"grasp {name!r}: no free particle inside the box {lo.tolist()} .. "
+                             f"{hi.tolist()}")
+        return self._hold(name, idx, 0.5 * (lo + hi))
+
+    def _new_gripper(self, name) -> str:
+        name = check_name(name)
+        if name in self._grippers:
+            raise ValueError(f"gripper {name!r} already holds {len(self._grippers[name].indices)} "
+                             f"particles: release it first")
+        return name
+
+    def _hold(self, name: str, idx: np.ndarray, point: np.ndarray) -> np.ndarray:
         self._grippers[name] = Gripper(name, idx, self.state.x[idx] - point, point)
         self._prestage = self.state.copy()
         self._wrench_ready = False

@@ -149,3 +149,45 @@ def test_a_scene_declares_grippers_and_checks_them():
             scene_from_dict({"grid": grid, "grippers": [bad]}, source="s.yaml")
     with pytest.raises(SceneError, match="unique"):
         scene_from_dict({"grid": grid, "grippers": [{"name": "a", "point": [0, 0, 0], "radius": 0.1}] * 2})
+
+
+def test_a_box_grips_a_whole_edge_and_turns_it_about_its_centre():
+    """grasp_box holds every free particle inside the box (a grid's first column here, and nothing
+    of the next one), placed at the box's centre: a quarter turn about x moves each held particle to
+    its place turned about that centre."""
+    model, sim = _cloth(integrator="symplectic_euler", dt=1e-3, gravity=(0.0, 0.0, 0.0))
+    idx = sim.grasp_box("edge", (-0.01, -0.01, -0.01), (0.01, 0.46, 0.01))
+    assert sorted(idx.tolist()) == [10 * r for r in range(10)]
+    centre = np.array([0.0, 0.225, 0.0])
+    before = sim.positions[idx].copy()
+    q = (math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0)  # a quarter turn about x
+    sim.set_gripper_pose("edge", centre, q)
+    sim.step()
+    turned = centre + (before - centre) @ np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]]).T
+    assert np.allclose(sim.positions[idx], turned, atol=1e-12)
+    with pytest.raises(ValueError, match="no free particle inside the box"):
+        sim.grasp_box("far", (5, 5, 5), (6, 6, 6))
+    with pytest.raises(ValueError, match="must not exceed"):
+        sim.grasp_box("bad", (0, 0, 1), (1, 1, 0))
+    with pytest.raises(ValueError, match="already holds"):
+        sim.grasp_box("edge", (-1, -1, -1), (1, 1, 1))
+    assert list(sim.grippers) == ["edge"]
+
+
+def test_a_scene_gripper_may_hold_a_box():
+    from cloth_sim.scene import SceneError, scene_from_dict
+
+    grid = {"rows": 6, "cols": 6, "spacing": 0.1}
+    scene = scene_from_dict({"grid": grid, "grippers": [
+        {"name": "edge", "box": {"min": [-0.01, -0.01, -0.01], "max": [0.01, 0.51, 0.01]}}]})
+    sim = scene.build_simulator()
+    assert sim.grippers["edge"].tolist() == [0, 6, 12, 18, 24, 30]
+    for bad, field in [({"name": "a", "box": {"min": [0, 0, 0], "max": [1, 1, 1]}, "radius": 0.1},
+                        "either point and radius or box"),
+                       ({"name": "a", "box": [0, 0, 0]}, r"grippers\[0\].box"),
+                       ({"name": "a", "box": {"min": [0, 0], "max": [1, 1, 1]}}, r"grippers\[0\].box.min"),
+                       ({"name": "a", "box": {"min": [0, 0, 2], "max": [1, 1, 1]}}, "min <= max"),
+                       ({"name": "a", "box": {"min": [0, 0, 0], "max": [1, 1, 1], "x": 1}},
+                        r"grippers\[0\].box.x")]:
+        with pytest.raises(SceneError, match=field):
+            scene_from_dict({"grid": grid, "grippers": [bad]}, source="s.yaml")

@@ -1,4 +1,5 @@
-"""Make the shipped garments, ``config/meshes/tshirt.obj`` and ``config/meshes/towel.obj``.
+"""Make the shipped garments, ``config/meshes/tshirt.obj`` and ``config/meshes/towel.obj``, and the
+``twist`` scene's sheet, ``config/meshes/twist_sheet.obj``.
 
 Each outline is a polygon in metres, its sides cut into pieces of about ``EDGE`` and triangulated by
 Shewchuk's Triangle (the ``triangle`` package) as a quality mesh: no angle below 28°, no triangle
@@ -11,6 +12,10 @@ panels cut from one outline share their seam vertices exactly.
   as made, with a few centimetres between its layers. The back panel's triangles are wound the other
   way, so every normal points out of the shirt.
 * **Towel**: a 0.5 m × 0.8 m rectangle, hung from its two top corners by the ``towel`` scene.
+* **Twist sheet**: the cloth of Newton's ``example_cloth_twist`` (its asset ``square_cloth.usd`` scaled
+  by 0.01): a 1.5 m × 1.0 m sheet of 50 × 50 vertices on a regular grid, each cell cut along the
+  diagonal that alternates like a checkerboard (as that asset's; the vertices in the same order, x
+  fastest). Not a quality mesh: the same triangles as the peer's, so the two solvers run one cloth.
 
 Run ``.venv/bin/python tools/make_garments.py``; the output is the same bytes every time.
 """
@@ -112,8 +117,20 @@ def towel() -> tuple[np.ndarray, np.ndarray]:
     return np.column_stack([xy, np.zeros(len(xy))]), tris
 
 
-def write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray, title: str) -> None:
-    lines = [f"# {title}", "# made by tools/make_garments.py (Triangle, quality mesh q28); units: metres",
+def twist_sheet(n: int = 50, width: float = 1.5, height: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    xs, ys = np.linspace(-width / 2, width / 2, n), np.linspace(-height / 2, height / 2, n)
+    vertices = np.array([(x, y, 0.0) for y in ys for x in xs])
+    faces = []
+    for r in range(n - 1):
+        for c in range(n - 1):
+            a, b, d, e = r * n + c, r * n + c + 1, (r + 1) * n + c, (r + 1) * n + c + 1
+            faces += ([(a, e, b), (a, d, e)] if (r + c) % 2 == 0 else [(a, d, b), (d, e, b)])
+    return vertices, np.array(faces)
+
+
+def write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray, title: str,
+              how: str = "Triangle, quality mesh q28") -> None:
+    lines = [f"# {title}", f"# made by tools/make_garments.py ({how}); units: metres",
              f"# {len(vertices)} vertices, {len(faces)} triangles"]
     lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in vertices]
     lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]
@@ -128,6 +145,10 @@ def main() -> None:
         v, f = make()
         write_obj(OUT / f"{name}.obj", v, f, title)
         print(f"{name}: {len(v)} vertices, {len(f)} triangles -> {OUT / (name + '.obj')}")
+    v, f = twist_sheet()
+    write_obj(OUT / "twist_sheet.obj", v, f, "Newton's twist cloth: 1.5 m x 1.0 m, 50 x 50 vertices",
+              "a regular grid, diagonals alternating")
+    print(f"twist_sheet: {len(v)} vertices, {len(f)} triangles -> {OUT / 'twist_sheet.obj'}")
 
 
 if __name__ == "__main__":

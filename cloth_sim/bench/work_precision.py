@@ -4,7 +4,7 @@ Reference: ``scipy.integrate.solve_ivp`` (DOP853, rtol 1e-10, atol 1e-12) on the
 disk under a key of the scene and tolerances, and checked against a solve 100× tighter (they must agree
 below 1e-9 m). Error at T: RMS over particles of |x(T) − x_ref(T)|, and the max. Steps
 dt = 1e-3·2^−k (k = 0…5; explicit Euler k = 5…7) for the explicit methods and (1/60)·2^−k for the
-implicit ones. Time: ``perf_counter`` around the stepping loop only, the minimum of ``repeats`` runs
+implicit ones; ``vbd`` at 1, 2, 5, 10 and 20 iterations a step, a line each (``vbd-N``). Time: ``perf_counter`` around the stepping loop only, the minimum of ``repeats`` runs
 after a warm-up. A run that diverges (the simulator's guard), or ends with a non-finite or > 1 m error,
 is recorded as a failure. Observed orders: least-squares slope of log error against log dt on a
 T = 0.1 s sweep, over the stable runs whose error is above 1000× the reference's own error.
@@ -26,9 +26,19 @@ from ..simulator import SimulationDiverged, Simulator
 from ._out import G, fmt, hang16, machine, markdown_table, progress, pyplot, write_rows
 
 EXPLICIT = ["explicit_euler", "symplectic_euler", "midpoint", "rk4", "verlet"]
-IMPLICIT = ["implicit_euler", "implicit_euler_prefactored", "kang", "liu2013", "xpbd"]
+#: vbd at a fixed iteration count a step: each is its own line (``vbd-N``)
+VBD_ITERATIONS = (1, 2, 5, 10, 20)
+IMPLICIT = (["implicit_euler", "implicit_euler_prefactored", "kang", "liu2013", "xpbd"]
+            + [f"vbd-{k}" for k in VBD_ITERATIONS])
 ORDER_EXPECTED = {"explicit_euler": 1, "symplectic_euler": 1, "midpoint": 2, "rk4": 4, "verlet": 2,
-                  "implicit_euler": 1, "liu2013": 1, "xpbd": 1}
+                  "implicit_euler": 1, "liu2013": 1, "xpbd": 1, "vbd-20": 1}
+
+
+def method(label: str) -> tuple[str, dict]:
+    """A line's integrator and options: ``vbd-N`` is vbd at N iterations a step."""
+    if label.startswith("vbd-"):
+        return "vbd", {"iterations": int(label[4:])}
+    return label, {}
 REF_RTOL, REF_ATOL = 1e-10, 1e-12
 
 
@@ -80,18 +90,19 @@ def checked_reference(T: float, cache: Path) -> dict:
     return {"x": x, "nfev": nfev, "nfev_tight": nfev_tight, "agreement": agree}
 
 
-def run(name: str, dt: float, T: float, x_ref: np.ndarray, repeats: int) -> dict:
+def run(label: str, dt: float, T: float, x_ref: np.ndarray, repeats: int) -> dict:
     n_steps = int(round(T / dt))
-    row = {"integrator": name, "dt": dt, "steps": n_steps, "T": T}
+    row = {"integrator": label, "dt": dt, "steps": n_steps, "T": T}
+    name, options = method(label)
     model = hang16()                      # shared: a Simulator never modifies its model
-    warm = Simulator(model, integrator=name, dt=dt, gravity=G)
+    warm = Simulator(model, integrator=name, dt=dt, gravity=G, integrator_options=options)
     try:
         warm.step(min(n_steps, 10))
     except SimulationDiverged:
         pass
     best, sim = math.inf, None
     for _ in range(repeats):
-        sim = Simulator(model, integrator=name, dt=dt, gravity=G)
+        sim = Simulator(model, integrator=name, dt=dt, gravity=G, integrator_options=options)
         t0 = time.perf_counter()
         try:
             sim.step(n_steps)

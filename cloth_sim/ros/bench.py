@@ -134,8 +134,8 @@ def print_scene_node_table(scene: str, seconds: float, rate: float) -> list[dict
     print(f"# cloth_sim_node, scene {scene} as it ships, {rate:g} Hz, ~/points + ~/mesh subscribed, "
           f"{seconds:g} s per row after 2 s warm-up; {platform.machine()}, {os.cpu_count()} cores")
     print("| self_collision | real-time factor | ms/step | tick wall ms | ticks/s | meshes/s | "
-          "overruns |")
-    print("|---|---|---|---|---|---|---|")
+          "overruns | worst strain |")
+    print("|---|---|---|---|---|---|---|---|")
     rows = []
     for on in (False, True):
         r = measure_node([Parameter("scene", value=scene), Parameter("self_collision", value=on),
@@ -143,7 +143,34 @@ def print_scene_node_table(scene: str, seconds: float, rate: float) -> list[dict
         rows.append(dict(r, self_collision=on))
         print(f"| {'on' if on else 'off'} | {r['rtf']:.3f} | {r['ms_per_step']:.3f} | "
               f"{r['tick_ms']:.2f} | {r['ticks_per_s']:.1f} | {r['meshes_per_s']:.1f} | "
-              f"{r['overruns']} |", flush=True)
+              f"{r['overruns']} | {r['worst_strain']:.4f} |", flush=True)
+    return rows
+
+
+def print_grid_scene_table(scenes, n: int, seconds: float, rate: float) -> list[dict]:
+    """Each grid scene as a user's ``-p rows:=n -p cols:=n`` runs it (its spacing and particle mass
+    kept: a larger, heavier cloth), its integrator, step and self-collision as it ships,
+    ``~/points`` and ``~/mesh`` subscribed."""
+    from ..scene import load_scene
+
+    print(f"# cloth_sim_node, grid scenes at -p rows:={n} -p cols:={n}, {rate:g} Hz, ~/points + ~/mesh "
+          f"subscribed, {seconds:g} s per row after 2 s warm-up; {platform.machine()}, "
+          f"{os.cpu_count()} cores")
+    print("| scene | integrator, dt | real-time factor | ms/step | tick wall ms | overruns | "
+          "worst strain |")
+    print("|---|---|---|---|---|---|---|")
+    rows = []
+    for scene in scenes:
+        s = load_scene(scene)
+        if s.mesh is not None:
+            print(f"| {scene} | a mesh scene: no grid to resize | | | | | |")
+            continue
+        r = measure_node([Parameter("scene", value=scene), Parameter("rows", value=n),
+                          Parameter("cols", value=n), Parameter("publish_rate", value=rate)],
+                         seconds, True)
+        rows.append(dict(r, scene=scene))
+        print(f"| {scene} | {s.integrator}, {s.dt:g} s | {r['rtf']:.3f} | {r['ms_per_step']:.3f} | "
+              f"{r['tick_ms']:.2f} | {r['overruns']} | {r['worst_strain']:.4f} |", flush=True)
     return rows
 
 
