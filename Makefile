@@ -47,12 +47,13 @@ fuzz: install
 bench: install
 	for b in work-precision stability scaling; do $(VENV)/bin/cloth-sim bench $$b --out docs/bench/$$b || exit 1; done
 
-# NVIDIA Warp's CPU cloth kernel and Newton's VBD beside ours (installs the pinned optional extra,
-# ~550 MB: warp-lang, newton, mujoco; about 10 minutes)
+# NVIDIA Warp's CPU cloth kernel, Newton's VBD and MuJoCo's flex beside ours (installs the pinned
+# optional extra, ~550 MB: warp-lang, newton, mujoco; about 12 minutes)
 bench-peers: install
 	$(PY) -m pip install --disable-pip-version-check -q -r requirements-peers.txt
 	$(VENV)/bin/cloth-sim bench peers
 	$(VENV)/bin/cloth-sim bench vbd-peers
+	$(VENV)/bin/cloth-sim bench flex-peer
 
 clean:
 	rm -rf $(VENV) .ros_log build install log *.egg-info

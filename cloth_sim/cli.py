@@ -15,6 +15,7 @@ drape … --grid 64``)
 
 ``cloth-sim bench peers [--sizes 32 64 128] [--rounds 9]`` (NVIDIA Warp's CPU cloth kernel beside ours)
 ``cloth-sim bench vbd-peers [--sizes 32 64] [--device cpu]`` (Newton's VBD beside ours, and its cloth twist)
+``cloth-sim bench flex-peer [--size 32]`` (MuJoCo's flex cloth beside ours on the drape scene)
 
 ``cloth-sim bench strain [--sizes 32 64] [--seconds 3]`` (worst strain and cost of the strain limit)
 ``cloth-sim bench contacts [--sizes 32 64] [--seconds 1.5]`` (cost of colliders and self-collision)
@@ -167,6 +168,12 @@ def _bench_vbd_peers(args) -> int:
     return print_vbd_peer_table(tuple(args.sizes), args.seconds, args.twist_seconds, args.device)
 
 
+def _bench_flex_peer(args) -> int:
+    from .bench.flex_peer import print_flex_table
+
+    return print_flex_table(args.size, args.seconds)
+
+
 def _bench_record(args) -> int:
     from .bag.bench import print_record_table
     print_record_table(args.size, args.rate, args.seconds)
@@ -273,6 +280,11 @@ def build_parser() -> argparse.ArgumentParser:
                     help="simulated time of the twist (Newton's example runs 300 frames: 5 s); 0: none")
     vp.add_argument("--device", default="cpu", help="Warp device of Newton's side (cpu, cuda:0)")
     vp.set_defaults(func=_bench_vbd_peers)
+    fp = bsub.add_parser("flex-peer", help="MuJoCo's flex cloth beside cloth_sim on the drape scene "
+                                          "(needs the optional mujoco: make bench-peers)")
+    fp.add_argument("--size", type=int, default=32, help="cloth N×N (default 32)")
+    fp.add_argument("--seconds", type=float, default=2.0, help="simulated time per run")
+    fp.set_defaults(func=_bench_flex_peer)
     bb = bsub.add_parser("blowup", help="how long a diverging step holds the caller, per integrator")
     bb.add_argument("--size", type=int, default=32, help="cloth N×N (default 32)")
     bb.set_defaults(func=_bench_blowup)
