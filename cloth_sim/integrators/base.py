@@ -35,6 +35,7 @@ import math
 import numpy as np
 
 from .. import stability as stab
+from ..forces import GravityTerm, WindTerm
 
 #: What ``parameters_changed`` may report.
 CHANGES = frozenset({"stiffness", "damping", "drag", "dt", "gravity", "wind"})
@@ -169,6 +170,16 @@ class Integrator:
         return None if known is None else min(known, analysis.onset_limit)
 
     # ------------------------------------------------------------------ helpers
+    def _external_force(self, forces, x, v) -> np.ndarray:
+        """Gravity's and the wind's force at ``(x, v)`` (a scratch array): what the implicit
+        methods take at the step's start, in their inertial target."""
+        f = self._buffer("_f_external", x)
+        f[:] = 0.0
+        for term in forces.terms:
+            if isinstance(term, (GravityTerm, WindTerm)):
+                term.add_force(x, v, f)
+        return f
+
     def _buffer(self, name: str, like: np.ndarray) -> np.ndarray:
         """A scratch array of ``like``'s shape, allocated once."""
         buf = self.__dict__.get(name)

@@ -44,7 +44,7 @@ import numba
 import numpy as np
 import scipy.sparse as sp
 
-from ..forces import BUCKLE_TABLE, GravityTerm, WindTerm, axial, spring_vector
+from ..forces import BUCKLE_TABLE, axial, spring_vector
 from . import register
 from .base import Integrator, Stability
 from .implicit import _graph_product, cholesky, constant_system, same_system, system_key
@@ -151,11 +151,7 @@ class Liu2013(Integrator):
         x0 = self._buffer("_x0", x)
         np.copyto(x0, x)
         # y = xₙ + h·vₙ + h²·M⁻¹·f_ext (pins: xₙ + h·vₙ, their place at the step's end)
-        f_ext = self._buffer("_fext", x)
-        f_ext[:] = 0.0
-        for term in forces.terms:
-            if isinstance(term, (GravityTerm, WindTerm)):
-                term.add_force(x, v, f_ext)
+        f_ext = self._external_force(forces, x, v)
         y = self._buffer("_y", x)
         np.multiply(v, dt, out=y)
         y += x0

@@ -61,7 +61,7 @@ import numpy as np
 
 from .. import stability as stab  # noqa: F401 (the protocol's stability class comes from the base)
 from ..colliders import carried, sdf
-from ..forces import BUCKLE_TABLE, GravityTerm, WindTerm, axial, incidence
+from ..forces import BUCKLE_TABLE, axial, incidence
 from ..model import LINEAR
 from ..self_collision import closest_on_segment_pair, closest_on_triangle
 from . import register
@@ -226,6 +226,20 @@ def _local_energy(i, px, py, pz, x, xt, y, m_h2, drag_h, inc_ptr, nbr, rest, k, 
 
 
 @numba.njit(cache=True, inline="always")
+def _press(mag, s, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5):
+    """A contact's force ``mag·n`` and stiffness ``s·n nᵀ`` added to a vertex's."""
+    return (f0 + mag * nx, f1 + mag * ny, f2 + mag * nz, h0 + s * nx * nx, h1 + s * nx * ny,
+            h2 + s * nx * nz, h3 + s * ny * ny, h4 + s * ny * nz, h5 + s * nz * nz)
+
+
+@numba.njit(cache=True, inline="always")
+def _slide(sf, tx, ty, tz, s, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5):
+    """Friction's force ``−sf·t`` and its stiffness ``s (I − n nᵀ)`` (the normal held) added."""
+    return (f0 - sf * tx, f1 - sf * ty, f2 - sf * tz, h0 + (s - s * nx * nx), h1 - s * nx * ny,
+            h2 - s * nx * nz, h3 + (s - s * ny * ny), h4 - s * ny * nz, h5 + (s - s * nz * nz))
+
+
+@numba.njit(cache=True, inline="always")
 def _colliders_at(i, x, xt, ckind, cpos, crot, cpos0, crot0, cgeo, cmu, tau, kc, eps,
                   f0, f1, f2, h0, h1, h2, h3, h4, h5):
     """Vertex ``i``'s collider contacts: the penalty, and IPC's lagged friction on its motion over
@@ -238,15 +252,8 @@ def _colliders_at(i, x, xt, ckind, cpos, crot, cpos0, crot0, cgeo, cmu, tau, kc,
             continue
         touched = True
         lam = kc * p
-        f0 += lam * nx
-        f1 += lam * ny
-        f2 += lam * nz
-        h0 += kc * nx * nx
-        h1 += kc * nx * ny
-        h2 += kc * nx * nz
-        h3 += kc * ny * ny
-        h4 += kc * ny * nz
-        h5 += kc * nz * nz
+        f0, f1, f2, h0, h1, h2, h3, h4, h5 = _press(lam, kc, nx, ny, nz, f0, f1, f2, h0, h1, h2,
+                                                    h3, h4, h5)
         mu = cmu[c]
         if mu <= 0.0:
             continue
@@ -258,16 +265,8 @@ def _colliders_at(i, x, xt, ckind, cpos, crot, cpos0, crot0, cgeo, cmu, tau, kc,
         tl = math.sqrt(tx * tx + ty * ty + tz * tz)
         g = 1.0 / tl if tl > eps else (2.0 - tl / eps) / eps
         s = mu * lam * g
-        f0 -= s * tx
-        f1 -= s * ty
-        f2 -= s * tz
-        # s (I − n nᵀ): the contact normal held
-        h0 += s - s * nx * nx
-        h1 -= s * nx * ny
-        h2 -= s * nx * nz
-        h3 += s - s * ny * ny
-        h4 -= s * ny * nz
-        h5 += s - s * nz * nz
+        f0, f1, f2, h0, h1, h2, h3, h4, h5 = _slide(s, tx, ty, tz, s, nx, ny, nz, f0, f1, f2, h0,
+                                                    h1, h2, h3, h4, h5)
     return f0, f1, f2, h0, h1, h2, h3, h4, h5, touched
 
 
@@ -312,17 +311,8 @@ def _self_contacts_at(i, x, xs, xt, colour, rec_ptr, rec, pidx, pcoef, pnrm, tau
             continue
         # ∂d/∂x_i = w n: the force pushes the pair apart along n
         lam = ks * (tau - d)
-        mag = lam * w
-        f0 += mag * nx
-        f1 += mag * ny
-        f2 += mag * nz
-        s = ks * w * w
-        h0 += s * nx * nx
-        h1 += s * nx * ny
-        h2 += s * nx * nz
-        h3 += s * ny * ny
-        h4 += s * ny * nz
-        h5 += s * nz * nz
+        f0, f1, f2, h0, h1, h2, h3, h4, h5 = _press(lam * w, ks * w * w, nx, ny, nz, f0, f1, f2,
+                                                    h0, h1, h2, h3, h4, h5)
         if mu <= 0.0:
             continue
         un = ux * nx + uy * ny + uz * nz
@@ -330,16 +320,8 @@ def _self_contacts_at(i, x, xs, xt, colour, rec_ptr, rec, pidx, pcoef, pnrm, tau
         tl = math.sqrt(tx * tx + ty * ty + tz * tz)
         g = 1.0 / tl if tl > eps else (2.0 - tl / eps) / eps
         sf = mu * lam * g
-        f0 -= sf * w * tx
-        f1 -= sf * w * ty
-        f2 -= sf * w * tz
-        s = sf * w * w  # s (I − n nᵀ), the normal held
-        h0 += s - s * nx * nx
-        h1 -= s * nx * ny
-        h2 -= s * nx * nz
-        h3 += s - s * ny * ny
-        h4 -= s * ny * nz
-        h5 += s - s * nz * nz
+        f0, f1, f2, h0, h1, h2, h3, h4, h5 = _slide(sf * w, tx, ty, tz, sf * w * w, nx, ny, nz, f0,
+                                                    f1, f2, h0, h1, h2, h3, h4, h5)
     return f0, f1, f2, h0, h1, h2, h3, h4, h5
 
 
@@ -780,11 +762,7 @@ class VBD(Integrator):
         xt = self._buffer("_xt", x)
         np.copyto(xt, x)
         # the external acceleration: gravity and the wind at the step's start
-        a = self._buffer("_a", x)
-        a[:] = 0.0
-        for term in forces.terms:
-            if isinstance(term, (GravityTerm, WindTerm)):
-                term.add_force(x, v, a)
+        a = self._external_force(forces, x, v)
         a /= model.masses[:, None]
         y = self._buffer("_y", x)
         np.multiply(v, h, out=y)
