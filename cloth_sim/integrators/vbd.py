@@ -33,8 +33,8 @@ Contacts inside the solve (when the simulator lets the method handle them, :attr
 * **Self-contact** between the cloth's own primitives, vertex–triangle and edge–edge, the same
   energy on their distance. Candidates come from the self-collision stage's tree
   (:mod:`cloth_sim.collision_tree`) at the start of the step and every ``collision_interval``
-  iterations, each vertex reaching ``τ/2`` plus its allowance of motion (``τ/2`` and 1.5 times its
-  inertial motion). **Conservative bound** (the paper's): between two searches a vertex moves at
+  iterations, each vertex reaching ``τ/2`` plus its allowance of motion (:data:`ALLOWANCE`: a tenth
+  of ``τ`` and its motion to the step's initial guess). **Conservative bound** (the paper's): between two searches a vertex moves at
   most ``γ = 0.45`` of the smallest distance the search found between its primitives (itself, its
   triangles, its edges) and any other, and at most its allowance; so two primitives that were
   ``d`` apart stay ``(1 − 2γ)·d > 0`` apart, those not found stay beyond ``τ``, and no vertex passes
@@ -70,10 +70,14 @@ from .base import Integrator, Stability
 #: the share of the nearest found distance a vertex may move between two candidate searches
 GAMMA = 0.45
 #: how far a vertex may move between two searches besides that bound: (a, b) for a·τ + b·|its
-#: inertial motion over the step| (a search then serves the next steps while they stay within)
+#: motion to the step's initial guess| (a search then serves the next steps while they stay
+#: within). The guess, not the inertia: a vertex lying on the table or on another layer has
+#: gravity's h²·g in its inertia and never moves it, and reaching that far multiplied the pairs
+#: measured (docs/BENCHMARKS.md §3h)
 ALLOWANCE = (0.1, 1.0)
 #: a search serves the next step while at most this share of the free vertices would move more
-#: than half their bound on inertia alone (those are held to their bound until the next search)
+#: than half their bound by their initial guess (those are held to their bound until the next
+#: search)
 REUSE_OVER = 0.02
 #: IPC's friction smoothing: relative tangential motion below EPS_V·h (m) is static
 EPS_V = 1e-3
@@ -863,7 +867,9 @@ class VBD(Integrator):
 
     def _detect(self, x, y, colliders, tau, self_contact, x_cd) -> None:
         """Candidate search from ``x`` (kept in ``x_cd``): the self-contact pairs and records
-        (:attr:`_rec`), every vertex's allowance and whether it may touch a collider."""
+        (:attr:`_rec`), every vertex's allowance (its way to ``y``, where it is expected to go:
+        the initial guess at the step's start, the inertia mid-step) and whether it may touch a
+        collider."""
         np.copyto(x_cd, x)
         n = len(x)
         allowance = ALLOWANCE[0] * tau + ALLOWANCE[1] * np.linalg.norm(y - x, axis=1)
@@ -888,8 +894,8 @@ class VBD(Integrator):
     def _detection_holds(self, y, colliders, tau, self_contact) -> bool:
         """Whether the last candidate search serves this step too: it was made for self-contact,
         no collider moved and the thickness is the same, and all but :data:`REUSE_OVER` of the
-        free vertices' inertial motions from where the search was made stay within half their
-        allowances. Its pairs, normals and bounds then still hold (they are taken from the
+        free vertices' initial guesses ``y`` stay within half their allowances of where the search
+        was made. Its pairs, normals and bounds then still hold (they are taken from the
         search's positions, and so are the bounds), and the search costs most of a contact-rich
         step."""
         if not self_contact or not self._candidates:
