@@ -15,7 +15,7 @@ export ROS_LOG_DIR ?= $(CURDIR)/.ros_log
 
 SCENE    ?= hanging
 
-.PHONY: install run test fuzz bench bench-peers clean
+.PHONY: install run test lint fuzz bench bench-peers clean
 install: $(STAMP) $(MSGS)
 
 $(STAMP): requirements.txt setup.py pyproject.toml
@@ -35,8 +35,16 @@ $(MSGS): $(STAMP) msg/Stats.msg $(wildcard srv/*.srv) CMakeLists.txt package.xml
 run: install
 	$(VENV)/bin/cloth_sim_node --ros-args --params-file config/cloth_sim.yaml -p scene:=$(SCENE)
 
+# the core's tests in a process of their own (test/core/conftest.py fails the run if rclpy was
+# imported), then the adapters' and the node's
 test: install
-	$(PY) -m pytest test/ $(PYTEST_ARGS)
+	$(PY) -m pytest test/core $(PYTEST_ARGS)
+	$(PY) -m pytest test/adapters test/ros $(PYTEST_ARGS)
+
+# ruff (pinned in requirements.txt, configured in pyproject.toml): the linter and the formatter's check
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
 
 # a long seeded fuzz of the live node through its parameter services; prints its figures (~8 min)
 FUZZ_SETS ?= 5000

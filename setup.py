@@ -1,4 +1,5 @@
-"""The pip installation used by `make` here (console scripts cloth-sim and cloth_sim_node in .venv/bin).
+"""The pip installation used by `make` here (console scripts cloth-sim and cloth_sim_node in
+.venv/bin).
 
 On a real ROS 2 install the package is built by colcon from CMakeLists.txt (build type ament_cmake,
 because it generates msg/Stats.msg); this file is not used there.
@@ -23,7 +24,9 @@ setup(
     ],
     install_requires=["setuptools"],
     # the versions are pinned in requirements.txt; `pip install .[envs]` names what the tasks need
-    extras_require={"envs": ["gymnasium>=1.2,<2", "numpy", "scipy", "numba", "pyyaml", "trimesh", "cholespy"]},
+    extras_require={
+        "envs": ["gymnasium>=1.2,<2", "numpy", "scipy", "numba", "pyyaml", "trimesh", "cholespy"]
+    },
     zip_safe=False,
     maintainer="cloth_sim developers",
     maintainer_email="cloth-sim@example.org",

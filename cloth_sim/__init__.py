@@ -1,4 +1,5 @@
-"""cloth_sim: mass-spring cloth (Provot 1995, Choi & Ko 2002) with explicit and implicit integrators.
+"""cloth_sim: mass-spring cloth (Provot 1995, Choi & Ko 2002) with explicit and implicit
+integrators.
 
 The core (this package minus ``cloth_sim.ros``, ``cloth_sim.bag`` and the benchmarks' front ends)
 imports numpy, scipy, numba and yaml only. Its public names are imported when first used (PEP 562),
@@ -18,7 +19,8 @@ __path__ = extend_path(__path__, __name__)
 # numba's threading layer: fork-safe. Its default on Linux is GNU OpenMP, and a process that forked
 # after a parallel kernel ran (Gymnasium's async vector envs, multiprocessing's fork pools, data
 # loaders) had its children killed ("fork() called from a process already using GNU OpenMP").
-# "forksafe" takes Intel TBB (the ``tbb`` wheel, pinned in requirements.txt: as fast as OpenMP here,
+# "forksafe" takes Intel TBB (the ``tbb`` wheel, pinned in requirements.txt: as fast as OpenMP
+# here,
 # docs/BENCHMARKS.md) and falls back to numba's own workqueue where TBB cannot be loaded. A user's
 # own NUMBA_THREADING_LAYER wins. Read when the first parallel kernel loads: set before that, and
 # inherited by the processes this one starts (Ray's workers, a vector env's workers).
@@ -27,7 +29,8 @@ if "numba" in sys.modules and sys.modules["numba"].config.THREADING_LAYER == "de
     # numba was imported first (its configuration read the environment then): tell it directly
     sys.modules["numba"].config.THREADING_LAYER = os.environ["NUMBA_THREADING_LAYER"]
 
-# For a user who chooses OpenMP (NUMBA_THREADING_LAYER=omp): its idle workers must not spin for long,
+# For a user who chooses OpenMP (NUMBA_THREADING_LAYER=omp): its idle workers must not spin for
+# long,
 # or they take a core from the ROS executor between ticks; put to sleep at once (OMP_WAIT_POLICY=
 # PASSIVE) they must be woken for each of a step's parallel regions. A bounded spin (10,000 rounds)
 # keeps them awake within a tick, then lets them sleep. A user's OMP_WAIT_POLICY or GOMP_SPINCOUNT
@@ -35,11 +38,17 @@ if "numba" in sys.modules and sys.modules["numba"].config.THREADING_LAYER == "de
 if "OMP_WAIT_POLICY" not in os.environ:
     os.environ.setdefault("GOMP_SPINCOUNT", "10000")
 
-__all__ = ["ClothModel", "Simulator", "SimulationDiverged", "integrators"]
+__all__ = ["ClothModel", "Simulator", "SimulationDiverged", "colliders", "integrators"]
 __version__ = "0.1.0"
 
-_LAZY = {"ClothModel": ".model", "Simulator": ".simulator", "SimulationDiverged": ".simulator",
-         "integrators": ".integrators"}
+_LAZY = {
+    "ClothModel": ".model",
+    "Simulator": ".simulator",
+    "SimulationDiverged": ".simulator",
+    "colliders": ".contact.colliders",
+    "integrators": ".integrators",
+}
+_MODULES = ("colliders", "integrators")  # names that are modules, not a module's attribute
 
 
 def __getattr__(name):
@@ -47,7 +56,7 @@ def __getattr__(name):
         import importlib
 
         module = importlib.import_module(_LAZY[name], __name__)
-        value = module if name == "integrators" else getattr(module, name)
+        value = module if name in _MODULES else getattr(module, name)
         globals()[name] = value
         return value
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

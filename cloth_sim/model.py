@@ -1,7 +1,8 @@
 """The cloth's topology and material: particles, masses, pins and spring families.
 
 A :class:`ClothModel` is read-only once built. Integrators never touch it: they advance a state
-(positions, velocities) that a :class:`~cloth_sim.simulator.Simulator` owns, so several simulators can
+(positions, velocities) that a :class:`~cloth_sim.simulator.Simulator` owns, so several simulators
+can
 share one model.
 """
 
@@ -11,19 +12,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-#: How a spring turns its length into a force.
-LINEAR = 0  #: Hooke spring, pushes and pulls (Provot 1995, eq. 1.6 of the review).
-TENSION_ONLY = 1  #: Choi & Ko type-1 interaction: pulls when stretched, nothing when compressed.
-BUCKLING = 2  #: Choi & Ko type-2 interaction: immediate-buckling arc when compressed, Hooke when stretched.
-
-GRID_FAMILIES = ("structural", "shear", "bend")
-MESH_FAMILIES = ("structural", "bend")  # a triangle mesh: its edges, and across each interior edge
-SPRING_FAMILY = "spring"  # the single family of a from_springs model
-MODELS = ("provot", "choi_ko")
-#: How the strain limit corrects (:mod:`cloth_sim.constraints`): Provot's Gauss–Seidel passes, or one
-#: projection of every over-stretched spring together (:mod:`cloth_sim.strain_projection`)
-STRAIN_LIMIT_METHODS = ("provot", "projection")
-ORIENTATIONS = ("horizontal", "vertical")
+from .kinds import (  # noqa: F401 (the model's vocabulary, importable from here too)
+    BUCKLING,
+    GRID_FAMILIES,
+    LINEAR,
+    MESH_FAMILIES,
+    MODELS,
+    ORIENTATIONS,
+    SPRING_FAMILY,
+    STRAIN_LIMIT_METHODS,
+    TENSION_ONLY,
+)
 
 
 def _freeze(a: np.ndarray) -> np.ndarray:
@@ -95,29 +94,55 @@ class ClothModel:
                 raise ValueError(f"{name} must be finite and >= 0")
         if np.any(~np.isfinite(self.rest_lengths)) or np.any(self.rest_lengths <= 0):
             raise ValueError("rest_lengths must be finite and > 0")
-        for name in ("positions", "masses", "springs", "rest_lengths", "stiffness", "damping",
-                     "family", "kind", "strain_limited", "pinned", "triangles"):
+        for name in (
+            "positions",
+            "masses",
+            "springs",
+            "rest_lengths",
+            "stiffness",
+            "damping",
+            "family",
+            "kind",
+            "strain_limited",
+            "pinned",
+            "triangles",
+        ):
             object.__setattr__(self, name, _freeze(getattr(self, name)))
 
     # ------------------------------------------------------------------ builders
     @classmethod
-    def grid(cls, rows: int, cols: int, spacing: float, particle_mass: float,
-             stiffness: dict | float, damping: dict | float | None = None,
-             pinned=(), model: str = "provot", orientation: str = "horizontal",
-             origin=(0.0, 0.0, 0.0)) -> "ClothModel":
-        """A regular ``rows × cols`` grid after Provot (1995), or Choi & Ko (2002) with ``model="choi_ko"``.
+    def grid(
+        cls,
+        rows: int,
+        cols: int,
+        spacing: float,
+        particle_mass: float,
+        stiffness: dict | float,
+        damping: dict | float | None = None,
+        pinned=(),
+        model: str = "provot",
+        orientation: str = "horizontal",
+        origin=(0.0, 0.0, 0.0),
+    ) -> "ClothModel":
+        """A regular ``rows × cols`` grid after Provot (1995), or Choi & Ko (2002) with
+        ``model="choi_ko"``.
 
         Springs: structural ``[i,j]–[i+1,j]``, ``[i,j]–[i,j+1]``; shear ``[i,j]–[i+1,j+1]``,
         ``[i+1,j]–[i,j+1]``; bend ``[i,j]–[i+2,j]``, ``[i,j]–[i,j+2]`` and, for ``choi_ko``, also
-        ``[i,j]–[i+2,j+2]``, ``[i+2,j]–[i,j+2]``. Particle ``(row, col)`` has index ``row*cols + col``
-        and starts at ``(col·s, row·s, 0)`` (``horizontal``) or ``(col·s, 0, −row·s)`` (``vertical``,
+        ``[i,j]–[i+2,j+2]``, ``[i+2,j]–[i,j+2]``. Particle ``(row, col)`` has index ``row*cols +
+        col``
+        and starts at ``(col·s, row·s, 0)`` (``horizontal``) or ``(col·s, 0, −row·s)``
+        (``vertical``,
         row 0 on top), plus ``origin`` (the position of particle ``(0, 0)``).
 
-        In ``choi_ko`` the structural and shear springs resist stretching only (type 1) and the bend
-        springs follow the immediate-buckling model (type 2), whose compressed branch reads the bend
-        stiffness as the flexural rigidity ``k_b`` (see :mod:`cloth_sim.forces`).
+        In ``choi_ko`` the structural and shear springs resist stretching only (type 1) and the
+        bend
+        springs follow the immediate-buckling model (type 2), whose compressed branch reads the
+        bend
+        stiffness as the flexural rigidity ``k_b`` (see :mod:`cloth_sim.physics.forces`).
 
-        ``stiffness`` and ``damping`` are dicts keyed by family (missing families get 0) or one number
+        ``stiffness`` and ``damping`` are dicts keyed by family (missing families get 0) or one
+        number
         for all. ``pinned`` lists ``(row, col)`` pairs; negative indices count from the end.
         """
         from .parameters import SCHEMA, ParameterError  # the schema imports this module
@@ -131,8 +156,10 @@ class ClothModel:
         if model not in MODELS:
             raise ValueError(f"grid: unknown model {model!r}; expected one of {', '.join(MODELS)}")
         if orientation not in ORIENTATIONS:
-            raise ValueError(f"grid: unknown orientation {orientation!r}; expected one of "
-                             f"{', '.join(ORIENTATIONS)}")
+            raise ValueError(
+                f"grid: unknown orientation {orientation!r}; expected one of "
+                f"{', '.join(ORIENTATIONS)}"
+            )
         k_fam = _per_family("stiffness", stiffness)
         c_fam = _per_family("damping", damping if damping is not None else 0.0)
 
@@ -177,27 +204,58 @@ class ClothModel:
             try:
                 rr, cc = (int(v) for v in p)
             except (TypeError, ValueError):
-                raise ValueError(f"grid: pinned entries must be (row, col) pairs, got {p!r}") from None
+                raise ValueError(
+                    f"grid: pinned entries must be (row, col) pairs, got {p!r}"
+                ) from None
             if not (-rows <= rr < rows and -cols <= cc < cols):
-                raise ValueError(f"grid: pinned (row, col) = {p!r} is outside the {rows}×{cols} grid")
+                raise ValueError(
+                    f"grid: pinned (row, col) = {p!r} is outside the {rows}×{cols} grid"
+                )
             pin_mask[(rr % rows) * cols + (cc % cols)] = True
 
         # two triangles per quad, consistently oriented
-        a, b, cq, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
+        a, b, cq, d = (
+            idx[:-1, :-1].ravel(),
+            idx[:-1, 1:].ravel(),
+            idx[1:, 1:].ravel(),
+            idx[1:, :-1].ravel(),
+        )
         tris = np.concatenate([np.stack([a, b, cq], 1), np.stack([a, cq, d], 1)]).astype(np.int64)
 
-        return cls(positions=x, masses=np.full(rows * cols, float(particle_mass)), springs=springs,
-                   rest_lengths=rest, stiffness=np.array([k_fam[f] for f in GRID_FAMILIES])[family],
-                   damping=np.array([c_fam[f] for f in GRID_FAMILIES])[family], family=family,
-                   family_names=GRID_FAMILIES, kind=kind,
-                   strain_limited=family != GRID_FAMILIES.index("bend"), pinned=pin_mask,
-                   triangles=tris, rows=rows, cols=cols, model=model, spacing=float(spacing))
+        return cls(
+            positions=x,
+            masses=np.full(rows * cols, float(particle_mass)),
+            springs=springs,
+            rest_lengths=rest,
+            stiffness=np.array([k_fam[f] for f in GRID_FAMILIES])[family],
+            damping=np.array([c_fam[f] for f in GRID_FAMILIES])[family],
+            family=family,
+            family_names=GRID_FAMILIES,
+            kind=kind,
+            strain_limited=family != GRID_FAMILIES.index("bend"),
+            pinned=pin_mask,
+            triangles=tris,
+            rows=rows,
+            cols=cols,
+            model=model,
+            spacing=float(spacing),
+        )
 
     @classmethod
-    def from_springs(cls, positions, masses, springs, stiffness, damping=None, rest_lengths=None,
-                     pinned=None, triangles=None) -> "ClothModel":
+    def from_springs(
+        cls,
+        positions,
+        masses,
+        springs,
+        stiffness,
+        damping=None,
+        rest_lengths=None,
+        pinned=None,
+        triangles=None,
+    ) -> "ClothModel":
         """Any spring network: ``positions (n,3)``, ``masses (n,)``, ``springs (m,2)``, per-spring
-        ``stiffness (m,)`` and ``damping (m,)``, ``rest_lengths`` (default: the current lengths) and
+        ``stiffness (m,)`` and ``damping (m,)``, ``rest_lengths`` (default: the current lengths)
+        and
         ``pinned`` particle indices. All springs are Hooke springs in one family, ``"spring"``, and
         all are strain-limited when the simulator has a strain limit. ``triangles (t,3)`` are
         optional; without them there are no normals and so no wind force."""
@@ -206,8 +264,11 @@ class ClothModel:
         s = np.array(springs, dtype=np.int64).reshape(-1, 2)
         m = len(s)
         k = np.broadcast_to(np.asarray(stiffness, dtype=np.float64), (m,)).copy()
-        c = np.zeros(m) if damping is None else np.broadcast_to(
-            np.asarray(damping, dtype=np.float64), (m,)).copy()
+        c = (
+            np.zeros(m)
+            if damping is None
+            else np.broadcast_to(np.asarray(damping, dtype=np.float64), (m,)).copy()
+        )
         mass = np.broadcast_to(np.asarray(masses, dtype=np.float64), (n,)).copy()
         if m and (s.min() < 0 or s.max() >= n):
             raise ValueError(f"springs: particle indices must lie in [0, {n - 1}]")
@@ -222,39 +283,61 @@ class ClothModel:
                 raise ValueError(f"pinned: particle indices must lie in [0, {n - 1}]")
             pin_mask[p] = True
         tris = np.zeros((0, 3), np.int64) if triangles is None else np.asarray(triangles, np.int64)
-        return cls(positions=x, masses=mass, springs=s, rest_lengths=rest, stiffness=k, damping=c,
-                   family=np.zeros(m, np.int64), family_names=(SPRING_FAMILY,),
-                   kind=np.full(m, LINEAR, np.int8), strain_limited=np.ones(m, bool),
-                   pinned=pin_mask, triangles=tris.reshape(-1, 3))
+        return cls(
+            positions=x,
+            masses=mass,
+            springs=s,
+            rest_lengths=rest,
+            stiffness=k,
+            damping=c,
+            family=np.zeros(m, np.int64),
+            family_names=(SPRING_FAMILY,),
+            kind=np.full(m, LINEAR, np.int8),
+            strain_limited=np.ones(m, bool),
+            pinned=pin_mask,
+            triangles=tris.reshape(-1, 3),
+        )
 
     @classmethod
-    def from_mesh(cls, source, density: float, stiffness: dict | float,
-                  damping: dict | float | None = None, pinned=(), model: str = "provot",
-                  scale: float = 1.0, position=(0.0, 0.0, 0.0),
-                  orientation=(1.0, 0.0, 0.0, 0.0)) -> "ClothModel":
+    def from_mesh(
+        cls,
+        source,
+        density: float,
+        stiffness: dict | float,
+        damping: dict | float | None = None,
+        pinned=(),
+        model: str = "provot",
+        scale: float = 1.0,
+        position=(0.0, 0.0, 0.0),
+        orientation=(1.0, 0.0, 0.0, 0.0),
+    ) -> "ClothModel":
         """A cloth from any triangle mesh: ``source`` is a file (OBJ, PLY, STL, glTF/GLB, OFF; see
-        :mod:`cloth_sim.mesh`) or a ``(vertices, faces)`` pair.
+        :mod:`cloth_sim.physics.mesh`) or a ``(vertices, faces)`` pair.
 
         Springs: one ``structural`` per unique edge, one ``bend`` per interior edge joining the two
         vertices opposite it; rest lengths are the mesh's own, so a garment modelled curved rests
         curved. Masses: ``density`` (kg/m²) × a third of each adjacent triangle's area. Vertices at
         the same position are welded into one particle (a mesh without duplicates keeps its vertex
-        order). ``model="choi_ko"``: structural springs resist stretching only and bend springs buckle
+        order). ``model="choi_ko"``: structural springs resist stretching only and bend springs
+        buckle
         (as on a grid). ``pinned`` lists vertex indices of the source (mapped through the welding).
-        ``scale`` is metres per file unit; the scaled mesh is then rotated by ``orientation`` (a unit
+        ``scale`` is metres per file unit; the scaled mesh is then rotated by ``orientation`` (a
+        unit
         quaternion ``(w, x, y, z)``) and moved by ``position``. ``stiffness``/``damping``: dicts
         keyed by ``structural`` and ``bend``, or one number for both.
 
         A mesh that cannot be cloth raises ``ValueError`` naming the source and the element (see
-        :func:`cloth_sim.mesh.check_mesh`); nothing is built."""
-        from . import mesh as M
-        from .grippers import check_pose
+        :func:`cloth_sim.physics.mesh.check_mesh`); nothing is built."""
+        from .constraints.grippers import check_pose
         from .parameters import SCHEMA
+        from .physics import mesh as M
 
         vertices, faces, name = M.read_mesh(source, scale)
         density = SCHEMA["density"].check(density)
         if model not in MODELS:
-            raise ValueError(f"from_mesh: unknown model {model!r}; expected one of {', '.join(MODELS)}")
+            raise ValueError(
+                f"from_mesh: unknown model {model!r}; expected one of {', '.join(MODELS)}"
+            )
         k_fam = _per_family("stiffness", stiffness, MESH_FAMILIES)
         c_fam = _per_family("damping", damping if damping is not None else 0.0, MESH_FAMILIES)
         try:
@@ -273,20 +356,31 @@ class ClothModel:
         p = np.asarray(list(pinned), dtype=np.float64).ravel()
         if p.size:
             if not np.all((p == np.round(p)) & (p >= 0) & (p < len(vertices))):
-                raise ValueError(f"from_mesh: pinned must be vertex indices in [0, {len(vertices) - 1}], "
-                                 f"got {list(pinned)[:8]!r}")
+                raise ValueError(
+                    f"from_mesh: pinned must be vertex indices in [0, {len(vertices) - 1}], "
+                    f"got {list(pinned)[:8]!r}"
+                )
             pin_mask[index[p.astype(np.int64)]] = True
         kind = np.full(len(springs), LINEAR, dtype=np.int8)
         if model == "choi_ko":
             kind[family == 0] = TENSION_ONLY
             kind[family == 1] = BUCKLING
-        return cls(positions=x, masses=M.lumped_masses(x, tris, density), springs=springs,
-                   rest_lengths=np.linalg.norm(x[springs[:, 1]] - x[springs[:, 0]], axis=1),
-                   stiffness=np.array([k_fam[f] for f in MESH_FAMILIES])[family],
-                   damping=np.array([c_fam[f] for f in MESH_FAMILIES])[family], family=family,
-                   family_names=MESH_FAMILIES, kind=kind, strain_limited=family == 0,
-                   pinned=pin_mask, triangles=tris, model=model,
-                   meta={"source": name, "vertex_index": index, "density": density})
+        return cls(
+            positions=x,
+            masses=M.lumped_masses(x, tris, density),
+            springs=springs,
+            rest_lengths=np.linalg.norm(x[springs[:, 1]] - x[springs[:, 0]], axis=1),
+            stiffness=np.array([k_fam[f] for f in MESH_FAMILIES])[family],
+            damping=np.array([c_fam[f] for f in MESH_FAMILIES])[family],
+            family=family,
+            family_names=MESH_FAMILIES,
+            kind=kind,
+            strain_limited=family == 0,
+            pinned=pin_mask,
+            triangles=tris,
+            model=model,
+            meta={"source": name, "vertex_index": index, "density": density},
+        )
 
     # ------------------------------------------------------------------ queries
     @property
@@ -302,8 +396,9 @@ class ClothModel:
         try:
             return self.family_names.index(name)
         except ValueError:
-            raise ValueError(f"unknown spring family {name!r}; this model has "
-                             f"{', '.join(self.family_names)}") from None
+            raise ValueError(
+                f"unknown spring family {name!r}; this model has {', '.join(self.family_names)}"
+            ) from None
 
     def index(self, row: int, col: int) -> int:
         """Particle index of grid cell ``(row, col)``."""
@@ -318,8 +413,10 @@ def _per_family(name: str, value, families=GRID_FAMILIES) -> dict:
     if isinstance(value, dict):
         unknown = set(value) - set(families)
         if unknown:
-            raise ValueError(f"{name}: unknown spring families {sorted(map(str, unknown))}; "
-                             f"expected {', '.join(families)}")
+            raise ValueError(
+                f"{name}: unknown spring families {sorted(map(str, unknown))}; "
+                f"expected {', '.join(families)}"
+            )
         value = {f: value.get(f, 0.0) for f in families}
     else:
         value = {f: value for f in families}

@@ -1,8 +1,12 @@
-"""One schema for every quantity a user can set: name, type, unit, range, description, how it applies.
+"""One schema for every quantity a user can set: name, type, unit, range, description, how it
+applies.
 
-Scene files (:mod:`cloth_sim.scene`), the model and simulator (:class:`~cloth_sim.model.ClothModel`,
-:class:`~cloth_sim.simulator.Simulator`), the ``cloth-sim`` command line and the ROS node's parameter
-descriptors and checks (:mod:`cloth_sim.ros.params`) all read their bounds from :data:`SCHEMA`, so a
+Scene files (:mod:`cloth_sim.scene`), the model and simulator
+(:class:`~cloth_sim.model.ClothModel`,
+:class:`~cloth_sim.simulator.Simulator`), the ``cloth-sim`` command line and the ROS node's
+parameter
+descriptors and checks (:mod:`cloth_sim.ros.params`) all read their bounds from :data:`SCHEMA`, so
+a
 quantity has one range everywhere. :meth:`Param.check` turns a value into its canonical form or
 raises :class:`ParameterError`, whose message names the parameter, the value and what is accepted.
 
@@ -19,7 +23,7 @@ import math
 import numbers
 from dataclasses import dataclass
 
-from .model import GRID_FAMILIES, MODELS, STRAIN_LIMIT_METHODS
+from .kinds import GRID_FAMILIES, INTEGRATORS, MODELS, STRAIN_LIMIT_METHODS
 
 #: The largest grid side anywhere (scene files, the node, ``ClothModel.grid``).
 MAX_GRID = 512
@@ -30,7 +34,9 @@ class ParameterError(ValueError):
 
     def __init__(self, name: str, value, accepted: str, message: str | None = None):
         self.name, self.value, self.accepted = name, value, accepted
-        super().__init__(message or f"{name} = {_show(value)} is not accepted: expected {accepted}")
+        super().__init__(
+            message or f"{name} = {_show(value)} is not accepted: expected {accepted}"
+        )
 
 
 def _show(value) -> str:
@@ -47,7 +53,8 @@ class Param:
     """One user-settable quantity.
 
     ``type`` is ``float``, ``int``, ``bool``, ``str`` or ``"vector3"`` (three floats). Numbers and
-    vector components lie in ``[lo, hi]`` (``(lo, hi]`` with ``lo_open``); strings in ``choices`` when
+    vector components lie in ``[lo, hi]`` (``(lo, hi]`` with ``lo_open``); strings in ``choices``
+    when
     given, and non-empty when ``nonempty``. ``scene_key`` is the field's path in a scene file
     (``grid.rows``), ``None`` for parameters only the node has.
     """
@@ -93,9 +100,13 @@ class Param:
             return value
         if self.type is str:
             if isinstance(value, str) and self.choices is not None and value not in self.choices:
-                raise ParameterError(name, value, self.range_text(),
-                                     f"{name} {_show(value)} is unknown; accepted values: "
-                                     f"{', '.join(self.choices)}")
+                raise ParameterError(
+                    name,
+                    value,
+                    self.range_text(),
+                    f"{name} {_show(value)} is unknown; accepted values: "
+                    f"{', '.join(self.choices)}",
+                )
             if not isinstance(value, str) or (self.nonempty and not value):
                 raise ParameterError(name, value, self.range_text())
             return value
@@ -103,9 +114,13 @@ class Param:
             if isinstance(value, (str, bytes, dict)) or not hasattr(value, "__len__"):
                 raise ParameterError(name, value, self.range_text())
             if len(value) != 3:
-                raise ParameterError(name, value, self.range_text(),
-                                     f"{name} must have exactly 3 elements [x, y, z], got "
-                                     f"{len(value)}: {_show(value)}")
+                raise ParameterError(
+                    name,
+                    value,
+                    self.range_text(),
+                    f"{name} must have exactly 3 elements [x, y, z], got "
+                    f"{len(value)}: {_show(value)}",
+                )
             return [self._number(v, f"{name}[{i}]") for i, v in enumerate(value)]
         if self.type is int:
             if isinstance(value, bool) or not isinstance(value, numbers.Integral):
@@ -121,11 +136,17 @@ class Param:
         ok = not isinstance(x, bool) and isinstance(x, numbers.Real)  # numpy scalars are Real too
         if ok:
             f = float(x)
-            ok = math.isfinite(f) and f <= self.hi and (f > self.lo if self.lo_open else f >= self.lo)
+            ok = (
+                math.isfinite(f)
+                and f <= self.hi
+                and (f > self.lo if self.lo_open else f >= self.lo)
+            )
         if not ok:
             lo = "(" if self.lo_open else "["
             unit = f" {self.unit}" if self.unit else ""
-            raise ParameterError(name, x, f"a number in {lo}{_num(self.lo)}, {_num(self.hi)}]{unit}")
+            raise ParameterError(
+                name, x, f"a number in {lo}{_num(self.lo)}, {_num(self.hi)}]{unit}"
+            )
         return f
 
     def is_valid(self, value) -> bool:
@@ -136,101 +157,369 @@ class Param:
         return True
 
 
-def _integrator_names() -> tuple[str, ...]:
-    from . import integrators  # the registry imports the simulator's pieces, not this module
-
-    return tuple(integrators.available())
-
-
 def _schema() -> dict[str, Param]:
     P = Param
     params = [
-        P("scene", str, "", "Scene name (hanging, curtain, flag, free_fall) or path to a scene YAML "
-          "file. Changing it rebuilds the cloth from that scene, its values included, and resets it.",
-          apply="rebuild", nonempty=True),
-        P("integrator", str, "", "Time integrator; switching keeps positions and velocities.",
-          choices=_integrator_names(), scene_key="integrator"),
-        P("dt", float, "s", "Simulation time step. A conditionally stable method refuses a dt above "
-          "its stable_dt unless allow_unstable is true.", lo=1e-7, hi=1.0, scene_key="dt"),
+        P(
+            "scene",
+            str,
+            "",
+            "Scene name (hanging, curtain, flag, free_fall) or path to a scene YAML "
+            "file. Changing it rebuilds the cloth from that scene, its values included, and "
+            "resets it.",
+            apply="rebuild",
+            nonempty=True,
+        ),
+        P(
+            "integrator",
+            str,
+            "",
+            "Time integrator; switching keeps positions and velocities.",
+            choices=INTEGRATORS,
+            scene_key="integrator",
+        ),
+        P(
+            "dt",
+            float,
+            "s",
+            "Simulation time step. A conditionally stable method refuses a dt above "
+            "its stable_dt unless allow_unstable is true.",
+            lo=1e-7,
+            hi=1.0,
+            scene_key="dt",
+        ),
         P("allow_unstable", bool, "", "Accept a dt above the method's stable_dt.", apply="node"),
-        P("vbd.iterations", int, "", "Iterations per step of the vbd integrator (Vertex Block "
-          "Descent): more is closer to backward Euler's step, any count gives a usable state.",
-          lo=1, hi=10_000, scene_key="vbd.iterations"),
-        P("vbd.fit_tick", bool, "", "vbd fits its iterations into the node's tick (at most "
-          "vbd.iterations a step, at least one, each step its share of the tick's budget): the "
-          "node keeps real time, and its results depend on the machine. Off: the same bits "
-          "anywhere.", apply="node"),
-        P("publish_rate", float, "Hz", "Ticks per second: each tick advances 1/publish_rate of "
-          "simulated time in whole steps of dt and publishes.", lo=0.1, hi=1000.0, apply="node"),
-        *[P(f"stiffness.{f}", float, "N/m", f"Spring stiffness of the {f} springs.", lo=0.0, hi=1e9,
-            scene_key=f"stiffness.{f}") for f in GRID_FAMILIES],
-        *[P(f"damping.{f}", float, "N·s/m", f"Damping along the {f} springs.", lo=0.0, hi=1e6,
-            scene_key=f"damping.{f}") for f in GRID_FAMILIES],
-        P("particle_mass", float, "kg", "Mass of each particle; rebuilds and resets the cloth.",
-          lo=1e-6, hi=1e3, apply="rebuild", scene_key="particle_mass"),
-        P("density", float, "kg/m²", "Areal density of a mesh cloth (each vertex carries a third "
-          "of its triangles' mass); rebuilds and resets the cloth. Mesh scenes only.", lo=1e-6,
-          hi=1e3, apply="rebuild"),  # a scene's mesh.density (cloth_sim.scene)
-        P("gravity", "vector3", "m/s²", "Gravity acceleration [x, y, z].", lo=-1e3, hi=1e3,
-          scene_key="gravity"),
-        P("wind.direction", "vector3", "", "Wind direction [x, y, z]; particle i feels "
-          "strength·(n_i·d) n_i.", lo=-1e3, hi=1e3, scene_key="wind.direction"),
-        P("wind.strength", float, "N", "Wind strength w (N per unit of normal projection); 0 turns "
-          "wind off.", lo=0.0, hi=1e3, scene_key="wind.strength"),
-        P("drag", float, "N·s/m", "Linear air drag on each particle.", lo=0.0, hi=1e3,
-          scene_key="drag"),
-        P("strain_limit", float, "", "Provot's critical deformation rate (0.1 = 10 %); 0 turns it "
-          "off.", lo=0.0, hi=10.0, scene_key="strain_limit"),
-        P("strain_limit_passes", int, "", "Most correction passes of the strain limit per step (it "
-          "stops once a pass corrects nothing): fewer is faster and lets the cloth stretch more.",
-          lo=1, hi=100),
-        P("strain_limit_method", str, "", "How the strain limit corrects: provot (Gauss–Seidel "
-          "passes: fast, the stretch plateaus above the limit on a large hanging cloth) or projection "
-          "(every over-stretched spring projected together: the stretch held to the limit; "
-          "strain_limit_passes bounds its iterations).", choices=STRAIN_LIMIT_METHODS,
-          scene_key="strain_limit_method"),
-        P("rows", int, "", "Particles along the grid's rows; rebuilds and resets the cloth.", lo=2,
-          hi=MAX_GRID, apply="rebuild", scene_key="grid.rows"),
-        P("cols", int, "", "Particles along the grid's columns; rebuilds and resets the cloth.", lo=2,
-          hi=MAX_GRID, apply="rebuild", scene_key="grid.cols"),
-        P("spacing", float, "m", "Rest distance between neighbouring particles; rebuilds and "
-          "resets the cloth.", lo=1e-4, hi=10.0, apply="rebuild", scene_key="grid.spacing"),
-        P("model", str, "", "Spring model; rebuilds and resets the cloth.", choices=MODELS,
-          apply="rebuild", scene_key="model"),
-        P("world_frame_id", str, "", "Parent of frame_id on /tf_static (an identity transform): "
-          "where the simulation's frame sits in the world.", apply="node", nonempty=True),
-        P("frame_id", str, "", "frame_id of the published cloud, mesh and stats.", apply="node",
-          nonempty=True),
-        P("publish_clock", bool, "", "Publish /clock with the simulated time and stamp every message "
-          "with it (for use_sim_time nodes, lockstep tests, data generation).", apply="node"),
-        P("real_time_factor", float, "", "Simulated seconds per wall-clock second the node aims at; "
-          "0 runs as fast as the CPU allows.", lo=0.0, hi=1000.0, apply="node"),
-        P("camera.enable", bool, "", "Render and publish the depth camera (~/camera/...) while "
-          "its topics are subscribed.", apply="node", scene_key="camera.enable"),
-        P("camera.width", int, "px", "Depth image width.", lo=1, hi=4096, apply="node",
-          scene_key="camera.width"),
-        P("camera.height", int, "px", "Depth image height.", lo=1, hi=4096, apply="node",
-          scene_key="camera.height"),
-        P("camera.fov", float, "deg", "Horizontal field of view (square pixels, principal point "
-          "at the image centre).", lo=1.0, hi=170.0, apply="node", scene_key="camera.fov"),
-        P("camera.position", "vector3", "m", "Where the camera is, in frame_id.", lo=-1e3, hi=1e3,
-          apply="node", scene_key="camera.position"),
-        P("camera.look_at", "vector3", "m", "The point the optical axis goes through, in frame_id "
-          "(image up is world +z, or +y looking straight up or down).", lo=-1e3, hi=1e3,
-          apply="node", scene_key="camera.look_at"),
-        P("camera.rate", float, "Hz", "Images per second of wall time.", lo=0.1, hi=120.0,
-          apply="node", scene_key="camera.rate"),
-        P("camera.near", float, "m", "Nearest depth seen.", lo=1e-3, hi=1e3, apply="node",
-          scene_key="camera.near"),
-        P("camera.far", float, "m", "Farthest depth seen (above camera.near).", lo=1e-3, hi=1e4,
-          apply="node", scene_key="camera.far"),
-        P("camera.noise", str, "", "Depth noise model: none, or kinect (Nguyen et al. 2012's axial "
-          "noise).", choices=("none", "kinect"), apply="node", scene_key="camera.noise"),
-        P("thickness", float, "m", "Distance the cloth keeps from every collider and, with "
-          "self_collision, from its own non-adjacent triangles.", lo=0.0, lo_open=True, hi=1.0,
-          scene_key="thickness"),
-        P("self_collision", bool, "", "Keep the cloth from passing through itself (off: no "
-          "self-collision code runs).", scene_key="self_collision"),
+        P(
+            "vbd.iterations",
+            int,
+            "",
+            "Iterations per step of the vbd integrator (Vertex Block "
+            "Descent): more is closer to backward Euler's step, any count gives a usable state.",
+            lo=1,
+            hi=10_000,
+            scene_key="vbd.iterations",
+        ),
+        P(
+            "vbd.fit_tick",
+            bool,
+            "",
+            "vbd fits its iterations into the node's tick (at most "
+            "vbd.iterations a step, at least one, each step its share of the tick's budget): the "
+            "node keeps real time, and its results depend on the machine. Off: the same bits "
+            "anywhere.",
+            apply="node",
+        ),
+        P(
+            "publish_rate",
+            float,
+            "Hz",
+            "Ticks per second: each tick advances 1/publish_rate of "
+            "simulated time in whole steps of dt and publishes.",
+            lo=0.1,
+            hi=1000.0,
+            apply="node",
+        ),
+        *[
+            P(
+                f"stiffness.{f}",
+                float,
+                "N/m",
+                f"Spring stiffness of the {f} springs.",
+                lo=0.0,
+                hi=1e9,
+                scene_key=f"stiffness.{f}",
+            )
+            for f in GRID_FAMILIES
+        ],
+        *[
+            P(
+                f"damping.{f}",
+                float,
+                "N·s/m",
+                f"Damping along the {f} springs.",
+                lo=0.0,
+                hi=1e6,
+                scene_key=f"damping.{f}",
+            )
+            for f in GRID_FAMILIES
+        ],
+        P(
+            "particle_mass",
+            float,
+            "kg",
+            "Mass of each particle; rebuilds and resets the cloth.",
+            lo=1e-6,
+            hi=1e3,
+            apply="rebuild",
+            scene_key="particle_mass",
+        ),
+        P(
+            "density",
+            float,
+            "kg/m²",
+            "Areal density of a mesh cloth (each vertex carries a third "
+            "of its triangles' mass); rebuilds and resets the cloth. Mesh scenes only.",
+            lo=1e-6,
+            hi=1e3,
+            apply="rebuild",
+        ),  # a scene's mesh.density (cloth_sim.scene)
+        P(
+            "gravity",
+            "vector3",
+            "m/s²",
+            "Gravity acceleration [x, y, z].",
+            lo=-1e3,
+            hi=1e3,
+            scene_key="gravity",
+        ),
+        P(
+            "wind.direction",
+            "vector3",
+            "",
+            "Wind direction [x, y, z]; particle i feels strength·(n_i·d) n_i.",
+            lo=-1e3,
+            hi=1e3,
+            scene_key="wind.direction",
+        ),
+        P(
+            "wind.strength",
+            float,
+            "N",
+            "Wind strength w (N per unit of normal projection); 0 turns wind off.",
+            lo=0.0,
+            hi=1e3,
+            scene_key="wind.strength",
+        ),
+        P(
+            "drag",
+            float,
+            "N·s/m",
+            "Linear air drag on each particle.",
+            lo=0.0,
+            hi=1e3,
+            scene_key="drag",
+        ),
+        P(
+            "strain_limit",
+            float,
+            "",
+            "Provot's critical deformation rate (0.1 = 10 %); 0 turns it off.",
+            lo=0.0,
+            hi=10.0,
+            scene_key="strain_limit",
+        ),
+        P(
+            "strain_limit_passes",
+            int,
+            "",
+            "Most correction passes of the strain limit per step (it "
+            "stops once a pass corrects nothing): fewer is faster and lets the cloth stretch "
+            "more.",
+            lo=1,
+            hi=100,
+        ),
+        P(
+            "strain_limit_method",
+            str,
+            "",
+            "How the strain limit corrects: provot (Gauss–Seidel "
+            "passes: fast, the stretch plateaus above the limit on a large hanging cloth) or "
+            "projection "
+            "(every over-stretched spring projected together: the stretch held to the limit; "
+            "strain_limit_passes bounds its iterations).",
+            choices=STRAIN_LIMIT_METHODS,
+            scene_key="strain_limit_method",
+        ),
+        P(
+            "rows",
+            int,
+            "",
+            "Particles along the grid's rows; rebuilds and resets the cloth.",
+            lo=2,
+            hi=MAX_GRID,
+            apply="rebuild",
+            scene_key="grid.rows",
+        ),
+        P(
+            "cols",
+            int,
+            "",
+            "Particles along the grid's columns; rebuilds and resets the cloth.",
+            lo=2,
+            hi=MAX_GRID,
+            apply="rebuild",
+            scene_key="grid.cols",
+        ),
+        P(
+            "spacing",
+            float,
+            "m",
+            "Rest distance between neighbouring particles; rebuilds and resets the cloth.",
+            lo=1e-4,
+            hi=10.0,
+            apply="rebuild",
+            scene_key="grid.spacing",
+        ),
+        P(
+            "model",
+            str,
+            "",
+            "Spring model; rebuilds and resets the cloth.",
+            choices=MODELS,
+            apply="rebuild",
+            scene_key="model",
+        ),
+        P(
+            "world_frame_id",
+            str,
+            "",
+            "Parent of frame_id on /tf_static (an identity transform): "
+            "where the simulation's frame sits in the world.",
+            apply="node",
+            nonempty=True,
+        ),
+        P(
+            "frame_id",
+            str,
+            "",
+            "frame_id of the published cloud, mesh and stats.",
+            apply="node",
+            nonempty=True,
+        ),
+        P(
+            "publish_clock",
+            bool,
+            "",
+            "Publish /clock with the simulated time and stamp every message "
+            "with it (for use_sim_time nodes, lockstep tests, data generation).",
+            apply="node",
+        ),
+        P(
+            "real_time_factor",
+            float,
+            "",
+            "Simulated seconds per wall-clock second the node aims at; "
+            "0 runs as fast as the CPU allows.",
+            lo=0.0,
+            hi=1000.0,
+            apply="node",
+        ),
+        P(
+            "camera.enable",
+            bool,
+            "",
+            "Render and publish the depth camera (~/camera/...) while its topics are subscribed.",
+            apply="node",
+            scene_key="camera.enable",
+        ),
+        P(
+            "camera.width",
+            int,
+            "px",
+            "Depth image width.",
+            lo=1,
+            hi=4096,
+            apply="node",
+            scene_key="camera.width",
+        ),
+        P(
+            "camera.height",
+            int,
+            "px",
+            "Depth image height.",
+            lo=1,
+            hi=4096,
+            apply="node",
+            scene_key="camera.height",
+        ),
+        P(
+            "camera.fov",
+            float,
+            "deg",
+            "Horizontal field of view (square pixels, principal point at the image centre).",
+            lo=1.0,
+            hi=170.0,
+            apply="node",
+            scene_key="camera.fov",
+        ),
+        P(
+            "camera.position",
+            "vector3",
+            "m",
+            "Where the camera is, in frame_id.",
+            lo=-1e3,
+            hi=1e3,
+            apply="node",
+            scene_key="camera.position",
+        ),
+        P(
+            "camera.look_at",
+            "vector3",
+            "m",
+            "The point the optical axis goes through, in frame_id "
+            "(image up is world +z, or +y looking straight up or down).",
+            lo=-1e3,
+            hi=1e3,
+            apply="node",
+            scene_key="camera.look_at",
+        ),
+        P(
+            "camera.rate",
+            float,
+            "Hz",
+            "Images per second of wall time.",
+            lo=0.1,
+            hi=120.0,
+            apply="node",
+            scene_key="camera.rate",
+        ),
+        P(
+            "camera.near",
+            float,
+            "m",
+            "Nearest depth seen.",
+            lo=1e-3,
+            hi=1e3,
+            apply="node",
+            scene_key="camera.near",
+        ),
+        P(
+            "camera.far",
+            float,
+            "m",
+            "Farthest depth seen (above camera.near).",
+            lo=1e-3,
+            hi=1e4,
+            apply="node",
+            scene_key="camera.far",
+        ),
+        P(
+            "camera.noise",
+            str,
+            "",
+            "Depth noise model: none, or kinect (Nguyen et al. 2012's axial noise).",
+            choices=("none", "kinect"),
+            apply="node",
+            scene_key="camera.noise",
+        ),
+        P(
+            "thickness",
+            float,
+            "m",
+            "Distance the cloth keeps from every collider and, with "
+            "self_collision, from its own non-adjacent triangles.",
+            lo=0.0,
+            lo_open=True,
+            hi=1.0,
+            scene_key="thickness",
+        ),
+        P(
+            "self_collision",
+            bool,
+            "",
+            "Keep the cloth from passing through itself (off: no self-collision code runs).",
+            scene_key="self_collision",
+        ),
     ]
     return {p.name: p for p in params}
 

@@ -17,13 +17,16 @@ A scene is a YAML mapping (see ``config/scenes/*.yaml``)::
     dt: 0.001
     thickness: 0.005               # kept from colliders (and from itself with self_collision)
     self_collision: false
-    grippers:                      # holding the cloth from the start (moved by ~/grippers/<name>/pose)
+    grippers:                      # holding the cloth from the start (moved by
+    ~/grippers/<name>/pose)
       - {name: left, point: [0, 0, 0], radius: 0.02}         # the particles within radius of point
       - {name: edge, box: {min: [x, y, z], max: [x, y, z]}}  # or every particle inside a box
-    colliders:                     # each with an optional name and friction (Coulomb's μ, default 0)
+    colliders:                     # each with an optional name and friction (Coulomb's μ, default
+    0)
       - {type: plane, normal: [0, 0, 1], offset: 0.0, friction: 0.5}
       - {type: sphere, center: [0.5, 0.5, -0.3], radius: 0.2}
-      - {type: box, center: [0, 0, -0.5], half_extents: [0.5, 0.4, 0.02], orientation: [1, 0, 0, 0]}
+      - {type: box, center: [0, 0, -0.5], half_extents: [0.5, 0.4, 0.02], orientation: [1, 0, 0,
+      0]}
       - {type: capsule, a: [0, 0, 0], b: [0, 0.2, 0], radius: 0.01}
 
 ``grid`` may also give ``origin: [x, y, z]``, where particle (0, 0) starts.
@@ -40,7 +43,8 @@ A garment or any triangle mesh takes the place of ``grid`` (see :meth:`ClothMode
     pinned: [0, 17]                     # vertex indices of the file
     pinned_box: {min: [x, y, z], max: [x, y, z]}   # and every vertex inside this box (placed)
 
-Every field but ``grid`` (or ``mesh``) has a default. A malformed file raises :class:`SceneError` naming the file,
+Every field but ``grid`` (or ``mesh``) has a default. A malformed file raises :class:`SceneError`
+naming the file,
 the field and what was expected.
 """
 
@@ -57,18 +61,27 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .colliders import KINDS
-from .self_collision import MAX_THICKNESS_FRACTION
-from .mesh import MESH_FORMATS
+from .contact.colliders import KINDS
+from .contact.self_collision import MAX_THICKNESS_FRACTION
 from .model import GRID_FAMILIES, MESH_FAMILIES, ORIENTATIONS, ClothModel
 from .parameters import SCHEMA, ParameterError
+from .physics.mesh import MESH_FORMATS
 from .simulator import Simulator
 
 EDGES = ("first_row", "last_row", "first_col", "last_col")
 #: the depth camera's settings when a scene does not give them (scene key ``camera``)
-CAMERA_DEFAULTS = {"enable": False, "width": 640, "height": 480, "fov": 60.0,
-                   "position": [0.5, -1.0, 1.0], "look_at": [0.5, 0.5, 0.0], "rate": 30.0,
-                   "near": 0.1, "far": 10.0, "noise": "none"}
+CAMERA_DEFAULTS = {
+    "enable": False,
+    "width": 640,
+    "height": 480,
+    "fov": 60.0,
+    "position": [0.5, -1.0, 1.0],
+    "look_at": [0.5, 0.5, 0.0],
+    "rate": 30.0,
+    "near": 0.1,
+    "far": 10.0,
+    "noise": "none",
+}
 
 
 class SceneError(ValueError):
@@ -110,7 +123,8 @@ class Scene:
     source: str = "<dict>"
     #: a mesh scene: ``{file (Path), scale, density, position, orientation}``; ``None`` for a grid
     mesh: dict | None = None
-    #: the depth camera's settings (the node's camera.* parameters), CAMERA_DEFAULTS where not given
+    # : the depth camera's settings (the node's camera.* parameters), CAMERA_DEFAULTS where not
+    # given
     camera: dict = field(default_factory=lambda: dict(CAMERA_DEFAULTS))
     #: a mesh scene's pins by place: ``(lo, hi)`` corners of a box in world coordinates, or None
     pinned_box: tuple | None = None
@@ -151,10 +165,12 @@ class Scene:
         cells = []
         for p in self.pinned:
             if isinstance(p, str):
-                cells += {"first_row": [(0, c) for c in range(cols)],
-                          "last_row": [(rows - 1, c) for c in range(cols)],
-                          "first_col": [(r, 0) for r in range(rows)],
-                          "last_col": [(r, cols - 1) for r in range(rows)]}[p]
+                cells += {
+                    "first_row": [(0, c) for c in range(cols)],
+                    "last_row": [(rows - 1, c) for c in range(cols)],
+                    "first_col": [(r, 0) for r in range(rows)],
+                    "last_col": [(r, cols - 1) for r in range(rows)],
+                }[p]
             elif -rows <= p[0] < rows and -cols <= p[1] < cols:
                 cells.append((p[0] % rows, p[1] % cols))
         return sorted(set(cells))
@@ -162,56 +178,102 @@ class Scene:
     def build_model(self, **override) -> ClothModel:
         """The scene's model; ``override`` replaces rows, cols, spacing, particle_mass (a grid) or
         density (a mesh), model, stiffness or damping (used by the node's live parameters)."""
-        p = ({"density": self.mesh["density"]} if self.mesh is not None else
-             {"rows": self.rows, "cols": self.cols, "spacing": self.spacing,
-              "particle_mass": self.particle_mass})
+        p = (
+            {"density": self.mesh["density"]}
+            if self.mesh is not None
+            else {
+                "rows": self.rows,
+                "cols": self.cols,
+                "spacing": self.spacing,
+                "particle_mass": self.particle_mass,
+            }
+        )
         p.update({"model": self.model, "stiffness": self.stiffness, "damping": self.damping})
         unknown = sorted(set(override) - set(p))
         if unknown:  # (a misspelt or simulator-only option used to vanish here unnoticed)
-            raise TypeError(f"unknown scene override(s): {', '.join(unknown)}; accepted: "
-                            f"{', '.join([*p, *self.SIMULATOR_OPTIONS])}")
+            raise TypeError(
+                f"unknown scene override(s): {', '.join(unknown)}; accepted: "
+                f"{', '.join([*p, *self.SIMULATOR_OPTIONS])}"
+            )
         p.update(override)
         if self.mesh is not None:
             return self._mesh_model(p)
-        return ClothModel.grid(p["rows"], p["cols"], p["spacing"], p["particle_mass"],
-                               stiffness=p["stiffness"], damping=p["damping"],
-                               pinned=self.pinned_cells(p["rows"], p["cols"]), model=p["model"],
-                               orientation=self.orientation, origin=self.origin)
+        return ClothModel.grid(
+            p["rows"],
+            p["cols"],
+            p["spacing"],
+            p["particle_mass"],
+            stiffness=p["stiffness"],
+            damping=p["damping"],
+            pinned=self.pinned_cells(p["rows"], p["cols"]),
+            model=p["model"],
+            orientation=self.orientation,
+            origin=self.origin,
+        )
 
     def _mesh_model(self, p: dict) -> ClothModel:
         m = self.mesh
-        fams = {name: {f: v for f, v in p[name].items() if f in MESH_FAMILIES}
-                for name in ("stiffness", "damping")}
-        model = ClothModel.from_mesh(str(m["file"]), density=p["density"], model=p["model"],
-                                     pinned=[q for q in self.pinned if not isinstance(q, str)],
-                                     scale=m["scale"], position=m["position"],
-                                     orientation=m["orientation"], **fams)
+        fams = {
+            name: {f: v for f, v in p[name].items() if f in MESH_FAMILIES}
+            for name in ("stiffness", "damping")
+        }
+        model = ClothModel.from_mesh(
+            str(m["file"]),
+            density=p["density"],
+            model=p["model"],
+            pinned=[q for q in self.pinned if not isinstance(q, str)],
+            scale=m["scale"],
+            position=m["position"],
+            orientation=m["orientation"],
+            **fams,
+        )
         if self.pinned_box is not None:
-            from .mesh import vertices_in_box
+            from .physics.mesh import vertices_in_box
 
             inside = vertices_in_box(model.positions, *self.pinned_box)
             if len(inside) == 0:
-                raise ValueError(f"{self.source}: field 'pinned_box' holds no vertex of "
-                                 f"{m['file']} as placed (its vertices span "
-                                 f"{model.positions.min(0).round(4).tolist()} to "
-                                 f"{model.positions.max(0).round(4).tolist()})")
+                raise ValueError(
+                    f"{self.source}: field 'pinned_box' holds no vertex of "
+                    f"{m['file']} as placed (its vertices span "
+                    f"{model.positions.min(0).round(4).tolist()} to "
+                    f"{model.positions.max(0).round(4).tolist()})"
+                )
             mask = np.array(model.pinned)
             mask[inside] = True
             model = dataclasses.replace(model, pinned=mask)
         return model
 
-    SIMULATOR_OPTIONS = ("integrator", "dt", "gravity", "wind", "strain_limit", "strain_limit_passes",
-                         "strain_limit_long_range", "strain_limit_method", "drag",
-                         "integrator_options", "colliders", "thickness", "self_collision")
+    SIMULATOR_OPTIONS = (
+        "integrator",
+        "dt",
+        "gravity",
+        "wind",
+        "strain_limit",
+        "strain_limit_passes",
+        "strain_limit_long_range",
+        "strain_limit_method",
+        "drag",
+        "integrator_options",
+        "colliders",
+        "thickness",
+        "self_collision",
+    )
 
     def build_simulator(self, **override) -> Simulator:
         """A simulator of the scene; ``override`` takes :meth:`build_model`'s keys and the
         simulator's options in :attr:`SIMULATOR_OPTIONS`; any other key is a ``TypeError``."""
-        sim_kw = {"integrator": self.integrator, "dt": self.dt, "gravity": self.gravity,
-                  "wind": self.wind, "strain_limit": self.strain_limit,
-                  "strain_limit_method": self.strain_limit_method, "drag": self.drag,
-                  "colliders": self.make_colliders(), "thickness": self.thickness,
-                  "self_collision": self.self_collision}
+        sim_kw = {
+            "integrator": self.integrator,
+            "dt": self.dt,
+            "gravity": self.gravity,
+            "wind": self.wind,
+            "strain_limit": self.strain_limit,
+            "strain_limit_method": self.strain_limit_method,
+            "drag": self.drag,
+            "colliders": self.make_colliders(),
+            "thickness": self.thickness,
+            "self_collision": self.self_collision,
+        }
         for key in self.SIMULATOR_OPTIONS:
             if key in override:
                 sim_kw[key] = override.pop(key)
@@ -225,8 +287,10 @@ class Scene:
 # --------------------------------------------------------------------------- loading
 def scene_dirs() -> list[Path]:
     """Where named scenes are looked up: the source tree, then the installed share directory."""
-    dirs = [Path(__file__).resolve().parent.parent / "config" / "scenes",
-            Path(sys.prefix) / "share" / "cloth_sim" / "config" / "scenes"]
+    dirs = [
+        Path(__file__).resolve().parent.parent / "config" / "scenes",
+        Path(sys.prefix) / "share" / "cloth_sim" / "config" / "scenes",
+    ]
     for prefix in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
         if prefix:
             dirs.append(Path(prefix) / "share" / "cloth_sim" / "config" / "scenes")
@@ -257,8 +321,9 @@ def find_scene(name_or_path: str) -> Path:
             if p.is_dir():
                 raise SceneError(f"{_short_path(name_or_path)}: is a directory, not a scene file")
             if p.is_symlink() and not p.exists():
-                raise SceneError(f"{_short_path(name_or_path)}: a symbolic link to nothing, or a "
-                                 f"loop of links")
+                raise SceneError(
+                    f"{_short_path(name_or_path)}: a symbolic link to nothing, or a loop of links"
+                )
             if not p.is_file():
                 raise SceneError(f"{_short_path(name_or_path)}: no such scene file")
             return p
@@ -267,8 +332,12 @@ def find_scene(name_or_path: str) -> Path:
             if candidate.is_file():
                 return candidate
     except OSError as e:  # a name too long for the file system, a symbolic link loop, …
-        raise SceneError(f"{_short_path(name_or_path)}: cannot be opened ({e.strerror or e})") from None
-    raise SceneError(f"unknown scene {_short(name_or_path)}; available: {', '.join(available_scenes())}")
+        raise SceneError(
+            f"{_short_path(name_or_path)}: cannot be opened ({e.strerror or e})"
+        ) from None
+    raise SceneError(
+        f"unknown scene {_short(name_or_path)}; available: {', '.join(available_scenes())}"
+    )
 
 
 class _SceneLoader(yaml.SafeLoader):
@@ -279,18 +348,23 @@ class _SceneLoader(yaml.SafeLoader):
     def compose_node(self, parent, index):
         if self.check_event(yaml.AliasEvent):
             mark = self.peek_event().start_mark
-            raise yaml.MarkedYAMLError(problem="aliases (*name) are not accepted in a scene file",
-                                       problem_mark=mark)
+            raise yaml.MarkedYAMLError(
+                problem="aliases (*name) are not accepted in a scene file", problem_mark=mark
+            )
         self._depth = getattr(self, "_depth", 0) + 1
         try:
             if self._depth > MAX_SCENE_DEPTH:
-                raise yaml.MarkedYAMLError(problem=f"nesting deeper than {MAX_SCENE_DEPTH} levels",
-                                           problem_mark=self.peek_event().start_mark)
+                raise yaml.MarkedYAMLError(
+                    problem=f"nesting deeper than {MAX_SCENE_DEPTH} levels",
+                    problem_mark=self.peek_event().start_mark,
+                )
             return super().compose_node(parent, index)
         finally:
             self._depth -= 1
 
-    def compose_document(self):  # anchors are allowed by the grammar: drop them, and the aliases fail
+    def compose_document(
+        self,
+    ):  # anchors are allowed by the grammar: drop them, and the aliases fail
         node = super().compose_document()
         self.anchors = {}
         return node
@@ -309,8 +383,9 @@ def load_scene(name_or_path: str) -> Scene:
     except OSError as e:
         raise SceneError(f"{where}: cannot be read ({e.strerror or e})") from None
     if len(raw) > MAX_SCENE_BYTES:
-        raise SceneError(f"{where}: larger than {MAX_SCENE_BYTES} bytes; a scene file is a short "
-                         f"YAML mapping")
+        raise SceneError(
+            f"{where}: larger than {MAX_SCENE_BYTES} bytes; a scene file is a short YAML mapping"
+        )
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as e:
@@ -320,7 +395,11 @@ def load_scene(name_or_path: str) -> Scene:
     except yaml.MarkedYAMLError as e:
         mark = e.problem_mark or e.context_mark
         at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        why = e.problem if isinstance(e.problem, str) and e.problem.startswith(("aliases", "nesting")) else ""
+        why = (
+            e.problem
+            if isinstance(e.problem, str) and e.problem.startswith(("aliases", "nesting"))
+            else ""
+        )
         raise SceneError(f"{where}: not valid YAML{at}{': ' + why if why else ''}") from None
     except (yaml.YAMLError, RecursionError):
         raise SceneError(f"{where}: not valid YAML") from None
@@ -335,18 +414,41 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
     """Validate a scene mapping; errors name ``source`` and the field. Every value is checked
     against :data:`cloth_sim.parameters.SCHEMA` (the field's ``scene_key``), so a scene accepts
     exactly what the node's parameters accept."""
-    v = _Validator(source)
+    v = SceneValidator(source)
     if not isinstance(data, dict):
         v.fail("(top level)", "a mapping of scene fields", data)
-    known = {"name", "grid", "mesh", "model", "particle_mass", "stiffness", "damping", "pinned",
-             "pinned_edges", "pinned_box", "gravity", "wind", "drag", "strain_limit",
-             "strain_limit_method", "integrator", "vbd",
-             "dt", "thickness", "self_collision", "colliders", "grippers", "camera"}
+    known = {
+        "name",
+        "grid",
+        "mesh",
+        "model",
+        "particle_mass",
+        "stiffness",
+        "damping",
+        "pinned",
+        "pinned_edges",
+        "pinned_box",
+        "gravity",
+        "wind",
+        "drag",
+        "strain_limit",
+        "strain_limit_method",
+        "integrator",
+        "vbd",
+        "dt",
+        "thickness",
+        "self_collision",
+        "colliders",
+        "grippers",
+        "camera",
+    }
     v.known("", data, known)
     if "mesh" in data:
         if "grid" in data:
-            raise SceneError(f"{source}: fields 'grid' and 'mesh' are both given: a scene's cloth is "
-                             f"one or the other")
+            raise SceneError(
+                f"{source}: fields 'grid' and 'mesh' are both given: a scene's cloth is "
+                f"one or the other"
+            )
         s = _mesh_scene(v, data, source, name)
     else:
         s = _grid_scene(v, data, source, name)
@@ -361,7 +463,9 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
     s.drag = v.param("drag", data.get("drag", 0.0))
     sl = data.get("strain_limit", None)
     s.strain_limit = None if sl is None else v.param("strain_limit", sl)
-    s.strain_limit_method = v.param("strain_limit_method", data.get("strain_limit_method", "provot"))
+    s.strain_limit_method = v.param(
+        "strain_limit_method", data.get("strain_limit_method", "provot")
+    )
     s.integrator = v.param("integrator", data.get("integrator", s.integrator))
     vbd = data.get("vbd", {}) or {}
     if not isinstance(vbd, dict):
@@ -373,14 +477,24 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
     s.self_collision = v.param("self_collision", data.get("self_collision", False))
     # (a mesh's shortest edge is known once it is read: Simulator checks the thickness there)
     if s.self_collision and s.mesh is None and s.thickness > MAX_THICKNESS_FRACTION * s.spacing:
-        v.fail("thickness", f"at most {MAX_THICKNESS_FRACTION:g} × grid.spacing = "
-               f"{MAX_THICKNESS_FRACTION * s.spacing:.4g} m with self_collision on", s.thickness)
+        v.fail(
+            "thickness",
+            f"at most {MAX_THICKNESS_FRACTION:g} × grid.spacing = "
+            f"{MAX_THICKNESS_FRACTION * s.spacing:.4g} m with self_collision on",
+            s.thickness,
+        )
     cam = data.get("camera", {}) or {}
     if not isinstance(cam, dict):
-        v.fail("camera", "a mapping of camera settings (enable, width, height, fov, position, "
-               "look_at, rate, near, far, noise)", cam)
+        v.fail(
+            "camera",
+            "a mapping of camera settings (enable, width, height, fov, position, "
+            "look_at, rate, near, far, noise)",
+            cam,
+        )
     v.known("camera.", cam, set(CAMERA_DEFAULTS))
-    s.camera = {k: v.param(f"camera.{k}", cam.get(k, default)) for k, default in CAMERA_DEFAULTS.items()}
+    s.camera = {
+        k: v.param(f"camera.{k}", cam.get(k, default)) for k, default in CAMERA_DEFAULTS.items()
+    }
     # (near < far and look_at ≠ position are checked where the camera is built: the node's gate)
     cols_ = data.get("colliders", []) or []
     if not isinstance(cols_, list):
@@ -394,8 +508,11 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
             v.fail(f"colliders[{i}].name", "unique (it names the collider's pose topic)", n)
     grips = data.get("grippers", []) or []
     if not isinstance(grips, list) or len(grips) > MAX_GRIPPERS:
-        v.fail("grippers", f"a list of at most {MAX_GRIPPERS} {{name, point, radius}} or {{name, box}} "
-               "mappings", grips)
+        v.fail(
+            "grippers",
+            f"a list of at most {MAX_GRIPPERS} {{name, point, radius}} or {{name, box}} mappings",
+            grips,
+        )
     for i, g in enumerate(grips):
         where = f"grippers[{i}]"
         if not isinstance(g, dict):
@@ -403,8 +520,11 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
         v.known(f"{where}.", g, {"name", "point", "radius", "box"})
         name = g.get("name")
         if not (isinstance(name, str) and GRIPPER_NAME.fullmatch(name)):
-            v.fail(f"{where}.name", "a name of ASCII letters, digits and _ (at most 64, not starting "
-                   "with a digit)", name)
+            v.fail(
+                f"{where}.name",
+                "a name of ASCII letters, digits and _ (at most 64, not starting with a digit)",
+                name,
+            )
         if name in [n for n, *_ in s.grippers]:
             v.fail(f"{where}.name", "unique (it names the gripper's topics)", name)
         if "box" in g:
@@ -428,19 +548,26 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
     return s
 
 
-def _grid_scene(v: "_Validator", data: dict, source: str, name: str) -> Scene:
+def _grid_scene(v: "SceneValidator", data: dict, source: str, name: str) -> Scene:
     grid = data.get("grid")
     if not isinstance(grid, dict):
         v.fail("grid", "a mapping with rows, cols, spacing (or a mesh mapping instead)", grid)
     v.known("grid.", grid, {"rows", "cols", "spacing", "orientation", "origin"})
     if "pinned_box" in data:
-        raise SceneError(f"{source}: field 'pinned_box' is for mesh scenes; a grid pins (row, col) "
-                         f"cells with pinned and pinned_edges")
-    s = Scene(name=str(data.get("name", name)), source=source,
-              rows=v.param("rows", grid.get("rows")), cols=v.param("cols", grid.get("cols")),
-              spacing=v.param("spacing", grid.get("spacing")),
-              orientation=v.choice("grid.orientation", grid.get("orientation", "horizontal"),
-                                   ORIENTATIONS))
+        raise SceneError(
+            f"{source}: field 'pinned_box' is for mesh scenes; a grid pins (row, col) "
+            f"cells with pinned and pinned_edges"
+        )
+    s = Scene(
+        name=str(data.get("name", name)),
+        source=source,
+        rows=v.param("rows", grid.get("rows")),
+        cols=v.param("cols", grid.get("cols")),
+        spacing=v.param("spacing", grid.get("spacing")),
+        orientation=v.choice(
+            "grid.orientation", grid.get("orientation", "horizontal"), ORIENTATIONS
+        ),
+    )
     s.particle_mass = v.param("particle_mass", data.get("particle_mass", s.particle_mass))
     s.stiffness = v.families("stiffness", data.get("stiffness", s.stiffness))
     s.damping = v.families("damping", data.get("damping", s.damping))
@@ -448,8 +575,11 @@ def _grid_scene(v: "_Validator", data: dict, source: str, name: str) -> Scene:
     if not isinstance(pins, list):
         v.fail("pinned", "a list of [row, col] pairs", pins)
     for i, p in enumerate(pins):
-        if not (isinstance(p, (list, tuple)) and len(p) == 2 and all(
-                isinstance(q, int) and not isinstance(q, bool) for q in p)):
+        if not (
+            isinstance(p, (list, tuple))
+            and len(p) == 2
+            and all(isinstance(q, int) and not isinstance(q, bool) for q in p)
+        ):
             v.fail(f"pinned[{i}]", "a [row, col] pair of integers", p)
         if not (-s.rows <= p[0] < s.rows and -s.cols <= p[1] < s.cols):
             v.fail(f"pinned[{i}]", f"a cell inside the {s.rows}×{s.cols} grid", p)
@@ -467,28 +597,41 @@ def _grid_scene(v: "_Validator", data: dict, source: str, name: str) -> Scene:
 MAX_PINNED = 100_000
 
 
-def _mesh_scene(v: "_Validator", data: dict, source: str, name: str) -> Scene:
+def _mesh_scene(v: "SceneValidator", data: dict, source: str, name: str) -> Scene:
     """A mesh scene's own fields: ``mesh`` (file relative to the scene file, scale, density, pose),
     ``pinned`` vertex indices and ``pinned_box``; grid-only fields are refused with the reason."""
     mesh = data.get("mesh")
     if not isinstance(mesh, dict):
-        v.fail("mesh", "a mapping with file, density and optional scale, position, orientation", mesh)
+        v.fail(
+            "mesh", "a mapping with file, density and optional scale, position, orientation", mesh
+        )
     v.known("mesh.", mesh, {"file", "scale", "density", "position", "orientation"})
     for key in ("particle_mass", "pinned_edges"):
         if key in data:
-            raise SceneError(f"{source}: field '{key}' is for grid scenes; "
-                             + ("a mesh's masses come from mesh.density (kg/m²)" if key == "particle_mass"
-                                else "a mesh pins vertex indices (pinned) or a box (pinned_box)"))
+            raise SceneError(
+                f"{source}: field '{key}' is for grid scenes; "
+                + (
+                    "a mesh's masses come from mesh.density (kg/m²)"
+                    if key == "particle_mass"
+                    else "a mesh pins vertex indices (pinned) or a box (pinned_box)"
+                )
+            )
     file = mesh.get("file")
     if not isinstance(file, str) or not file:
-        v.fail("mesh.file", f"a mesh file path ({', '.join('.' + e for e in MESH_FORMATS)}), "
-               f"relative to the scene file", file)
+        v.fail(
+            "mesh.file",
+            f"a mesh file path ({', '.join('.' + e for e in MESH_FORMATS)}), "
+            f"relative to the scene file",
+            file,
+        )
     path = Path(file)
     if not path.is_absolute():
         path = (Path(source).parent if source != "<dict>" else Path.cwd()) / path
     path = Path(os.path.normpath(path))
     if path.suffix.lower().lstrip(".") not in MESH_FORMATS:
-        v.fail("mesh.file", f"a mesh file ending in {', '.join('.' + e for e in MESH_FORMATS)}", file)
+        v.fail(
+            "mesh.file", f"a mesh file ending in {', '.join('.' + e for e in MESH_FORMATS)}", file
+        )
     try:
         found = path.is_file()
     except OSError:
@@ -499,18 +642,32 @@ def _mesh_scene(v: "_Validator", data: dict, source: str, name: str) -> Scene:
     if scale <= 0:
         v.fail("mesh.scale", "a finite number > 0 (metres per file unit)", scale)
     if "density" not in mesh:
-        raise SceneError(f"{source}: field 'mesh.density' is missing: a mesh's masses come from its "
-                         f"areal density (kg/m²)")
+        raise SceneError(
+            f"{source}: field 'mesh.density' is missing: a mesh's masses come from its "
+            f"areal density (kg/m²)"
+        )
     density = v.param("density", mesh["density"], field="mesh.density")
     position = v.vector("mesh.position", mesh.get("position", (0.0, 0.0, 0.0)), 3)
     orientation = v.vector("mesh.orientation", mesh.get("orientation", (1.0, 0.0, 0.0, 0.0)), 4)
     if not np.any(orientation):
         v.fail("mesh.orientation", "a nonzero quaternion (w, x, y, z)", orientation)
-    s = Scene(name=str(data.get("name", name)), source=source, rows=None, cols=None, spacing=None,
-              mesh={"file": path, "scale": scale, "density": density, "position": position,
-                    "orientation": orientation})
-    s.stiffness = v.families("stiffness", data.get("stiffness", {"structural": 1e3, "bend": 1.0}),
-                             MESH_FAMILIES)
+    s = Scene(
+        name=str(data.get("name", name)),
+        source=source,
+        rows=None,
+        cols=None,
+        spacing=None,
+        mesh={
+            "file": path,
+            "scale": scale,
+            "density": density,
+            "position": position,
+            "orientation": orientation,
+        },
+    )
+    s.stiffness = v.families(
+        "stiffness", data.get("stiffness", {"structural": 1e3, "bend": 1.0}), MESH_FAMILIES
+    )
     s.damping = v.families("damping", data.get("damping", 0.0), MESH_FAMILIES)
     pins = data.get("pinned", [])
     if not isinstance(pins, list) or len(pins) > MAX_PINNED:
@@ -547,11 +704,18 @@ _COLLIDER_FIELDS = {
     "box": {"center": 3, "half_extents": 3, "orientation": 4},
     "capsule": {"a": 3, "b": 3, "radius": 1},
 }
-_COLLIDER_REQUIRED = {"plane": ("normal",), "sphere": ("center", "radius"),
-                      "box": ("center", "half_extents"), "capsule": ("a", "b", "radius")}
+_COLLIDER_REQUIRED = {
+    "plane": ("normal",),
+    "sphere": ("center", "radius"),
+    "box": ("center", "half_extents"),
+    "capsule": ("a", "b", "radius"),
+}
 
 
-class _Validator:
+class SceneValidator:
+    """Checks a scene's fields one at a time; each refusal is a :class:`SceneError` naming the
+    source, the field and what it accepts (scene files, and the node's ``spawn_entity``)."""
+
     def __init__(self, source):
         self.source = source
 
@@ -559,11 +723,16 @@ class _Validator:
         raise SceneError(f"{self.source}: field '{fld}' must be {expected}, got {_short(got)}")
 
     def known(self, prefix, mapping, keys):
-        unknown = sorted(k if isinstance(k, str) and k.isprintable() else _short(k)
-                         for k in mapping if k not in keys)
+        unknown = sorted(
+            k if isinstance(k, str) and k.isprintable() else _short(k)
+            for k in mapping
+            if k not in keys
+        )
         if unknown:
-            raise SceneError(f"{self.source}: unknown field(s) {prefix}{(', ' + prefix).join(unknown)}; "
-                             f"expected {', '.join(sorted(keys))}")
+            raise SceneError(
+                f"{self.source}: unknown field(s) {prefix}{(', ' + prefix).join(unknown)}; "
+                f"expected {', '.join(sorted(keys))}"
+            )
 
     def param(self, name, x, field=None):
         """``x`` checked against the schema's entry ``name``, reported under its scene key (or
@@ -575,8 +744,14 @@ class _Validator:
             self.fail(e.name, e.accepted, x)
 
     def vector(self, fld, x, n):
-        if not (isinstance(x, (list, tuple)) and len(x) == n and all(
-                isinstance(q, (int, float)) and not isinstance(q, bool) and np.isfinite(q) for q in x)):
+        if not (
+            isinstance(x, (list, tuple))
+            and len(x) == n
+            and all(
+                isinstance(q, (int, float)) and not isinstance(q, bool) and np.isfinite(q)
+                for q in x
+            )
+        ):
             self.fail(fld, f"a list of {n} finite numbers", x)
         return [float(q) for q in x]
 
@@ -593,19 +768,32 @@ class _Validator:
         kw = {}
         for name in _COLLIDER_REQUIRED[kind]:
             if name not in c:
-                raise SceneError(f"{self.source}: field '{where}.{name}' is missing: a {kind} needs "
-                                 f"{', '.join(_COLLIDER_REQUIRED[kind])}")
+                raise SceneError(
+                    f"{self.source}: field '{where}.{name}' is missing: a {kind} needs "
+                    f"{', '.join(_COLLIDER_REQUIRED[kind])}"
+                )
         for name, n in fields.items():
             if name in c:
-                kw[name] = (self.vector(f"{where}.{name}", c[name], n) if n > 1
-                            else self.number(f"{where}.{name}", c[name]))
+                kw[name] = (
+                    self.vector(f"{where}.{name}", c[name], n)
+                    if n > 1
+                    else self.number(f"{where}.{name}", c[name])
+                )
         if "friction" in c:
             kw["friction"] = self.number(f"{where}.friction", c["friction"], lo=0.0)
         if "name" in c:
-            if not (isinstance(c["name"], str) and c["name"].isidentifier() and c["name"].isascii()
-                    and len(c["name"]) <= 64):
-                self.fail(f"{where}.name", "a name of ASCII letters, digits and _ (at most 64, "
-                          "not starting with a digit)", c["name"])
+            if not (
+                isinstance(c["name"], str)
+                and c["name"].isidentifier()
+                and c["name"].isascii()
+                and len(c["name"]) <= 64
+            ):
+                self.fail(
+                    f"{where}.name",
+                    "a name of ASCII letters, digits and _ (at most 64, "
+                    "not starting with a digit)",
+                    c["name"],
+                )
         kw["name"] = c.get("name", f"{kind}_{i}")
         try:
             KINDS[kind](**kw)  # the shape's own checks (a positive radius, a nonzero normal, …)
@@ -615,8 +803,12 @@ class _Validator:
         return kind, kw
 
     def number(self, fld, x, lo=None):
-        if not (isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x)
-                and (lo is None or x >= lo)):
+        if not (
+            isinstance(x, (int, float))
+            and not isinstance(x, bool)
+            and np.isfinite(x)
+            and (lo is None or x >= lo)
+        ):
             self.fail(fld, "a finite number" + (f" >= {lo:g}" if lo is not None else ""), x)
         return float(x)
 
@@ -632,9 +824,16 @@ class _Validator:
             self.fail(fld, f"a mapping of {', '.join(families)} to numbers >= 0", x)
         unknown = sorted(_short(k) for k in x if k not in families)
         if unknown:
-            self.fail(fld, f"keyed by {', '.join(families)}"
-                      + (" (a mesh has no shear springs)" if "shear" in x and "shear" not in families
-                         else ""), unknown)
+            self.fail(
+                fld,
+                f"keyed by {', '.join(families)}"
+                + (
+                    " (a mesh has no shear springs)"
+                    if "shear" in x and "shear" not in families
+                    else ""
+                ),
+                unknown,
+            )
         return {f: self.param(f"{fld}.{f}", x.get(f, 0.0)) for f in families}
 
 

@@ -1,6 +1,7 @@
 """The node's settings as plain values — what a scene implies, which combinations are refused, and
 the simulator they build — with no ROS, so that the node's parameter gate
-(:mod:`cloth_sim.ros.gate`) and the sweeps (:mod:`cloth_sim.sweep`) give a value the same meaning and
+(:mod:`cloth_sim.ros.gate`) and the sweeps (:mod:`cloth_sim.sweep`) give a value the same meaning
+and
 refuse it for the same reason.
 
 A *configuration* is a dict holding a value for every name of :data:`~cloth_sim.parameters.SCHEMA`
@@ -15,47 +16,74 @@ import math
 import numpy as np
 
 from . import integrators
-from . import stability as stab
-from .constraints import DEFAULT_STRAIN_LIMIT_PASSES
+from .constraints.strain_limit import DEFAULT_STRAIN_LIMIT_PASSES
+from .contact.self_collision import check_thickness
 from .integrators.base import Stability
 from .parameters import REBUILD, SCHEMA, ParameterError
+from .physics import stability as stab
 from .scene import Scene, load_scene
-from .self_collision import check_thickness
 from .simulator import Simulator
 
 #: the rebuild parameters that shape the model (``scene`` is the other one)
 MODEL_KEYS = tuple(name for name in REBUILD if name != "scene")
-#: the parameters that shape a grid only, and a mesh only: a scene of the other kind refuses a change
+# : the parameters that shape a grid only, and a mesh only: a scene of the other kind refuses a
+# change
 GRID_ONLY = ("rows", "cols", "spacing", "particle_mass", "stiffness.shear", "damping.shear")
 MESH_ONLY = ("density",)
 #: what those parameters hold while the scene does not use them (start-up on a scene of the other
 #: kind; they keep their values across scene changes)
-UNUSED_VALUES = {"rows": 32, "cols": 32, "spacing": 1.0 / 31, "particle_mass": 0.01,
-                 "stiffness.shear": 0.0, "damping.shear": 0.0, "density": 0.1}
+UNUSED_VALUES = {
+    "rows": 32,
+    "cols": 32,
+    "spacing": 1.0 / 31,
+    "particle_mass": 0.01,
+    "stiffness.shear": 0.0,
+    "damping.shear": 0.0,
+    "density": 0.1,
+}
 #: the camera's parameters, without their ``camera.`` prefix
-CAMERA_SETTINGS = ("enable", "width", "height", "fov", "position", "look_at", "rate", "near", "far",
-                   "noise")
+CAMERA_SETTINGS = (
+    "enable",
+    "width",
+    "height",
+    "fov",
+    "position",
+    "look_at",
+    "rate",
+    "near",
+    "far",
+    "noise",
+)
 
 
 def scene_values(scene: Scene) -> dict:
     """The parameter values a scene implies (a grid's size and mass or a mesh's density; the
     parameters of the other kind are left out)."""
     values = {
-        "integrator": scene.integrator, "dt": float(scene.dt),
+        "integrator": scene.integrator,
+        "dt": float(scene.dt),
         "gravity": [float(g) for g in scene.gravity],
         "wind.direction": [float(w) for w in scene.wind_direction],
-        "wind.strength": float(scene.wind_strength), "drag": float(scene.drag),
+        "wind.strength": float(scene.wind_strength),
+        "drag": float(scene.drag),
         "strain_limit": float(scene.strain_limit or 0.0),
         "strain_limit_method": scene.strain_limit_method,
-        "model": scene.model, "thickness": float(scene.thickness),
+        "model": scene.model,
+        "thickness": float(scene.thickness),
         "self_collision": bool(scene.self_collision),
         "vbd.iterations": int(scene.vbd_iterations),
     }
     if scene.mesh is not None:
         values["density"] = float(scene.mesh["density"])
     else:
-        values.update({"rows": int(scene.rows), "cols": int(scene.cols),
-                       "spacing": float(scene.spacing), "particle_mass": float(scene.particle_mass)})
+        values.update(
+            {
+                "rows": int(scene.rows),
+                "cols": int(scene.cols),
+                "spacing": float(scene.spacing),
+                "particle_mass": float(scene.particle_mass),
+            }
+        )
     for k, value in scene.camera.items():  # (the scene's camera, or the default one)
         values[f"camera.{k}"] = [float(x) for x in value] if isinstance(value, list) else value
     for f in scene.families:
@@ -66,10 +94,17 @@ def scene_values(scene: Scene) -> dict:
 
 def defaults(scene: Scene) -> dict:
     """Every parameter's value on ``scene`` before anything is set."""
-    values = {"scene": scene.name, "allow_unstable": False, "publish_rate": 60.0, "frame_id": "cloth",
-              "world_frame_id": "world", "publish_clock": False, "real_time_factor": 1.0,
-              "strain_limit_passes": DEFAULT_STRAIN_LIMIT_PASSES,
-              "vbd.fit_tick": False}
+    values = {
+        "scene": scene.name,
+        "allow_unstable": False,
+        "publish_rate": 60.0,
+        "frame_id": "cloth",
+        "world_frame_id": "world",
+        "publish_clock": False,
+        "real_time_factor": 1.0,
+        "strain_limit_passes": DEFAULT_STRAIN_LIMIT_PASSES,
+        "vbd.fit_tick": False,
+    }
     values.update(UNUSED_VALUES)
     values.update(scene_values(scene))
     return values
@@ -83,12 +118,17 @@ def not_applicable(scene: Scene, cand: dict, current: dict) -> str | None:
     if not changed:
         return None
     if scene.mesh is not None:
-        return (f"{', '.join(changed)}: not used by scene {scene.name}, a triangle mesh "
-                f"({scene.mesh['file'].name}): its particles are the mesh's vertices, its masses come "
-                f"from density (kg/m²) and its springs are structural (edges) and bend (across edges), "
-                f"no shear")
-    return (f"{', '.join(changed)}: not used by scene {scene.name}, a {scene.rows}×{scene.cols} grid "
-            f"(its masses come from particle_mass); density applies to mesh scenes")
+        return (
+            f"{', '.join(changed)}: not used by scene {scene.name}, a triangle mesh "
+            f"({scene.mesh['file'].name}): its particles are the mesh's vertices, its masses come "
+            "from density (kg/m²) and its springs are structural (edges) and bend (across "
+            "edges), "
+            f"no shear"
+        )
+    return (
+        f"{', '.join(changed)}: not used by scene {scene.name}, a {scene.rows}×{scene.cols} grid "
+        f"(its masses come from particle_mass); density applies to mesh scenes"
+    )
 
 
 def camera_settings(cfg: dict) -> dict:
@@ -98,7 +138,7 @@ def camera_settings(cfg: dict) -> dict:
 def camera_reason(cfg: dict) -> str | None:
     """The reason ``cfg``'s camera cannot be built (naming the parameter), ``None`` when it can or
     is off."""
-    from .camera import camera_from_settings
+    from .sensors.camera import camera_from_settings
 
     if not cfg["camera.enable"]:
         return None
@@ -124,11 +164,17 @@ def wind(cfg: dict):
 
 def build_model(cfg: dict, scene: Scene):
     """``scene``'s model with ``cfg``'s size or density, spring model and material."""
-    size = ({"density": cfg["density"]} if scene.mesh is not None else
-            {k: cfg[k] for k in ("rows", "cols", "spacing", "particle_mass")})
-    return scene.build_model(**size, model=cfg["model"],
-                             stiffness={f: cfg[f"stiffness.{f}"] for f in scene.families},
-                             damping={f: cfg[f"damping.{f}"] for f in scene.families})
+    size = (
+        {"density": cfg["density"]}
+        if scene.mesh is not None
+        else {k: cfg[k] for k in ("rows", "cols", "spacing", "particle_mass")}
+    )
+    return scene.build_model(
+        **size,
+        model=cfg["model"],
+        stiffness={f: cfg[f"stiffness.{f}"] for f in scene.families},
+        damping={f: cfg[f"damping.{f}"] for f in scene.families},
+    )
 
 
 def integrator_options(cfg: dict) -> dict:
@@ -140,13 +186,21 @@ def integrator_options(cfg: dict) -> dict:
 def build_simulator(cfg: dict, model, scene: Scene) -> Simulator:
     """A simulator of ``model`` (built for ``scene``) with ``cfg``'s live values, the scene's
     colliders and grippers."""
-    sim = Simulator(model, integrator=cfg["integrator"], dt=cfg["dt"], gravity=cfg["gravity"],
-                    integrator_options=integrator_options(cfg),
-                    wind=wind(cfg), drag=cfg["drag"], strain_limit=cfg["strain_limit"] or None,
-                    strain_limit_passes=cfg["strain_limit_passes"],
-                    strain_limit_method=cfg["strain_limit_method"],
-                    colliders=scene.make_colliders(), thickness=cfg["thickness"],
-                    self_collision=cfg["self_collision"])
+    sim = Simulator(
+        model,
+        integrator=cfg["integrator"],
+        dt=cfg["dt"],
+        gravity=cfg["gravity"],
+        integrator_options=integrator_options(cfg),
+        wind=wind(cfg),
+        drag=cfg["drag"],
+        strain_limit=cfg["strain_limit"] or None,
+        strain_limit_passes=cfg["strain_limit_passes"],
+        strain_limit_method=cfg["strain_limit_method"],
+        colliders=scene.make_colliders(),
+        thickness=cfg["thickness"],
+        self_collision=cfg["self_collision"],
+    )
     scene.apply_grippers(sim)
     k, c = material(model, cfg)
     if not (np.array_equal(model.stiffness, k) and np.array_equal(model.damping, c)):
@@ -158,7 +212,8 @@ def build_simulator(cfg: dict, model, scene: Scene) -> Simulator:
 
 def check_stability(cfg: dict, model) -> tuple[str | None, float]:
     """``(reason, stable_dt)``: the limit of ``cfg``'s method on ``model`` with ``cfg``'s material
-    (computed once per material and method, :mod:`cloth_sim.stability`), and the reason to refuse
+    (computed once per material and method, :mod:`cloth_sim.physics.stability`), and the reason to
+    refuse
     ``cfg["dt"]`` above it (``None`` when fine or ``allow_unstable``)."""
     k, c = material(model, cfg)
     analysis = stab.analysis_for(model, k, c, cfg["drag"])
@@ -167,19 +222,30 @@ def check_stability(cfg: dict, model) -> tuple[str | None, float]:
     if not integ.step_is_stable(analysis, cfg["dt"]) and not cfg["allow_unstable"]:
         above = integ.stable_again_above(analysis)
         if above < math.inf:  # Choi–Ko's onset band of an unconditionally stable method
-            return (f"dt={cfg['dt']:g} s is inside the band of steps where Choi–Ko's buckling onset "
-                    f"load 12·k_b/L² throws this cloth about with {cfg['integrator']} "
-                    f"({limit:.4g} s < dt < {above:.4g} s; stiffness.bend is a flexural rigidity "
-                    f"in N·m² in this model): choose dt <= {limit:.4g} or dt >= {above:.4g}, a "
-                    f"smaller stiffness.bend, or set allow_unstable to true"), limit
-        unconditional = ", ".join(n for n in integrators.available()
-                                  if integrators.get(n).stability is Stability.UNCONDITIONAL)
-        onset = (" (set by Choi–Ko's buckling onset load 12·k_b/L²: stiffness.bend is a flexural "
-                 "rigidity in N·m² in this model)" if limit == analysis.onset_limit else "")
-        return (f"dt={cfg['dt']:g} s is above the stable limit of {cfg['integrator']} for this "
-                f"cloth, stable_dt={limit:.4g} s{onset}: choose dt <= {limit:.4g}, an "
-                f"unconditionally stable integrator ({unconditional}), or set allow_unstable to "
-                f"true"), limit
+            return (
+                f"dt={cfg['dt']:g} s is inside the band of steps where Choi–Ko's buckling onset "
+                f"load 12·k_b/L² throws this cloth about with {cfg['integrator']} "
+                f"({limit:.4g} s < dt < {above:.4g} s; stiffness.bend is a flexural rigidity "
+                f"in N·m² in this model): choose dt <= {limit:.4g} or dt >= {above:.4g}, a "
+                f"smaller stiffness.bend, or set allow_unstable to true"
+            ), limit
+        unconditional = ", ".join(
+            n
+            for n in integrators.available()
+            if integrators.get(n).stability is Stability.UNCONDITIONAL
+        )
+        onset = (
+            " (set by Choi–Ko's buckling onset load 12·k_b/L²: stiffness.bend is a flexural "
+            "rigidity in N·m² in this model)"
+            if limit == analysis.onset_limit
+            else ""
+        )
+        return (
+            f"dt={cfg['dt']:g} s is above the stable limit of {cfg['integrator']} for this "
+            f"cloth, stable_dt={limit:.4g} s{onset}: choose dt <= {limit:.4g}, an "
+            f"unconditionally stable integrator ({unconditional}), or set allow_unstable to "
+            f"true"
+        ), limit
     return None, limit
 
 
@@ -211,9 +277,12 @@ def configure(scene: str | Scene, values: dict) -> tuple[dict, Scene, Simulator,
     cfg = defaults(scene)
     for name, value in values.items():
         if name not in SCHEMA:
-            raise ParameterError(name, value, "a parameter of the node",
-                                 f"{name} is not a parameter; the parameters are "
-                                 f"{', '.join(sorted(SCHEMA))}")
+            raise ParameterError(
+                name,
+                value,
+                "a parameter of the node",
+                f"{name} is not a parameter; the parameters are {', '.join(sorted(SCHEMA))}",
+            )
         if name != "scene":
             cfg[name] = SCHEMA[name].check(value)
     reason = not_applicable(scene, cfg, defaults(scene))

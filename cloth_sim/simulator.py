@@ -3,13 +3,16 @@
 * the **model** (:class:`~cloth_sim.model.ClothModel`) is read-only and may be shared;
 * the **state** (:class:`~cloth_sim.state.State`) is what changes: positions, velocities, time and
   the integrator's history;
-* the **forces** (:class:`~cloth_sim.forces.Forces`) are a list of terms compiled from the current
+* the **forces** (:class:`~cloth_sim.physics.forces.Forces`) are a list of terms compiled from the
+current
   material and rebuilt when a parameter changes;
 * the **integrator** (:mod:`cloth_sim.integrators`) advances the state with ``step(state, forces,
   dt)`` and imports nothing from here;
-* the **stages** (:mod:`cloth_sim.constraints`) correct the state after each step; inactive ones
+* the **stages** (:mod:`cloth_sim.constraints.strain_limit`) correct the state after each step;
+inactive ones
   are skipped;
-* the **stability analysis** (:mod:`cloth_sim.stability`) is computed when asked, once per material,
+* the **stability analysis** (:mod:`cloth_sim.physics.stability`) is computed when asked, once per
+material,
   never inside a step or an error path.
 
 Every value a user sets is checked against :data:`cloth_sim.parameters.SCHEMA`.
@@ -25,17 +28,30 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import integrators
-from . import stability as stab
-from .colliders import Contacts, _positive
-from .constraints import (DEFAULT_STRAIN_LIMIT_PASSES, StrainLimit, attachment_pass_parallel,
-                          nearest_attachments)
-from .forces import (GATHER_ACCELERATION, GATHER_FORCE, GATHER_KICK_DRIFT,
-                     GATHER_RK_STAGE, Forces, gather_arrays, runge_kutta_fused,
-                     spring_forces_gather, spring_strains)
+from .constraints.grippers import Gripper, check_box, check_grasp, check_name, check_pose
+from .constraints.strain_limit import (
+    DEFAULT_STRAIN_LIMIT_PASSES,
+    StrainLimit,
+    attachment_pass_parallel,
+    nearest_attachments,
+)
+from .contact.colliders import Contacts
+from .contact.geometry import positive
+from .contact.self_collision import SelfCollision, check_thickness
 from .model import ClothModel
 from .parameters import SCHEMA, ParameterError
-from .grippers import Gripper, check_box, check_grasp, check_name, check_pose
-from .self_collision import SelfCollision, check_thickness
+from .physics import stability as stab
+from .physics.forces import (
+    GATHER_ACCELERATION,
+    GATHER_FORCE,
+    GATHER_KICK_DRIFT,
+    GATHER_RK_STAGE,
+    Forces,
+    gather_arrays,
+    runge_kutta_fused,
+    spring_forces_gather,
+    spring_strains,
+)
 from .state import State
 
 
@@ -85,37 +101,54 @@ class Simulator:
         strain_limit: Provot's critical deformation rate ``τc`` (0.1 = 10 %), ``None`` for none.
         strain_limit_passes: maximum correction passes per step.
         strain_limit_method: ``"provot"`` (Gauss–Seidel passes) or ``"projection"`` (every
-            over-stretched spring projected together, :mod:`cloth_sim.strain_projection`).
+            over-stretched spring projected together,
+            :mod:`cloth_sim.constraints.strain_projection`).
         strain_limit_long_range: long-range attachments to the pins before the passes (see
-            :mod:`cloth_sim.constraints`); ``False`` for Provot's passes alone.
+            :mod:`cloth_sim.constraints.strain_limit`); ``False`` for Provot's passes alone.
         drag: linear air drag coefficient (N·s/m per particle).
         max_speed, max_coordinate: the stability guard's bounds; a step that leaves them, or
             produces NaN or inf, is undone and raises :class:`SimulationDiverged`.
         integrator_options: keyword options of the integrator (e.g. ``{"solver": "direct"}`` for
             ``implicit_euler``, ``{"sweeps": 3}`` for ``kang``).
-        colliders: shapes from :mod:`cloth_sim.colliders` (plane, sphere, box, capsule) the cloth
+        colliders: shapes from :mod:`cloth_sim.contact.colliders` (plane, sphere, box, capsule) the
+        cloth
             cannot enter; :attr:`colliders` keeps them in this order.
         thickness: distance (m) the cloth keeps from every collider and, with ``self_collision``,
             from its own non-adjacent triangles.
-        self_collision: keep the cloth from passing through itself (:mod:`cloth_sim.self_collision`).
+        self_collision: keep the cloth from passing through itself
+        (:mod:`cloth_sim.contact.self_collision`).
     """
 
-    def __init__(self, model: ClothModel, integrator: str = "symplectic_euler", dt: float = 1e-3,
-                 gravity=(0.0, 0.0, -9.81), wind=None, strain_limit: float | None = None,
-                 strain_limit_passes: int = DEFAULT_STRAIN_LIMIT_PASSES,
-                 strain_limit_long_range: bool = True, strain_limit_method: str = "provot",
-                 drag: float = 0.0,
-                 max_speed: float = 1e3, max_coordinate: float = 1e6,
-                 integrator_options: dict | None = None, colliders=None, thickness: float = 0.005,
-                 self_collision: bool = False):
+    def __init__(
+        self,
+        model: ClothModel,
+        integrator: str = "symplectic_euler",
+        dt: float = 1e-3,
+        gravity=(0.0, 0.0, -9.81),
+        wind=None,
+        strain_limit: float | None = None,
+        strain_limit_passes: int = DEFAULT_STRAIN_LIMIT_PASSES,
+        strain_limit_long_range: bool = True,
+        strain_limit_method: str = "provot",
+        drag: float = 0.0,
+        max_speed: float = 1e3,
+        max_coordinate: float = 1e6,
+        integrator_options: dict | None = None,
+        colliders=None,
+        thickness: float = 0.005,
+        self_collision: bool = False,
+    ):
         self.model = model
-        #: the model as given; ``model`` is it with the held particles pinned while grippers hold some
+        # : the model as given; ``model`` is it with the held particles pinned while grippers hold
+        # some
         self.base_model = model
         self._grippers: dict[str, Gripper] = {}
         self._integrator_options = dict(integrator_options or {})
-        self._strain_options = (SCHEMA["strain_limit_passes"].check(strain_limit_passes),
-                                bool(strain_limit_long_range),
-                                SCHEMA["strain_limit_method"].check(strain_limit_method))
+        self._strain_options = (
+            SCHEMA["strain_limit_passes"].check(strain_limit_passes),
+            bool(strain_limit_long_range),
+            SCHEMA["strain_limit_method"].check(strain_limit_method),
+        )
         self._k = np.array(model.stiffness, dtype=np.float64)
         self._c = np.array(model.damping, dtype=np.float64)
         self._gravity = np.array(SCHEMA["gravity"].check(gravity), dtype=np.float64)
@@ -128,8 +161,10 @@ class Simulator:
         self.max_speed = float(max_speed)
         self.max_coordinate = float(max_coordinate)
         sel = model.strain_limited
-        self._limited = (np.ascontiguousarray(model.springs[sel]),
-                         np.ascontiguousarray(model.rest_lengths[sel]))
+        self._limited = (
+            np.ascontiguousarray(model.springs[sel]),
+            np.ascontiguousarray(model.rest_lengths[sel]),
+        )
         self._contacts = Contacts(model, colliders or (), thickness)
         self._integrator = None  # (made below: the stages are built first)
         self._build_stages(model, None, self_collision)
@@ -151,13 +186,15 @@ class Simulator:
 
     @positions.setter
     def positions(self, x) -> None:
-        """Place every particle; pinned particles move with it (that is how a gripper drags the cloth)."""
+        """Place every particle; pinned particles move with it (that is how a gripper drags the
+        cloth)."""
         self.state.x[:] = self._check_state("positions", x)
         self._integrator.reset(self.state, self.forces, self._dt)
 
     @property
     def velocities(self) -> np.ndarray:
-        """``(n, 3)`` velocities (a read-only view; assign to change them). Pinned rows are zero."""
+        """``(n, 3)`` velocities (a read-only view; assign to change them). Pinned rows are
+        zero."""
         view = self.state.v.view()
         view.setflags(write=False)
         return view
@@ -170,16 +207,20 @@ class Simulator:
 
     def move_pins(self, positions, indices=None) -> None:
         """Move pinned particles to ``positions`` (``(p, 3)``; ``indices`` default to every pinned
-        particle, in index order). They stay pinned, at rest; the rest of the cloth is untouched."""
+        particle, in index order). They stay pinned, at rest; the rest of the cloth is
+        untouched."""
         pinned_idx = np.flatnonzero(self.model.pinned)
         idx = pinned_idx if indices is None else np.asarray(indices, dtype=np.int64).ravel()
         if not np.all(self.model.pinned[idx]):
-            raise ValueError("move_pins: every index must be a pinned particle; pinned are "
-                             f"{pinned_idx.tolist()}")
+            raise ValueError(
+                "move_pins: every index must be a pinned particle; pinned are "
+                f"{pinned_idx.tolist()}"
+            )
         p = np.asarray(positions, dtype=np.float64)
         if p.shape != (len(idx), 3) or not np.all(np.isfinite(p)):
-            raise ValueError(f"move_pins: positions must be finite with shape ({len(idx)}, 3), "
-                             f"got {p.shape}")
+            raise ValueError(
+                f"move_pins: positions must be finite with shape ({len(idx)}, 3), got {p.shape}"
+            )
         self.state.x[idx] = p
         self._integrator.pins_moved(self.state)
 
@@ -219,8 +260,10 @@ class Simulator:
         """Go back to a state from :meth:`save_state` (time included). The integrator's history is
         the saved one when the same method saved it, rebuilt from the state otherwise."""
         if saved.x.shape != self.state.x.shape:
-            raise ValueError(f"restore_state: a state of {len(saved.x)} particles for a cloth of "
-                             f"{len(self.state.x)}")
+            raise ValueError(
+                f"restore_state: a state of {len(saved.x)} particles for a cloth of "
+                f"{len(self.state.x)}"
+            )
         saved.copy_to(self.state)
         for g in self._grippers.values():  # held particles stay where their grippers are
             self.state.x[g.indices] = g.places(g.position, g.rotation)
@@ -272,11 +315,13 @@ class Simulator:
         return self._k[self.model.family == self.model.family_index(family)].copy()
 
     def set_stiffness(self, family: str, k: float) -> None:
-        """Set every spring of ``family`` to stiffness ``k`` (N/m, ≥ 0); applies at the next step."""
+        """Set every spring of ``family`` to stiffness ``k`` (N/m, ≥ 0); applies at the next
+        step."""
         self._set_family(self._k, "stiffness", family, k)
 
     def set_damping(self, family: str, c: float) -> None:
-        """Set every spring of ``family`` to damping ``c`` (N·s/m, ≥ 0); applies at the next step."""
+        """Set every spring of ``family`` to damping ``c`` (N·s/m, ≥ 0); applies at the next
+        step."""
         self._set_family(self._c, "damping", family, c)
 
     @property
@@ -317,7 +362,8 @@ class Simulator:
 
     @property
     def strain_limit_passes(self) -> int:
-        """Most correction passes of the strain limit per step (the limit stops once a pass corrects
+        """Most correction passes of the strain limit per step (the limit stops once a pass
+        corrects
         nothing); fewer is faster and lets the cloth stretch more."""
         return self._strain.passes
 
@@ -329,7 +375,8 @@ class Simulator:
 
     @property
     def strain_limit_method(self) -> str:
-        """``"provot"`` or ``"projection"`` (:data:`~cloth_sim.model.STRAIN_LIMIT_METHODS`); live."""
+        """``"provot"`` or ``"projection"`` (:data:`~cloth_sim.model.STRAIN_LIMIT_METHODS`);
+        live."""
         return self._strain.method
 
     @strain_limit_method.setter
@@ -343,10 +390,12 @@ class Simulator:
         """The colliders, in the order given (move one with :meth:`set_collider_pose`)."""
         return list(self._contacts.colliders)
 
-    def set_collider_pose(self, i: int, position, orientation=(1.0, 0.0, 0.0, 0.0),
-                          teleport: bool = False) -> None:
+    def set_collider_pose(
+        self, i: int, position, orientation=(1.0, 0.0, 0.0, 0.0), teleport: bool = False
+    ) -> None:
         """Move collider ``i`` to ``position`` with ``orientation`` (a unit quaternion ``(w, x, y,
-        z)``; see :mod:`cloth_sim.colliders` for what they mean per shape). The next step sweeps it
+        z)``; see :mod:`cloth_sim.contact.colliders` for what they mean per shape). The next step
+        sweeps it
         there: its velocity over that step is the pose change divided by ``dt``, so friction drags
         what rests on it and nothing it meets on the way passes through. With ``teleport`` it is
         there now, at rest: the next step sees it standing at the new pose, drags nothing, and
@@ -356,7 +405,8 @@ class Simulator:
         self._contacts.set_pose(i, position, orientation, teleport=teleport)
 
     def add_collider(self, collider) -> int:
-        """Add a collider (a shape of :mod:`cloth_sim.colliders`, its name not in use) from the next
+        """Add a collider (a shape of :mod:`cloth_sim.contact.colliders`, its name not in use) from
+        the next
         step on; returns its index in :attr:`colliders`. A bad shape or a name in use raises
         ``ValueError`` and changes nothing."""
         i = self._contacts.add(collider)
@@ -377,7 +427,7 @@ class Simulator:
 
     @thickness.setter
     def thickness(self, value: float) -> None:
-        value = _positive("thickness", value)
+        value = positive("thickness", value)
         if self._self_collision.enabled:
             check_thickness(self.model, value)
         self._contacts.thickness = self._self_collision.thickness = value
@@ -385,6 +435,14 @@ class Simulator:
     @property
     def self_collision(self) -> bool:
         return self._self_collision.enabled
+
+    @property
+    def contact_counts(self) -> tuple[int, int]:
+        """``(touching, pairs)`` of the last step: particles touching a collider, and
+        self-collision's
+        pairs within reach (0 when it is off)."""
+        pairs = self._self_collision.last_pairs if self._self_collision.enabled else 0
+        return int(self._contacts.last_touching), int(pairs)
 
     @self_collision.setter
     def self_collision(self, on: bool) -> None:
@@ -400,7 +458,7 @@ class Simulator:
 
     @property
     def active_terms(self) -> tuple[str, ...]:
-        """Force terms the pipeline evaluates (see :mod:`cloth_sim.forces`)."""
+        """Force terms the pipeline evaluates (see :mod:`cloth_sim.physics.forces`)."""
         return self.forces.active_terms
 
     @property
@@ -414,7 +472,7 @@ class Simulator:
         state, checkpoint, dt = self.state, self._checkpoint, self._dt
         integ, forces, stages = self._integrator, self.forces, self._active_stages
         follow = integ.velocity_follow
-        vmax2, xmax = self.max_speed ** 2, self.max_coordinate
+        vmax2, xmax = self.max_speed**2, self.max_coordinate
         grippers = self._grippers
         # the wrench reads the step's own end only for methods that evaluate forces past its start
         keep_end = bool(grippers) and integ.force_point > 0
@@ -478,7 +536,7 @@ class Simulator:
     def fastest_mode(self) -> tuple[float, float]:
         """``(ω_max, ζ)``: the highest natural frequency of ``M⁻¹K`` over the free particles,
         linearised about the rest shape, and that mode's damping ratio (spring damping and drag);
-        see :func:`cloth_sim.stability.fastest_mode`."""
+        see :func:`cloth_sim.physics.stability.fastest_mode`."""
         return tuple(self.analysis.mode)
 
     def stable_dt(self) -> float:
@@ -489,25 +547,31 @@ class Simulator:
 
     def step_is_stable(self, dt: float | None = None) -> bool:
         """Whether ``dt`` (the current one by default) is a step the current method is expected to
-        survive: at most :meth:`stable_dt`, or, for a method without a step limit, above the band of
+        survive: at most :meth:`stable_dt`, or, for a method without a step limit, above the band
+        of
         steps where Choi–Ko's onset load throws the cloth about
-        (:func:`cloth_sim.stability.buckling_onset_band`)."""
-        return self._integrator.step_is_stable(self.analysis, self._dt if dt is None else float(dt))
+        (:func:`cloth_sim.physics.stability.buckling_onset_band`)."""
+        return self._integrator.step_is_stable(
+            self.analysis, self._dt if dt is None else float(dt)
+        )
 
     def rest_matrices(self) -> tuple[sp.csr_matrix, sp.csr_matrix]:
-        """``(K, C)`` linearised about the rest shape (:func:`cloth_sim.stability.rest_matrices`)."""
+        """``(K, C)`` linearised about the rest shape
+        (:func:`cloth_sim.physics.stability.rest_matrices`)."""
         return stab.rest_matrices(self.model, self._k, self._c)
 
     # ------------------------------------------------------------------ grippers
     @property
     def grippers(self) -> dict:
-        """``{name: indices}`` of the particles each gripper holds (see :mod:`cloth_sim.grippers`)."""
+        """``{name: indices}`` of the particles each gripper holds (see
+        :mod:`cloth_sim.constraints.grippers`)."""
         return {name: g.indices.copy() for name, g in self._grippers.items()}
 
     def grasp(self, name: str, point, radius: float) -> np.ndarray:
         """Hold every free particle within ``radius`` of ``point`` with a gripper called ``name``,
         placed at ``point`` with the identity orientation; returns their indices. A name in use,
-        a bad point or radius, or no particle in reach raises ``ValueError`` and changes nothing."""
+        a bad point or radius, or no particle in reach raises ``ValueError`` and changes
+        nothing."""
         name = self._new_gripper(name)
         point, radius = check_grasp(point, radius)
         held = self.model.pinned
@@ -515,8 +579,10 @@ class Simulator:
         idx = np.flatnonzero((d <= radius) & ~held)
         if len(idx) == 0:
             near = float(d[~held].min()) if (~held).any() else float("nan")
-            raise ValueError(f"grasp {name!r}: no free particle within radius {radius:g} m of point "
-                             f"{point.tolist()} (the nearest is {near:.4g} m away)")
+            raise ValueError(
+                f"grasp {name!r}: no free particle within radius {radius:g} m of point "
+                f"{point.tolist()} (the nearest is {near:.4g} m away)"
+            )
         return self._hold(name, idx, point)
 
     def grasp_box(self, name: str, lo, hi) -> np.ndarray:
@@ -529,15 +595,18 @@ class Simulator:
         held = self.model.pinned
         idx = np.flatnonzero(np.all((self.state.x >= lo) & (self.state.x <= hi), axis=1) & ~held)
         if len(idx) == 0:
-            raise ValueError(f"grasp {name!r}: no free particle inside the box {lo.tolist()} .. "
-                             f"{hi.tolist()}")
+            raise ValueError(
+                f"grasp {name!r}: no free particle inside the box {lo.tolist()} .. {hi.tolist()}"
+            )
         return self._hold(name, idx, 0.5 * (lo + hi))
 
     def _new_gripper(self, name) -> str:
         name = check_name(name)
         if name in self._grippers:
-            raise ValueError(f"gripper {name!r} already holds {len(self._grippers[name].indices)} "
-                             f"particles: release it first")
+            raise ValueError(
+                f"gripper {name!r} already holds {len(self._grippers[name].indices)} "
+                f"particles: release it first"
+            )
         return name
 
     def _hold(self, name: str, idx: np.ndarray, point: np.ndarray) -> np.ndarray:
@@ -548,8 +617,9 @@ class Simulator:
         self._set_held()
         return idx.copy()
 
-    def set_gripper_pose(self, name: str, position, orientation=(1.0, 0.0, 0.0, 0.0),
-                         teleport: bool = False) -> None:
+    def set_gripper_pose(
+        self, name: str, position, orientation=(1.0, 0.0, 0.0, 0.0), teleport: bool = False
+    ) -> None:
         """Move gripper ``name`` to ``position`` with ``orientation`` (a unit quaternion ``(w, x,
         y, z)``) over the next step: the particles it holds move with the velocity that takes them
         there. With ``teleport`` it and its particles are there now, at rest (the rest of the cloth
@@ -571,10 +641,11 @@ class Simulator:
         return g.position.copy(), g.orientation.copy()
 
     def gripper_wrench(self, name: str) -> tuple[np.ndarray, np.ndarray]:
-        """``(force, torque)`` the cloth exerts on gripper ``name`` at the end of the last step: the
+        """``(force, torque)`` the cloth exerts on gripper ``name`` at the end of the last step:
+        the
         springs' pull on the particles it holds, plus the strain limit's constraint force on them
         when it is on (N), and its moment about the gripper's position (N·m), world frame (see
-        :mod:`cloth_sim.grippers`)."""
+        :mod:`cloth_sim.constraints.grippers`)."""
         g = self._gripper(name)
         term = self.forces.spring_term
         f = np.zeros_like(self.state.x)
@@ -583,8 +654,10 @@ class Simulator:
             # before the corrections, or between (integrators' force_point); the current state
             # before any step
             theta = self._integrator.force_point if self._wrench_ready else 1.0
-            ends = ((1.0 - theta, self._checkpoint), (theta, self._prestage if self._wrench_ready
-                                                       else self.state))
+            ends = (
+                (1.0 - theta, self._checkpoint),
+                (theta, self._prestage if self._wrench_ready else self.state),
+            )
             for weight, st in ends:
                 if weight:
                     part = np.zeros_like(f)
@@ -606,20 +679,26 @@ class Simulator:
     def _gripper(self, name) -> Gripper:
         g = self._grippers.get(name) if isinstance(name, str) else None
         if g is None:
-            raise ValueError(f"unknown gripper {name!r}; grippers: "
-                             f"{', '.join(self._grippers) if self._grippers else 'none (grasp first)'}")
+            raise ValueError(
+                f"unknown gripper {name!r}; grippers: "
+                f"{', '.join(self._grippers) if self._grippers else 'none (grasp first)'}"
+            )
         return g
 
     def _set_held(self) -> None:
-        """The model with the scene's pins and every held particle pinned; everything built from the
+        """The model with the scene's pins and every held particle pinned; everything built from
+        the
         model is rebuilt around the same state and parameters."""
         mask = np.array(self.base_model.pinned)
         for g in self._grippers.values():
             mask[g.indices] = True
         if np.array_equal(mask, self.model.pinned):
             return
-        model = self.base_model if np.array_equal(mask, self.base_model.pinned) else \
-            dataclasses.replace(self.base_model, pinned=mask)
+        model = (
+            self.base_model
+            if np.array_equal(mask, self.base_model.pinned)
+            else dataclasses.replace(self.base_model, pinned=mask)
+        )
         self.model = model
         self._evaluations_before += self.forces.evaluations
         self.forces = self._build_forces()
@@ -706,13 +785,17 @@ class Simulator:
         bad_t = self.time + self._dt
         self._checkpoint.copy_to(self.state)
         limit = self._integrator.known_stable_dt(self.analysis)
-        estimate = ("not computed (stable_dt() computes it)" if limit is None
-                    else f"stable_dt()={limit:.4g} s")
+        estimate = (
+            "not computed (stable_dt() computes it)"
+            if limit is None
+            else f"stable_dt()={limit:.4g} s"
+        )
         raise SimulationDiverged(
             f"the {self.integrator} step from t={self.time:.6g} s to t={bad_t:.6g} s diverged "
             f"(non-finite value, speed above {self.max_speed:g} m/s or coordinate above "
             f"{self.max_coordinate:g} m) with dt={self._dt:g} s; the stable limit estimate is "
-            f"{estimate}. The state before that step was restored.")
+            f"{estimate}. The state before that step was restored."
+        )
 
     def _check_state(self, name, a):
         a = np.asarray(a, dtype=np.float64)
@@ -735,33 +818,45 @@ def compile_kernels() -> float:
     for 6 s there). About 0.3 s when the cache is warm."""
     import time
 
-    from .integrators.explicit import _combine_parallel as combine_parallel
+    from .integrators.explicit import combine_parallel
 
     t0 = time.perf_counter()
     for model_name in ("provot", "choi_ko"):
-        model = ClothModel.grid(4, 4, 0.1, 0.01, stiffness=100.0, damping=0.1, pinned=[(0, 0)],
-                                model=model_name)
+        model = ClothModel.grid(
+            4, 4, 0.1, 0.01, stiffness=100.0, damping=0.1, pinned=[(0, 0)], model=model_name
+        )
         for name in integrators.available():
-            sim = Simulator(model, integrator=name, dt=1e-4, wind=(0.0, 0.0, 1.0), drag=0.01,
-                            strain_limit=0.1)
+            sim = Simulator(
+                model, integrator=name, dt=1e-4, wind=(0.0, 0.0, 1.0), drag=0.01, strain_limit=0.1
+            )
             sim.step(2)
             sim.energy()
             sim.max_strain()
         # the strain limit's projection method
         Simulator(model, dt=1e-4, strain_limit=0.1, strain_limit_method="projection").step(2)
         # contacts with every collider shape, and self-collision
-        from . import colliders as col
+        from .contact import colliders as col
 
-        sim = Simulator(model, dt=1e-4, self_collision=True, thickness=0.01, colliders=[
-            col.Plane(friction=0.5), col.Sphere(radius=0.1, friction=0.1),
-            col.Box(half_extents=(0.1, 0.1, 0.1)), col.Capsule(radius=0.05)])
+        sim = Simulator(
+            model,
+            dt=1e-4,
+            self_collision=True,
+            thickness=0.01,
+            colliders=[
+                col.Plane(friction=0.5),
+                col.Sphere(radius=0.1, friction=0.1),
+                col.Box(half_extents=(0.1, 0.1, 0.1)),
+                col.Capsule(radius=0.05),
+            ],
+        )
         sim.set_collider_pose(1, (0.0, 0.0, -0.5))
         sim.step(2)
         # the parallel gather, which only cloths above forces.PARALLEL_MIN_SPRINGS use: with the
         # state's own (writable) arrays, updating them or not, and with read-only views (reports)
         term = sim.forces.spring_term
-        springs = gather_arrays(term.springs, term.rest, term.k, term.c, term.kind, True,
-                                model.n_particles)
+        springs = gather_arrays(
+            term.springs, term.rest, term.k, term.c, term.kind, True, model.n_particles
+        )
         gravity, inv_mass = sim.forces.terms[0].force, sim.forces.inv_mass
         gather = (*springs, gravity, np.zeros_like(sim.positions), inv_mass, 1e-4)
         x, v = sim.positions.copy(), sim.velocities.copy()
@@ -770,20 +865,47 @@ def compile_kernels() -> float:
         spring_forces_gather(x, v, *gather, GATHER_KICK_DRIFT, x, v, stage)
         spring_forces_gather(x, v, *gather, GATHER_RK_STAGE, x, v, stage)
         for mode in (GATHER_FORCE, GATHER_ACCELERATION):
-            spring_forces_gather(sim.positions, sim.velocities, *gather, mode, np.zeros((1, 3)),
-                                 np.zeros((1, 3)), stage)
+            spring_forces_gather(
+                sim.positions,
+                sim.velocities,
+                *gather,
+                mode,
+                np.zeros((1, 3)),
+                np.zeros((1, 3)),
+                stage,
+            )
         # the whole fused Runge–Kutta step, and the stages' update on every core (wind or drag
         # after the springs)
-        runge_kutta_fused(x, v, np.zeros((2, 2)), np.ones(2), 1e-4, k[0], k[1], np.zeros_like(x),
-                          np.zeros(2), *springs, gravity, inv_mass)
+        runge_kutta_fused(
+            x,
+            v,
+            np.zeros((2, 2)),
+            np.ones(2),
+            1e-4,
+            k[0],
+            k[1],
+            np.zeros_like(x),
+            np.zeros(2),
+            *springs,
+            gravity,
+            inv_mass,
+        )
         combine_parallel(x, v, x, v, k[0], k[1], np.ones(2))
         # the long-range attachments on every core, which only cloths from
         # constraints.PARALLEL_MIN_PARTICLES on use (a 64×64 node compiled them in its first tick)
         anchor, reach = nearest_attachments(model)
         attachment_pass_parallel(x, anchor, reach, 0.1)
         # the depth camera's kernels (triangles, each collider shape)
-        from .camera import DepthCamera
+        from .sensors.camera import DepthCamera
 
-        DepthCamera(width=8, height=6, fx=5.0, fy=5.0, cx=3.5, cy=2.5, position=(0.2, 0.2, 1.0),
-                    noise="kinect").render(sim)
+        DepthCamera(
+            width=8,
+            height=6,
+            fx=5.0,
+            fy=5.0,
+            cx=3.5,
+            cy=2.5,
+            position=(0.2, 0.2, 1.0),
+            noise="kinect",
+        ).render(sim)
     return time.perf_counter() - t0

@@ -1,4 +1,5 @@
-"""Render the contact and garment scenes (table, drape, fold, tshirt, towel) after a few seconds of simulation into
+"""Render the contact and garment scenes (table, drape, fold, tshirt, towel) after a few seconds of
+simulation into
 docs/img/<scene>.png, as shown in the README.
 
     .venv/bin/python docs/render_scenes.py [--seconds 3] [--out docs/img] [scene[:seconds] ...]
@@ -15,19 +16,27 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from cloth_sim.colliders import Box, Capsule, Plane, Sphere  # noqa: E402
+from cloth_sim.contact.colliders import Box, Capsule, Plane, Sphere  # noqa: E402
 from cloth_sim.scene import load_scene  # noqa: E402
 
 
 def _draw_collider(ax, c, span):
     if isinstance(c, Sphere):
-        u, v = np.mgrid[0:2 * np.pi:40j, 0:np.pi:20j]
+        u, v = np.mgrid[0 : 2 * np.pi : 40j, 0 : np.pi : 20j]
         r, (x, y, z) = c.radius, c.center
-        ax.plot_surface(x + r * np.cos(u) * np.sin(v), y + r * np.sin(u) * np.sin(v),
-                        z + r * np.cos(v), color="0.6", alpha=0.5, linewidth=0)
+        ax.plot_surface(
+            x + r * np.cos(u) * np.sin(v),
+            y + r * np.sin(u) * np.sin(v),
+            z + r * np.cos(v),
+            color="0.6",
+            alpha=0.5,
+            linewidth=0,
+        )
     elif isinstance(c, Box):
         h = c.half_extents
-        corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * h
+        corners = (
+            np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * h
+        )
         pts = corners @ c.rotation.T + c.center
         for i in range(8):
             for j in range(i + 1, 8):
@@ -53,15 +62,33 @@ def render(name: str, seconds: float, out: Path) -> Path:
     lo, hi = x.min(axis=0) - 0.2, x.max(axis=0) + 0.2
     for c in sim.colliders:
         _draw_collider(ax, c, ((lo[0], hi[0]), (lo[1], hi[1])))
-    ax.plot_trisurf(x[:, 0], x[:, 1], x[:, 2], triangles=sim.model.triangles, color="tab:blue",
-                    edgecolor="navy", linewidth=0.1, alpha=0.9)
+    ax.plot_trisurf(
+        x[:, 0],
+        x[:, 1],
+        x[:, 2],
+        triangles=sim.model.triangles,
+        color="tab:blue",
+        edgecolor="navy",
+        linewidth=0.1,
+        alpha=0.9,
+    )
     mid, half = (lo + hi) / 2, (hi - lo).max() / 2
-    ax.set(xlim=(mid[0] - half, mid[0] + half), ylim=(mid[1] - half, mid[1] + half),
-           zlim=(max(lo[2], mid[2] - half), mid[2] + half), xlabel="x", ylabel="y", zlabel="z")
-    cloth = (f"{sim.model.rows}×{sim.model.cols}" if sim.model.rows else
-             f"{sim.model.n_particles} vertices, {len(sim.model.triangles)} triangles")
-    ax.set_title(f"{name}: t = {sim.time:.1f} s, {cloth}, "
-                 f"{', '.join(sim.active_stages)}", fontsize=9)
+    ax.set(
+        xlim=(mid[0] - half, mid[0] + half),
+        ylim=(mid[1] - half, mid[1] + half),
+        zlim=(max(lo[2], mid[2] - half), mid[2] + half),
+        xlabel="x",
+        ylabel="y",
+        zlabel="z",
+    )
+    cloth = (
+        f"{sim.model.rows}×{sim.model.cols}"
+        if sim.model.rows
+        else f"{sim.model.n_particles} vertices, {len(sim.model.triangles)} triangles"
+    )
+    ax.set_title(
+        f"{name}: t = {sim.time:.1f} s, {cloth}, {', '.join(sim.active_stages)}", fontsize=9
+    )
     ax.view_init(elev=22, azim=-60)
     out.mkdir(parents=True, exist_ok=True)
     path = out / f"{name}.png"
@@ -74,8 +101,12 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=3.0)
     ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parent / "img")
-    ap.add_argument("scenes", nargs="*", default=["table", "drape", "fold:0.8", "tshirt:0.6", "towel:1.5"],
-                    help="scene names, each optionally :seconds (default --seconds)")
+    ap.add_argument(
+        "scenes",
+        nargs="*",
+        default=["table", "drape", "fold:0.8", "tshirt:0.6", "towel:1.5"],
+        help="scene names, each optionally :seconds (default --seconds)",
+    )
     args = ap.parse_args(argv)
     for item in args.scenes:
         name, _, seconds = item.partition(":")

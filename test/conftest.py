@@ -1,43 +1,15 @@
+"""What every layer's tests share: one BLAS thread, and the seeded random generator."""
+
 import os
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from cloth_sim import ClothModel
-
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
-
-def one_spring(k=100.0, m=1.0, L=1.0, amplitude=0.1, damping=0.0):
-    """Particle 0 pinned at the origin, particle 1 free at L + amplitude on the x axis."""
-    return ClothModel.from_springs(positions=[[0, 0, 0], [L + amplitude, 0, 0]], masses=[m, m],
-                                   springs=[[0, 1]], stiffness=[k], damping=[damping],
-                                   rest_lengths=[L], pinned=[0])
-
-
-def cloth16(k=1000.0, damping=0.0, model="provot"):
-    """The tests' 16×16 cloth: 1 m square, k for every family, 0.01 kg particles, two corners pinned."""
-    return ClothModel.grid(16, 16, 1.0 / 15, 0.01, stiffness=k, damping=damping,
-                           pinned=[(0, 0), (0, -1)], model=model)
-
-
-def free_cloth(rng, rows=6, cols=6, damping=0.5, drift=(0.3, -0.1, 0.5)):
-    """An unpinned 6×6 cloth and random initial velocities around a common ``drift``."""
-    model = ClothModel.grid(rows, cols, 0.1, 0.01, stiffness=200.0, damping=damping)
-    v0 = rng.normal(scale=0.2, size=(rows * cols, 3)) + np.asarray(drift)
-    return model, v0
-
-
-def free_fall(sim, v0, steps):
-    """Give ``sim`` the velocities ``v0`` and take ``steps``. Returns the centre of mass then, the closed
-    form ``x0 + v0·t + g·t²/2`` of the centre of mass under gravity alone, and ``t``."""
-    m = sim.model.masses[:, None]
-    x0 = (m * sim.positions).sum(0) / m.sum()
-    vc = (m * np.asarray(v0)).sum(0) / m.sum()
-    sim.velocities = v0
-    sim.step(steps)
-    t = sim.time
-    return (m * sim.positions).sum(0) / m.sum(), x0 + vc * t + 0.5 * sim.gravity * t * t, t
+# the helpers every layer shares (malformed_scenes) import by name, as each folder's own do
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 
 @pytest.fixture

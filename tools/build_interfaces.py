@@ -6,7 +6,8 @@ CMake files name the wheel build host's Python and numpy include directories), c
 package's CMakeLists.txt with CLOTH_SIM_INTERFACES_ONLY=ON, builds, and installs into
 build/interfaces/install (its libraries linked into the venv's lib/); a .pth file then puts the
 generated Python package behind the hand-written one, which extends its __path__ to it (see
-cloth_sim/__init__.py). The ament index entries and share/cloth_sim are linked into the venv, so the
+cloth_sim/__init__.py). The ament index entries and share/cloth_sim are linked into the venv, so
+the
 venv is an ament prefix of cloth_sim (`ros2 interface show`, `ros2 run`, `ros2 launch` find it).
 On a real ROS 2 install none of this is used: `colcon build` builds the same CMakeLists.txt.
 """
@@ -33,7 +34,10 @@ VENDORED = ("simulation_interfaces", "tf2_msgs")
 
 def fix_wheel_cmake_paths(venv: Path) -> int:
     """Point the wheels' exported CMake files at this venv's Python and numpy headers."""
-    ours = {HOST_PY_INCLUDE: sysconfig.get_paths()["include"], HOST_NUMPY_INCLUDE: numpy.get_include()}
+    ours = {
+        HOST_PY_INCLUDE: sysconfig.get_paths()["include"],
+        HOST_NUMPY_INCLUDE: numpy.get_include(),
+    }
     changed = 0
     for path in (venv / "share").rglob("*.cmake"):
         text = path.read_text()
@@ -60,11 +64,14 @@ def expose_in_venv(venv: Path) -> None:
     and ``share/cloth_sim`` (the generated interfaces, package.xml, and the repository's config/
     and launch/) linked under ``venv/share``, and ``lib/cloth_sim/cloth_sim_node``. With
     ``AMENT_PREFIX_PATH`` holding the venv, ``ros2 interface show cloth_sim/msg/Stats``,
-    ``ros2 run cloth_sim cloth_sim_node`` and ``ros2 launch cloth_sim cloth_sim.launch.py`` work."""
+    ``ros2 run cloth_sim cloth_sim_node`` and ``ros2 launch cloth_sim cloth_sim.launch.py``
+    work."""
     index = PREFIX / "share" / "ament_index" / "resource_index"
     for name in ("cloth_sim", *VENDORED):
         for entry in index.glob(f"*/{name}"):
-            _link(venv / "share" / "ament_index" / "resource_index" / entry.parent.name / name, entry)
+            _link(
+                venv / "share" / "ament_index" / "resource_index" / entry.parent.name / name, entry
+            )
     for name in VENDORED:
         _link(venv / "share" / name, PREFIX / "share" / name)
     share = PREFIX / "share" / "cloth_sim"
@@ -87,7 +94,9 @@ def main() -> int:
         print(f"build_interfaces: pointed {fixed} wheel CMake files at this venv's include dirs")
     cmake = shutil.which("cmake")
     if cmake is None:
-        print("build_interfaces: error: cmake (>= 3.8) is needed to generate msg/", file=sys.stderr)
+        print(
+            "build_interfaces: error: cmake (>= 3.8) is needed to generate msg/", file=sys.stderr
+        )
         return 1
     env = dict(os.environ)
     env["PATH"] = f"{venv / 'bin'}{os.pathsep}{env.get('PATH', '')}"
@@ -98,11 +107,25 @@ def main() -> int:
     env["CMAKE_PREFIX_PATH"] = f"{PREFIX}{os.pathsep}{venv}"
     env["AMENT_PREFIX_PATH"] = f"{PREFIX}{os.pathsep}{venv}"
     # the standard interfaces no wheel has (interfaces/README.md), then the package's own
-    packages = [(name, ROOT / "interfaces" / name, ["CMakeLists.txt", "package.xml"],
-                 [d for d in ("msg", "srv", "action") if (ROOT / "interfaces" / name / d).is_dir()], [])
-                for name in VENDORED]
-    packages.append(("cloth_sim", ROOT, ["CMakeLists.txt", "package.xml"], ["msg", "srv"],
-                     ["-DCLOTH_SIM_INTERFACES_ONLY=ON"]))
+    packages = [
+        (
+            name,
+            ROOT / "interfaces" / name,
+            ["CMakeLists.txt", "package.xml"],
+            [d for d in ("msg", "srv", "action") if (ROOT / "interfaces" / name / d).is_dir()],
+            [],
+        )
+        for name in VENDORED
+    ]
+    packages.append(
+        (
+            "cloth_sim",
+            ROOT,
+            ["CMakeLists.txt", "package.xml"],
+            ["msg", "srv"],
+            ["-DCLOTH_SIM_INTERFACES_ONLY=ON"],
+        )
+    )
     for name, root, files, dirs, options in packages:
         # CMake refuses exported include dirs inside the source tree, and the venv (with numpy's
         # headers) lives in the repository: configure from a copy of what the interfaces need.
@@ -116,18 +139,34 @@ def main() -> int:
             shutil.copytree(root / d, src / d)
         work = BUILD / "cmake" / name
         work.mkdir(parents=True, exist_ok=True)
-        configure = [cmake, "-S", str(src), "-B", str(work), *options,
-                     "-DBUILD_TESTING=OFF", f"-DPython3_EXECUTABLE={venv / 'bin' / 'python3'}",
-                     f"-DCMAKE_INSTALL_PREFIX={PREFIX}", f"-DCMAKE_INSTALL_RPATH={rpath}",
-                     "-DCMAKE_BUILD_TYPE=Release"]
-        for cmd in (configure, [cmake, "--build", str(work), "-j", str(os.cpu_count() or 2)],
-                    [cmake, "--install", str(work)]):
-            out = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                 text=True)
+        configure = [
+            cmake,
+            "-S",
+            str(src),
+            "-B",
+            str(work),
+            *options,
+            "-DBUILD_TESTING=OFF",
+            f"-DPython3_EXECUTABLE={venv / 'bin' / 'python3'}",
+            f"-DCMAKE_INSTALL_PREFIX={PREFIX}",
+            f"-DCMAKE_INSTALL_RPATH={rpath}",
+            "-DCMAKE_BUILD_TYPE=Release",
+        ]
+        for cmd in (
+            configure,
+            [cmake, "--build", str(work), "-j", str(os.cpu_count() or 2)],
+            [cmake, "--install", str(work)],
+        ):
+            out = subprocess.run(
+                cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+            )
             if out.returncode != 0:
                 print(out.stdout[-6000:], file=sys.stderr)
-                print(f"build_interfaces: error: {name}: {' '.join(cmd[:3])} … failed "
-                      f"({out.returncode})", file=sys.stderr)
+                print(
+                    f"build_interfaces: error: {name}: {' '.join(cmd[:3])} … failed "
+                    f"({out.returncode})",
+                    file=sys.stderr,
+                )
                 return 1
         print(f"build_interfaces: {name} built", flush=True)
     # rosidl's type-support dispatch dlopens the libraries by name along LD_LIBRARY_PATH, which the

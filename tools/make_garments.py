@@ -1,18 +1,24 @@
 """Make the shipped garments, ``config/meshes/tshirt.obj`` and ``config/meshes/towel.obj``, and the
 ``twist`` scene's sheet, ``config/meshes/twist_sheet.obj``.
 
-Each outline is a polygon in metres, its sides cut into pieces of about ``EDGE`` and triangulated by
+Each outline is a polygon in metres, its sides cut into pieces of about ``EDGE`` and triangulated
+by
 Shewchuk's Triangle (the ``triangle`` package) as a quality mesh: no angle below 28°, no triangle
 larger than an equilateral one of side ``EDGE``, and no point added on the outline (``Y``), so two
 panels cut from one outline share their seam vertices exactly.
 
-* **T-shirt**: a front and a back panel from one outline, joined along the side, sleeve and shoulder
-  seams (their vertices are shared), open at the neck, the two cuffs and the waist. The panels bulge
-  apart by up to ``DEPTH`` away from the seams (a garment modelled around a body), so the shirt rests
-  as made, with a few centimetres between its layers. The back panel's triangles are wound the other
+* **T-shirt**: a front and a back panel from one outline, joined along the side, sleeve and
+shoulder
+  seams (their vertices are shared), open at the neck, the two cuffs and the waist. The panels
+  bulge
+  apart by up to ``DEPTH`` away from the seams (a garment modelled around a body), so the shirt
+  rests
+  as made, with a few centimetres between its layers. The back panel's triangles are wound the
+  other
   way, so every normal points out of the shirt.
 * **Towel**: a 0.5 m × 0.8 m rectangle, hung from its two top corners by the ``towel`` scene.
-* **Twist sheet**: the cloth of Newton's ``example_cloth_twist`` (its asset ``square_cloth.usd`` scaled
+* **Twist sheet**: the cloth of Newton's ``example_cloth_twist`` (its asset ``square_cloth.usd``
+scaled
   by 0.01): a 1.5 m × 1.0 m sheet of 50 × 50 vertices on a regular grid, each cell cut along the
   diagonal that alternates like a checkerboard (as that asset's; the vertices in the same order, x
   fastest). Not a quality mesh: the same triangles as the peer's, so the two solvers run one cloth.
@@ -29,9 +35,9 @@ import numpy as np
 import triangle
 
 OUT = Path(__file__).resolve().parent.parent / "config" / "meshes"
-EDGE = 0.025     # m, target edge length
-DEPTH = 0.05     # m, the most each T-shirt panel bulges away from the seams
-FALLOFF = 0.06   # m, distance from a seam over which the bulge grows
+EDGE = 0.025  # m, target edge length
+DEPTH = 0.05  # m, the most each T-shirt panel bulges away from the seams
+FALLOFF = 0.06  # m, distance from a seam over which the bulge grows
 
 
 def _polyline(points: np.ndarray, closed: bool = True) -> np.ndarray:
@@ -49,7 +55,7 @@ def _quality_mesh(outline: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Triangle's quality mesh of a simple polygon (counter-clockwise), its outline unsplit."""
     n = len(outline)
     segments = np.stack([np.arange(n), (np.arange(n) + 1) % n], axis=1)
-    area = np.sqrt(3) / 4 * EDGE ** 2
+    area = np.sqrt(3) / 4 * EDGE**2
     out = triangle.triangulate({"vertices": outline, "segments": segments}, f"pq28Ya{area:.8f}")
     if len(out["vertices"]) < n or not np.allclose(out["vertices"][:n], outline):
         sys.exit("make_garments: Triangle changed the outline")
@@ -60,12 +66,19 @@ def _tshirt_outline() -> tuple[np.ndarray, list[tuple[int, int]]]:
     """The shirt's outline (counter-clockwise, metres, waist at y = 0) and which of its sides are
     seams (the rest are openings: waist, cuffs, neck)."""
     neck = [(0.09 * np.cos(t), 0.69 - 0.07 * np.sin(t)) for t in np.linspace(0.0, np.pi, 9)]
-    corners = [(-0.25, 0.0), (0.25, 0.0),                    # waist (opening)
-               (0.25, 0.45), (0.48, 0.42),                   # right side seam, right sleeve bottom seam
-               (0.41, 0.56), (0.20, 0.65),                   # right cuff (opening), sleeve top seam
-               *neck,                                        # shoulder seam to (0.09, 0.69), neck
-               (-0.20, 0.65), (-0.41, 0.56),                 # left shoulder seam, left sleeve top seam
-               (-0.48, 0.42), (-0.25, 0.45)]                 # left cuff (opening), sleeve bottom, side
+    corners = [
+        (-0.25, 0.0),
+        (0.25, 0.0),  # waist (opening)
+        (0.25, 0.45),
+        (0.48, 0.42),  # right side seam, right sleeve bottom seam
+        (0.41, 0.56),
+        (0.20, 0.65),  # right cuff (opening), sleeve top seam
+        *neck,  # shoulder seam to (0.09, 0.69), neck
+        (-0.20, 0.65),
+        (-0.41, 0.56),  # left shoulder seam, left sleeve top seam
+        (-0.48, 0.42),
+        (-0.25, 0.45),
+    ]  # left cuff (opening), sleeve bottom, side
     corners = np.array(corners)
     k = len(corners)
     openings = {0, 3, *range(6, 6 + len(neck) - 1), k - 3}  # sides i → i+1 that stay open
@@ -91,8 +104,11 @@ def tshirt() -> tuple[np.ndarray, np.ndarray]:
     xy, tris = _quality_mesh(outline)
     # the bulge: 0 on the seams, growing to DEPTH away from them
     seam_pts = outline[on_seam]
-    seam_segs = [(outline[i], outline[(i + 1) % len(outline)]) for i in range(len(outline))
-                 if on_seam[i] and on_seam[(i + 1) % len(outline)]]
+    seam_segs = [
+        (outline[i], outline[(i + 1) % len(outline)])
+        for i in range(len(outline))
+        if on_seam[i] and on_seam[(i + 1) % len(outline)]
+    ]
     dist = np.full(len(xy), np.inf)
     for a, b in seam_segs:
         ab = b - a
@@ -117,21 +133,31 @@ def towel() -> tuple[np.ndarray, np.ndarray]:
     return np.column_stack([xy, np.zeros(len(xy))]), tris
 
 
-def twist_sheet(n: int = 50, width: float = 1.5, height: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+def twist_sheet(
+    n: int = 50, width: float = 1.5, height: float = 1.0
+) -> tuple[np.ndarray, np.ndarray]:
     xs, ys = np.linspace(-width / 2, width / 2, n), np.linspace(-height / 2, height / 2, n)
     vertices = np.array([(x, y, 0.0) for y in ys for x in xs])
     faces = []
     for r in range(n - 1):
         for c in range(n - 1):
             a, b, d, e = r * n + c, r * n + c + 1, (r + 1) * n + c, (r + 1) * n + c + 1
-            faces += ([(a, e, b), (a, d, e)] if (r + c) % 2 == 0 else [(a, d, b), (d, e, b)])
+            faces += [(a, e, b), (a, d, e)] if (r + c) % 2 == 0 else [(a, d, b), (d, e, b)]
     return vertices, np.array(faces)
 
 
-def write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray, title: str,
-              how: str = "Triangle, quality mesh q28") -> None:
-    lines = [f"# {title}", f"# made by tools/make_garments.py ({how}); units: metres",
-             f"# {len(vertices)} vertices, {len(faces)} triangles"]
+def write_obj(
+    path: Path,
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    title: str,
+    how: str = "Triangle, quality mesh q28",
+) -> None:
+    lines = [
+        f"# {title}",
+        f"# made by tools/make_garments.py ({how}); units: metres",
+        f"# {len(vertices)} vertices, {len(faces)} triangles",
+    ]
     lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in vertices]
     lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]
     path.write_text("\n".join(lines) + "\n")
@@ -139,15 +165,25 @@ def write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray, title: str,
 
 def main() -> None:
     OUT.mkdir(parents=True, exist_ok=True)
-    for name, make, title in (("tshirt", tshirt, "A T-shirt: front and back panels joined at the "
-                                                 "shoulders, sleeves and sides"),
-                              ("towel", towel, "A 0.5 m x 0.8 m towel")):
+    for name, make, title in (
+        (
+            "tshirt",
+            tshirt,
+            "A T-shirt: front and back panels joined at the shoulders, sleeves and sides",
+        ),
+        ("towel", towel, "A 0.5 m x 0.8 m towel"),
+    ):
         v, f = make()
         write_obj(OUT / f"{name}.obj", v, f, title)
         print(f"{name}: {len(v)} vertices, {len(f)} triangles -> {OUT / (name + '.obj')}")
     v, f = twist_sheet()
-    write_obj(OUT / "twist_sheet.obj", v, f, "Newton's twist cloth: 1.5 m x 1.0 m, 50 x 50 vertices",
-              "a regular grid, diagonals alternating")
+    write_obj(
+        OUT / "twist_sheet.obj",
+        v,
+        f,
+        "Newton's twist cloth: 1.5 m x 1.0 m, 50 x 50 vertices",
+        "a regular grid, diagonals alternating",
+    )
     print(f"twist_sheet: {len(v)} vertices, {len(f)} triangles -> {OUT / 'twist_sheet.obj'}")
 
 

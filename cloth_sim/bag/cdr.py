@@ -86,7 +86,9 @@ class CdrWriter:
 _FLOAT32 = 7
 
 
-def point_cloud(positions: np.ndarray, rows: int, cols: int, frame_id: str, stamp_ns: int) -> bytes:
+def point_cloud(
+    positions: np.ndarray, rows: int, cols: int, frame_id: str, stamp_ns: int
+) -> bytes:
     """``sensor_msgs/PointCloud2``: ``rows`` × ``cols`` float32 x y z (what the node's ``~/points``
     and ``~/camera/points`` carry)."""
     pts = np.ascontiguousarray(positions, dtype=np.float32)
@@ -123,7 +125,7 @@ def image(values: np.ndarray, encoding: str, frame_id: str, stamp_ns: int) -> by
 
 
 def camera_info(camera, frame_id: str, stamp_ns: int) -> bytes:
-    """``sensor_msgs/CameraInfo`` of a :class:`~cloth_sim.camera.DepthCamera` (pinhole, no
+    """``sensor_msgs/CameraInfo`` of a :class:`~cloth_sim.sensors.camera.DepthCamera` (pinhole, no
     distortion: ``plumb_bob`` with zeros, ``P = [K | 0]``), as the node publishes it."""
     fx, fy, cx, cy = camera.fx, camera.fy, camera.cx, camera.cy
     w = CdrWriter()
@@ -143,19 +145,43 @@ def camera_info(camera, frame_id: str, stamp_ns: int) -> bytes:
     return w.getvalue()
 
 
-def stats(*, stamp_ns: int, frame_id: str, integrator: str, dt: float, steps: int,
-          step_time_mean: float, step_time_max: float, tick_wall_time: float,
-          real_time_factor: float, sim_time: float, kinetic_energy: float,
-          potential_energy: float, max_strain: float, overruns: int, stability_margin: float,
-          paused: bool, solver_iterations: int = 0, solver_residual: float = 0.0) -> bytes:
+def stats(
+    *,
+    stamp_ns: int,
+    frame_id: str,
+    integrator: str,
+    dt: float,
+    steps: int,
+    step_time_mean: float,
+    step_time_max: float,
+    tick_wall_time: float,
+    real_time_factor: float,
+    sim_time: float,
+    kinetic_energy: float,
+    potential_energy: float,
+    max_strain: float,
+    overruns: int,
+    stability_margin: float,
+    paused: bool,
+    solver_iterations: int = 0,
+    solver_residual: float = 0.0,
+) -> bytes:
     """``cloth_sim/msg/Stats`` (msg/Stats.msg), field for field."""
     w = CdrWriter()
     w.header(stamp_ns, frame_id)
     w.string(integrator)
     w.f64(dt)
     w.u32(steps)
-    for v in (step_time_mean, step_time_max, tick_wall_time, real_time_factor, sim_time,
-              kinetic_energy, potential_energy, max_strain):
+    for v in (
+        step_time_mean,
+        step_time_max,
+        tick_wall_time,
+        real_time_factor,
+        sim_time,
+        kinetic_energy,
+        potential_energy,
+        max_strain,
+    ):
         w.f64(v)
     w.u64(overruns)
     w.f64(stability_margin)

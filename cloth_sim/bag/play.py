@@ -1,9 +1,12 @@
-"""``cloth-sim play``: publish a bag's recorded bytes with their original relative timing and QoS, as
+"""``cloth-sim play``: publish a bag's recorded bytes with their original relative timing and QoS,
+as
 ``ros2 bag play`` does.
 
 Message i is published at wall time ``start + (log_time_i − log_time_first − offset) / rate``; the
-schedule is absolute, so sleeping late for one message does not shift the ones after it. Each topic gets
-one publisher with the QoS its recorded publishers offered (the first offer; an unknown or system-default
+schedule is absolute, so sleeping late for one message does not shift the ones after it. Each topic
+gets
+one publisher with the QoS its recorded publishers offered (the first offer; an unknown or
+system-default
 history becomes keep-last with the recorded depth, at least 10).
 """
 
@@ -14,7 +17,13 @@ import time
 
 import rclpy
 from rclpy.duration import Duration
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    LivelinessPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+)
 from rclpy.signals import SignalHandlerOptions
 
 from .record import message_class
@@ -39,10 +48,13 @@ def qos_from_offer(offer: dict | None) -> QoSProfile:
         history = HistoryPolicy.KEEP_LAST
     if history == HistoryPolicy.KEEP_LAST:
         depth = max(depth, 10)
-    q = QoSProfile(history=history, depth=depth,
-                   reliability=policy(ReliabilityPolicy, "reliability", ReliabilityPolicy.RELIABLE),
-                   durability=policy(DurabilityPolicy, "durability", DurabilityPolicy.VOLATILE),
-                   liveliness=policy(LivelinessPolicy, "liveliness", LivelinessPolicy.AUTOMATIC))
+    q = QoSProfile(
+        history=history,
+        depth=depth,
+        reliability=policy(ReliabilityPolicy, "reliability", ReliabilityPolicy.RELIABLE),
+        durability=policy(DurabilityPolicy, "durability", DurabilityPolicy.VOLATILE),
+        liveliness=policy(LivelinessPolicy, "liveliness", LivelinessPolicy.AUTOMATIC),
+    )
     for key in ("deadline", "lifespan", "liveliness_lease_duration"):
         ns = time_ns(offer.get(key))
         if 0 < ns < INFINITE_NS:
@@ -51,9 +63,19 @@ def qos_from_offer(offer: dict | None) -> QoSProfile:
 
 
 class Player:
-    def __init__(self, path, *, rate: float = 1.0, loop: bool = False, topics: list[str] | None = None,
-                 start_offset: float = 0.0, ack_timeout: float = 5.0, context=None, log=print):
-        if not 0 < rate < float("inf"):                # (also false for NaN)
+    def __init__(
+        self,
+        path,
+        *,
+        rate: float = 1.0,
+        loop: bool = False,
+        topics: list[str] | None = None,
+        start_offset: float = 0.0,
+        ack_timeout: float = 5.0,
+        context=None,
+        log=print,
+    ):
+        if not 0 < rate < float("inf"):  # (also false for NaN)
             raise BagError(f"--rate must be a finite number > 0, got {rate}")
         if not start_offset >= 0:
             raise BagError(f"--start-offset must be ≥ 0 s, got {start_offset}")
@@ -64,11 +86,15 @@ class Player:
         if topics:
             unknown = [t for t in topics if t not in known]
             if unknown:
-                raise BagError(f"topic {unknown[0]} is not in {path}; it has: {', '.join(sorted(known))}")
+                raise BagError(
+                    f"topic {unknown[0]} is not in {path}; it has: {', '.join(sorted(known))}"
+                )
             known = {t: known[t] for t in topics}
         duration = (self.info.end - self.info.start) / 1e9
         if start_offset > duration:
-            raise BagError(f"--start-offset {start_offset} s is past the bag's end ({duration:.3f} s)")
+            raise BagError(
+                f"--start-offset {start_offset} s is past the bag's end ({duration:.3f} s)"
+            )
         self.start_ns = self.info.start + int(round(start_offset * 1e9))
         self.topics = known
         classes = {}
@@ -76,22 +102,28 @@ class Player:
             try:
                 classes[t.name] = message_class(t.type)
             except (ImportError, AttributeError, ValueError):
-                raise BagError(f"topic {t.name} has type {t.type!r}, which is not installed here "
-                               f"(leave it out with --topics)") from None
-        self.node = rclpy.create_node("cloth_sim_player", context=context, start_parameter_services=False)
+                raise BagError(
+                    f"topic {t.name} has type {t.type!r}, which is not installed here "
+                    f"(leave it out with --topics)"
+                ) from None
+        self.node = rclpy.create_node(
+            "cloth_sim_player", context=context, start_parameter_services=False
+        )
         self.publishers = {}
         for t in known.values():
             try:
                 offers = parse_qos_profiles(t.offered_qos_profiles)
             except ValueError as e:
                 raise BagError(f"topic {t.name}: unreadable offered_qos_profiles ({e})") from None
-            self.publishers[t.name] = self.node.create_publisher(classes[t.name], t.name,
-                                                                 qos_from_offer(offers[0] if offers else None))
+            self.publishers[t.name] = self.node.create_publisher(
+                classes[t.name], t.name, qos_from_offer(offers[0] if offers else None)
+            )
         self.published = 0
         self.stop_requested = False
 
     def run(self) -> float:
-        """Publish until the end (or forever with loop, until stopped); returns the wall time taken."""
+        """Publish until the end (or forever with loop, until stopped); returns the wall time
+        taken."""
         wall0 = time.perf_counter()
         names = set(self.topics)
         while True:
@@ -113,7 +145,8 @@ class Player:
                 return time.perf_counter() - wall0
 
     def wait_for_all_acked(self) -> bool:
-        """Let reliable subscribers acknowledge what was sent before the publishers go away (a DDS writer
+        """Let reliable subscribers acknowledge what was sent before the publishers go away (a DDS
+        writer
         destroyed at exit drops what it has not delivered yet); at most ``ack_timeout`` seconds."""
         deadline = time.monotonic() + self.ack_timeout
         ok = True
@@ -131,17 +164,28 @@ def main(args) -> int:
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     player = None
     try:
-        player = Player(args.bag, rate=args.rate, loop=args.loop, topics=args.topics,
-                        start_offset=args.start_offset, ack_timeout=args.wait_for_all_acked, context=context)
+        player = Player(
+            args.bag,
+            rate=args.rate,
+            loop=args.loop,
+            topics=args.topics,
+            start_offset=args.start_offset,
+            ack_timeout=args.wait_for_all_acked,
+            context=context,
+        )
 
         def stop(signum, frame):
             player.stop_requested = True
+
         signal.signal(signal.SIGINT, stop)
         signal.signal(signal.SIGTERM, stop)
         if args.delay > 0:
-            time.sleep(args.delay)                # let subscribers discover the publishers first
-        print(f"playing {args.bag}: {sum(t.count for t in player.topics.values())} messages on "
-              f"{len(player.topics)} topics, rate {args.rate:g}", flush=True)
+            time.sleep(args.delay)  # let subscribers discover the publishers first
+        print(
+            f"playing {args.bag}: {sum(t.count for t in player.topics.values())} messages on "
+            f"{len(player.topics)} topics, rate {args.rate:g}",
+            flush=True,
+        )
         wall = player.run()
         print(f"published {player.published} messages in {wall:.2f} s", flush=True)
     finally:

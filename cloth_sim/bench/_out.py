@@ -1,4 +1,5 @@
-"""Shared output helpers of the benchmarks: CSV/JSON/Markdown files, plots, progress bars, machine line."""
+"""Shared output helpers of the benchmarks: CSV/JSON/Markdown files, plots, progress bars, machine
+line."""
 
 from __future__ import annotations
 
@@ -14,9 +15,12 @@ G = (0.0, 0.0, -9.81)
 
 
 def hang16(k: float = 1000.0, damping: float = 0.0) -> ClothModel:
-    """Scene hang16: 16×16 grid, 1 m square, k for every family, 0.01 kg particles, two corners of one
+    """Scene hang16: 16×16 grid, 1 m square, k for every family, 0.01 kg particles, two corners of
+    one
     edge pinned, flat and at rest (no wind, no strain limit are the simulator's defaults)."""
-    return ClothModel.grid(16, 16, 1.0 / 15, 0.01, stiffness=k, damping=damping, pinned=[(0, 0), (0, 15)])
+    return ClothModel.grid(
+        16, 16, 1.0 / 15, 0.01, stiffness=k, damping=damping, pinned=[(0, 0), (0, 15)]
+    )
 
 
 def machine() -> str:
@@ -28,12 +32,16 @@ def machine() -> str:
                 break
     except OSError:
         pass
-    return (f"{cpu or platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-            f"Python {platform.python_version()}, OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', '-')}")
+    return (
+        f"{cpu or platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+        f"Python {platform.python_version()}, "
+        f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', '-')}"
+    )
 
 
 def progress(iterable, desc: str, total: int | None = None):
     from tqdm import tqdm
+
     return tqdm(iterable, desc=desc, total=total, leave=False, disable=None)
 
 
@@ -79,8 +87,10 @@ def markdown_table(headers: list[str], rows: list[list]) -> str:
 
 def pyplot():
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
     return plt
 
 

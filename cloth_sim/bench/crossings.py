@@ -4,7 +4,8 @@ collision handling).
 
 Every particle moves on a straight path between the states and so does every triangle's corner; a
 particle ``p`` not a corner of triangle ``abc`` crosses it when the coplanarity cubic ``f(s) = (p −
-a)·((b − a) × (c − a))`` has a root in ``[0, 1]`` at which ``p`` lies inside the triangle. The cubic's
+a)·((b − a) × (c − a))`` has a root in ``[0, 1]`` at which ``p`` lies inside the triangle. The
+cubic's
 coefficients come from four samples, its real roots from monotone brackets (split at the roots of
 ``f'``) and bisection. Candidate pairs are those whose swept boxes overlap, found with SciPy's
 k-d tree over the boxes' centres.
@@ -28,8 +29,11 @@ def _overlapping(x0, x1, tris):
     near = cKDTree(c_t).query_ball_point(c_p, r_p + float(r_t.max()) + 1e-12)
     P = np.repeat(np.arange(len(x0)), [len(k) for k in near])
     T = np.fromiter((t for k in near for t in k), dtype=np.int64, count=len(P))
-    keep = (np.all(lo_t[T] <= hi_p[P], axis=1) & np.all(hi_t[T] >= lo_p[P], axis=1)
-            & np.all(tris[T] != P[:, None], axis=1))
+    keep = (
+        np.all(lo_t[T] <= hi_p[P], axis=1)
+        & np.all(hi_t[T] >= lo_p[P], axis=1)
+        & np.all(tris[T] != P[:, None], axis=1)
+    )
     return P[keep], T[keep]
 
 
@@ -75,7 +79,13 @@ def crossings(x0, x1, tris) -> list[tuple[int, int]]:
     every = np.arange(len(P))
     for lo, hi in ((0 * ones, k1), (k1, k2), (k2, ones)):
         bracket = np.flatnonzero((cubic(lo, every) * cubic(hi, every) <= 0) & (hi >= lo))
-        P, A, B, C, T = all_P[bracket], all_A[bracket], all_B[bracket], all_C[bracket], all_T[bracket]
+        P, A, B, C, T = (
+            all_P[bracket],
+            all_A[bracket],
+            all_B[bracket],
+            all_C[bracket],
+            all_T[bracket],
+        )
         lo, hi = lo[bracket], hi[bracket]
         if len(P) == 0:
             continue

@@ -1,4 +1,5 @@
-"""ms/step of integrators on the hanging scene at several grid sizes, side by side in one process."""
+"""ms/step of integrators on the hanging scene at several grid sizes, side by side in one
+process."""
 
 from __future__ import annotations
 
@@ -31,12 +32,17 @@ def time_steps(sim, seconds: float = 1.0, repeats: int = 3) -> float:
 
 def print_step_table(sizes, names, seconds: float = 1.0) -> list[dict]:
     scene = load_scene("hanging")
-    print(f"# hanging scene ({scene.source}) resized to N×N over 1 m; k/m as in the scene, dt={scene.dt} s, "
-          f"strain limit {scene.strain_limit} ({scene.strain_limit_method}); "
-          f"{platform.processor() or platform.machine()}, "
-          f"{os.cpu_count()} cores; min of 3")
-    print("| N | particles | integrator | ms/step, no strain limit | ms/step, strain limit | "
-          "force evals/step |")
+    print(
+        f"# hanging scene ({scene.source}) resized to N×N over 1 m; k/m as in the scene, "
+        f"dt={scene.dt} s, "
+        f"strain limit {scene.strain_limit} ({scene.strain_limit_method}); "
+        f"{platform.processor() or platform.machine()}, "
+        f"{os.cpu_count()} cores; min of 3"
+    )
+    print(
+        "| N | particles | integrator | ms/step, no strain limit | ms/step, strain limit | "
+        "force evals/step |"
+    )
     print("|---|---|---|---|---|---|")
     rows = []
     tau = scene.strain_limit
@@ -51,8 +57,13 @@ def print_step_table(sizes, names, seconds: float = 1.0) -> list[dict]:
             evals = (sim.force_evaluations - e0) / max(sim.steps_taken - s0, 1)
             sim.strain_limit = tau
             limited = 1e3 * time_steps(sim, seconds)
-            rows.append({"N": n, "integrator": name, "ms_per_step": plain, "ms_per_step_strain": limited})
-            print(f"| {n} | {n * n} | {name} | {plain:.3f} | {limited:.3f} | {evals:.0f} |", flush=True)
+            rows.append(
+                {"N": n, "integrator": name, "ms_per_step": plain, "ms_per_step_strain": limited}
+            )
+            print(
+                f"| {n} | {n * n} | {name} | {plain:.3f} | {limited:.3f} | {evals:.0f} |",
+                flush=True,
+            )
     return rows
 
 
@@ -70,15 +81,22 @@ IMPLICIT_VARIANTS = (
 def print_implicit_table(sizes, dt: float, seconds: float = 1.0) -> list[dict]:
     """ms/step of the implicit methods (and the linear solver behind them) at a large step, on the
     hanging scene at N×N (the 1 m, 10.24 kg cloth: spacing 1/(N−1), mass 10.24/N², as the strain
-    and node benchmarks), each also as a multiple of a symplectic Euler step of the same cloth timed
-    in the same run (at dt = 0.1 ms, where it is stable at every size: a step's cost does not depend
+    and node benchmarks), each also as a multiple of a symplectic Euler step of the same cloth
+    timed
+    in the same run (at dt = 0.1 ms, where it is stable at every size: a step's cost does not
+    depend
     on dt; at 1 ms, 81×81 without the strain limit diverges)."""
     from ..simulator import SimulationDiverged
 
-    print(f"# hanging scene resized to N×N over 1 m and 10.24 kg, dt={dt:.6g} s, no strain limit; "
-          f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores; min of 3 after "
-          f"0.5 s of simulated warm-up; × a symplectic Euler step of the same cloth")
-    print("| N | method | ms/step | × a symplectic step | mean CG iterations/step | factorisations | note |")
+    print(
+        f"# hanging scene resized to N×N over 1 m and 10.24 kg, dt={dt:.6g} s, no strain limit; "
+        f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores; min of 3 after "
+        f"0.5 s of simulated warm-up; × a symplectic Euler step of the same cloth"
+    )
+    print(
+        "| N | method | ms/step | × a symplectic step | mean CG iterations/step | factorisations "
+        "| note |"
+    )
     print("|---|---|---|---|---|---|---|")
     rows = []
     for n in sizes:
@@ -87,9 +105,18 @@ def print_implicit_table(sizes, dt: float, seconds: float = 1.0) -> list[dict]:
         base = 1e3 * time_steps(reference, seconds)
         print(f"| {n} | symplectic_euler (dt = 0.1 ms) | {base:.3f} | 1 |  |  |  |", flush=True)
         for name, options, label in IMPLICIT_VARIANTS:
-            sim = _hanging(n, strain_limit=None, integrator=name, dt=dt, integrator_options=options)
-            row = {"N": n, "method": label, "ms_per_step": float("nan"), "cg_iterations": None,
-                   "factorizations": None, "note": "", "symplectic_ms": base}
+            sim = _hanging(
+                n, strain_limit=None, integrator=name, dt=dt, integrator_options=options
+            )
+            row = {
+                "N": n,
+                "method": label,
+                "ms_per_step": float("nan"),
+                "cg_iterations": None,
+                "factorizations": None,
+                "note": "",
+                "symplectic_ms": base,
+            }
             try:
                 sim.advance(0.5)
                 before = sim.integrator_stats
@@ -97,8 +124,9 @@ def print_implicit_table(sizes, dt: float, seconds: float = 1.0) -> list[dict]:
                 row["ms_per_step"] = 1e3 * time_steps(sim, seconds)
                 after = sim.integrator_stats
                 if "cg_iterations" in after and options.get("solver") == "cg":
-                    row["cg_iterations"] = ((after["cg_iterations"] - before["cg_iterations"])
-                                            / (sim.steps_taken - s0))
+                    row["cg_iterations"] = (after["cg_iterations"] - before["cg_iterations"]) / (
+                        sim.steps_taken - s0
+                    )
                 row["factorizations"] = after.get("factorizations")
             except SimulationDiverged:
                 row["note"] = f"diverged at t = {sim.time:.3f} s"
@@ -124,19 +152,25 @@ def print_blowup_table(size: int = 32) -> list[dict]:
 
     scene = load_scene("hanging")
     spacing = 1.0 / (size - 1)
-    print(f"# a blow-up's cost: hanging scene at {size}×{size}, strain limit off; "
-          f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores")
-    print("| integrator | dt (s) | steps before the blow-up | ms in the failing step() | "
-          "ms per normal step | message says |")
+    print(
+        f"# a blow-up's cost: hanging scene at {size}×{size}, strain limit off; "
+        f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores"
+    )
+    print(
+        "| integrator | dt (s) | steps before the blow-up | ms in the failing step() | "
+        "ms per normal step | message says |"
+    )
     print("|---|---|---|---|---|---|")
     rows = []
     for name in integrators.available():
-        twin = scene.build_simulator(rows=size, cols=size, spacing=spacing, integrator=name,
-                                     strain_limit=None)
+        twin = scene.build_simulator(
+            rows=size, cols=size, spacing=spacing, integrator=name, strain_limit=None
+        )
         unconditional = integrators.get(name).stability is Stability.UNCONDITIONAL
         dt = 1.0 / 60 if unconditional else min(1.0, 10.0 * twin.stable_dt()) or 1e-3
-        sim = scene.build_simulator(rows=size, cols=size, spacing=spacing, integrator=name, dt=dt,
-                                    strain_limit=None)
+        sim = scene.build_simulator(
+            rows=size, cols=size, spacing=spacing, integrator=name, dt=dt, strain_limit=None
+        )
         if unconditional:
             sim.max_speed = 0.5
         steps, normal, failing, message = 0, 0.0, float("nan"), ""
@@ -146,22 +180,34 @@ def print_blowup_table(size: int = 32) -> list[dict]:
                 sim.step()
             except SimulationDiverged as e:
                 failing = time.perf_counter() - t
-                message = "stable_dt not computed" if "not computed" in str(e) else "stable_dt known"
+                message = (
+                    "stable_dt not computed" if "not computed" in str(e) else "stable_dt known"
+                )
                 break
             normal += time.perf_counter() - t
             steps += 1
-        row = {"integrator": name, "dt": dt, "steps": steps, "failing_ms": 1e3 * failing,
-               "step_ms": 1e3 * normal / max(steps, 1), "message": message}
+        row = {
+            "integrator": name,
+            "dt": dt,
+            "steps": steps,
+            "failing_ms": 1e3 * failing,
+            "step_ms": 1e3 * normal / max(steps, 1),
+            "message": message,
+        }
         rows.append(row)
-        print(f"| {name} | {dt:.3g} | {steps} | {row['failing_ms']:.2f} | {row['step_ms']:.3f} | "
-              f"{message} |", flush=True)
+        print(
+            f"| {name} | {dt:.3g} | {steps} | {row['failing_ms']:.2f} | {row['step_ms']:.3f} | "
+            f"{message} |",
+            flush=True,
+        )
     return rows
 
 
 def _hanging(n: int, **kw):
     """The hanging scene at N×N: the same 1 m, 10.24 kg cloth (spacing 1/(N−1), mass 10.24/N²)."""
-    return load_scene("hanging").build_simulator(rows=n, cols=n, spacing=1 / (n - 1),
-                                                 particle_mass=10.24 / n ** 2, **kw)
+    return load_scene("hanging").build_simulator(
+        rows=n, cols=n, spacing=1 / (n - 1), particle_mass=10.24 / n**2, **kw
+    )
 
 
 def _ms_per_step(sim, seconds: float, every_10=None) -> float:
@@ -180,33 +226,54 @@ def _ms_per_step(sim, seconds: float, every_10=None) -> float:
 
 def print_strain_limit_table(sizes=(32, 64), seconds: float = 3.0, tau: float = 0.1) -> list[dict]:
     """The hanging scene at N×N (the 1 m, 10.24 kg cloth: spacing 1/(N−1), mass 10.24/N²) over
-    ``seconds``: worst structural/shear strain (sampled every 10 steps) and ms/step without the strain
+    ``seconds``: worst structural/shear strain (sampled every 10 steps) and ms/step without the
+    strain
     limit, with Provot's passes alone, with long-range attachments at 20 (the default), 10 and 5
     passes, and with the projection method; the cost ratios to the run without, measured in one
     process."""
-    print(f"# strain limit τ = {tau} on the hanging scene, {seconds:g} s, symplectic Euler dt = 1 ms; "
-          f"{platform.machine()}, {os.cpu_count()} cores")
+    print(
+        f"# strain limit τ = {tau} on the hanging scene, {seconds:g} s, symplectic Euler dt = 1 "
+        "ms; "
+        f"{platform.machine()}, {os.cpu_count()} cores"
+    )
     print("| N | method | worst strain | ms/step | × the step without |")
     print("|---|---|---|---|---|")
     rows = []
     for n in sizes:
         base = None
-        for label, kw in (("off", dict(strain_limit=None)),
-                          ("provot (20 passes)", dict(strain_limit=tau, strain_limit_long_range=False,
-                                                      strain_limit_method="provot")),
-                          ("provot + long-range attachments (20 passes)",
-                           dict(strain_limit=tau, strain_limit_method="provot")),
-                          ("provot + long-range attachments, 10 passes",
-                           dict(strain_limit=tau, strain_limit_passes=10, strain_limit_method="provot")),
-                          ("provot + long-range attachments, 5 passes",
-                           dict(strain_limit=tau, strain_limit_passes=5, strain_limit_method="provot")),
-                          ("projection (Goldenthal et al. 2007) after the attachments",
-                           dict(strain_limit=tau, strain_limit_method="projection"))):
-            _hanging(n, **kw).step(5)  # load its kernels first (the first row's cost was 0.08–0.19 ms)
+        for label, kw in (
+            ("off", dict(strain_limit=None)),
+            (
+                "provot (20 passes)",
+                dict(
+                    strain_limit=tau, strain_limit_long_range=False, strain_limit_method="provot"
+                ),
+            ),
+            (
+                "provot + long-range attachments (20 passes)",
+                dict(strain_limit=tau, strain_limit_method="provot"),
+            ),
+            (
+                "provot + long-range attachments, 10 passes",
+                dict(strain_limit=tau, strain_limit_passes=10, strain_limit_method="provot"),
+            ),
+            (
+                "provot + long-range attachments, 5 passes",
+                dict(strain_limit=tau, strain_limit_passes=5, strain_limit_method="provot"),
+            ),
+            (
+                "projection (Goldenthal et al. 2007) after the attachments",
+                dict(strain_limit=tau, strain_limit_method="projection"),
+            ),
+        ):
+            _hanging(n, **kw).step(
+                5
+            )  # load its kernels first (the first row's cost was 0.08–0.19 ms)
             sim = _hanging(n, **kw)
             samples = []
-            ms = _ms_per_step(sim, seconds,
-                              lambda: samples.append(float(sim.strains(limited_only=True).max())))
+            ms = _ms_per_step(
+                sim, seconds, lambda: samples.append(float(sim.strains(limited_only=True).max()))
+            )
             worst = max(samples)
             base = base or ms
             rows.append({"N": n, "method": label, "worst": worst, "ms": ms})
@@ -219,25 +286,38 @@ def print_contacts_table(sizes=(32, 64), seconds: float = 1.5) -> list[dict]:
     onto a floor 0.7 m below its pins: ms/step without contacts, with the plane and the sphere, and
     with self-collision as well; each a ratio to the contact-free step of the same run, with how
     many particles touched a collider and how many self-collision pairs the last step had."""
-    from ..colliders import Plane, Sphere
+    from ..contact.colliders import Plane, Sphere
 
-    print(f"# contacts on the hanging scene, {seconds:g} s, symplectic Euler dt = 1 ms, strain limit "
-          f"0.1; {platform.machine()}, {os.cpu_count()} cores")
+    print(
+        f"# contacts on the hanging scene, {seconds:g} s, symplectic Euler dt = 1 ms, strain "
+        "limit "
+        f"0.1; {platform.machine()}, {os.cpu_count()} cores"
+    )
     print("| N | contacts | ms/step | × the step without | touching (last step) | self pairs |")
     print("|---|---|---|---|---|---|")
     rows = []
     for n in sizes:
         base = None
-        for label, kw in (("none", {}),
-                          ("plane + sphere", dict(colliders=True)),
-                          ("plane + sphere + self-collision", dict(colliders=True, self_collision=True))):
-            cols = [Plane(normal=(0, 0, 1), offset=-0.7, friction=0.5),
-                    Sphere(center=(0.5, 0.25, -0.5), radius=0.2, friction=0.3)] if kw.get("colliders") else []
+        for label, kw in (
+            ("none", {}),
+            ("plane + sphere", dict(colliders=True)),
+            ("plane + sphere + self-collision", dict(colliders=True, self_collision=True)),
+        ):
+            cols = (
+                [
+                    Plane(normal=(0, 0, 1), offset=-0.7, friction=0.5),
+                    Sphere(center=(0.5, 0.25, -0.5), radius=0.2, friction=0.3),
+                ]
+                if kw.get("colliders")
+                else []
+            )
             sim = _hanging(n, colliders=cols, self_collision=kw.get("self_collision", False))
             ms = _ms_per_step(sim, seconds)
             base = base or ms
-            touching = sim._contacts.last_touching if cols else 0
-            pairs = sim._self_collision.last_pairs if sim.self_collision else 0
+            touching, pairs = sim.contact_counts
             rows.append({"N": n, "contacts": label, "ms": ms, "ratio": ms / base})
-            print(f"| {n} | {label} | {ms:.3f} | {ms / base:.2f} | {touching} | {pairs} |", flush=True)
+            print(
+                f"| {n} | {label} | {ms:.3f} | {ms / base:.2f} | {touching} | {pairs} |",
+                flush=True,
+            )
     return rows

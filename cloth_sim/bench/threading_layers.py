@@ -1,7 +1,8 @@
 """ms/step of the hanging cloth under each of numba's threading layers, side by side.
 
 numba picks its threading layer once per process, so each layer runs in its own child process
-(``NUMBA_THREADING_LAYER`` set), the layers taking turns for ``rounds`` rounds; the table gives each
+(``NUMBA_THREADING_LAYER`` set), the layers taking turns for ``rounds`` rounds; the table gives
+each
 layer's median. Two ways of stepping, both from the same state, 0.5 s after the release:
 
 * *steady*: steps back to back (a sweep, a benchmark, ``cloth-sim run``);
@@ -43,8 +44,9 @@ def _child(size: int, seconds: float) -> dict:
         t = time.perf_counter()
         sim.step(n)
         out[f"{label}_steady_ms"] = 1e3 * (time.perf_counter() - t) / n
-        out[f"{label}_hash"] = hashlib.sha1(sim.positions.tobytes()
-                                            + sim.velocities.tobytes()).hexdigest()[:12]
+        out[f"{label}_hash"] = hashlib.sha1(
+            sim.positions.tobytes() + sim.velocities.tobytes()
+        ).hexdigest()[:12]
         sim.restore_state(saved)
         period = 1.0 / 60.0
         per_tick = max(1, int(round(period / sim.dt)))
@@ -70,8 +72,12 @@ def measure(size: int = 64, seconds: float = 1.0, rounds: int = 3, layers=LAYERS
             if isinstance(out[layer], str):
                 continue
             env = dict(os.environ, NUMBA_THREADING_LAYER=layer)
-            p = subprocess.run([sys.executable, "-m", __name__, "--child", str(size), str(seconds)],
-                               env=env, capture_output=True, text=True)
+            p = subprocess.run(
+                [sys.executable, "-m", __name__, "--child", str(size), str(seconds)],
+                env=env,
+                capture_output=True,
+                text=True,
+            )
             if p.returncode:
                 out[layer] = p.stderr.strip().splitlines()[-1] if p.stderr.strip() else "failed"
                 continue
@@ -80,11 +86,16 @@ def measure(size: int = 64, seconds: float = 1.0, rounds: int = 3, layers=LAYERS
 
 
 def print_table(size: int = 64, seconds: float = 1.0, rounds: int = 3) -> dict:
-    print(f"# hanging {size}×{size}, {seconds:g} s simulated from t = 0.5 s, with the scene's strain "
-          f"limit and without it; each layer in its own process, {rounds} rounds taking turns "
-          f"(median); {os.cpu_count()} cores; cloth_sim's default: NUMBA_THREADING_LAYER=forksafe")
-    print("| layer | fork-safe | ms/step, steady | ms/step, 1/60 s ticks | without strain limit: "
-          "steady | ticks | state hashes |")
+    print(
+        f"# hanging {size}×{size}, {seconds:g} s simulated from t = 0.5 s, with the scene's "
+        "strain "
+        f"limit and without it; each layer in its own process, {rounds} rounds taking turns "
+        f"(median); {os.cpu_count()} cores; cloth_sim's default: NUMBA_THREADING_LAYER=forksafe"
+    )
+    print(
+        "| layer | fork-safe | ms/step, steady | ms/step, 1/60 s ticks | without strain limit: "
+        "steady | ticks | state hashes |"
+    )
     print("|---|---|---|---|---|---|---|")
     results = measure(size, seconds, rounds)
     for layer, runs in results.items():
@@ -92,15 +103,21 @@ def print_table(size: int = 64, seconds: float = 1.0, rounds: int = 3) -> dict:
         if isinstance(runs, str):
             print(f"| {layer} | {safe} | not available: {runs} | | | | |")
             continue
-        cells = [f"{statistics.median(r[k] for r in runs):.3f}" for k in
-                 ("scene_steady_ms", "scene_ticks_ms", "free_steady_ms", "free_ticks_ms")]
-        hashes = ", ".join(sorted({r["scene_hash"] for r in runs} | {r["free_hash"] for r in runs}))
+        cells = [
+            f"{statistics.median(r[k] for r in runs):.3f}"
+            for k in ("scene_steady_ms", "scene_ticks_ms", "free_steady_ms", "free_ticks_ms")
+        ]
+        hashes = ", ".join(
+            sorted({r["scene_hash"] for r in runs} | {r["free_hash"] for r in runs})
+        )
         print(f"| {layer} | {safe} | {' | '.join(cells)} | {hashes} |", flush=True)
     return results
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="cloth-sim bench threading", description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(
+        prog="cloth-sim bench threading", description=__doc__.split("\n")[0]
+    )
     ap.add_argument("--child", nargs=2, metavar=("SIZE", "SECONDS"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.child:

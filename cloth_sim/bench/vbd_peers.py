@@ -10,15 +10,19 @@ Newton's examples do.
    cloth), its particles, masses, pins and every structural, shear and bend spring given to Newton
    one by one (``ModelBuilder.add_spring``: Newton's VBD takes springs beside its FEM triangles),
    with our colour groups (Newton colours triangles and bending edges only, none here), no strain
-   limit on either side. Both step each 1/60 s frame in 10 substeps of 10 iterations (the numbers of
+   limit on either side. Both step each 1/60 s frame in 10 substeps of 10 iterations (the numbers
+   of
    Newton's cloth examples). Figures: wall seconds per simulated second, the worst stretch of any
    spring and the bottom row's swing (the range of its mean y), each over the run, sampled a frame.
 2. **Newton's twist** (``example_cloth_twist``): Newton's own set-up — its FEM cloth of 50 × 50
    vertices (Lamé μ = λ = 1000 N/m, 0.2 kg/m², bending 1e-3), the two short edges fixed and turned
-   in opposite senses at π/3 rad/s about the long axis, zero gravity, self-contact at a 2 mm margin,
+   in opposite senses at π/3 rad/s about the long axis, zero gravity, self-contact at a 2 mm
+   margin,
    10 substeps × 4 iterations a frame, the BVH rebuilt every frame — rebuilt here without its USD
-   asset (the same vertices and triangles, written by ``tools/make_garments.py``), beside cloth_sim's
-   ``twist`` scene (springs on the same triangles, grippers turning the edges at the same rate) as it
+   asset (the same vertices and triangles, written by ``tools/make_garments.py``), beside
+   cloth_sim's
+   ``twist`` scene (springs on the same triangles, grippers turning the edges at the same rate) as
+   it
    ships. Figures: wall seconds per simulated second, and crossings by the independent check
    (:mod:`cloth_sim.bench.crossings`) between every two steps of ours and every two substeps of
    Newton's (every two frames on a GPU, where a frame is one captured graph), outside the timed
@@ -54,10 +58,16 @@ def _newton():
 def hanging_sim(n: int, iterations: int, substeps: int):
     """The hanging scene at ``n``×``n`` (the node's 1 m, 10.24 kg cloth), no strain limit, ``vbd``
     at ``FRAME / substeps`` with ``iterations``."""
-    return load_scene("hanging").build_simulator(rows=n, cols=n, spacing=1.0 / (n - 1),
-                                                 particle_mass=10.24 / n ** 2, strain_limit=None,
-                                                 integrator="vbd", dt=FRAME / substeps,
-                                                 integrator_options={"iterations": iterations})
+    return load_scene("hanging").build_simulator(
+        rows=n,
+        cols=n,
+        spacing=1.0 / (n - 1),
+        particle_mass=10.24 / n**2,
+        strain_limit=None,
+        integrator="vbd",
+        dt=FRAME / substeps,
+        integrator_options={"iterations": iterations},
+    )
 
 
 class NewtonSprings:
@@ -68,13 +78,18 @@ class NewtonSprings:
 
         b = newton.ModelBuilder(gravity=tuple(float(g) for g in gravity))
         for i in range(model.n_particles):
-            b.add_particle(tuple(float(c) for c in model.positions[i]), (0.0, 0.0, 0.0),
-                           0.0 if model.pinned[i] else float(model.masses[i]), radius=1e-3)
+            b.add_particle(
+                tuple(float(c) for c in model.positions[i]),
+                (0.0, 0.0, 0.0),
+                0.0 if model.pinned[i] else float(model.masses[i]),
+                radius=1e-3,
+            )
         for (i, j), k, c in zip(model.springs, model.stiffness, model.damping):
             b.add_spring(int(i), int(j), float(k), float(c), 0.0)
         cptr, verts = colour_groups(model.springs, model.n_particles, ~model.pinned)
-        b.particle_color_groups = [np.asarray(verts[cptr[g]:cptr[g + 1]], dtype=np.int32)
-                                   for g in range(len(cptr) - 1)]
+        b.particle_color_groups = [
+            np.asarray(verts[cptr[g] : cptr[g + 1]], dtype=np.int32) for g in range(len(cptr) - 1)
+        ]
         self.wp, self.device = wp, device
         self.model = b.finalize(device=device)
         self.solver = newton.solvers.SolverVBD(self.model, iterations=iterations)
@@ -120,12 +135,22 @@ def _run_frames(frame, positions, springs, rest, bottom, seconds):
     return wall / seconds, worst, float(np.ptp(ys))
 
 
-def hanging_rows(newton, wp, sizes, seconds: float, iterations: int, substeps: int, device: str,
-                 ours: bool = True):
+def hanging_rows(
+    newton,
+    wp,
+    sizes,
+    seconds: float,
+    iterations: int,
+    substeps: int,
+    device: str,
+    ours: bool = True,
+):
     rows = []
     for n in sizes:
         scene = load_scene("hanging")
-        model = scene.build_model(rows=n, cols=n, spacing=1.0 / (n - 1), particle_mass=10.24 / n ** 2)
+        model = scene.build_model(
+            rows=n, cols=n, spacing=1.0 / (n - 1), particle_mass=10.24 / n**2
+        )
         common = (model.springs, model.rest_lengths, np.arange((n - 1) * n, n * n), seconds)
         row = {"N": n}
         if ours:
@@ -147,16 +172,26 @@ class NewtonTwist:
     this module that moves the fixed vertices to their place at the substep's time."""
 
     def __init__(self, newton, wp, device: str, substeps: int = 10, iterations: int = 4):
-        from ..mesh import read_mesh
+        from ..physics.mesh import read_mesh
 
         vertices, faces, _ = read_mesh(str(load_scene("twist").mesh["file"]), 1.0)
         # the asset's frame: the sheet in the x–z plane in centimetres (scaled by 0.01 below)
         verts = [wp.vec3(100.0 * x, 0.0, 100.0 * y) for x, y, _ in vertices]
         b = newton.ModelBuilder(gravity=(0.0, 0.0, 0.0))
-        b.add_cloth_mesh(pos=wp.vec3(0.0, 0.0, 0.0), rot=wp.quat_from_axis_angle(wp.vec3(0, 0, 1), np.pi / 2),
-                         scale=0.01, vertices=verts, indices=np.asarray(faces).ravel().tolist(),
-                         vel=wp.vec3(0.0, 0.0, 0.0), density=0.2, tri_ke=1.0e3, tri_ka=1.0e3,
-                         tri_kd=2.0e-4, edge_ke=1e-3, edge_kd=1e-2)
+        b.add_cloth_mesh(
+            pos=wp.vec3(0.0, 0.0, 0.0),
+            rot=wp.quat_from_axis_angle(wp.vec3(0, 0, 1), np.pi / 2),
+            scale=0.01,
+            vertices=verts,
+            indices=np.asarray(faces).ravel().tolist(),
+            vel=wp.vec3(0.0, 0.0, 0.0),
+            density=0.2,
+            tri_ke=1.0e3,
+            tri_ka=1.0e3,
+            tri_kd=2.0e-4,
+            edge_ke=1e-3,
+            edge_kd=1e-2,
+        )
         b.color()
         model = b.finalize(device=device)
         model.soft_contact_ke, model.soft_contact_kd, model.soft_contact_mu = 1.0e3, 1.0e-1, 0.2
@@ -168,9 +203,14 @@ class NewtonTwist:
             flags[v] &= ~newton.ParticleFlags.ACTIVE
         model.particle_flags = wp.array(flags, device=device)
         self.solver = newton.solvers.SolverVBD(
-            model, iterations=iterations, particle_enable_self_contact=True,
-            particle_self_contact_margin=0.002, particle_self_contact_gap=0.0015,
-            particle_vertex_contact_buffer_size=64, particle_edge_contact_buffer_size=128)
+            model,
+            iterations=iterations,
+            particle_enable_self_contact=True,
+            particle_self_contact_margin=0.002,
+            particle_self_contact_gap=0.0015,
+            particle_vertex_contact_buffer_size=64,
+            particle_edge_contact_buffer_size=128,
+        )
         self.s0, self.s1, self.control = model.state(), model.state(), model.control()
         self.pipeline = newton.CollisionPipeline(model)
         self.contacts = self.pipeline.contacts()
@@ -206,10 +246,21 @@ class NewtonTwist:
             x0 = self.positions() if check else None
             t = time.perf_counter()
             self.s0.clear_forces()
-            wp.launch(self.kernel, dim=self._fixed.shape[0],
-                      inputs=[self._fixed, self._axes, self._roots, self._arms, self._t, TWIST_RATE,
-                              self.dt],
-                      outputs=[self.s0.particle_q, self.s1.particle_q], device=self.device)
+            wp.launch(
+                self.kernel,
+                dim=self._fixed.shape[0],
+                inputs=[
+                    self._fixed,
+                    self._axes,
+                    self._roots,
+                    self._arms,
+                    self._t,
+                    TWIST_RATE,
+                    self.dt,
+                ],
+                outputs=[self.s0.particle_q, self.s1.particle_q],
+                device=self.device,
+            )
             self.solver.step(self.s0, self.s1, self.control, self.contacts, self.dt)
             self.s0, self.s1 = self.s1, self.s0
             if self.graph is None:  # (not while a graph is being captured)
@@ -239,10 +290,17 @@ class NewtonTwist:
 
 def _turn_kernel(wp):
     @wp.kernel
-    def turn(fixed: wp.array(dtype=wp.int32), axes: wp.array(dtype=wp.vec3),
-             roots: wp.array(dtype=wp.vec3), arms: wp.array(dtype=wp.vec3),
-             t: wp.array(dtype=float), rate: float, dt: float,
-             q0: wp.array(dtype=wp.vec3), q1: wp.array(dtype=wp.vec3)):
+    def turn(
+        fixed: wp.array(dtype=wp.int32),
+        axes: wp.array(dtype=wp.vec3),
+        roots: wp.array(dtype=wp.vec3),
+        arms: wp.array(dtype=wp.vec3),
+        t: wp.array(dtype=float),
+        rate: float,
+        dt: float,
+        q0: wp.array(dtype=wp.vec3),
+        q1: wp.array(dtype=wp.vec3),
+    ):
         k = wp.tid()
         turned = wp.quat_rotate(wp.quat_from_axis_angle(axes[k], t[0] * rate), arms[k])
         q0[fixed[k]] = roots[k] + turned
@@ -283,9 +341,13 @@ def twist_row(newton, wp, seconds: float, device: str, ours: bool = True) -> dic
             sim.step()
             wall += time.perf_counter() - t
             crossed += len(crossings(x0, sim.positions, tris))
-        row.update(cloth_sim_s_per_s=wall / seconds, cloth_sim_crossings=crossed,
-                   cloth_sim_contacts=int(sim.integrator_stats["last_contacts"]),
-                   cloth_sim_dt=sim.dt, cloth_sim_iterations=sim.integrator_options.get("iterations"))
+        row.update(
+            cloth_sim_s_per_s=wall / seconds,
+            cloth_sim_crossings=crossed,
+            cloth_sim_contacts=int(sim.integrator_stats["last_contacts"]),
+            cloth_sim_dt=sim.dt,
+            cloth_sim_iterations=sim.integrator_options.get("iterations"),
+        )
     NewtonTwist(newton, wp, device).frame()  # a warm-up, thrown away: Warp loads its modules
     peer = NewtonTwist(newton, wp, device)
     found = [0]
@@ -304,40 +366,69 @@ def _f(row, key, form="{:.3f}"):
     return form.format(row[key]) if key in row else "–"
 
 
-def print_vbd_peer_table(sizes=(32, 64), seconds: float = 2.0, twist_seconds: float = 5.0,
-                         device: str = "cpu", iterations: int = 10, substeps: int = 10,
-                         ours: bool = True) -> int:
+def print_vbd_peer_table(
+    sizes=(32, 64),
+    seconds: float = 2.0,
+    twist_seconds: float = 5.0,
+    device: str = "cpu",
+    iterations: int = 10,
+    substeps: int = 10,
+    ours: bool = True,
+) -> int:
     """Both tables (module docstring); ``ours=False`` runs Newton's side alone (a GPU machine
     where cloth_sim's figures come from another run)."""
     peers = _newton()
     if peers is None:
-        print("newton is not installed: `make bench-peers` installs the pinned optional extra "
-              "(requirements-peers.txt)")
+        print(
+            "newton is not installed: `make bench-peers` installs the pinned optional extra "
+            "(requirements-peers.txt)"
+        )
         return 1
     newton, wp = peers
     where = wp.get_device(device)
-    print(f"# Newton {newton.__version__} SolverVBD on Warp {wp.config.version} {where.alias} "
-          f"({where.name}) vs cloth_sim vbd on this CPU")
-    print(f"## 1. hanging N×N (1 m, 10.24 kg), the same springs, no strain limit; 1/60 s frames of "
-          f"{substeps} substeps × {iterations} iterations, {seconds:g} s")
-    print("| N | cloth_sim s per sim s | Newton s per sim s | cloth_sim speed / Newton's | "
-          "worst stretch (cloth_sim / Newton) | swing m (cloth_sim / Newton) |")
+    print(
+        f"# Newton {newton.__version__} SolverVBD on Warp {wp.config.version} {where.alias} "
+        f"({where.name}) vs cloth_sim vbd on this CPU"
+    )
+    print(
+        f"## 1. hanging N×N (1 m, 10.24 kg), the same springs, no strain limit; 1/60 s frames of "
+        f"{substeps} substeps × {iterations} iterations, {seconds:g} s"
+    )
+    print(
+        "| N | cloth_sim s per sim s | Newton s per sim s | cloth_sim speed / Newton's | "
+        "worst stretch (cloth_sim / Newton) | swing m (cloth_sim / Newton) |"
+    )
     print("|---|---|---|---|---|---|")
     for r in hanging_rows(newton, wp, sizes, seconds, iterations, substeps, device, ours):
-        print(f"| {r['N']} | {_f(r, 'cloth_sim_s_per_s')} | {_f(r, 'newton_s_per_s')} | "
-              f"{_f(r, 'speed_ratio', '{:.1f}×')} | {_f(r, 'cloth_sim_stretch', '{:.4f}')} / "
-              f"{_f(r, 'newton_stretch', '{:.4f}')} | {_f(r, 'cloth_sim_swing', '{:.4f}')} / "
-              f"{_f(r, 'newton_swing', '{:.4f}')} |", flush=True)
+        print(
+            f"| {r['N']} | {_f(r, 'cloth_sim_s_per_s')} | {_f(r, 'newton_s_per_s')} | "
+            f"{_f(r, 'speed_ratio', '{:.1f}×')} | {_f(r, 'cloth_sim_stretch', '{:.4f}')} / "
+            f"{_f(r, 'newton_stretch', '{:.4f}')} | {_f(r, 'cloth_sim_swing', '{:.4f}')} / "
+            f"{_f(r, 'newton_swing', '{:.4f}')} |",
+            flush=True,
+        )
     if twist_seconds > 0:
         r = twist_row(newton, wp, twist_seconds, device, ours)
-        mine = (f"cloth_sim's twist scene at dt {r['cloth_sim_dt']:.6g} s × "
-                f"{r['cloth_sim_iterations']} iterations" if ours else "Newton's side alone")
-        print(f"## 2. Newton's example_cloth_twist ({twist_seconds:g} s): Newton 1/60 s frames of 10 "
-              f"substeps × 4 iterations; {mine}")
-        print("| cloth_sim s per sim s | Newton s per sim s | cloth_sim speed / Newton's | "
-              "crossings (cloth_sim / Newton) | cloth_sim contacts at the end |")
+        mine = (
+            f"cloth_sim's twist scene at dt {r['cloth_sim_dt']:.6g} s × "
+            f"{r['cloth_sim_iterations']} iterations"
+            if ours
+            else "Newton's side alone"
+        )
+        print(
+            f"## 2. Newton's example_cloth_twist ({twist_seconds:g} s): Newton 1/60 s frames of "
+            "10 "
+            f"substeps × 4 iterations; {mine}"
+        )
+        print(
+            "| cloth_sim s per sim s | Newton s per sim s | cloth_sim speed / Newton's | "
+            "crossings (cloth_sim / Newton) | cloth_sim contacts at the end |"
+        )
         print("|---|---|---|---|---|")
-        print(f"| {_f(r, 'cloth_sim_s_per_s')} | {_f(r, 'newton_s_per_s')} | "
-              f"{_f(r, 'speed_ratio', '{:.1f}×')} | {_f(r, 'cloth_sim_crossings', '{}')} / "
-              f"{r['newton_crossings']} | {_f(r, 'cloth_sim_contacts', '{}')} |", flush=True)
+        print(
+            f"| {_f(r, 'cloth_sim_s_per_s')} | {_f(r, 'newton_s_per_s')} | "
+            f"{_f(r, 'speed_ratio', '{:.1f}×')} | {_f(r, 'cloth_sim_crossings', '{}')} / "
+            f"{r['newton_crossings']} | {_f(r, 'cloth_sim_contacts', '{}')} |",
+            flush=True,
+        )
     return 0

@@ -28,7 +28,10 @@ _ENVS = {
     "cloth_sim/ClothFlatten-v0": ("ClothFlattenEnv", {}),
     "cloth_sim/ClothFold-v0": ("ClothFoldEnv", {}),
     "cloth_sim/ClothDrop-v0": ("ClothDropEnv", {}),
-    "cloth_sim/ClothFlattenPPP-v0": ("ClothFlattenEnv", dict(action_mode="pickerpickplace", horizon=20)),
+    "cloth_sim/ClothFlattenPPP-v0": (
+        "ClothFlattenEnv",
+        dict(action_mode="pickerpickplace", horizon=20),
+    ),
     "cloth_sim/ClothFoldPPP-v0": ("ClothFoldEnv", dict(action_mode="pickerpickplace", horizon=20)),
 }
 ENV_IDS = tuple(_ENVS)

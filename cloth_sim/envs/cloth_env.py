@@ -10,8 +10,10 @@ What SoftGym's ``ClothEnv``/``FlexEnv`` do (Lin et al. 2020), on cloth_sim's phy
   0.01 m per frame, ``pick > 0.5`` holds the nearest particle within reach (:mod:`.pickers`).
   ``"pickerpickplace"``: ``[x, y, z, pick]`` per picker, a target the pickers go to at 0.01 m per
   frame (at most 300 frames) holding or not.
-* **Observations.** ``"key_point"``: the cloth's four corners and the pickers, world frame (SoftGym's
-  reduced state). ``"point_cloud"``: what the depth camera sees of the cloth, in the camera's optical
+* **Observations.** ``"key_point"``: the cloth's four corners and the pickers, world frame
+(SoftGym's
+  reduced state). ``"point_cloud"``: what the depth camera sees of the cloth, in the camera's
+  optical
   frame, ``max_points`` points (a seeded random subset when more are visible, zeros after the last
   when fewer; ``info["points"]`` is the count), then the pickers in the same frame. ``"depth"``:
   the depth image (metres, 0 where nothing is seen).
@@ -21,7 +23,8 @@ What SoftGym's ``ClothEnv``/``FlexEnv`` do (Lin et al. 2020), on cloth_sim's phy
 * ``info["normalized_performance"]`` is the task's metric at every step, as SoftGym names it, with
   ``info["performance"]`` (also the reward, as in SoftGym).
 
-Subclasses (:mod:`.tasks`) give the cloth, how a variation is generated, where the pickers start and
+Subclasses (:mod:`.tasks`) give the cloth, how a variation is generated, where the pickers start
+and
 the metric.
 """
 
@@ -33,9 +36,9 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from .. import colliders
-from ..camera import camera_from_settings
+from ..contact import colliders
 from ..model import ClothModel
+from ..sensors.camera import camera_from_settings
 from ..simulator import Simulator
 from . import initial_states
 from .pickers import Pickers
@@ -54,21 +57,31 @@ PICK_PLACE_FRAMES = 300
 
 def _choice(name, value, allowed):
     if value not in allowed:
-        raise ValueError(f"{name} = {value!r} is not accepted: expected one of {', '.join(map(repr, allowed))}")
+        raise ValueError(
+            f"{name} = {value!r} is not accepted: expected one of {', '.join(map(repr, allowed))}"
+        )
     return value
 
 
 def _integer(name, value, lo, hi=None):
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo or \
-            (hi is not None and value > hi):
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, np.integer))
+        or value < lo
+        or (hi is not None and value > hi)
+    ):
         rng = f"[{lo}, {hi}]" if hi is not None else f">= {lo}"
         raise ValueError(f"{name} = {value!r} is not accepted: expected an integer {rng}")
     return int(value)
 
 
 def _positive(name, value):
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) or \
-            not math.isfinite(value) or value <= 0:
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float, np.floating, np.integer))
+        or not math.isfinite(value)
+        or value <= 0
+    ):
         raise ValueError(f"{name} = {value!r} is not accepted: expected a finite number > 0")
     return float(value)
 
@@ -85,67 +98,117 @@ class ClothEnv(gym.Env):
     task = "Cloth"
     defaults = dict(horizon=100, action_repeat=8)
     #: bounds of the pickers' centres, (x, y, z) low and high before centring, z up: SoftGym's
-    #: ``(-0.4, 0, -0.4)``–``(1.0, 0.5, 0.4)`` (y up) less the picker's radius, but down to the height
+    # : ``(-0.4, 0, -0.4)``–``(1.0, 0.5, 0.4)`` (y up) less the picker's radius, but down to the
+    # height
     #: of a particle on the floor (see :mod:`.pickers`)
     picker_bounds = ((-0.38, -0.38, 0.004), (0.98, 0.38, 0.48))
     picker_radius = 0.02
     camera = dict(position=(0.0, -0.82, 0.82), look_at=(0.0, 0.0, 0.0), fov=45.0)
 
-    def __init__(self, observation_mode: str = "key_point", action_mode: str = "picker",
-                 num_picker: int = 2, render_mode: str | None = None, cloth_size=(24, 24),
-                 spacing: float = 0.0175, horizon: int | None = None, action_repeat: int | None = None,
-                 num_variations: int = 1000, image_size: int = 128, max_points: int = 1024,
-                 self_collision: bool = False, cache_dir=None):
+    def __init__(
+        self,
+        observation_mode: str = "key_point",
+        action_mode: str = "picker",
+        num_picker: int = 2,
+        render_mode: str | None = None,
+        cloth_size=(24, 24),
+        spacing: float = 0.0175,
+        horizon: int | None = None,
+        action_repeat: int | None = None,
+        num_variations: int = 1000,
+        image_size: int = 128,
+        max_points: int = 1024,
+        self_collision: bool = False,
+        cache_dir=None,
+    ):
         self.observation_mode = _choice("observation_mode", observation_mode, OBSERVATION_MODES)
         self.action_mode = _choice("action_mode", action_mode, ACTION_MODES)
-        self.render_mode = None if render_mode is None else \
-            _choice("render_mode", render_mode, RENDER_MODES)
+        self.render_mode = (
+            None if render_mode is None else _choice("render_mode", render_mode, RENDER_MODES)
+        )
         self.num_picker = _integer("num_picker", num_picker, 1, 8)
         try:
             rows, cols = cloth_size
         except (TypeError, ValueError):
-            raise ValueError(f"cloth_size = {cloth_size!r} is not accepted: expected (rows, cols)") from None
+            raise ValueError(
+                f"cloth_size = {cloth_size!r} is not accepted: expected (rows, cols)"
+            ) from None
         self.rows = _integer("cloth_size[0] (rows)", rows, 4, 256)
         self.cols = _integer("cloth_size[1] (cols)", cols, 4, 256)
         self.spacing = _positive("spacing", spacing)
         default_repeat = 1 if action_mode == "pickerpickplace" else self.defaults["action_repeat"]
-        self.horizon = _integer("horizon", self.defaults["horizon"] if horizon is None else horizon, 1)
-        self.action_repeat = _integer("action_repeat", default_repeat if action_repeat is None
-                                      else action_repeat, 1, 1000)
+        self.horizon = _integer(
+            "horizon", self.defaults["horizon"] if horizon is None else horizon, 1
+        )
+        self.action_repeat = _integer(
+            "action_repeat", default_repeat if action_repeat is None else action_repeat, 1, 1000
+        )
         if self.action_mode == "pickerpickplace" and self.action_repeat != 1:
-            raise ValueError(f"action_repeat = {action_repeat!r} is not accepted with action_mode "
-                             f"'pickerpickplace': expected 1 (a pick-and-place is one env step)")
+            raise ValueError(
+                f"action_repeat = {action_repeat!r} is not accepted with action_mode "
+                f"'pickerpickplace': expected 1 (a pick-and-place is one env step)"
+            )
         self.num_variations = _integer("num_variations", num_variations, 1)
         self.image_size = _integer("image_size", image_size, 8, 2048)
         self.max_points = _integer("max_points", max_points, 1)
         if not isinstance(self_collision, (bool, np.bool_)):
-            raise ValueError(f"self_collision = {self_collision!r} is not accepted: expected True or False")
+            raise ValueError(
+                f"self_collision = {self_collision!r} is not accepted: expected True or False"
+            )
         self.self_collision = bool(self_collision)
         self._check_task()
 
         self.model = self._model()
-        self.sim = Simulator(self.model, "symplectic_euler", dt=FRAME / SUBSTEPS, strain_limit=0.1,
-                             colliders=[colliders.Plane(normal=(0, 0, 1), offset=0.0, friction=0.5,
-                                                        name="floor")],
-                             thickness=self.thickness, self_collision=self.self_collision)
+        self.sim = Simulator(
+            self.model,
+            "symplectic_euler",
+            dt=FRAME / SUBSTEPS,
+            strain_limit=0.1,
+            colliders=[colliders.Plane(normal=(0, 0, 1), offset=0.0, friction=0.5, name="floor")],
+            thickness=self.thickness,
+            self_collision=self.self_collision,
+        )
         if not self.sim.step_is_stable():
-            raise ValueError(f"the cloth's springs need a step below {self.sim.stable_dt():.3g} s, "
-                             f"above the env's {self.sim.dt:.3g} s")
-        self.cam = camera_from_settings(dict(width=self.image_size, height=self.image_size,
-                                             near=0.05, far=10.0, noise="none", **self.camera))
-        self.pickers = Pickers(self.num_picker, self.picker_radius,
-                               self.picker_radius + 0.005 + PARTICLE_RADIUS, 0.01, *self.picker_bounds)
-        self.corners = np.array([0, self.cols * (self.rows - 1), self.cols - 1, self.rows * self.cols - 1])
+            raise ValueError(
+                f"the cloth's springs need a step below {self.sim.stable_dt():.3g} s, "
+                f"above the env's {self.sim.dt:.3g} s"
+            )
+        self.cam = camera_from_settings(
+            dict(
+                width=self.image_size,
+                height=self.image_size,
+                near=0.05,
+                far=10.0,
+                noise="none",
+                **self.camera,
+            )
+        )
+        self.pickers = Pickers(
+            self.num_picker,
+            self.picker_radius,
+            self.picker_radius + 0.005 + PARTICLE_RADIUS,
+            0.01,
+            *self.picker_bounds,
+        )
+        self.corners = np.array(
+            [0, self.cols * (self.rows - 1), self.cols - 1, self.rows * self.cols - 1]
+        )
         self.states = initial_states.Cache(self.task, self._cache_key(), self._generate, cache_dir)
 
         p = self.num_picker
         if self.action_mode == "picker":
-            self.action_space = spaces.Box(np.tile(np.float32([-0.01, -0.01, -0.01, 0.0]), p),
-                                           np.tile(np.float32([0.01, 0.01, 0.01, 1.0]), p), dtype=np.float32)
+            self.action_space = spaces.Box(
+                np.tile(np.float32([-0.01, -0.01, -0.01, 0.0]), p),
+                np.tile(np.float32([0.01, 0.01, 0.01, 1.0]), p),
+                dtype=np.float32,
+            )
         else:
             lo, hi = self.pick_place_bounds
-            self.action_space = spaces.Box(np.tile(np.float32([*lo, 0.0]), p),
-                                           np.tile(np.float32([*hi, 1.0]), p), dtype=np.float32)
+            self.action_space = spaces.Box(
+                np.tile(np.float32([*lo, 0.0]), p),
+                np.tile(np.float32([*hi, 1.0]), p),
+                dtype=np.float32,
+            )
         if self.observation_mode == "key_point":
             n = 3 * (len(self.corners) + p)
             self.observation_space = spaces.Box(-np.inf, np.inf, (n,), np.float32)
@@ -153,8 +216,9 @@ class ClothEnv(gym.Env):
             n = 3 * (self.max_points + p)
             self.observation_space = spaces.Box(-np.inf, np.inf, (n,), np.float32)
         else:
-            self.observation_space = spaces.Box(0.0, np.float32(self.cam.far),
-                                                (self.image_size, self.image_size), np.float32)
+            self.observation_space = spaces.Box(
+                0.0, np.float32(self.cam.far), (self.image_size, self.image_size), np.float32
+            )
         self.variation = None
         self.steps = 0
 
@@ -184,7 +248,7 @@ class ClothEnv(gym.Env):
     @property
     def particle_mass(self) -> float:
         """0.2 kg/m² (a light cotton) times the area a particle stands for."""
-        return 0.2 * self.spacing ** 2
+        return 0.2 * self.spacing**2
 
     def _model(self) -> ClothModel:
         m = self.particle_mass
@@ -192,14 +256,27 @@ class ClothEnv(gym.Env):
         # a quarter here, which puts the stable step at twice the env's), the strain limit
         # holding the stretch
         k = 2.5e4 * m
-        return ClothModel.grid(self.rows, self.cols, self.spacing, m,
-                               stiffness={"structural": k, "shear": k, "bend": 0.01 * k},
-                               damping={"structural": 2 * m, "shear": 2 * m, "bend": 0.5 * m})
+        return ClothModel.grid(
+            self.rows,
+            self.cols,
+            self.spacing,
+            m,
+            stiffness={"structural": k, "shear": k, "bend": 0.01 * k},
+            damping={"structural": 2 * m, "shear": 2 * m, "bend": 0.5 * m},
+        )
 
     def _cache_key(self) -> dict:
-        return dict(task=self.task, rows=self.rows, cols=self.cols, spacing=self.spacing,
-                    num_picker=self.num_picker, self_collision=self.self_collision,
-                    frame=FRAME, substeps=SUBSTEPS, thickness=self.thickness)
+        return dict(
+            task=self.task,
+            rows=self.rows,
+            cols=self.cols,
+            spacing=self.spacing,
+            num_picker=self.num_picker,
+            self_collision=self.self_collision,
+            frame=FRAME,
+            substeps=SUBSTEPS,
+            thickness=self.thickness,
+        )
 
     def flat_positions(self) -> np.ndarray:
         """The grid lying flat on the floor, centred on the origin."""
@@ -209,7 +286,8 @@ class ClothEnv(gym.Env):
         return x
 
     def lay_flat(self) -> np.ndarray:
-        """Put the cloth flat on the floor at rest (:meth:`flat_positions`); returns the positions."""
+        """Put the cloth flat on the floor at rest (:meth:`flat_positions`); returns the
+        positions."""
         x = self.flat_positions()
         self._set_state(x, np.zeros_like(x))
         return x
@@ -241,8 +319,9 @@ class ClothEnv(gym.Env):
         if unknown:
             raise ValueError(f"reset options: unknown {sorted(unknown)}; accepted: 'variation'")
         if "variation" in options:
-            self.variation = _integer("options['variation']", options["variation"], 0,
-                                      self.num_variations - 1)
+            self.variation = _integer(
+                "options['variation']", options["variation"], 0, self.num_variations - 1
+            )
         else:
             self.variation = int(self.np_random.integers(self.num_variations))
         state = self.states.get(self.variation)
@@ -263,7 +342,8 @@ class ClothEnv(gym.Env):
         return obs, info["performance"], False, self.steps >= self.horizon, info
 
     def _pick_place(self, a) -> None:
-        """SoftGym's ``PickerPickPlace.step``: straight to the (clipped) targets at 0.01 m per frame
+        """SoftGym's ``PickerPickPlace.step``: straight to the (clipped) targets at 0.01 m per
+        frame
         for the farthest picker, the pick flags held throughout, at most 300 frames."""
         end = np.array([self.pickers.clip(p) for p in a[:, :3]])
         dist = np.linalg.norm(end - self.pickers.positions, axis=1)
@@ -281,26 +361,38 @@ class ClothEnv(gym.Env):
         try:
             a = np.asarray(action, dtype=np.float64)
         except (TypeError, ValueError):
-            raise ValueError(f"action: expected {shape[0]} numbers ({what} for each of "
-                             f"{self.num_picker} pickers), got {action!r}") from None
+            raise ValueError(
+                f"action: expected {shape[0]} numbers ({what} for each of "
+                f"{self.num_picker} pickers), got {action!r}"
+            ) from None
         if a.shape != shape:
-            raise ValueError(f"action: expected shape {shape} ({what} for each of {self.num_picker} "
-                             f"pickers), got shape {a.shape}")
+            raise ValueError(
+                f"action: expected shape {shape} ({what} for each of {self.num_picker} "
+                f"pickers), got shape {a.shape}"
+            )
         bad = np.flatnonzero(~np.isfinite(a))
         if len(bad):
             i = int(bad[0])
-            raise ValueError(f"action[{i}] = {float(a[i])} (picker {i // 4}, {what[1:-1].split(', ')[i % 4]}) "
-                             f"is not finite")
+            raise ValueError(
+                f"action[{i}] = {float(a[i])} (picker {i // 4}, {what[1:-1].split(', ')[i % 4]}) "
+                f"is not finite"
+            )
         return a.reshape(self.num_picker, 4)
 
     def _observe(self):
         performance, extra = self._performance()
-        info = dict(performance=performance, normalized_performance=self._normalized(performance),
-                    variation=self.variation, picked=[h is not None for h in self.pickers.held], **extra)
+        info = dict(
+            performance=performance,
+            normalized_performance=self._normalized(performance),
+            variation=self.variation,
+            picked=[h is not None for h in self.pickers.held],
+            **extra,
+        )
         mode = self.observation_mode
         if mode == "key_point":
-            obs = np.concatenate([self.sim.positions[self.corners].ravel(),
-                                  self.pickers.positions.ravel()]).astype(np.float32)
+            obs = np.concatenate(
+                [self.sim.positions[self.corners].ravel(), self.pickers.positions.ravel()]
+            ).astype(np.float32)
         else:
             frame = self.cam.render(self.sim)
             if mode == "depth":
@@ -319,8 +411,10 @@ class ClothEnv(gym.Env):
 
     def render(self):
         if self.render_mode is None:
-            gym.logger.warn("render() without a render_mode: pass render_mode='rgb_array' or "
-                            "'depth_array' to gymnasium.make")
+            gym.logger.warn(
+                "render() without a render_mode: pass render_mode='rgb_array' or "
+                "'depth_array' to gymnasium.make"
+            )
             return None
         frame = self.cam.render(self.sim)
         if self.render_mode == "depth_array":

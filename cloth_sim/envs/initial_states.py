@@ -1,10 +1,13 @@
 """Initial states, generated once per variation and kept on disk.
 
 Variation ``i`` of a task is made by the task's generator from ``numpy.random.default_rng([task id,
-i])`` (SoftGym's ``generate_env_variation``, one variation at a time), so it depends on the task, its
-settings and ``i`` alone: generating it again anywhere gives the same float64 state bit for bit, and
+i])`` (SoftGym's ``generate_env_variation``, one variation at a time), so it depends on the task,
+its
+settings and ``i`` alone: generating it again anywhere gives the same float64 state bit for bit,
+and
 a cached one is that state. The cache is a folder per task and settings (a hash of them and of
-:data:`VERSION`) under ``$CLOTH_SIM_CACHE`` or ``~/.cache/cloth_sim/initial_states``, a ``.npz`` per
+:data:`VERSION`) under ``$CLOTH_SIM_CACHE`` or ``~/.cache/cloth_sim/initial_states``, a ``.npz``
+per
 variation written to a temporary name and renamed, so processes sharing it (vector envs) never read
 half a file. ``cache_dir=False`` keeps them in memory only.
 """
@@ -29,7 +32,8 @@ def default_dir() -> Path:
 
 
 class Cache:
-    """``get(i)`` → the dict of arrays of variation ``i`` (made by ``generate(rng)`` when missing)."""
+    """``get(i)`` → the dict of arrays of variation ``i`` (made by ``generate(rng)`` when
+    missing)."""
 
     def __init__(self, task: str, key: dict, generate, cache_dir=None):
         self.task, self.generate = task, generate
@@ -39,7 +43,9 @@ class Cache:
         if cache_dir is False:
             self.folder = None
         else:
-            self.folder = (default_dir() if cache_dir is None else Path(cache_dir)) / f"{task}-{digest}"
+            self.folder = (
+                default_dir() if cache_dir is None else Path(cache_dir)
+            ) / f"{task}-{digest}"
         self._memory: dict = {}
 
     def get(self, i: int) -> dict:

@@ -1,12 +1,15 @@
 """SoftGym's pickers on cloth_sim's grippers.
 
-A picker is a point that moves by at most ``max_move`` per frame inside a box (``low``, ``high``: the
+A picker is a point that moves by at most ``max_move`` per frame inside a box (``low``, ``high``:
+the
 bounds of its centre) and, while its pick
-flag is on, holds the one free particle that was nearest to it, within ``reach``, when the flag went
+flag is on, holds the one free particle that was nearest to it, within ``reach``, when the flag
+went
 on (SoftGym's ``Picker``: Lin et al. 2020, ``softgym/action_space/action_space.py``). The particle
 is held rigidly at its offset from the picker: it is a cloth_sim gripper (``Simulator.grasp``), so
 the strain limit, contacts and the gripper's wrench all see it. Turning the flag off releases it
-with the picker's velocity. Unlike SoftGym's spheres, pickers do not collide with the cloth, so their
+with the picker's velocity. Unlike SoftGym's spheres, pickers do not collide with the cloth, so
+their
 centres may go down to the height of a particle lying on the floor: SoftGym's spheres stop 5 cm up
 and take the nearest particle within 6 cm, which in a crumpled pile is often one on top of the
 corner aimed at rather than the corner itself.
@@ -53,12 +56,15 @@ class Pickers:
         self.low, self.high = low, high
         r = np.sqrt(self.count - 1) * self.radius * 2.0
         a = 2 * np.pi * np.arange(self.count) / self.count
-        pts = np.stack([center[0] + np.sin(a) * r, center[1] + np.cos(a) * r,
-                        np.full(self.count, center[2])], axis=1)
+        pts = np.stack(
+            [center[0] + np.sin(a) * r, center[1] + np.cos(a) * r, np.full(self.count, center[2])],
+            axis=1,
+        )
         self.positions = np.array([self.clip(p) for p in pts])
 
     def place(self, positions) -> None:
-        """Put the pickers at ``positions`` (clipped to the bounds) without moving anything held."""
+        """Put the pickers at ``positions`` (clipped to the bounds) without moving anything
+        held."""
         self.positions = np.array([self.clip(p) for p in np.asarray(positions, float)])
 
     def clip(self, p) -> np.ndarray:
@@ -69,7 +75,9 @@ class Pickers:
         """One frame: release where ``pick`` went off, grasp where it is on and nothing is held,
         then move by ``delta`` (each component clipped to ``±max_move``, the end clipped to the
         bounds) in ``substeps`` equal steps of the simulation, dragging what is held."""
-        delta = np.clip(np.asarray(delta, float).reshape(self.count, 3), -self.max_move, self.max_move)
+        delta = np.clip(
+            np.asarray(delta, float).reshape(self.count, 3), -self.max_move, self.max_move
+        )
         for i in range(self.count):
             if not pick[i]:
                 self._release(sim, i)
@@ -78,8 +86,11 @@ class Pickers:
                 self._grasp(sim, i)
         start = self.positions.copy()
         end = np.array([self.clip(p) for p in start + delta])
-        moving = [i for i in range(self.count) if self.held[i] is not None and
-                  not np.array_equal(start[i], end[i])]
+        moving = [
+            i
+            for i in range(self.count)
+            if self.held[i] is not None and not np.array_equal(start[i], end[i])
+        ]
         for s in range(1, substeps + 1):
             for i in moving:
                 p = start[i] + (end[i] - start[i]) * (s / substeps)

@@ -1,4 +1,5 @@
-"""Scripted (oracle) policies for the picker tasks: they read the cloth's corners from the simulation,
+"""Scripted (oracle) policies for the picker tasks: they read the cloth's corners from the
+simulation,
 so they work with any observation mode. Used by the tests, the README's frames and the benchmark.
 
 Each is a generator of actions: ``for action in fold(env.unwrapped): env.step(action)``. A policy
@@ -13,7 +14,8 @@ import numpy as np
 
 
 def _go(env, targets, pick: bool, settle: int = 0):
-    """Actions taking the pickers to ``targets`` (one row per picker), then ``settle`` more steps."""
+    """Actions taking the pickers to ``targets`` (one row per picker), then ``settle`` more
+    steps."""
     targets = np.array([env.pickers.clip(t) for t in np.asarray(targets, float)])
     for _ in range(400):
         left = targets - env.pickers.positions
@@ -33,8 +35,10 @@ def _action(env, delta, pick: bool) -> np.ndarray:
 
 def flatten(env):
     """Pick the two corners of an edge (the pair farthest apart of the cloth's four corners that
-    share an edge), lift them until the cloth hangs free, pull them apart to the edge's length, then
-    drag them across the floor away from where the cloth hangs while lowering, and let go: the cloth
+    share an edge), lift them until the cloth hangs free, pull them apart to the edge's length,
+    then
+    drag them across the floor away from where the cloth hangs while lowering, and let go: the
+    cloth
     is laid down flat behind them."""
     x = env.sim.positions
     c = env.corners
@@ -62,15 +66,19 @@ def flatten(env):
     # first drag the hanging cloth's lower edge along the floor, then lower as they go, the cloth
     # trailing behind
     for f, z in ((0.2, 0.3), (0.5, 0.05), (1.1, 0.0)):
-        yield from _go(env, [[*(p[i, :2] + away * length * f), low + (p[i, 2] - low) * z]
-                             for i in range(2)], pick=True)
+        yield from _go(
+            env,
+            [[*(p[i, :2] + away * length * f), low + (p[i, 2] - low) * z] for i in range(2)],
+            pick=True,
+        )
     yield from _go(env, env.pickers.positions, pick=True, settle=2)
     yield from _go(env, env.pickers.positions, pick=False, settle=3)
 
 
 def fold(env):
     """Fold the left half (columns ``< cols/2``) onto the right: pick the left edge's two corners,
-    carry them over in a half circle about the middle to 3 cm above the right edge's corners and let
+    carry them over in a half circle about the middle to 3 cm above the right edge's corners and
+    let
     go there."""
     x = env.sim.positions
     c = env.corners
@@ -81,7 +89,12 @@ def fold(env):
     # stretching or sliding
     crease = (src + dst) / 2
     for angle in np.linspace(np.pi / 6, np.pi, 6):
-        yield from _go(env, crease + (src - crease) * np.cos(angle) +
-                       (0.0, 0.0, np.linalg.norm(src - crease, axis=1).mean() * np.sin(angle)), pick=True)
+        yield from _go(
+            env,
+            crease
+            + (src - crease) * np.cos(angle)
+            + (0.0, 0.0, np.linalg.norm(src - crease, axis=1).mean() * np.sin(angle)),
+            pick=True,
+        )
     yield from _go(env, dst + (0.0, 0.0, 0.03), pick=True, settle=1)
     yield from _go(env, env.pickers.positions, pick=False, settle=3)

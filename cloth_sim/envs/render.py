@@ -50,7 +50,11 @@ def render_rgb(frame, sim, cam, pickers) -> np.ndarray:
     for i, (X, Y, Z) in enumerate(pc):
         if Z <= cam.near:
             continue
-        u, v, r = frame.fx * X / Z + frame.cx, frame.fy * Y / Z + frame.cy, frame.fx * pickers.radius / Z
+        u, v, r = (
+            frame.fx * X / Z + frame.cx,
+            frame.fy * Y / Z + frame.cy,
+            frame.fx * pickers.radius / Z,
+        )
         disc = ((uu - u) ** 2 + (vv - v) ** 2 <= r * r) & ~(frame.depth < Z - pickers.radius)
         img[disc] = (0.9, 0.15, 0.15) if pickers.held[i] is not None else (0.95, 0.95, 0.95)
     return (np.clip(img, 0, 1) * 255).astype(np.uint8)

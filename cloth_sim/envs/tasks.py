@@ -1,6 +1,7 @@
 """SoftGym's three cloth tasks (Lin et al. 2020: ``softgym/envs/cloth_{flatten,fold,drop}.py``).
 
-* :class:`ClothFlattenEnv` — a crumpled cloth on the floor; spread it out. Variation: the flat cloth
+* :class:`ClothFlattenEnv` — a crumpled cloth on the floor; spread it out. Variation: the flat
+cloth
   grasped at a random particle, lifted 0.5–1 m, held until still (at most 5 s), dropped and left
   until still (at most 5 s), centred. Performance: the covered area; normalized: the coverage
   improvement from the start to the flat cloth's area.
@@ -9,7 +10,8 @@
   normalized: from the start (0) to a perfect fold (1).
 * :class:`ClothDropEnv` — a cloth hanging from its two top corners (0.1–0.2 m above the floor at
   its lowest, at least 0.5 m at its top, a random ±0.1 m along x); lay it flat at its target, the
-  cloth lying along +x from x = 0. The pickers start at the two corners (not holding them: the first
+  cloth lying along +x from x = 0. The pickers start at the two corners (not holding them: the
+  first
   action must pick) and stay at least 0.5 m up. Performance: minus the mean distance to the target;
   normalized: from the start (0) to on target (1).
 """
@@ -60,7 +62,8 @@ class ClothFlattenEnv(ClothEnv):
 
     @cached_property
     def area_flat(self) -> float:
-        """The flat cloth's covered area: the best possible (one per env: it depends on the grid)."""
+        """The flat cloth's covered area: the best possible (one per env: it depends on the
+        grid)."""
         return metrics.covered_area(self.flat_positions(), self.radius)
 
     def _performance(self):
@@ -94,8 +97,9 @@ class ClothFoldEnv(ClothEnv):
         self.performance_start = self._performance()[0]
 
     def _performance(self):
-        p, group, fixation = metrics.fold_distance(self.sim.positions, self.start_positions,
-                                                   self.group_a, self.group_b)
+        p, group, fixation = metrics.fold_distance(
+            self.sim.positions, self.start_positions, self.group_a, self.group_b
+        )
         return p, dict(neg_group_dist=-group, neg_fixation_dist=-fixation)
 
     def _normalized(self, performance):
@@ -110,8 +114,10 @@ class ClothDropEnv(ClothEnv):
 
     def _check_task(self):
         if self.num_picker != 2:
-            raise ValueError(f"num_picker = {self.num_picker} is not accepted by ClothDrop: it holds "
-                             f"the cloth by its two top corners (2)")
+            raise ValueError(
+                f"num_picker = {self.num_picker} is not accepted by ClothDrop: it holds "
+                f"the cloth by its two top corners (2)"
+            )
 
     def target(self) -> np.ndarray:
         """The cloth flat on the floor along +x from x = 0, centred on y = 0, column 0 at x = 0."""

@@ -6,7 +6,8 @@ one place. A method is constructed for one model (``cls(model, **options)``) and
 * ``reset(state, forces, dt)`` — rebuild its history in ``state.history`` from ``state.x``,
   ``state.v`` (called when the state, ``dt`` or the method changes);
 * ``step(state, forces, dt)`` — advance ``state.x``, ``state.v`` by one step in place, reading
-  forces only through ``forces`` (a :class:`~cloth_sim.forces.Forces`, rebuilt by the simulator
+  forces only through ``forces`` (a :class:`~cloth_sim.physics.forces.Forces`, rebuilt by the
+  simulator
   when parameters change, so a method never holds stale forces);
 * ``pins_moved(state)`` — pinned particles were placed; keep them at rest;
 * ``kinematic_velocities(state, indices, dt)`` — pinned particles move with ``state.v`` over the
@@ -16,14 +17,17 @@ one place. A method is constructed for one model (``cls(model, **options)``) and
 * ``attach(contacts, self_collision)`` — the contact stages, for a method that resolves them inside
   its step (it declares which in ``handles``; the simulator then skips them after the step);
 * ``stable_dt(analysis)`` — the largest stable ``dt`` by its :class:`Stability` class, from a
-  :class:`~cloth_sim.stability.Analysis` of the material (computed once per material and kept).
+  :class:`~cloth_sim.physics.stability.Analysis` of the material (computed once per material and
+  kept).
 
 It declares ``name``, ``order``, ``stability``, ``counter_names`` (the counters it keeps in
 :attr:`counters`: solves, CG iterations, factorisations) and ``conserves_momentum``. Integrators
 import nothing from the simulator.
 
-To add a method: a subclass in this package decorated with ``@register`` (or a module imported at the
-end of ``integrators/__init__.py``); the tests parametrised over ``integrators.available()`` then check
+To add a method: a subclass in this package decorated with ``@register`` (or a module imported at
+the
+end of ``integrators/__init__.py``); the tests parametrised over ``integrators.available()`` then
+check
 its free fall, momentum, declared order and stability limit.
 """
 
@@ -34,8 +38,8 @@ import math
 
 import numpy as np
 
-from .. import stability as stab
-from ..forces import GravityTerm, WindTerm
+from ..physics import stability as stab
+from ..physics.forces import GravityTerm, WindTerm
 
 #: What ``parameters_changed`` may report.
 CHANGES = frozenset({"stiffness", "damping", "drag", "dt", "gravity", "wind"})
@@ -102,8 +106,10 @@ class Integrator:
         """Some of :data:`CHANGES` changed (no-op by default)."""
 
     def attach(self, contacts, self_collision) -> None:
-        """The simulator's contact stage (:class:`~cloth_sim.colliders.Contacts`) and self-collision
-        stage (:class:`~cloth_sim.self_collision.SelfCollision`), for a method that resolves them
+        """The simulator's contact stage (:class:`~cloth_sim.contact.colliders.Contacts`) and
+        self-collision
+        stage (:class:`~cloth_sim.contact.self_collision.SelfCollision`), for a method that
+        resolves them
         (:attr:`handles`); called whenever they or the method change (no-op by default)."""
 
     # ------------------------------------------------------------------ stability
@@ -134,13 +140,15 @@ class Integrator:
         stable methods (unless Choi–Ko's onset load would throw the cloth about at some step), the
         amplification matrix's limit on the fastest mode, or the method's own analysis; each
         computed once per material and kept in ``analysis``; at most
-        :func:`~cloth_sim.stability.buckling_onset_limit` (Choi–Ko's onset load, a jump that no
+        :func:`~cloth_sim.physics.stability.buckling_onset_limit` (Choi–Ko's onset load, a jump
+        that no
         mode analysis sees)."""
         if self.stability is Stability.UNCONDITIONAL:
             return analysis.onset_band[0]
         if self.stability is Stability.AMPLIFICATION:
-            limit = analysis.limit(("amplification", type(self)),
-                                   lambda a: stab.one_step_limit(type(self), a))
+            limit = analysis.limit(
+                ("amplification", type(self)), lambda a: stab.one_step_limit(type(self), a)
+            )
         else:
             limit = analysis.limit(("analysis", type(self), self.analysis_key()), self.analyse)
         # Choi–Ko's buckling load jumps in at the onset of compression: no mode analysis sees it
@@ -149,7 +157,8 @@ class Integrator:
     def stable_again_above(self, analysis: "stab.Analysis") -> float:
         """The step above which a method without a step limit is fine again although
         :meth:`stable_dt` is finite (the top of Choi–Ko's onset band,
-        :func:`~cloth_sim.stability.buckling_onset_band`); ``inf`` for the other methods."""
+        :func:`~cloth_sim.physics.stability.buckling_onset_band`); ``inf`` for the other
+        methods."""
         if self.stability is Stability.UNCONDITIONAL:
             return analysis.onset_band[1]
         return math.inf
@@ -202,5 +211,6 @@ def matrices(entries) -> np.ndarray:
     evaluates many at once."""
     entries = [[np.asarray(e, dtype=np.float64) for e in row] for row in entries]
     shape = np.broadcast_shapes(*(e.shape for row in entries for e in row))
-    return np.stack([np.stack([np.broadcast_to(e, shape) for e in row], axis=-1) for row in entries],
-                    axis=-2)
+    return np.stack(
+        [np.stack([np.broadcast_to(e, shape) for e in row], axis=-1) for row in entries], axis=-2
+    )

@@ -9,9 +9,9 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from . import register
-from ..forces import combine_particle
+from ..physics.forces import combine_particle
 from .base import Integrator, matrices, oscillator_matrix
+from .registry import register
 
 
 class ExplicitRungeKutta(Integrator):
@@ -32,7 +32,7 @@ class ExplicitRungeKutta(Integrator):
         if forces.fuses_stages:  # each stage's forces and the next stage's state in one pass
             forces.runge_kutta_step(x, v, self.A, self.b, dt, kx, kv, xs, coef)
             return
-        combine = _combine_parallel if forces.spring_term.parallel else _combine
+        combine = combine_parallel if forces.spring_term.parallel else _combine
         for i in range(stages):
             if i == 0:  # the first stage is the current state itself; no copy needed
                 np.copyto(kx[0], v)
@@ -47,8 +47,10 @@ class ExplicitRungeKutta(Integrator):
 
     @classmethod
     def spectral_radii(cls, h, omega, zeta):
-        """``max |R(hλ)|`` over the oscillator's eigenvalues ``λ = ω(−ζ ± √(ζ²−1))``, with ``R`` the
-        tableau's stability polynomial ``1 + Σ_k (b·A^{k−1}·1) z^k`` (the eigenvalues of a polynomial
+        """``max |R(hλ)|`` over the oscillator's eigenvalues ``λ = ω(−ζ ± √(ζ²−1))``, with ``R``
+        the
+        tableau's stability polynomial ``1 + Σ_k (b·A^{k−1}·1) z^k`` (the eigenvalues of a
+        polynomial
         of a matrix are the polynomial of its eigenvalues): the same as the amplification matrix's
         radius, without building it."""
         h, omega, zeta = (np.asarray(a, dtype=np.float64) for a in (h, omega, zeta))
@@ -94,7 +96,7 @@ def _combine(xo, vo, x, v, kx, kv, coef):
 
 
 @numba.njit(cache=True, parallel=True)
-def _combine_parallel(xo, vo, x, v, kx, kv, coef):
+def combine_parallel(xo, vo, x, v, kx, kv, coef):
     """:func:`_combine` on every core (each particle's elements are independent: the same bits);
     for the cloths whose spring forces run on every core, where it was a fifth of an RK4 step at
     128×128 on one."""
@@ -113,14 +115,19 @@ def _verlet_update(x, v, prev, a, dt, pinned):
         for d in range(3):
             new = 2.0 * x[p, d] - prev[p, d] + h2 * a[p, d]
             # a pinned particle moves at constant velocity (0 for a pin, a gripper's otherwise)
-            v[p, d] = (new - x[p, d]) / dt if pinned[p] else (3.0 * new - 4.0 * x[p, d] + prev[p, d]) / inv
+            v[p, d] = (
+                (new - x[p, d]) / dt
+                if pinned[p]
+                else (3.0 * new - 4.0 * x[p, d] + prev[p, d]) / inv
+            )
             prev[p, d] = x[p, d]
             x[p, d] = new
 
 
 @register
 class ExplicitEuler(ExplicitRungeKutta):
-    """Explicit (forward) Euler, order 1: ``x += dt·v``, ``v += dt·a(x, v)``, both from the old state
+    """Explicit (forward) Euler, order 1: ``x += dt·v``, ``v += dt·a(x, v)``, both from the old
+    state
     (Provot 1995; review eq. 1.11). Unstable for any ``dt`` on an undamped oscillator."""
 
     name = "explicit_euler"
@@ -133,7 +140,8 @@ class ExplicitEuler(ExplicitRungeKutta):
 @register
 class SymplecticEuler(Integrator):
     """Symplectic (semi-implicit) Euler, order 1, in Provot's form (review eq. 1.12):
-    ``v += dt·a(x, v)``, then ``x += dt·v`` with the new velocity. Undamped, it keeps the energy error
+    ``v += dt·a(x, v)``, then ``x += dt·v`` with the new velocity. Undamped, it keeps the energy
+    error
     bounded and is stable for ``ω·dt < 2``."""
 
     name = "symplectic_euler"
@@ -169,10 +177,9 @@ class RK4(ExplicitRungeKutta):
     name = "rk4"
     force_point = 0.5
     order = 4
-    A = np.array([[0.0, 0.0, 0.0, 0.0],
-                  [0.5, 0.0, 0.0, 0.0],
-                  [0.0, 0.5, 0.0, 0.0],
-                  [0.0, 0.0, 1.0, 0.0]])
+    A = np.array(
+        [[0.0, 0.0, 0.0, 0.0], [0.5, 0.0, 0.0, 0.0], [0.0, 0.5, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]]
+    )
     b = np.array([1.0, 2.0, 2.0, 1.0]) / 6.0
 
 
@@ -180,10 +187,13 @@ class RK4(ExplicitRungeKutta):
 class Verlet(Integrator):
     """Position (Störmer) Verlet, order 2 (review eq. 1.15): ``x⁺ = 2x − x⁻ + dt²·a(x, v)``.
 
-    It is started consistently, ``x⁻ = x − dt·v + ½dt²·a``, and rebuilt that way whenever the state,
-    ``dt`` or the method changes. Its velocity, used for damping and diagnostics, is the second-order
+    It is started consistently, ``x⁻ = x − dt·v + ½dt²·a``, and rebuilt that way whenever the
+    state,
+    ``dt`` or the method changes. Its velocity, used for damping and diagnostics, is the
+    second-order
     one-sided estimate ``v = (3x − 4x⁻ + x⁻⁻)/(2dt)`` from the last three positions. Stable for
-    ``ω·dt < 2`` undamped; with damping the lagged velocity estimate lowers the limit below symplectic
+    ``ω·dt < 2`` undamped; with damping the lagged velocity estimate lowers the limit below
+    symplectic
     Euler's (about 20 % at ζ = 0.1), which :meth:`amplification` accounts for.
     """
 
@@ -215,6 +225,10 @@ class Verlet(Integrator):
         """3×3, on ``(xₙ, xₙ₋₁, xₙ₋₂)``: ``xₙ₊₁ = 2xₙ − xₙ₋₁ + h²·(−ω²xₙ − c·vₙ)`` with
         ``vₙ = (3xₙ − 4xₙ₋₁ + xₙ₋₂)/(2h)`` and ``c = 2ζω``."""
         w2, c = omega * omega, 2.0 * zeta * omega
-        return matrices([[2.0 - h * h * w2 - 1.5 * h * c, -1.0 + 2.0 * h * c, -0.5 * h * c],
-                            [1.0, 0.0, 0.0],
-                            [0.0, 1.0, 0.0]])
+        return matrices(
+            [
+                [2.0 - h * h * w2 - 1.5 * h * c, -1.0 + 2.0 * h * c, -0.5 * h * c],
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+            ]
+        )

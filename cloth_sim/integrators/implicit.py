@@ -10,13 +10,15 @@ and differ in the matrix they use and how they solve with it:
   Choi–Ko interactions), their damping and drag, refilled every step into a sparsity pattern built
   once; solved by block-Jacobi-preconditioned conjugate gradients or a direct sparse solve.
 * ``implicit_euler_prefactored`` (eqs. 1.19–1.20): ∂f/∂x replaced by the constant graph matrix
-  ``H`` (``H_ij = k_ij``, ``H_ii = −Σ_j k_ij``, the same for each coordinate) and ∂f/∂v by ``C`` built
+  ``H`` (``H_ij = k_ij``, ``H_ii = −Σ_j k_ij``, the same for each coordinate) and ∂f/∂v by ``C``
+  built
   the same way from the damping coefficients, so the matrix is constant: one sparse Cholesky
   factorisation (``cholespy``) serves every step until stiffness, damping, drag or dt change.
 * ``kang`` (Kang, Choi & Cho 2000): the same ``H`` with no solve at all; one Jacobi sweep per step
   with the neighbours' ``Δv`` from the previous step.
 
-Pinned particles are eliminated: the unknowns are the free particles' velocity changes only, so pins
+Pinned particles are eliminated: the unknowns are the free particles' velocity changes only, so
+pins
 never move. Gravity and wind are explicit (in ``f``); wind depends on the positions through the
 triangle normals and is not linearised.
 """
@@ -30,10 +32,10 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
-from .. import stability as stab
-from ..forces import incidence, spring_sums
-from . import register
+from ..physics import stability as stab
+from ..physics.forces import incidence, spring_sums
 from .base import Integrator, Stability, matrices
+from .registry import register
 
 SOLVERS = ("cg", "direct")
 
@@ -43,11 +45,13 @@ def _block_pattern(springs: np.ndarray, free_index: np.ndarray, n_free: int):
     """CSR pattern over the free degrees of freedom of ``Σ`` spring blocks plus the diagonal.
 
     Returns ``(indptr, indices, slot, dslot)``: ``slot[s, b, p, q]`` is where entry ``(p, q)`` of
-    block ``b`` (0: ii, 1: jj, 2: ij, 3: ji) of spring ``s`` lives in the data array (−1 where a pin
+    block ``b`` (0: ii, 1: jj, 2: ij, 3: ji) of spring ``s`` lives in the data array (−1 where a
+    pin
     eliminates it), ``dslot[i, p]`` the diagonal entry of particle ``i``'s coordinate ``p``."""
     i, j = springs[:, 0], springs[:, 1]
-    pairs = np.stack([np.stack([i, i], 1), np.stack([j, j], 1), np.stack([i, j], 1),
-                      np.stack([j, i], 1)], 1)  # (m, 4, 2)
+    pairs = np.stack(
+        [np.stack([i, i], 1), np.stack([j, j], 1), np.stack([i, j], 1), np.stack([j, i], 1)], 1
+    )  # (m, 4, 2)
     rp = free_index[pairs[..., 0]]  # (m, 4) free particle index of the row, −1 if pinned
     cp = free_index[pairs[..., 1]]
     m = len(springs)
@@ -61,7 +65,7 @@ def _block_pattern(springs: np.ndarray, free_index: np.ndarray, n_free: int):
     uniq, inverse = np.unique(keys, return_inverse=True)
     slot = np.full(keep.shape, -1, dtype=np.int64)
     slot[keep] = inverse[: int(keep.sum())]
-    dslot_free = inverse[int(keep.sum()):]
+    dslot_free = inverse[int(keep.sum()) :]
     dslot = np.full((len(free_index), 3), -1, dtype=np.int64)
     free = free_index >= 0
     dslot[free] = dslot_free.reshape(-1, 3)
@@ -77,8 +81,9 @@ def _block_pattern(springs: np.ndarray, free_index: np.ndarray, n_free: int):
 def _assemble_baraff_witkin(springs, kx, cv, f, v, h, diag, slot, dslot, data, rhs):
     """Fill ``data`` with ``M − h·∂f/∂v − h²·∂f/∂x`` and ``rhs`` with ``h·(f + h·∂f/∂x·v)`` from
     the springs' Jacobian blocks ``kx`` (elastic) and ``cv`` (damping), as
-    :meth:`~cloth_sim.forces.SpringTerm.jacobian_blocks` gives them (the same blocks
-    :meth:`~cloth_sim.forces.Forces.jacobians` reports). ``diag[i]`` is ``m_i + h·drag``. The damping
+    :meth:`~cloth_sim.physics.forces.SpringTerm.jacobian_blocks` gives them (the same blocks
+    :meth:`~cloth_sim.physics.forces.Forces.jacobians` reports). ``diag[i]`` is ``m_i + h·drag``.
+    The damping
     force's dependence on positions is left out (it would make the matrix unsymmetric), as Baraff &
     Witkin do."""
     data[:] = 0.0
@@ -119,7 +124,8 @@ def _baraff_witkin_rhs(springs, kx, f, v, h, rhs):
 
 #: a symmetric 3×3 block stored as its upper triangle: (0,0) (0,1) (0,2) (1,1) (1,2) (2,2)
 _SYM = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
-#: CG's sums run over this many fixed slices of the particles, each summed on one core and the slices'
+# : CG's sums run over this many fixed slices of the particles, each summed on one core and the
+# slices'
 #: sums added in order: the same bits at any thread count
 _SLICES = 64
 
@@ -127,8 +133,10 @@ _SLICES = 64
 @numba.njit(cache=True)
 def _system_blocks(springs, kx, cv, f, v, h, diag, rhs, blocks, D):
     """The Baraff–Witkin system without its matrix: ``rhs`` as :func:`_assemble_baraff_witkin`
-    fills it, each spring's coupling block ``B_s = h·cv + h²·kx`` into ``blocks`` and each particle's
-    diagonal block ``m_i + h·drag + Σ_{s∋i} B_s`` into ``D``, both symmetric and kept as their upper
+    fills it, each spring's coupling block ``B_s = h·cv + h²·kx`` into ``blocks`` and each
+    particle's
+    diagonal block ``m_i + h·drag + Σ_{s∋i} B_s`` into ``D``, both symmetric and kept as their
+    upper
     triangles (:data:`_SYM`): ``A`` is then ``(A·x)_i = D_i·x_i − Σ_{s∋i} B_s·x_j`` over the free
     ``j``."""
     _baraff_witkin_rhs(springs, kx, f, v, h, rhs)
@@ -155,16 +163,19 @@ def _system_blocks(springs, kx, cv, f, v, h, diag, rhs, blocks, D):
 def _sym_product(b, k, x, o):
     """``b[k]`` (a symmetric block's upper triangle) times ``x[3o:3o+3]``."""
     x0, x1, x2 = x[3 * o], x[3 * o + 1], x[3 * o + 2]
-    return (b[k, 0] * x0 + b[k, 1] * x1 + b[k, 2] * x2,
-            b[k, 1] * x0 + b[k, 3] * x1 + b[k, 4] * x2,
-            b[k, 2] * x0 + b[k, 4] * x1 + b[k, 5] * x2)
+    return (
+        b[k, 0] * x0 + b[k, 1] * x1 + b[k, 2] * x2,
+        b[k, 1] * x0 + b[k, 3] * x1 + b[k, 4] * x2,
+        b[k, 2] * x0 + b[k, 4] * x1 + b[k, 5] * x2,
+    )
 
 
 @numba.njit(cache=True, parallel=True)
 def _system_product(particles, ptr, adj, other, blocks, D, x, out, partial):
     """``out = A·x`` over the free particles (``particles[k]``: the particle of free index ``k``;
     ``other[e]``: the free index of the far end of incidence ``e``'s spring, −1 for a pin), each
-    particle summing its springs in incidence order, and ``partial[c, 0]`` the sum of ``x·out`` over
+    particle summing its springs in incidence order, and ``partial[c, 0]`` the sum of ``x·out``
+    over
     slice ``c`` of the particles; the slices on every core (the same bits at any thread count).
     Reads 6 numbers per spring and particle where the assembled CSR matrix streamed 9 per coupling
     and index (5.6 MB at 64×64, 0.22 ms a product)."""
@@ -261,8 +272,10 @@ def _pcg(system, inv, b, x, rtol, maxiter, r, z, p, q, partial):
     """Conjugate gradients on ``A·x = b`` (``x`` holds the start and receives the solution), ``A``
     applied by :func:`_system_product` from ``system = (particles, ptr, adj, other, blocks, D)``,
     preconditioned with the 3×3 diagonal blocks' inverses ``inv``; stops when
-    ``|b − A·x| ≤ rtol·|b|`` (the recurrence's residual, as ``scipy.sparse.linalg.cg``). Returns the
-    iterations taken, or −1 when ``maxiter`` did not reach the tolerance. ``r``, ``z``, ``p``, ``q``
+    ``|b − A·x| ≤ rtol·|b|`` (the recurrence's residual, as ``scipy.sparse.linalg.cg``). Returns
+    the
+    iterations taken, or −1 when ``maxiter`` did not reach the tolerance. ``r``, ``z``, ``p``,
+    ``q``
     are scratch of ``b``'s length, ``partial`` of ``(_SLICES, 3)``. Each iteration is three passes
     on every core — the product with ``p·Ap``, the update with ``r·r`` and ``r·z``, the new
     direction — whose sums are taken over fixed slices (the same bits at any thread count)."""
@@ -296,7 +309,7 @@ def _pcg(system, inv, b, x, rtol, maxiter, r, z, p, q, partial):
 
 
 @numba.njit(cache=True)
-def _graph_product(springs, w, v, out):
+def graph_product(springs, w, v, out):
     """``out_i += Σ_j w_ij (v_j − v_i)``: the graph matrix (``H`` or ``C``) times ``v``."""
     for s in range(springs.shape[0]):
         i = springs[s, 0]
@@ -310,7 +323,8 @@ def _graph_product(springs, w, v, out):
 
 @numba.njit(cache=True)
 def _kang_sweeps(f, v, dv, springs, k, h, sweeps, inv_den, acc, new):
-    """Kang et al.'s update ``Δv_i = (h f_i + h² Σ_j k_ij (v_j − v_i + Δv_j)) / (m_i + h² Σ_j k_ij)``,
+    """Kang et al.'s update ``Δv_i = (h f_i + h² Σ_j k_ij (v_j − v_i + Δv_j)) / (m_i + h² Σ_j
+    k_ij)``,
     ``sweeps`` Jacobi sweeps starting from ``dv`` (the previous step's ``Δv``); result in ``dv``.
     ``inv_den`` is ``1/(m_i + h² Σ_j k_ij)``, 0 for pinned particles."""
     n = f.shape[0]
@@ -341,14 +355,20 @@ def cholesky(A: sp.spmatrix):
     A = A.tocsc()
     if A.shape[0] == 0:
         return None
-    return CholeskySolverD(A.shape[0], A.indptr.astype(np.int32), A.indices.astype(np.int32),
-                           np.ascontiguousarray(A.data), MatrixType.CSC)
+    return CholeskySolverD(
+        A.shape[0],
+        A.indptr.astype(np.int32),
+        A.indices.astype(np.int32),
+        np.ascontiguousarray(A.data),
+        MatrixType.CSC,
+    )
 
 
 def constant_system(model, forces, dt: float):
     """``M + dt·c_d·I + dt·C + dt²·H`` over the free particles: one ``n_free×n_free`` matrix (CSC)
     for the three coordinates, with ``H`` the graph Laplacian of the springs' linearised stiffness
-    (a Choi–Ko buckling pair resists compression with ``k·max|h''|/L³``, far above ``k``: with ``k``
+    (a Choi–Ko buckling pair resists compression with ``k·max|h''|/L³``, far above ``k``: with
+    ``k``
     the prefactored matrix was too soft and the step diverged) and ``C`` that of their damping
     coefficients. Returns ``(A, h, w, index)``: ``h`` those stiffnesses, ``w = dt·c + dt²·h`` the
     Laplacian's weights and ``index`` each particle's row (−1 on pins, which are eliminated)."""
@@ -370,15 +390,21 @@ def constant_system(model, forces, dt: float):
 
 
 def system_key(forces, dt: float) -> tuple:
-    """What :func:`constant_system` depends on besides the model (a new model, a new integrator)."""
+    """What :func:`constant_system` depends on besides the model (a new model, a new
+    integrator)."""
     return (dt, forces.drag, forces.springs.copy(), forces.k.copy(), forces.c.copy())
 
 
 def same_system(key, forces, dt: float) -> bool:
     """Whether ``key`` (:func:`system_key`) still describes ``forces`` and ``dt``."""
-    return (key is not None and key[0] == dt and key[1] == forces.drag
-            and np.array_equal(key[2], forces.springs) and np.array_equal(key[3], forces.k)
-            and np.array_equal(key[4], forces.c))
+    return (
+        key is not None
+        and key[0] == dt
+        and key[1] == forces.drag
+        and np.array_equal(key[2], forces.springs)
+        and np.array_equal(key[3], forces.k)
+        and np.array_equal(key[4], forces.c)
+    )
 
 
 # --------------------------------------------------------------------------- base
@@ -406,7 +432,8 @@ class _LinearisedImplicitEuler(Integrator):
 
 @register
 class ImplicitEuler(_LinearisedImplicitEuler):
-    """Baraff & Witkin (1998): one Newton step of backward Euler with the analytic spring Jacobians.
+    """Baraff & Witkin (1998): one Newton step of backward Euler with the analytic spring
+    Jacobians.
 
     Options (keyword arguments of the constructor, or attributes):
 
@@ -418,18 +445,21 @@ class ImplicitEuler(_LinearisedImplicitEuler):
       The cap is well below what a direct solve costs: at 64×64 an iteration takes ~0.1 ms and a
       direct solve 220 ms, at 81×81 ~0.15 and 460 ms; the hanging scene at dt = 1/60 with its mass
       spread over the finer grid needs 150–190 iterations there (200, the cap until the solve was
-      compiled, sent it to the direct solve at 0.2–0.5 s a step); ``"direct"``: a direct solve every
+      compiled, sent it to the direct solve at 0.2–0.5 s a step); ``"direct"``: a direct solve
+      every
       step, sparse Cholesky (``cholespy``) of the symmetric positive definite matrix, or SuperLU's
       LU when ``clamp_compression`` is off and the matrix may be indefinite.
     * ``clamp_compression`` (default on) — drop the compressive, indefinite part of each spring's
       stiffness block (``E''`` and ``E'/l`` below zero), which keeps the matrix symmetric positive
       definite so CG applies at any step. It changes the Jacobian, not the force: the step stays
-      first-order accurate here, but the linearisation is no longer exact for compressed springs, so
+      first-order accurate here, but the linearisation is no longer exact for compressed springs,
+      so
       it costs accuracy there, and a method built on the exact Jacobian (a BDF2 step, a full Newton
       iteration) would lose its higher order.
 
     The matrix is assembled from the spring term's Jacobian blocks (the ones
-    :meth:`~cloth_sim.forces.Forces.jacobians` reports and the tests check by finite differences)
+    :meth:`~cloth_sim.physics.forces.Forces.jacobians` reports and the tests check by finite
+    differences)
     refilled into a sparsity pattern built once. The damping force's dependence on positions is
     left out of the matrix (Baraff & Witkin do the same: it is small and unsymmetric). Wind and
     gravity are explicit.
@@ -438,8 +468,14 @@ class ImplicitEuler(_LinearisedImplicitEuler):
     name = "implicit_euler"
     counter_names = ("solves", "cg_iterations", "last_cg_iterations", "direct_fallbacks")
 
-    def __init__(self, model, solver: str = "cg", cg_tolerance: float = 1e-6,
-                 cg_max_iterations: int = 1000, clamp_compression: bool = True):
+    def __init__(
+        self,
+        model,
+        solver: str = "cg",
+        cg_tolerance: float = 1e-6,
+        cg_max_iterations: int = 1000,
+        clamp_compression: bool = True,
+    ):
         super().__init__(model)
         if solver not in SOLVERS:
             raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
@@ -470,17 +506,23 @@ class ImplicitEuler(_LinearisedImplicitEuler):
         self._free_dofs = np.flatnonzero(np.repeat(free, 3))
         self._n = 3 * n_free
         self._slot, self._dslot = slot, dslot
-        self._matrix = sp.csr_matrix((np.zeros(len(indices)), indices, indptr),
-                                     shape=(self._n, self._n))
+        self._matrix = sp.csr_matrix(
+            (np.zeros(len(indices)), indices, indptr), shape=(self._n, self._n)
+        )
         self._matrix.has_sorted_indices = True
         self._rhs = np.empty((self.model.n_particles, 3))
         self._pattern_springs = springs
         # CG's matrix-free operator: each free particle's springs and their far ends' free indices
         ptr, adj, sign = incidence(springs, len(index))
         far = np.where(sign > 0, springs[adj, 1], springs[adj, 0])
-        self._system = (np.flatnonzero(free).astype(np.int32), ptr.astype(np.int32),
-                        adj.astype(np.int32), index[far].astype(np.int32),
-                        np.empty((len(springs), 6)), np.empty((len(index), 6)))
+        self._system = (
+            np.flatnonzero(free).astype(np.int32),
+            ptr.astype(np.int32),
+            adj.astype(np.int32),
+            index[far].astype(np.int32),
+            np.empty((len(springs), 6)),
+            np.empty((len(index), 6)),
+        )
         self._block_inv = np.empty((n_free, 6))
         self._cg_work = np.empty((6, 3 * n_free))  # b, b/s, and CG's r, z, p, q
         self._cg_partial = np.empty((_SLICES, 3))
@@ -492,14 +534,16 @@ class ImplicitEuler(_LinearisedImplicitEuler):
         x, v = state.x, state.v
         springs = forces.springs
         if self._pattern_springs is not springs and not (
-                self._pattern_springs is not None and np.array_equal(self._pattern_springs, springs)):
+            self._pattern_springs is not None and np.array_equal(self._pattern_springs, springs)
+        ):
             self._build(springs)  # the set of active springs changed
             state.history.pop("dv", None)
             state.history.pop("dv_before", None)
         self._pattern_springs = springs
         f = forces.force(x, v, out=self._buffer("_f", x))
-        kx, _, cv = forces.spring_term.jacobian_blocks(x, v, self.clamp_compression,
-                                                       position_damping=False, out=self._jacobian)
+        kx, _, cv = forces.spring_term.jacobian_blocks(
+            x, v, self.clamp_compression, position_damping=False, out=self._jacobian
+        )
         if self._n == 0:
             return
         diag = np.add(self.model.masses, dt * forces.drag, out=self._diag)
@@ -515,8 +559,9 @@ class ImplicitEuler(_LinearisedImplicitEuler):
             self._direct_steps -= 1
         if dv is None:  # the matrix itself, assembled
             A = self._matrix
-            _assemble_baraff_witkin(springs, kx, cv, f, v, dt, diag, self._slot, self._dslot, A.data,
-                                    self._rhs)
+            _assemble_baraff_witkin(
+                springs, kx, cv, f, v, dt, diag, self._slot, self._dslot, A.data, self._rhs
+            )
             last = state.history.get("dv")
             if last is not None:  # the warm start's second point, for when CG is tried again
                 state.history["dv_before"] = last
@@ -541,7 +586,8 @@ class ImplicitEuler(_LinearisedImplicitEuler):
         """CG on ``A·dv = b`` with ``A`` applied without assembling it (:func:`_system_product`,
         from each spring's 3×3 block), preconditioned with the inverses of the particles' 3×3
         diagonal blocks (a particle's own coupling, which the plain diagonal leaves out), compiled
-        (:func:`_pcg`: the products on every core, the sums of the dot products in a fixed order, so
+        (:func:`_pcg`: the products on every core, the sums of the dot products in a fixed order,
+        so
         the same bits at any thread count), warm-started from the last two steps' ``Δv`` (the
         state's ``history["dv"]``, which receives the solution, and ``history["dv_before"]``);
         solved as ``A·y = b/s`` with ``s`` the power of two nearest ``|b|`` (exact, so the iterates
@@ -572,8 +618,16 @@ class ImplicitEuler(_LinearisedImplicitEuler):
         y -= before
         y *= inv_scale
         np.copyto(before, dv)
-        its = _pcg(self._system, self._block_inv, np.multiply(b, inv_scale, out=self._cg_work[1]), y,
-                   self.cg_tolerance, self.cg_max_iterations, *self._cg_work[2:], self._cg_partial)
+        its = _pcg(
+            self._system,
+            self._block_inv,
+            np.multiply(b, inv_scale, out=self._cg_work[1]),
+            y,
+            self.cg_tolerance,
+            self.cg_max_iterations,
+            *self._cg_work[2:],
+            self._cg_partial,
+        )
         count = self.cg_max_iterations if its < 0 else its
         self.counters["last_cg_iterations"] = count
         self.counters["cg_iterations"] += count
@@ -585,7 +639,8 @@ class ImplicitEuler(_LinearisedImplicitEuler):
 
 @numba.njit(cache=True)
 def _update(x, v, particles, dv, h):
-    """``v += Δv`` on the free particles (``particles[k]`` takes ``dv[3k:3k+3]``), then ``x += h·v``:
+    """``v += Δv`` on the free particles (``particles[k]`` takes ``dv[3k:3k+3]``), then ``x +=
+    h·v``:
     the array expressions' operations, in one pass and without temporaries."""
     for k in range(particles.shape[0]):
         p = particles[k]
@@ -601,8 +656,10 @@ class ImplicitEulerPrefactored(_LinearisedImplicitEuler):
     """The review's eqs. 1.16–1.20: implicit Euler with the constant matrix
     ``M − dt·C − dt²·H`` (``H_ij = k_ij``, ``H_ii = −Σ_j k_ij``; ``C`` the same from the damping
     coefficients; drag on the diagonal), one ``n×n`` matrix shared by the three coordinates. For
-    Choi & Ko's buckling pairs ``k_ij`` is their linearised stiffness, the stiffer of the two branches
-    (:func:`cloth_sim.stability.effective_stiffness`); with the bare ``k`` the step diverges.
+    Choi & Ko's buckling pairs ``k_ij`` is their linearised stiffness, the stiffer of the two
+    branches
+    (:func:`cloth_sim.physics.stability.effective_stiffness`); with the bare ``k`` the step
+    diverges.
 
     It is symmetric positive definite, factorised once by sparse Cholesky (``cholespy``) and reused
     for every step; it is refactorised when stiffness, damping, drag, dt, pins or topology change
@@ -651,7 +708,7 @@ class ImplicitEulerPrefactored(_LinearisedImplicitEuler):
         f = forces.force(x, v, out=self._buffer("_f", x))
         rhs = self._rhs_full
         rhs[:] = 0.0
-        _graph_product(forces.springs, self._h, v, rhs)  # H v
+        graph_product(forces.springs, self._h, v, rhs)  # H v
         rhs *= dt
         rhs += f
         rhs *= dt
@@ -667,16 +724,20 @@ class ImplicitEulerPrefactored(_LinearisedImplicitEuler):
 @register
 class Kang(_LinearisedImplicitEuler):
     """Kang, Choi & Cho (2000), the approximated implicit method: the linear system of
-    :class:`ImplicitEulerPrefactored` without damping in the matrix, not solved but approximated per
+    :class:`ImplicitEulerPrefactored` without damping in the matrix, not solved but approximated
+    per
     particle by ``sweeps`` Jacobi sweeps (the paper: one),
 
         Δv_i = (dt·f_i + dt²·Σ_j k_ij·(v_j − v_i + Δv_j)) / (m_i + dt²·Σ_j k_ij),
 
     with the neighbours' ``Δv_j`` from the previous step (kept in ``state.history["dv"]``). Spring
     damping stays explicit in ``f``. Not unconditionally stable: the lagged ``Δv_j`` and explicit
-    damping limit the step, which its own analysis finds (:func:`cloth_sim.stability.kang_stable_dt`:
-    a von Neumann analysis of the grid, tens of milliseconds; the whole linearised step for other spring
-    networks), and the simulator's guard catches a blow-up like any explicit method's. The per-particle
+    damping limit the step, which its own analysis finds
+    (:func:`cloth_sim.physics.stability.kang_stable_dt`:
+    a von Neumann analysis of the grid, tens of milliseconds; the whole linearised step for other
+    spring
+    networks), and the simulator's guard catches a blow-up like any explicit method's. The
+    per-particle
     scaling does not conserve linear momentum while ``Δv`` changes from step to step.
     """
 
@@ -688,8 +749,10 @@ class Kang(_LinearisedImplicitEuler):
 
     @classmethod
     def amplification(cls, h, omega, zeta):
-        raise NotImplementedError("kang has no scalar mode model (its lagged neighbours couple the "
-                                  "modes): see cloth_sim.stability.kang_stable_dt")
+        raise NotImplementedError(
+            "kang has no scalar mode model (its lagged neighbours couple the "
+            "modes): see cloth_sim.physics.stability.kang_stable_dt"
+        )
 
     def __init__(self, model, sweeps: int = 1):
         super().__init__(model)
@@ -702,8 +765,14 @@ class Kang(_LinearisedImplicitEuler):
         return (self.sweeps,)
 
     def analyse(self, analysis):
-        return stab.kang_stable_dt(self.model, analysis.k, analysis.c, analysis.drag, self.sweeps,
-                                   omega=analysis.mode.omega)
+        return stab.kang_stable_dt(
+            self.model,
+            analysis.k,
+            analysis.c,
+            analysis.drag,
+            self.sweeps,
+            omega=analysis.mode.omega,
+        )
 
     def reset(self, state, forces, dt):
         state.history["dv"] = np.zeros_like(state.x)
@@ -720,9 +789,18 @@ class Kang(_LinearisedImplicitEuler):
     def step(self, state, forces, dt):
         x, v, dv = state.x, state.v, state.history["dv"]
         f = forces.force(x, v, out=self._buffer("_f", x))
-        _kang_sweeps(f, v, dv, forces.springs, forces.k, dt, self.sweeps,
-                     self._inverse_denominators(forces, dt), self._buffer("_acc", x),
-                     self._buffer("_new", x))
+        _kang_sweeps(
+            f,
+            v,
+            dv,
+            forces.springs,
+            forces.k,
+            dt,
+            self.sweeps,
+            self._inverse_denominators(forces, dt),
+            self._buffer("_acc", x),
+            self._buffer("_new", x),
+        )
         self.counters["solves"] += 1
         v += dv
         x += np.multiply(v, dt, out=self._buffer("_new", x))  # no temporary

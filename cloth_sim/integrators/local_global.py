@@ -1,11 +1,13 @@
-"""Liu, O'Sullivan, Sifakis & Kavan (2013), "Fast simulation of mass-spring systems": backward Euler
+"""Liu, O'Sullivan, Sifakis & Kavan (2013), "Fast simulation of mass-spring systems": backward
+Euler
 for springs solved by block coordinate descent.
 
 One step of backward Euler is the minimiser of
 
     g(x) = 1/(2h²)·‖x − y‖²_M + E(x),      y = xₙ + h·vₙ + h²·M⁻¹·f_ext,
 
-and for a Hooke spring ``½k(|x_ij| − L)² = min_{|d| = L} ½k|x_ij − d|²`` (``x_ij = x_j − x_i``). With
+and for a Hooke spring ``½k(|x_ij| − L)² = min_{|d| = L} ½k|x_ij − d|²`` (``x_ij = x_j − x_i``).
+With
 the directions ``d`` as extra unknowns, ``g`` is minimised by alternating
 
 * a **local step**: each spring's ``d = L·x_ij/|x_ij|`` (independent per spring), and
@@ -17,19 +19,24 @@ Each iteration lowers ``g``, and the iterates converge to the backward-Euler ste
 
 Other spring laws. A spring whose energy is any ``E(l)`` of its length gets the target
 ``d = (l − E'(l)/w)·x_ij/l`` with a weight ``w`` in the matrix: for Hooke (``w = k``) this is Liu's
-``d = L·x_ij/l``; in general the fixed point is still the backward-Euler step (``w·(x_ij − d)`` is the
+``d = L·x_ij/l``; in general the fixed point is still the backward-Euler step (``w·(x_ij − d)`` is
+the
 spring's force), and the iteration is the quasi-Newton method with the constant Laplacian as the
 Hessian that Liu, Bouaziz & Kavan (2017) derive. Choi & Ko's tension-only pairs (``E' = 0`` when
-compressed: ``d = x_ij``, no force) and buckling pairs (``E'`` from the arc model) take this form with
+compressed: ``d = x_ij``, no force) and buckling pairs (``E'`` from the arc model) take this form
+with
 ``w`` their linearised stiffness, the stiffer branch
-(:func:`cloth_sim.stability.springs_effective_stiffness`), so that ``w`` bounds the energy's
+(:func:`cloth_sim.physics.stability.springs_effective_stiffness`), so that ``w`` bounds the
+energy's
 curvature and each iteration still lowers ``g``. At the buckling onset the force jumps (the
-immediate-buckling load ``12 k/L²``): there ``E`` has a kink, which the iteration approaches without
+immediate-buckling load ``12 k/L²``): there ``E`` has a kink, which the iteration approaches
+without
 oscillating but converges to more slowly.
 
 Damping (Rayleigh, as the issue allows, since the paper leaves springs undamped). Spring damping
 ``c`` enters as the graph Laplacian ``C`` of the damping coefficients acting on the new velocity
-``(x − xₙ)/h``: it damps the relative velocity of a spring's ends in every direction, not only along
+``(x − xₙ)/h``: it damps the relative velocity of a spring's ends in every direction, not only
+along
 the spring (that would make the matrix depend on the directions), conserves linear momentum, and
 keeps the matrix constant; drag ``−c_d·v`` is implicit too. The global matrix is then
 ``M + h·c_d·I + h·C + h²·L``. Gravity and wind are explicit, in ``y`` (wind at the step's start).
@@ -44,16 +51,18 @@ import numba
 import numpy as np
 import scipy.sparse as sp
 
-from ..forces import BUCKLE_TABLE, axial, spring_vector
-from . import register
+from ..physics.forces import BUCKLE_TABLE, axial, spring_vector
 from .base import Integrator, Stability
-from .implicit import _graph_product, cholesky, constant_system, same_system, system_key
+from .implicit import cholesky, constant_system, graph_product, same_system, system_key
+from .registry import register
 
 
 @numba.njit(cache=True)
 def _local_global_rhs(x, springs, rest, k, w, kind, tab, h2, base, rhs):
-    """``rhs = base + h²·J·d``: the local step (each spring's target ``d`` from the positions ``x``)
-    and its contribution to the global step's right-hand side, ``−h²·w·d`` on ``i`` and ``+h²·w·d`` on
+    """``rhs = base + h²·J·d``: the local step (each spring's target ``d`` from the positions
+    ``x``)
+    and its contribution to the global step's right-hand side, ``−h²·w·d`` on ``i`` and ``+h²·w·d``
+    on
     ``j`` for the spring ``(i, j)``."""
     rhs[:] = base
     for s in range(springs.shape[0]):
@@ -87,7 +96,8 @@ class Liu2013(Integrator):
     Wang's under-relaxation 0.9: worth it from tens of iterations (on a 5×5 sheet at dt = 1/60,
     100 iterations land 80× closer to the step than without; at 10 it does not help).
 
-    First order (backward Euler, whatever the iteration count: the iteration starts at ``y``, within
+    First order (backward Euler, whatever the iteration count: the iteration starts at ``y``,
+    within
     ``O(h²)`` of the step, and only shrinks that error); linear momentum conserved (every spring
     and the damping act in equal and opposite pairs); no step limit (each iteration lowers the
     step's objective). The matrix is refactorised when stiffness, damping, drag or dt change (the
@@ -106,7 +116,11 @@ class Liu2013(Integrator):
 
     def __init__(self, model, iterations: int = 10, chebyshev: bool = False, rho: float = 0.99):
         super().__init__(model)
-        if isinstance(iterations, bool) or int(iterations) != iterations or not 1 <= iterations <= 10_000:
+        if (
+            isinstance(iterations, bool)
+            or int(iterations) != iterations
+            or not 1 <= iterations <= 10_000
+        ):
             raise ValueError(f"iterations must be an integer in [1, 10000], got {iterations!r}")
         if not (isinstance(rho, (int, float)) and 0.0 < rho < 1.0):
             raise ValueError(f"rho must be a number in (0, 1), got {rho!r}")
@@ -129,11 +143,14 @@ class Liu2013(Integrator):
         n_free = A.shape[0]
         i, j = forces.springs[:, 0], forces.springs[:, 1]
         fi, fj = index[i], index[j]
-        # a free particle's springs to pinned ones: their Laplacian entries move to the right-hand side
+        # a free particle's springs to pinned ones: their Laplacian entries move to the right-hand
+        # side
         cross = (fi >= 0) != (fj >= 0)
         rows = np.where(fi[cross] >= 0, fi[cross], fj[cross])
         cols = np.where(fi[cross] >= 0, j[cross], i[cross])
-        self._pin_coupling = sp.csr_matrix((off[cross], (rows, cols)), shape=(n_free, self.model.n_particles))
+        self._pin_coupling = sp.csr_matrix(
+            (off[cross], (rows, cols)), shape=(n_free, self.model.n_particles)
+        )
         self._solver = cholesky(A)
         self._free = index >= 0
         self._free_index = np.flatnonzero(self._free)
@@ -161,7 +178,7 @@ class Liu2013(Integrator):
         np.multiply(y, self.model.masses[:, None], out=base)
         base += (dt * forces.drag) * x0
         if forces.with_damping:  # + h·C·xₙ, Σ_j h·c_ij·(x_i − x_j): the graph product with −h·c
-            _graph_product(forces.springs, -dt * forces.c, x0, base)
+            graph_product(forces.springs, -dt * forces.c, x0, base)
         pins = self._pin_coupling @ y if self._pin_coupling.nnz else None
         rhs = self._buffer("_rhs", x)
         cur = self._buffer("_cur", x)
@@ -173,8 +190,18 @@ class Liu2013(Integrator):
             np.copyto(prev_f, cur_f)
         omega = 1.0
         for it in range(self.iterations):
-            _local_global_rhs(cur, forces.springs, forces.rest, forces.k, self._w, forces.kind,
-                              BUCKLE_TABLE, h2, base, rhs)
+            _local_global_rhs(
+                cur,
+                forces.springs,
+                forces.rest,
+                forces.k,
+                self._w,
+                forces.kind,
+                BUCKLE_TABLE,
+                h2,
+                base,
+                rhs,
+            )
             np.take(rhs, idx, axis=0, out=b)
             if pins is not None:
                 b += pins
@@ -184,8 +211,11 @@ class Liu2013(Integrator):
                 cur[idx] = sol
                 continue
             # Wang (2015): x⁺ = ω·(γ·(x̂ − x) + x − x⁻) + x⁻, ω from the Chebyshev recurrence
-            omega = 1.0 if it == 0 else (2.0 / (2.0 - self.rho ** 2) if it == 1
-                                         else 4.0 / (4.0 - self.rho ** 2 * omega))
+            omega = (
+                1.0
+                if it == 0
+                else (2.0 / (2.0 - self.rho**2) if it == 1 else 4.0 / (4.0 - self.rho**2 * omega))
+            )
             np.subtract(sol, cur_f, out=new_f)
             new_f *= self.GAMMA
             new_f += cur_f

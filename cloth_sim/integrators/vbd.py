@@ -5,7 +5,8 @@ A step of ``h`` is backward Euler written as the minimum of the incremental pote
 
     G(x) = Σ_i m_i/(2h²) |x_i − y_i|² + E(x),      y = x^t + h v^t + h² a_ext,
 
-``E`` the springs' energy (every family, Hooke or Choi–Ko's), their damping along the spring and the
+``E`` the springs' energy (every family, Hooke or Choi–Ko's), their damping along the spring and
+the
 air drag as dissipation potentials of ``(x − x^t)/h``, and the contacts' energies. Block coordinate
 descent over the vertices: each vertex in turn takes one Newton step on ``G`` with the others held,
 
@@ -32,12 +33,15 @@ Contacts inside the solve (when the simulator lets the method handle them, :attr
   current iterate, the contact normal held), as the paper does.
 * **Self-contact** between the cloth's own primitives, vertex–triangle and edge–edge, the same
   energy on their distance. Candidates come from the self-collision stage's tree
-  (:mod:`cloth_sim.collision_tree`) at the start of the step and every ``collision_interval``
+  (:mod:`cloth_sim.contact.collision_tree`) at the start of the step and every
+  ``collision_interval``
   iterations, each vertex reaching ``τ/2`` plus its allowance of motion (:data:`ALLOWANCE`: a tenth
-  of ``τ`` and its motion to the step's initial guess). **Conservative bound** (the paper's): between two searches a vertex moves at
+  of ``τ`` and its motion to the step's initial guess). **Conservative bound** (the paper's):
+  between two searches a vertex moves at
   most ``γ = 0.45`` of the smallest distance the search found between its primitives (itself, its
   triangles, its edges) and any other, and at most its allowance; so two primitives that were
-  ``d`` apart stay ``(1 − 2γ)·d > 0`` apart, those not found stay beyond ``τ``, and no vertex passes
+  ``d`` apart stay ``(1 − 2γ)·d > 0`` apart, those not found stay beyond ``τ``, and no vertex
+  passes
   through the cloth or a collider (its allowance is also kept below the distance to the far side of
   the thinnest collider near it). Over a whole step the cloth never crosses itself.
 
@@ -47,7 +51,8 @@ and so does the strain limit where one is set.
 
 Counters (:attr:`Simulator.integrator_stats`): ``steps``, ``iterations``, ``last_iterations``,
 ``last_residual`` (the root mean square of the free vertices' Newton steps in the last iteration,
-m), ``detections`` (candidate searches), ``last_contacts`` (self-contact pairs and vertices touching
+m), ``detections`` (candidate searches), ``last_contacts`` (self-contact pairs and vertices
+touching
 a collider at the last search) and ``truncated`` (vertex updates the conservative bound shortened).
 """
 
@@ -59,13 +64,12 @@ import time
 import numba
 import numpy as np
 
-from .. import stability as stab  # noqa: F401 (the protocol's stability class comes from the base)
-from ..colliders import carried, sdf
-from ..forces import BUCKLE_TABLE, axial, incidence
-from ..model import LINEAR
-from ..self_collision import closest_on_segment_pair, closest_on_triangle
-from . import register
+from ..contact.colliders import carried, sdf
+from ..contact.geometry import closest_on_segment_pair, closest_on_triangle
+from ..kinds import LINEAR
+from ..physics.forces import BUCKLE_TABLE, axial, incidence
 from .base import Integrator, Stability
+from .registry import register
 
 #: the share of the nearest found distance a vertex may move between two candidate searches
 GAMMA = 0.45
@@ -101,7 +105,7 @@ def colour_greedy(ptr, nbr, free):
             if c >= 0:
                 if c >= taken.shape[0]:
                     grown = np.full(2 * c + 2, -1, np.int64)
-                    grown[:taken.shape[0]] = taken
+                    grown[: taken.shape[0]] = taken
                     taken = grown
                 taken[c] = i
         c = 0
@@ -112,7 +116,8 @@ def colour_greedy(ptr, nbr, free):
 
 
 def colour_groups(springs: np.ndarray, n: int, free: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(ptr, verts)``: colour ``c``'s vertices are ``verts[ptr[c]:ptr[c+1]]``, in increasing order;
+    """``(ptr, verts)``: colour ``c``'s vertices are ``verts[ptr[c]:ptr[c+1]]``, in increasing
+    order;
     no two vertices of a colour share a spring. Pinned vertices are in none."""
     a = np.concatenate([springs[:, 0], springs[:, 1]])
     b = np.concatenate([springs[:, 1], springs[:, 0]])
@@ -152,13 +157,17 @@ def _solve3(a, b, c, d, e, f, fx, fy, fz):
     c12 = b * c - a * e
     c22 = a * d - b * b
     inv = 1.0 / det
-    return ((c00 * fx + c01 * fy + c02 * fz) * inv, (c01 * fx + c11 * fy + c12 * fz) * inv,
-            (c02 * fx + c12 * fy + c22 * fz) * inv)
+    return (
+        (c00 * fx + c01 * fy + c02 * fz) * inv,
+        (c01 * fx + c11 * fy + c12 * fz) * inv,
+        (c02 * fx + c12 * fy + c22 * fz) * inv,
+    )
 
 
 @numba.njit(cache=True, inline="always")
-def _springs_at(i, x, xt, inc_ptr, nbr, rest, k, c, kind, tab, inv_h,
-                f0, f1, f2, h0, h1, h2, h3, h4, h5):
+def _springs_at(
+    i, x, xt, inc_ptr, nbr, rest, k, c, kind, tab, inv_h, f0, f1, f2, h0, h1, h2, h3, h4, h5
+):
     """Vertex ``i``'s springs: elastic, and damping along the spring; and whether one of them is a
     compressed Choi–Ko buckling pair (the step is then checked against the energy)."""
     rough = False
@@ -180,14 +189,19 @@ def _springs_at(i, x, xt, inc_ptr, nbr, rest, k, c, kind, tab, inv_h,
         else:
             _, de, d2e = axial(l, L, kk, kd, tab)
             if l < L:
-                rough = True  # a compressed Choi–Ko pair: its energy is not smooth at the rest length
+                rough = (
+                    True  # a compressed Choi–Ko pair: its energy is not smooth at the rest length
+                )
         # the force on i pulls it towards j by E'(l); the damping along the spring resists the
         # ends' relative motion over the step
         cs = c[q] * inv_h
         mag = de
         if cs > 0.0:
-            mag += cs * (((xj - xt[j, 0]) - mx) * ux + ((yj - xt[j, 1]) - my) * uy
-                         + ((zj - xt[j, 2]) - mz) * uz)
+            mag += cs * (
+                ((xj - xt[j, 0]) - mx) * ux
+                + ((yj - xt[j, 1]) - my) * uy
+                + ((zj - xt[j, 2]) - mz) * uz
+            )
         f0 += mag * ux
         f1 += mag * uy
         f2 += mag * uz
@@ -206,13 +220,16 @@ def _springs_at(i, x, xt, inc_ptr, nbr, rest, k, c, kind, tab, inv_h,
 
 
 @numba.njit(cache=True, inline="always")
-def _local_energy(i, px, py, pz, x, xt, y, m_h2, drag_h, inc_ptr, nbr, rest, k, c, kind, tab,
-                  inv_h):
+def _local_energy(
+    i, px, py, pz, x, xt, y, m_h2, drag_h, inc_ptr, nbr, rest, k, c, kind, tab, inv_h
+):
     """The part of the incremental potential that depends on vertex ``i`` placed at ``p``: its
     inertia and drag, its springs' energy and their damping potential (contacts left out)."""
     ax, ay, az = px - y[i, 0], py - y[i, 1], pz - y[i, 2]
     bx, by, bz = px - xt[i, 0], py - xt[i, 1], pz - xt[i, 2]
-    e = 0.5 * m_h2[i] * (ax * ax + ay * ay + az * az) + 0.5 * drag_h * (bx * bx + by * by + bz * bz)
+    e = 0.5 * m_h2[i] * (ax * ax + ay * ay + az * az) + 0.5 * drag_h * (
+        bx * bx + by * by + bz * bz
+    )
     for q in range(inc_ptr[i], inc_ptr[i + 1]):
         j = nbr[q]
         dx, dy, dz = x[j, 0] - px, x[j, 1] - py, x[j, 2] - pz
@@ -222,8 +239,11 @@ def _local_energy(i, px, py, pz, x, xt, y, m_h2, drag_h, inc_ptr, nbr, rest, k, 
         es, _, _ = axial(l, rest[q], k[q], kind[q], tab)
         e += es
         if c[q] > 0.0:
-            rel = ((x[j, 0] - xt[j, 0]) - bx) * dx + ((x[j, 1] - xt[j, 1]) - by) * dy \
+            rel = (
+                ((x[j, 0] - xt[j, 0]) - bx) * dx
+                + ((x[j, 1] - xt[j, 1]) - by) * dy
                 + ((x[j, 2] - xt[j, 2]) - bz) * dz
+            )
             rel /= l
             e += 0.5 * c[q] * inv_h * rel * rel
     return e
@@ -232,20 +252,60 @@ def _local_energy(i, px, py, pz, x, xt, y, m_h2, drag_h, inc_ptr, nbr, rest, k, 
 @numba.njit(cache=True, inline="always")
 def _press(mag, s, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5):
     """A contact's force ``mag·n`` and stiffness ``s·n nᵀ`` added to a vertex's."""
-    return (f0 + mag * nx, f1 + mag * ny, f2 + mag * nz, h0 + s * nx * nx, h1 + s * nx * ny,
-            h2 + s * nx * nz, h3 + s * ny * ny, h4 + s * ny * nz, h5 + s * nz * nz)
+    return (
+        f0 + mag * nx,
+        f1 + mag * ny,
+        f2 + mag * nz,
+        h0 + s * nx * nx,
+        h1 + s * nx * ny,
+        h2 + s * nx * nz,
+        h3 + s * ny * ny,
+        h4 + s * ny * nz,
+        h5 + s * nz * nz,
+    )
 
 
 @numba.njit(cache=True, inline="always")
 def _slide(sf, tx, ty, tz, s, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5):
     """Friction's force ``−sf·t`` and its stiffness ``s (I − n nᵀ)`` (the normal held) added."""
-    return (f0 - sf * tx, f1 - sf * ty, f2 - sf * tz, h0 + (s - s * nx * nx), h1 - s * nx * ny,
-            h2 - s * nx * nz, h3 + (s - s * ny * ny), h4 - s * ny * nz, h5 + (s - s * nz * nz))
+    return (
+        f0 - sf * tx,
+        f1 - sf * ty,
+        f2 - sf * tz,
+        h0 + (s - s * nx * nx),
+        h1 - s * nx * ny,
+        h2 - s * nx * nz,
+        h3 + (s - s * ny * ny),
+        h4 - s * ny * nz,
+        h5 + (s - s * nz * nz),
+    )
 
 
 @numba.njit(cache=True, inline="always")
-def _colliders_at(i, x, xt, ckind, cpos, crot, cpos0, crot0, cgeo, cmu, tau, kc, eps,
-                  f0, f1, f2, h0, h1, h2, h3, h4, h5):
+def _colliders_at(
+    i,
+    x,
+    xt,
+    ckind,
+    cpos,
+    crot,
+    cpos0,
+    crot0,
+    cgeo,
+    cmu,
+    tau,
+    kc,
+    eps,
+    f0,
+    f1,
+    f2,
+    h0,
+    h1,
+    h2,
+    h3,
+    h4,
+    h5,
+):
     """Vertex ``i``'s collider contacts: the penalty, and IPC's lagged friction on its motion over
     the step relative to the collider's point under it; and whether it touches one."""
     touched = False
@@ -256,8 +316,9 @@ def _colliders_at(i, x, xt, ckind, cpos, crot, cpos0, crot0, cgeo, cmu, tau, kc,
             continue
         touched = True
         lam = kc * p
-        f0, f1, f2, h0, h1, h2, h3, h4, h5 = _press(lam, kc, nx, ny, nz, f0, f1, f2, h0, h1, h2,
-                                                    h3, h4, h5)
+        f0, f1, f2, h0, h1, h2, h3, h4, h5 = _press(
+            lam, kc, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5
+        )
         mu = cmu[c]
         if mu <= 0.0:
             continue
@@ -269,8 +330,9 @@ def _colliders_at(i, x, xt, ckind, cpos, crot, cpos0, crot0, cgeo, cmu, tau, kc,
         tl = math.sqrt(tx * tx + ty * ty + tz * tz)
         g = 1.0 / tl if tl > eps else (2.0 - tl / eps) / eps
         s = mu * lam * g
-        f0, f1, f2, h0, h1, h2, h3, h4, h5 = _slide(s, tx, ty, tz, s, nx, ny, nz, f0, f1, f2, h0,
-                                                    h1, h2, h3, h4, h5)
+        f0, f1, f2, h0, h1, h2, h3, h4, h5 = _slide(
+            s, tx, ty, tz, s, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5
+        )
     return f0, f1, f2, h0, h1, h2, h3, h4, h5, touched
 
 
@@ -285,9 +347,34 @@ def _pick(x, xs, colour, i, p):
 
 
 @numba.njit(cache=True, inline="always")
-def _self_contacts_at(i, x, xs, xt, colour, rec_ptr, rec, pidx, pcoef, pnrm, tau, ks, mu, eps,
-                      rec_d, f0, f1, f2, h0, h1, h2, h3, h4, h5):
-    """Vertex ``i``'s self-contacts: ``½ k (τ − d)²`` on each pair's distance ``d`` along the normal
+def _self_contacts_at(
+    i,
+    x,
+    xs,
+    xt,
+    colour,
+    rec_ptr,
+    rec,
+    pidx,
+    pcoef,
+    pnrm,
+    tau,
+    ks,
+    mu,
+    eps,
+    rec_d,
+    f0,
+    f1,
+    f2,
+    h0,
+    h1,
+    h2,
+    h3,
+    h4,
+    h5,
+):
+    """Vertex ``i``'s self-contacts: ``½ k (τ − d)²`` on each pair's distance ``d`` along the
+    normal
     the search found, ``d = n·Σ_k w_k x_k`` over the pair's four vertices (:func:`contact_pairs`:
     the normal and the nearest points' weights held between two searches), for the pairs ``i`` is
     in (its records ``4·pair + slot``); and friction ``μ`` between the two sides as on a collider
@@ -315,8 +402,9 @@ def _self_contacts_at(i, x, xs, xt, colour, rec_ptr, rec, pidx, pcoef, pnrm, tau
             continue
         # ∂d/∂x_i = w n: the force pushes the pair apart along n
         lam = ks * (tau - d)
-        f0, f1, f2, h0, h1, h2, h3, h4, h5 = _press(lam * w, ks * w * w, nx, ny, nz, f0, f1, f2,
-                                                    h0, h1, h2, h3, h4, h5)
+        f0, f1, f2, h0, h1, h2, h3, h4, h5 = _press(
+            lam * w, ks * w * w, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5
+        )
         if mu <= 0.0:
             continue
         un = ux * nx + uy * ny + uz * nz
@@ -324,8 +412,9 @@ def _self_contacts_at(i, x, xs, xt, colour, rec_ptr, rec, pidx, pcoef, pnrm, tau
         tl = math.sqrt(tx * tx + ty * ty + tz * tz)
         g = 1.0 / tl if tl > eps else (2.0 - tl / eps) / eps
         sf = mu * lam * g
-        f0, f1, f2, h0, h1, h2, h3, h4, h5 = _slide(sf * w, tx, ty, tz, sf * w * w, nx, ny, nz, f0,
-                                                    f1, f2, h0, h1, h2, h3, h4, h5)
+        f0, f1, f2, h0, h1, h2, h3, h4, h5 = _slide(
+            sf * w, tx, ty, tz, sf * w * w, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5
+        )
     return f0, f1, f2, h0, h1, h2, h3, h4, h5
 
 
@@ -334,7 +423,8 @@ def contact_pairs(x, vt, ee, tris, edges, tri_edge, edge_owner, vertex_owner):
     """Every candidate pair as its four vertices, the weights of its nearest points and the unit
     normal between them at ``x``: a vertex–triangle pair ``(p; a, b, c)`` with weights
     ``(1, −w_a, −w_b, −w_c)``, an edge pair ``(a, b; c, d)`` with ``(1 − s, s, −(1 − t), −t)``, so
-    that ``n·Σ_k w_k x_k`` is their distance along ``n`` (where the two touch, the triangle's normal
+    that ``n·Σ_k w_k x_k`` is their distance along ``n`` (where the two touch, the triangle's
+    normal
     or the normal to both edges); and whether the pair carries the contact energy.
 
     Every pair bounds its vertices' motion (:func:`_truncate`); the energy is carried by each
@@ -354,14 +444,28 @@ def contact_pairs(x, vt, ee, tris, edges, tri_edge, edge_owner, vertex_owner):
         if q < nv:
             p, t = vt[q, 0], vt[q, 1]
             a, b, c = tris[t, 0], tris[t, 1], tris[t, 2]
-            wa, wb, wc = closest_on_triangle(x[p, 0], x[p, 1], x[p, 2], x[a, 0], x[a, 1], x[a, 2],
-                                             x[b, 0], x[b, 1], x[b, 2], x[c, 0], x[c, 1], x[c, 2])
+            wa, wb, wc = closest_on_triangle(
+                x[p, 0],
+                x[p, 1],
+                x[p, 2],
+                x[a, 0],
+                x[a, 1],
+                x[a, 2],
+                x[b, 0],
+                x[b, 1],
+                x[b, 2],
+                x[c, 0],
+                x[c, 1],
+                x[c, 2],
+            )
             if wa > 0.0 and wb > 0.0 and wc > 0.0:
                 energy[q] = True
             elif wa >= 1.0 or wb >= 1.0 or wc >= 1.0:  # nearest a corner: from its owner only
                 energy[q] = vertex_owner[a if wa >= 1.0 else (b if wb >= 1.0 else c)] == t
             else:  # nearest an edge: from its owner only
-                energy[q] = edge_owner[tri_edge[t, 0 if wc == 0.0 else (1 if wa == 0.0 else 2)]] == t
+                energy[q] = (
+                    edge_owner[tri_edge[t, 0 if wc == 0.0 else (1 if wa == 0.0 else 2)]] == t
+                )
             dx = x[p, 0] - (wa * x[a, 0] + wb * x[b, 0] + wc * x[c, 0])
             dy = x[p, 1] - (wa * x[a, 1] + wb * x[b, 1] + wc * x[c, 1])
             dz = x[p, 2] - (wa * x[a, 2] + wb * x[b, 2] + wc * x[c, 2])
@@ -373,8 +477,20 @@ def contact_pairs(x, vt, ee, tris, edges, tri_edge, edge_owner, vertex_owner):
             e = q - nv
             a, b = edges[ee[e, 0], 0], edges[ee[e, 0], 1]
             c, d_ = edges[ee[e, 1], 0], edges[ee[e, 1], 1]
-            sv, tv = closest_on_segment_pair(x[a, 0], x[a, 1], x[a, 2], x[b, 0], x[b, 1], x[b, 2],
-                                             x[c, 0], x[c, 1], x[c, 2], x[d_, 0], x[d_, 1], x[d_, 2])
+            sv, tv = closest_on_segment_pair(
+                x[a, 0],
+                x[a, 1],
+                x[a, 2],
+                x[b, 0],
+                x[b, 1],
+                x[b, 2],
+                x[c, 0],
+                x[c, 1],
+                x[c, 2],
+                x[d_, 0],
+                x[d_, 1],
+                x[d_, 2],
+            )
             energy[q] = 0.0 < sv < 1.0 and 0.0 < tv < 1.0
             dx = (x[a, 0] + sv * (x[b, 0] - x[a, 0])) - (x[c, 0] + tv * (x[d_, 0] - x[c, 0]))
             dy = (x[a, 1] + sv * (x[b, 1] - x[a, 1])) - (x[c, 1] + tv * (x[d_, 1] - x[c, 1]))
@@ -500,12 +616,39 @@ def _nearest(ptr, rec, dist):
 
 # ---------------------------------------------------------------------------- the iteration
 @numba.njit(cache=True, error_model="numpy")
-def _sweep(verts, lo, hi, x, xt, y, xs, m_h2, sp, inv_h, drag_h, co, tau, kc, eps, sc, ks, mu_self,
-           x_cd, allow, gamma, near, stepped, cut, touch):
+def _sweep(
+    verts,
+    lo,
+    hi,
+    x,
+    xt,
+    y,
+    xs,
+    m_h2,
+    sp,
+    inv_h,
+    drag_h,
+    co,
+    tau,
+    kc,
+    eps,
+    sc,
+    ks,
+    mu_self,
+    x_cd,
+    allow,
+    gamma,
+    near,
+    stepped,
+    cut,
+    touch,
+):
     """The Newton steps of vertices ``verts[lo:hi]`` in order, each on the incremental potential,
-    written to its row of ``x``, within its bounds (:func:`_truncate`). ``sp``: each vertex's springs (CSR:
+    written to its row of ``x``, within its bounds (:func:`_truncate`). ``sp``: each vertex's
+    springs (CSR:
     the other end, rest length, k, c, kind, in the vertex's order) and Choi–Ko's table; ``co``: the
-    colliders (:meth:`~cloth_sim.colliders.Contacts.packed`); ``sc``: the self-contact records, pairs
+    colliders (:meth:`~cloth_sim.contact.colliders.Contacts.packed`); ``sc``: the self-contact
+    records, pairs
     and topology. (The arrays are unpacked here, once a chunk: unpacked per vertex, or passed one
     by one to a function per vertex, their reference counting cost more than the vertex's work.)"""
     inc_ptr, nbr, rest, k, c, kind, tab, nonsmooth = sp
@@ -518,38 +661,153 @@ def _sweep(verts, lo, hi, x, xt, y, xs, m_h2, sp, inv_h, drag_h, co, tau, kc, ep
         f1 = -m_h2[i] * (x[i, 1] - y[i, 1]) - drag_h * (x[i, 1] - xt[i, 1])
         f2 = -m_h2[i] * (x[i, 2] - y[i, 2]) - drag_h * (x[i, 2] - xt[i, 2])
         h0, h1, h2, h3, h4, h5 = m, 0.0, 0.0, m, 0.0, m
-        f0, f1, f2, h0, h1, h2, h3, h4, h5, rough = _springs_at(i, x, xt, inc_ptr, nbr, rest, k, c,
-                                                                kind, tab, inv_h, f0, f1, f2, h0, h1,
-                                                                h2, h3, h4, h5)
+        f0, f1, f2, h0, h1, h2, h3, h4, h5, rough = _springs_at(
+            i,
+            x,
+            xt,
+            inc_ptr,
+            nbr,
+            rest,
+            k,
+            c,
+            kind,
+            tab,
+            inv_h,
+            f0,
+            f1,
+            f2,
+            h0,
+            h1,
+            h2,
+            h3,
+            h4,
+            h5,
+        )
         touch[i] = 0
         if ckind.shape[0] and near[i]:
-            f0, f1, f2, h0, h1, h2, h3, h4, h5, touched = _colliders_at(i, x, xt, ckind, cpos, crot, cpos0,
-                                                               crot0, cgeo, cmu, tau, kc, eps, f0, f1,
-                                                               f2, h0, h1, h2, h3, h4, h5)
+            f0, f1, f2, h0, h1, h2, h3, h4, h5, touched = _colliders_at(
+                i,
+                x,
+                xt,
+                ckind,
+                cpos,
+                crot,
+                cpos0,
+                crot0,
+                cgeo,
+                cmu,
+                tau,
+                kc,
+                eps,
+                f0,
+                f1,
+                f2,
+                h0,
+                h1,
+                h2,
+                h3,
+                h4,
+                h5,
+            )
             if touched:
                 touch[i] = 1
         if rec_ptr[i + 1] > rec_ptr[i]:
             touch[i] = 1
             f0, f1, f2, h0, h1, h2, h3, h4, h5 = _self_contacts_at(
-                i, x, xs, xt, colour, rec_ptr, rec, pidx, pcoef, pnrm, tau, ks, mu_self, eps, rec_d,
-                f0, f1, f2, h0, h1, h2, h3, h4, h5)
+                i,
+                x,
+                xs,
+                xt,
+                colour,
+                rec_ptr,
+                rec,
+                pidx,
+                pcoef,
+                pnrm,
+                tau,
+                ks,
+                mu_self,
+                eps,
+                rec_d,
+                f0,
+                f1,
+                f2,
+                h0,
+                h1,
+                h2,
+                h3,
+                h4,
+                h5,
+            )
         sx, sy, sz = _solve3(h0, h1, h2, h3, h4, h5, f0, f1, f2)
         if touch[i] or near[i]:
             # a contact not yet pressed is not in the Hessian: a step past its onset would land
             # deep inside (the next iteration pushing back out: the iterations cycled); the step
             # stops at its onset, where the next iteration sees it
-            sx, sy, sz = _onset(i, sx, sy, sz, x, rec_ptr, rec, rec_d, pcoef, pnrm, tau,
-                                ckind if near[i] else ckind[:0], cpos, crot, cgeo)
+            sx, sy, sz = _onset(
+                i,
+                sx,
+                sy,
+                sz,
+                x,
+                rec_ptr,
+                rec,
+                rec_d,
+                pcoef,
+                pnrm,
+                tau,
+                ckind if near[i] else ckind[:0],
+                cpos,
+                crot,
+                cgeo,
+            )
         if rough or nonsmooth:
             # Choi–Ko's energies are not smooth at the rest length (a buckling pair's force jumps
             # at the onset, a tension-only pair's stiffness vanishes): Newton's step may overshoot.
             # Backtrack (halving, at most 8 times) until the vertex's energy does not rise, so each
             # vertex step, and so each iteration, descends
-            e0 = _local_energy(i, x[i, 0], x[i, 1], x[i, 2], x, xt, y, m_h2, drag_h, inc_ptr, nbr,
-                               rest, k, c, kind, tab, inv_h)
+            e0 = _local_energy(
+                i,
+                x[i, 0],
+                x[i, 1],
+                x[i, 2],
+                x,
+                xt,
+                y,
+                m_h2,
+                drag_h,
+                inc_ptr,
+                nbr,
+                rest,
+                k,
+                c,
+                kind,
+                tab,
+                inv_h,
+            )
             tries = 0
-            while _local_energy(i, x[i, 0] + sx, x[i, 1] + sy, x[i, 2] + sz, x, xt, y, m_h2, drag_h,
-                                inc_ptr, nbr, rest, k, c, kind, tab, inv_h) > e0:
+            while (
+                _local_energy(
+                    i,
+                    x[i, 0] + sx,
+                    x[i, 1] + sy,
+                    x[i, 2] + sz,
+                    x,
+                    xt,
+                    y,
+                    m_h2,
+                    drag_h,
+                    inc_ptr,
+                    nbr,
+                    rest,
+                    k,
+                    c,
+                    kind,
+                    tab,
+                    inv_h,
+                )
+                > e0
+            ):
                 tries += 1
                 if tries > 8:
                     sx = sy = sz = 0.0
@@ -557,8 +815,9 @@ def _sweep(verts, lo, hi, x, xt, y, xs, m_h2, sp, inv_h, drag_h, co, tau, kc, ep
                 sx, sy, sz = 0.5 * sx, 0.5 * sy, 0.5 * sz
         nx, ny, nz = x[i, 0] + sx, x[i, 1] + sy, x[i, 2] + sz
         stepped[i] = sx * sx + sy * sy + sz * sz
-        nx, ny, nz, was_cut = _truncate(i, nx, ny, nz, x_cd, allow, gptr, grec, pidx, pcoef, pnrm,
-                                        pdist, dmin, gamma)
+        nx, ny, nz, was_cut = _truncate(
+            i, nx, ny, nz, x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, gamma
+        )
         if was_cut:
             cut[i] = 1
         x[i, 0] = nx
@@ -566,15 +825,37 @@ def _sweep(verts, lo, hi, x, xt, y, xs, m_h2, sp, inv_h, drag_h, co, tau, kc, ep
         x[i, 2] = nz
 
 
-
-
 #: chunks a colour is cut into for the cores (a fixed number: the result does not depend on it)
 CHUNKS = 16
 
 
 @numba.njit(cache=True, parallel=True)
-def _iterate_parallel(verts, cptr, x, xt, y, xs, m_h2, sp, inv_h, drag_h, co, tau, kc, eps, sc, ks,
-                      mu_self, x_cd, allow, gamma, near, stepped, cut, touch):
+def _iterate_parallel(
+    verts,
+    cptr,
+    x,
+    xt,
+    y,
+    xs,
+    m_h2,
+    sp,
+    inv_h,
+    drag_h,
+    co,
+    tau,
+    kc,
+    eps,
+    sc,
+    ks,
+    mu_self,
+    x_cd,
+    allow,
+    gamma,
+    near,
+    stepped,
+    cut,
+    touch,
+):
     """One iteration: the colours in order, each colour's vertices at once, in chunks (each vertex
     writes only its own row; a colour reads other colours' rows and, for contacts, ``xs``)."""
     for col in range(cptr.shape[0] - 1):
@@ -582,8 +863,33 @@ def _iterate_parallel(verts, cptr, x, xt, y, xs, m_h2, sp, inv_h, drag_h, co, ta
         size = (hi - lo + CHUNKS - 1) // CHUNKS
         for b in numba.prange(CHUNKS):
             a = lo + b * size
-            _sweep(verts, a, min(a + size, hi), x, xt, y, xs, m_h2, sp, inv_h, drag_h, co, tau, kc,
-                   eps, sc, ks, mu_self, x_cd, allow, gamma, near, stepped, cut, touch)
+            _sweep(
+                verts,
+                a,
+                min(a + size, hi),
+                x,
+                xt,
+                y,
+                xs,
+                m_h2,
+                sp,
+                inv_h,
+                drag_h,
+                co,
+                tau,
+                kc,
+                eps,
+                sc,
+                ks,
+                mu_self,
+                x_cd,
+                allow,
+                gamma,
+                near,
+                stepped,
+                cut,
+                touch,
+            )
 
 
 def _iterate_serial(verts, cptr, *args):
@@ -603,8 +909,9 @@ def _chebyshev(x, x_prev2, omega, free, x_cd, allow, gamma, sc, cut, touch):
         px = omega * (x[i, 0] - x_prev2[i, 0]) + x_prev2[i, 0]
         py = omega * (x[i, 1] - x_prev2[i, 1]) + x_prev2[i, 1]
         pz = omega * (x[i, 2] - x_prev2[i, 2]) + x_prev2[i, 2]
-        px, py, pz, was_cut = _truncate(i, px, py, pz, x_cd, allow, gptr, grec, pidx, pcoef, pnrm,
-                                        pdist, dmin, gamma)
+        px, py, pz, was_cut = _truncate(
+            i, px, py, pz, x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, gamma
+        )
         x[i, 0], x[i, 1], x[i, 2] = px, py, pz
         if was_cut:
             cut[i] = 1
@@ -640,7 +947,8 @@ class VBD(Integrator):
     after 10 iterations; docs/BENCHMARKS.md); ``contact_stiffness`` (N/m, default 1e4);
     ``collision_interval`` (default 5): iterations between candidate searches when the cloth
     self-collides and a vertex met its bound; ``self_friction`` (default 0.5): Coulomb's μ between
-    the cloth's own layers; ``time_budget`` (s, default None): when set, iterate until that much wall time
+    the cloth's own layers; ``time_budget`` (s, default None): when set, iterate until that much
+    wall time
     has passed (at least one iteration, at most ``iterations``) — a node that must keep its tick,
     whose results then depend on the machine.
 
@@ -655,8 +963,15 @@ class VBD(Integrator):
     #: backward Euler's step conserves it; the iterations do to their residual (as the CG solve of
     #: implicit_euler does to its tolerance): 2.5e-13 of the momentum after 0.5 s at 200 iterations
     conserves_momentum = True
-    counter_names = ("steps", "iterations", "last_iterations", "last_residual", "detections",
-                     "last_contacts", "truncated")
+    counter_names = (
+        "steps",
+        "iterations",
+        "last_iterations",
+        "last_residual",
+        "detections",
+        "last_contacts",
+        "truncated",
+    )
     #: the post-step stages resolved inside the iterations. Self-contact, and with it every
     #: self-collision pass, is; the colliders' contacts are in the iterations too, and their stage
     #: still runs after the step, as an exact finish: a penalty leaves the cloth a little inside
@@ -665,24 +980,39 @@ class VBD(Integrator):
     #: distance and static friction to rounding (a few microseconds a step)
     handles = frozenset({"self_collision"})
 
-    def __init__(self, model, iterations: int = 10, rho: float = 0.8, contact_stiffness: float = 1e4,
-                 collision_interval: int = 5, time_budget: float | None = None,
-                 self_friction: float = 0.5):
+    def __init__(
+        self,
+        model,
+        iterations: int = 10,
+        rho: float = 0.8,
+        contact_stiffness: float = 1e4,
+        collision_interval: int = 5,
+        time_budget: float | None = None,
+        self_friction: float = 0.5,
+    ):
         super().__init__(model)
-        for name, value, hi in (("iterations", iterations, 10_000),
-                                ("collision_interval", collision_interval, 10_000)):
+        for name, value, hi in (
+            ("iterations", iterations, 10_000),
+            ("collision_interval", collision_interval, 10_000),
+        ):
             if isinstance(value, bool) or int(value) != value or not 1 <= value <= hi:
                 raise ValueError(f"{name} must be an integer in [1, {hi}], got {value!r}")
         if not (isinstance(rho, (int, float)) and 0.0 <= rho < 1.0):
             raise ValueError(f"rho must be a number in [0, 1), got {rho!r}")
         if not (isinstance(contact_stiffness, (int, float)) and 0 < contact_stiffness < math.inf):
-            raise ValueError(f"contact_stiffness must be a positive number (N/m), got {contact_stiffness!r}")
-        if time_budget is not None and not (isinstance(time_budget, (int, float))
-                                            and 0 < time_budget < math.inf):
-            raise ValueError(f"time_budget must be None or a positive number of seconds, "
-                             f"got {time_budget!r}")
+            raise ValueError(
+                f"contact_stiffness must be a positive number (N/m), got {contact_stiffness!r}"
+            )
+        if time_budget is not None and not (
+            isinstance(time_budget, (int, float)) and 0 < time_budget < math.inf
+        ):
+            raise ValueError(
+                f"time_budget must be None or a positive number of seconds, got {time_budget!r}"
+            )
         if not (isinstance(self_friction, (int, float)) and 0.0 <= self_friction < math.inf):
-            raise ValueError(f"self_friction must be a number >= 0 (Coulomb's μ), got {self_friction!r}")
+            raise ValueError(
+                f"self_friction must be a number >= 0 (Coulomb's μ), got {self_friction!r}"
+            )
         self.self_friction = float(self_friction)
         self.iterations = int(iterations)
         self.rho = float(rho)
@@ -707,13 +1037,28 @@ class VBD(Integrator):
         self._cut_last = False
         tris = np.ascontiguousarray(model.triangles, dtype=np.int64).reshape(-1, 3)
         self._tris = tris
-        self._no_rec = (np.zeros(n + 1, np.int64), np.zeros(0, np.int64),
-                        np.zeros(n + 1, np.int64), np.zeros(0, np.int64), np.zeros((0, 4), np.int64),
-                        np.zeros((0, 4)), np.zeros((0, 3)), np.zeros(0), np.full(n, np.inf),
-                        np.zeros(0))
+        self._no_rec = (
+            np.zeros(n + 1, np.int64),
+            np.zeros(0, np.int64),
+            np.zeros(n + 1, np.int64),
+            np.zeros(0, np.int64),
+            np.zeros((0, 4), np.int64),
+            np.zeros((0, 4)),
+            np.zeros((0, 3)),
+            np.zeros(0),
+            np.full(n, np.inf),
+            np.zeros(0),
+        )
         self._rec = self._no_rec
-        self._no_colliders = (np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3)),
-                              np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros((0, 4)), np.zeros(0))
+        self._no_colliders = (
+            np.zeros(0, np.int64),
+            np.zeros((0, 3)),
+            np.zeros((0, 3, 3)),
+            np.zeros((0, 3)),
+            np.zeros((0, 3, 3)),
+            np.zeros((0, 4)),
+            np.zeros(0),
+        )
 
     # ------------------------------------------------------------------ protocol
     def attach(self, contacts, self_collision) -> None:
@@ -737,10 +1082,16 @@ class VBD(Integrator):
             # a model with Choi–Ko pairs checks every vertex step against the energy (the line
             # search in _sweep): one compressed pair makes its neighbours' steps overshoot too
             nonsmooth = bool(np.any(forces.kind != LINEAR))
-            self._springs = (ptr, np.ascontiguousarray(nbr, dtype=np.int64),
-                             *(np.ascontiguousarray(a[inc]) for a in (forces.rest, forces.k, forces.c,
-                                                                      forces.kind)), BUCKLE_TABLE,
-                             nonsmooth)
+            self._springs = (
+                ptr,
+                np.ascontiguousarray(nbr, dtype=np.int64),
+                *(
+                    np.ascontiguousarray(a[inc])
+                    for a in (forces.rest, forces.k, forces.c, forces.kind)
+                ),
+                BUCKLE_TABLE,
+                nonsmooth,
+            )
             if self._colours_of is None or not np.array_equal(self._colours_of, springs):
                 self._colours = colour_groups(springs, n, self.free)
                 self._colours_of = springs
@@ -761,7 +1112,6 @@ class VBD(Integrator):
         model = self.model
         sp, (cptr, verts) = self._layout(forces)
         free = self.free
-        n = len(x)
         h = dt
         xt = self._buffer("_xt", x)
         np.copyto(xt, x)
@@ -803,8 +1153,18 @@ class VBD(Integrator):
             if not self._detection_holds(x, colliders, tau, self_contact):
                 self._detect(xt, x, colliders, tau, self_contact, x_cd)
             # the initial guess within the bounds
-            _chebyshev(x, x_cd, 1.0, free, x_cd, allow, GAMMA, (*self._rec, self._colour),
-                       self._cut, self._no_touch)
+            _chebyshev(
+                x,
+                x_cd,
+                1.0,
+                free,
+                x_cd,
+                allow,
+                GAMMA,
+                (*self._rec, self._colour),
+                self._cut,
+                self._no_touch,
+            )
         else:
             allow[:] = np.inf
             self._rec = self._no_rec
@@ -829,12 +1189,36 @@ class VBD(Integrator):
                 cut[:] = 0
             sc_arrays = (*self._rec, self._colour)
             np.copyto(xs, x)
-            run(verts, cptr, x, xt, y, xs, m_h2, sp, 1.0 / h, drag_h, colliders, tau, kc, eps,
-                sc_arrays, ks, self.self_friction, x_cd, allow, GAMMA, self._near, stepped, cut,
-                touch)
+            run(
+                verts,
+                cptr,
+                x,
+                xt,
+                y,
+                xs,
+                m_h2,
+                sp,
+                1.0 / h,
+                drag_h,
+                colliders,
+                tau,
+                kc,
+                eps,
+                sc_arrays,
+                ks,
+                self.self_friction,
+                x_cd,
+                allow,
+                GAMMA,
+                self._near,
+                stepped,
+                cut,
+                touch,
+            )
             done += 1
-            last = it == self.iterations - 1 or (budget_end is not None
-                                                 and time.perf_counter() >= budget_end)
+            last = it == self.iterations - 1 or (
+                budget_end is not None and time.perf_counter() >= budget_end
+            )
             if last:
                 # the step ends on a sweep, never on an extrapolation: an over-relaxed iterate is
                 # no descent from the last one (at 2 iterations, ω = 1.47 on hang16 at 1/60 s
@@ -842,8 +1226,13 @@ class VBD(Integrator):
                 break
             if self.rho > 0.0:
                 # Chebyshev: ω₁ = 1, ω₂ = 2/(2 − ρ²), ω_k = 4/(4 − ρ² ω_{k−1})
-                omega = 1.0 if it == 0 else (2.0 / (2.0 - self.rho ** 2) if it == 1
-                                             else 4.0 / (4.0 - self.rho ** 2 * omega))
+                omega = (
+                    1.0
+                    if it == 0
+                    else (
+                        2.0 / (2.0 - self.rho**2) if it == 1 else 4.0 / (4.0 - self.rho**2 * omega)
+                    )
+                )
                 if it > 0:
                     _chebyshev(x, prev2, omega, free, x_cd, allow, GAMMA, sc_arrays, cut, touch)
                 np.copyto(prev2, xs)
@@ -884,8 +1273,18 @@ class VBD(Integrator):
             self._rec = self._records(n, x, vt, vt_d, ee, ee_d, sc)
         else:
             allowance[:] = np.inf
-        _allowances(x, allowance, colliders[0], colliders[1], colliders[2], colliders[5],
-                    self._depths(colliders), tau, self._allow, self._near)
+        _allowances(
+            x,
+            allowance,
+            colliders[0],
+            colliders[1],
+            colliders[2],
+            colliders[5],
+            self._depths(colliders),
+            tau,
+            self._allow,
+            self._near,
+        )
         self._allow[~self.free] = np.inf
         c["last_contacts"] = self._energy_pairs
         self._candidates = self_contact
@@ -901,8 +1300,11 @@ class VBD(Integrator):
         if not self_contact or not self._candidates:
             return False
         pos, rot, tau0 = self._cd_colliders
-        if tau0 != tau or pos.shape != colliders[1].shape or not (
-                np.array_equal(pos, colliders[1]) and np.array_equal(rot, colliders[2])):
+        if (
+            tau0 != tau
+            or pos.shape != colliders[1].shape
+            or not (np.array_equal(pos, colliders[1]) and np.array_equal(rot, colliders[2]))
+        ):
             return False
         free = self.free
         moved = np.linalg.norm(y[free] - self._x_cd[free], axis=1)
@@ -914,21 +1316,38 @@ class VBD(Integrator):
         distances, each vertex's nearest distance, each energy record's distance in the current
         iteration)``."""
         _, tri_edge, edge_owner, _, vertex_owner = sc.features[:5]
-        idx, coef, nrm, energy = contact_pairs(x, np.ascontiguousarray(vt, dtype=np.int64),
-                                               np.ascontiguousarray(ee, dtype=np.int64), self._tris,
-                                               sc.edges, tri_edge, edge_owner, vertex_owner)
+        idx, coef, nrm, energy = contact_pairs(
+            x,
+            np.ascontiguousarray(vt, dtype=np.int64),
+            np.ascontiguousarray(ee, dtype=np.int64),
+            self._tris,
+            sc.edges,
+            tri_edge,
+            edge_owner,
+            vertex_owner,
+        )
         dist = np.concatenate([vt_d, ee_d]).astype(np.float64)
         self._energy_pairs = int(energy.sum())
         ptr, rec = contact_records(n, idx, coef, energy)
         gptr, grec = contact_records(n, idx, coef, np.ones(len(idx), np.bool_))
-        return (ptr, rec, gptr, grec, idx, coef, nrm, dist, _nearest(gptr, grec, dist),
-                np.zeros(len(rec)))
+        return (
+            ptr,
+            rec,
+            gptr,
+            grec,
+            idx,
+            coef,
+            nrm,
+            dist,
+            _nearest(gptr, grec, dist),
+            np.zeros(len(rec)),
+        )
 
     @staticmethod
     def _depths(colliders):
         """Per collider, how far in its far side is (half its thinnest dimension; ``inf`` for a
         plane, a half-space)."""
-        from ..colliders import BOX, CAPSULE, SPHERE
+        from ..contact.colliders import BOX, CAPSULE, SPHERE
 
         kinds, geo = colliders[0], colliders[5]
         depth = np.full(len(kinds), np.inf)

@@ -4,7 +4,8 @@ simulation".
 
 Each spring is a distance constraint ``C = |x_j − x_i| − L`` with compliance ``α = 1/k``. A step of
 ``dt`` is ``substeps`` substeps of ``h = dt/substeps``; in each, the velocities take the external
-forces (gravity, wind; drag implicitly, with them held), the positions are predicted, ``p = x + h·v``, and
+forces (gravity, wind; drag implicitly, with them held), the positions are predicted, ``p = x +
+h·v``, and
 ``iterations`` Gauss–Seidel sweeps over the springs, in a fixed order, project
 
     Δλ = (−C − α̃·λ − γ·∇C·(p − x)) / ((1 + γ)·(w_i + w_j) + α̃),      α̃ = α/h²,  γ = α·β/h,
@@ -12,7 +13,8 @@ forces (gravity, wind; drag implicitly, with them held), the positions are predi
 with ``w`` the inverse masses (0 on pins), ``λ`` the constraint's multiplier accumulated over the
 substep's sweeps, and ``β`` the spring's damping coefficient: the papers' constraint damping, which
 resists the relative velocity of the ends along the spring like ``−c·(u·v_ij)·u``. The new velocity
-is ``(p − x)/h``. The update is evaluated multiplied through by ``k·h²``, so ``k = 0`` (a damping-only
+is ``(p − x)/h``. The update is evaluated multiplied through by ``k·h²``, so ``k = 0`` (a
+damping-only
 spring) and ``c = 0`` need no special case.
 
 Spring laws other than Hooke. A spring with energy ``E(l)`` projects with its force in place of
@@ -32,15 +34,16 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from .. import stability as stab
-from ..forces import BUCKLE_TABLE, GravityTerm, WindTerm, axial, spring_vector
-from . import register
+from ..physics import stability as stab
+from ..physics.forces import BUCKLE_TABLE, GravityTerm, WindTerm, axial, spring_vector
 from .base import Integrator, Stability
+from .registry import register
 
 
 @numba.njit(cache=True)
 def _project(p, x, springs, rest, k, w, c, kind, tab, inv_mass, h, lam):
-    """One Gauss–Seidel sweep over the springs in their order, in place on ``p``; ``lam`` holds each
+    """One Gauss–Seidel sweep over the springs in their order, in place on ``p``; ``lam`` holds
+    each
     spring's multiplier accumulated over the substep's sweeps (an impulse times ``h``: the force is
     ``lam/h²``)."""
     h2 = h * h
@@ -58,9 +61,11 @@ def _project(p, x, springs, rest, k, w, c, kind, tab, inv_mass, h, lam):
         ux, uy, uz = dx / l, dy / l, dz / l
         _, de, _ = axial(l, rest[s], k[s], kind[s], tab)
         # the relative displacement over the substep along the spring: ∇C·(p − x)
-        rel = ((p[j, 0] - x[j, 0]) - (p[i, 0] - x[i, 0])) * ux \
-            + ((p[j, 1] - x[j, 1]) - (p[i, 1] - x[i, 1])) * uy \
+        rel = (
+            ((p[j, 0] - x[j, 0]) - (p[i, 0] - x[i, 0])) * ux
+            + ((p[j, 1] - x[j, 1]) - (p[i, 1] - x[i, 1])) * uy
             + ((p[j, 2] - x[j, 2]) - (p[i, 2] - x[i, 2])) * uz
+        )
         hc = h * c[s]
         den = (h2 * w[s] + hc) * wsum + 1.0
         if den == 1.0:  # neither stiffness nor damping
@@ -78,14 +83,16 @@ def _project(p, x, springs, rest, k, w, c, kind, tab, inv_mass, h, lam):
 @register
 class XPBD(Integrator):
     """XPBD (Macklin, Müller & Chentanez 2016) with substeps (Macklin et al. 2019): compliant
-    distance constraints (compliance ``1/k``) projected by Gauss–Seidel, constraint damping from the
+    distance constraints (compliance ``1/k``) projected by Gauss–Seidel, constraint damping from
+    the
     spring damping coefficients.
 
     Options: ``substeps`` (default 10) per step and ``iterations`` (default 1, as "Small steps"
     recommends: substeps buy more accuracy than iterations) per substep.
 
     First order; linear momentum conserved (each projection moves the two ends by opposite
-    impulses); no step limit (see the module docstring). External forces are applied at the start of
+    impulses); no step limit (see the module docstring). External forces are applied at the start
+    of
     each substep (symplectic Euler in the substep), drag implicitly per particle.
     """
 
@@ -128,10 +135,13 @@ class XPBD(Integrator):
             lam = self._lam = np.empty(len(forces.springs))
         external = [t for t in forces.terms if isinstance(t, (GravityTerm, WindTerm))]
         # Drag is backward Euler within the substep, coupled with the constraints: from
-        # (m + h·d)·v' = m·(v + h·a) + h·f_constraints, the prediction is v' = (v + h·a)/(1 + h·d/m)
-        # and the projections move the particles with inverse masses 1/(m + h·d). A free particle then
+        # (m + h·d)·v' = m·(v + h·a) + h·f_constraints, the prediction is v' = (v + h·a)/(1 +
+        # h·d/m)
+        # and the projections move the particles with inverse masses 1/(m + h·d). A free particle
+        # then
         # falls at exactly the terminal velocity m·a/d at any h (damping the substep's starting
-        # velocity and then kicking it by h·a left a full kick on top: 19 mg particles in a 24 N wind
+        # velocity and then kicking it by h·a left a full kick on top: 19 mg particles in a 24 N
+        # wind
         # with drag 60 ended a 1 ms step above 1000 m/s, against a terminal velocity of a few m/s),
         # and a cloth at rest hangs at the springs' static extension under its full weight.
         damp, inv_solve = None, inv_mass
@@ -150,8 +160,20 @@ class XPBD(Integrator):
             p += x
             lam[:] = 0.0
             for _ in range(self.iterations):
-                _project(p, x, forces.springs, forces.rest, forces.k, w, forces.c, forces.kind,
-                         BUCKLE_TABLE, inv_solve, h, lam)
+                _project(
+                    p,
+                    x,
+                    forces.springs,
+                    forces.rest,
+                    forces.k,
+                    w,
+                    forces.c,
+                    forces.kind,
+                    BUCKLE_TABLE,
+                    inv_solve,
+                    h,
+                    lam,
+                )
             # v = (p − x)/h on the free particles; pins keep their velocity and land at x + h·v
             v[free] = (p[free] - x[free]) / h
             np.copyto(x, p)

@@ -26,30 +26,37 @@ import re
 import numpy as np
 from simulation_interfaces.msg import Bounds, EntityCategory, Result, TagsFilter
 
-from ..colliders import Box, Capsule, Plane, Sphere
+from ..contact.colliders import Box, Capsule, Plane, Sphere
 
 CLOTH = "cloth"
 #: the categories each kind of entity reports unless set otherwise
-DEFAULT_CATEGORY = {"cloth": EntityCategory.CATEGORY_OBJECT,
-                    "collider": EntityCategory.CATEGORY_STATIC_OBJECT,
-                    "gripper": EntityCategory.CATEGORY_ROBOT}
-CATEGORY_NAMES = {getattr(EntityCategory, n): n for n in dir(EntityCategory) if n.startswith("CATEGORY_")}
+DEFAULT_CATEGORY = {
+    "cloth": EntityCategory.CATEGORY_OBJECT,
+    "collider": EntityCategory.CATEGORY_STATIC_OBJECT,
+    "gripper": EntityCategory.CATEGORY_ROBOT,
+}
+CATEGORY_NAMES = {
+    getattr(EntityCategory, n): n for n in dir(EntityCategory) if n.startswith("CATEGORY_")
+}
 
 
 class Entities:
-    """The entity table over a node's simulator (``node.sim``, read at each call)."""
+    """The entity table over the session's simulator (``session.sim``, read at each call)."""
 
-    def __init__(self, node):
-        self.node = node
+    def __init__(self, session, manipulation):
+        self.session, self.manipulation = session, manipulation
         #: full name -> (category, description or None, tags) set by set_entity_info
         self._set: dict[str, tuple[int, str | None, tuple[str, ...]]] = {}
 
     # ------------------------------------------------------------------ names
     def names(self) -> list[str]:
         """Every entity's full name: the cloth, the colliders in order, the grippers."""
-        sim = self.node.sim
-        names = [CLOTH, *(f"collider/{c.name}" for c in sim.colliders),
-                 *(f"gripper/{g}" for g in sim.grippers)]
+        sim = self.session.sim
+        names = [
+            CLOTH,
+            *(f"collider/{c.name}" for c in sim.colliders),
+            *(f"gripper/{g}" for g in sim.grippers),
+        ]
         for gone in set(self._set) - set(names):  # what set_entity_info set goes with its entity
             del self._set[gone]
         return names
@@ -67,11 +74,20 @@ class Entities:
         names = self.names()
         same = [n for n in names if n.partition("/")[2] == name]
         if len(same) > 1:
-            return Result(result=Result.RESULT_NOT_FOUND, error_message=(
-                f"entity {name!r} is ambiguous: it names {', '.join(same)}; give the full name"))
-        return Result(result=Result.RESULT_NOT_FOUND, error_message=(
-            f"no entity {name!r}; entities: {', '.join(names)} (a collider or gripper also by its "
-            f"own name)"))
+            return Result(
+                result=Result.RESULT_NOT_FOUND,
+                error_message=(
+                    f"entity {name!r} is ambiguous: it names {', '.join(same)}; give the full name"
+                ),
+            )
+        return Result(
+            result=Result.RESULT_NOT_FOUND,
+            error_message=(
+                f"no entity {name!r}; entities: {', '.join(names)} (a collider or gripper also by "
+                "its "
+                f"own name)"
+            ),
+        )
 
     # ------------------------------------------------------------------ information
     def info(self, name: str) -> tuple[int, str, tuple[str, ...]]:
@@ -81,11 +97,13 @@ class Entities:
         return category, description if description is not None else self._describe(name), tags
 
     def _describe(self, name: str) -> str:
-        sim = self.node.sim
+        sim = self.session.sim
         kind, _, key = name.partition("/")
         if kind == "cloth":
-            return (f"the cloth: {sim.model.n_particles} particles, {len(sim.model.triangles)} "
-                    f"triangles")
+            return (
+                f"the cloth: {sim.model.n_particles} particles, {len(sim.model.triangles)} "
+                f"triangles"
+            )
         if kind == "gripper":
             return f"a gripper holding {len(sim.grippers[key])} particles"
         c = self.collider(key)
@@ -99,15 +117,25 @@ class Entities:
         cloth and a gripper keep theirs. An empty description keeps the generated one."""
         kind = name.partition("/")[0]
         if category not in CATEGORY_NAMES:
-            return Result(result=Result.RESULT_OPERATION_FAILED, error_message=(
-                f"info.category.category = {category}: expected one of "
-                f"{', '.join(f'{v} ({n})' for v, n in sorted(CATEGORY_NAMES.items()))}"))
+            return Result(
+                result=Result.RESULT_OPERATION_FAILED,
+                error_message=(
+                    f"info.category.category = {category}: expected one of "
+                    f"{', '.join(f'{v} ({n})' for v, n in sorted(CATEGORY_NAMES.items()))}"
+                ),
+            )
         if kind != "collider" and category != DEFAULT_CATEGORY[kind]:
-            return Result(result=Result.RESULT_OPERATION_FAILED, error_message=(
-                f"info.category.category = {category}: {name} is always "
-                f"{CATEGORY_NAMES[DEFAULT_CATEGORY[kind]]} (a collider's category can be set)"))
+            return Result(
+                result=Result.RESULT_OPERATION_FAILED,
+                error_message=(
+                    f"info.category.category = {category}: {name} is always "
+                    f"{CATEGORY_NAMES[DEFAULT_CATEGORY[kind]]} (a collider's category can be set)"
+                ),
+            )
         if kind == "collider" and category == EntityCategory.CATEGORY_STATIC_OBJECT:
-            self.node.set_twist("collider", name.partition("/")[2], 0, 0)  # static: it stops
+            self.manipulation.set_twist(
+                "collider", name.partition("/")[2], 0, 0
+            )  # static: it stops
         self._set[name] = (category, description or None, tuple(tags))
         return Result(result=Result.RESULT_OK)
 
@@ -122,22 +150,40 @@ class Entities:
         try:
             pattern = re.compile(filters.filter)
         except re.error as e:
-            return None, Result(result=Result.RESULT_OPERATION_FAILED, error_message=(
-                f"filters.filter = {filters.filter!r} is not a regular expression ({e})"))
+            return None, Result(
+                result=Result.RESULT_OPERATION_FAILED,
+                error_message=(
+                    f"filters.filter = {filters.filter!r} is not a regular expression ({e})"
+                ),
+            )
         b = filters.bounds
         if b.type not in (Bounds.TYPE_EMPTY, Bounds.TYPE_BOX, Bounds.TYPE_SPHERE):
-            return None, Result(result=Result.RESULT_FEATURE_UNSUPPORTED, error_message=(
-                f"filters.bounds.type = {b.type}: cloth_sim filters by TYPE_SPHERE and TYPE_BOX "
-                f"bounds (TYPE_CONVEX_HULL is not supported)"))
+            return None, Result(
+                result=Result.RESULT_FEATURE_UNSUPPORTED,
+                error_message=(
+                    f"filters.bounds.type = {b.type}: cloth_sim filters by TYPE_SPHERE and "
+                    "TYPE_BOX "
+                    f"bounds (TYPE_CONVEX_HULL is not supported)"
+                ),
+            )
         if b.type != Bounds.TYPE_EMPTY:
             if len(b.points) != 2:
-                return None, Result(result=Result.RESULT_OPERATION_FAILED, error_message=(
-                    f"filters.bounds.points: {len(b.points)} points; a sphere or box has 2"))
+                return None, Result(
+                    result=Result.RESULT_OPERATION_FAILED,
+                    error_message=(
+                        f"filters.bounds.points: {len(b.points)} points; a sphere or box has 2"
+                    ),
+                )
             pts = np.array([[p.x, p.y, p.z] for p in b.points])
             if not np.all(np.isfinite(pts)) or (b.type == Bounds.TYPE_SPHERE and pts[1, 0] < 0):
-                return None, Result(result=Result.RESULT_OPERATION_FAILED, error_message=(
-                    f"filters.bounds.points = {pts.tolist()}: expected finite points (a sphere's "
-                    f"radius, the second point's x, at least 0)"))
+                return None, Result(
+                    result=Result.RESULT_OPERATION_FAILED,
+                    error_message=(
+                        f"filters.bounds.points = {pts.tolist()}: expected finite points (a "
+                        "sphere's "
+                        f"radius, the second point's x, at least 0)"
+                    ),
+                )
         categories = {c.category for c in filters.categories}
         wanted = set(filters.tags.tags)
         every = filters.tags.filter_mode == TagsFilter.FILTER_MODE_ALL
@@ -154,7 +200,7 @@ class Entities:
         return out, Result(result=Result.RESULT_OK)
 
     def _overlaps(self, name: str, kind: int, pts: np.ndarray) -> bool:
-        sim = self.node.sim
+        sim = self.session.sim
         entity, _, key = name.partition("/")
         if kind == Bounds.TYPE_SPHERE:
             centre, radius = pts[0], pts[1, 0]
@@ -165,7 +211,9 @@ class Entities:
         lo, hi = np.minimum(pts[0], pts[1]), np.maximum(pts[0], pts[1])
         if entity == "collider" and isinstance(self.collider(key), Plane):
             c = self.collider(key)
-            corners = np.array([[a[0], b[1], d[2]] for a in (lo, hi) for b in (lo, hi) for d in (lo, hi)])
+            corners = np.array(
+                [[a[0], b[1], d[2]] for a in (lo, hi) for b in (lo, hi) for d in (lo, hi)]
+            )
             side = corners @ c.normal - c.offset
             return bool(side.min() <= 0.0)  # some of the box is on the plane or behind it
         box = self.box(name)
@@ -173,11 +221,12 @@ class Entities:
 
     # ------------------------------------------------------------------ geometry
     def collider(self, name: str):
-        return next(c for c in self.node.sim.colliders if c.name == name)
+        return next(c for c in self.session.sim.colliders if c.name == name)
 
     def box(self, name: str) -> tuple[np.ndarray, np.ndarray] | None:
-        """``(min, max)`` corners of the entity's axis-aligned bounding box; ``None`` for a plane."""
-        sim = self.node.sim
+        """``(min, max)`` corners of the entity's axis-aligned bounding box; ``None`` for a
+        plane."""
+        sim = self.session.sim
         entity, _, key = name.partition("/")
         if entity == "cloth":
             pts = sim.positions

@@ -3,7 +3,8 @@
 * ``/tf_static`` (transient local, as tf2's static broadcaster): ``world_frame_id`` → ``frame_id``,
   the identity — the simulation's frame placed in the world — again whenever either name changes;
 * ``/tf``: each collider and gripper in ``frame_id`` (``<frame_id>/collider/<name>``,
-  ``<frame_id>/gripper/<name>``) and the depth camera's optical frame (``<frame_id>/camera_optical``),
+  ``<frame_id>/gripper/<name>``) and the depth camera's optical frame
+  (``<frame_id>/camera_optical``),
   every tick while ``/tf`` has a subscriber.
 
 The messages are built by :func:`cloth_sim.ros.messages.transform` and
@@ -18,8 +19,9 @@ from tf2_msgs.msg import TFMessage
 from . import messages
 
 #: tf2's static broadcaster's profile: late joiners get the last message
-STATIC_QOS = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
-                        reliability=ReliabilityPolicy.RELIABLE)
+STATIC_QOS = QoSProfile(
+    depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE
+)
 
 
 class Frames:
@@ -36,8 +38,13 @@ class Frames:
         if self._static == (world, frame):
             return
         self._static = (world, frame)
-        t = messages.transform(world, frame, (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0),
-                               self.node.get_clock().now().to_msg())
+        t = messages.transform(
+            world,
+            frame,
+            (0.0, 0.0, 0.0),
+            (1.0, 0.0, 0.0, 0.0),
+            self.node.get_clock().now().to_msg(),
+        )
         self.static_pub.publish(TFMessage(transforms=[t]))
 
     def publish(self, sim, frame: str, stamp, camera=None) -> None:

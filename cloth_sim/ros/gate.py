@@ -1,9 +1,12 @@
 """The parameter gate: every value set on the node passes here, as rclpy intends it (ros2/demos
-``set_parameters_callback.py``). The pre-set callback expands a scene change into the scene's values
+``set_parameters_callback.py``). The pre-set callback expands a scene change into the scene's
+values
 and turns values the schema takes but rclpy's types would not (an integer for a double, an integer
-array for a double array) into the declared type; the on-set callback validates the whole batch with
+array for a double array) into the declared type; the on-set callback validates the whole batch
+with
 no side effects (the stability analysis it needs is computed once per material and kept,
-:mod:`cloth_sim.stability`); the post-set callback applies it, live or by rebuilding the cloth.
+:mod:`cloth_sim.physics.stability`); the post-set callback applies it, live or by rebuilding the
+cloth.
 """
 
 from __future__ import annotations
@@ -11,14 +14,15 @@ from __future__ import annotations
 import gc
 
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.exceptions import ParameterException
 from rclpy.parameter import Parameter
 
 from .. import settings
-from ..energy_balance import EnergyBalance
 from ..parameters import SCHEMA
 from ..scene import SceneError, load_scene
 from ..settings import MODEL_KEYS
 from . import params as P
+from .session import Session
 
 #: a publish_rate is refused only when the measured cost exceeds the time available this many times
 RATE_REFUSAL_LOAD = 10.0
@@ -26,7 +30,14 @@ RATE_REFUSAL_LOAD = 10.0
 FIT_SHARE = 0.6
 
 
-def _settle_garbage() -> None:
+def _startup_value(name, value):
+    value, reason = P.check_value(name, value)
+    if reason:
+        raise StartupError(reason)
+    return value
+
+
+def settle_garbage() -> None:
     """Collect once and move every object alive now to the collector's permanent generation.
 
     Python's full (generation-2) collection walks every tracked object: after start-up (rclpy,
@@ -39,10 +50,12 @@ def _settle_garbage() -> None:
     gc.freeze()
 
 
-def _as_declared(p: Parameter) -> Parameter:
-    """An integer given for a double parameter (``ros2 param set /cloth_sim dt 1``), as a double, and
+def as_declared(p: Parameter) -> Parameter:
+    """An integer given for a double parameter (``ros2 param set /cloth_sim dt 1``), as a double,
+    and
     an integer array for a double array (``gravity: [0, 0, -9]`` in a params file), as a double
-    array: the schema accepts them, rclpy's type check would not (its refusal names no parameter)."""
+    array: the schema accepts them, rclpy's type check would not (its refusal names no
+    parameter)."""
     spec = SCHEMA.get(p.name)
     if spec is not None and spec.type is float and p.type_ == Parameter.Type.INTEGER:
         return Parameter(p.name, value=float(p.value))
@@ -51,9 +64,65 @@ def _as_declared(p: Parameter) -> Parameter:
     return p
 
 
+class StartupError(ValueError):
+    """A value the node cannot start with; one line naming it."""
+
+
 class ParameterGate:
-    """The node's parameter callbacks and the building of its model and simulator (a mixin of
-    :class:`~cloth_sim.ros.node.ClothSimNode`, over its ``cfg``, ``scene`` and ``sim``)."""
+    """The node's parameters: declared from the start-up values (:meth:`__init__` checks them
+    whole, then builds the :attr:`session`), then every change through rclpy's three callbacks,
+    registered by :meth:`open` once the parts a change drives exist (``manipulation``'s topics
+    follow a new scene, ``publishing``'s frames and camera the new values, ``ticker`` a new
+    rate)."""
+
+    def __init__(self, node, overrides: dict):
+        self.node = node
+        self._ready = False
+        self._models = {}  # rebuild key -> model (a scene's model at a size), last few kept
+        self._validated = None  # what the on-set callback checked, for the post-set callback
+        self._gate_errors: list[str] = []  # found by the pre-set callback, reported by on-set
+        # the scene first: it provides the other parameters' defaults
+        scene_name = _startup_value("scene", overrides.get("scene", "hanging"))
+        try:
+            scene = load_scene(scene_name)
+        except SceneError as e:
+            raise StartupError(f"scene: {e}") from None
+        defaults = P.defaults(scene)
+        cfg = {}
+        for name in SCHEMA:
+            value = _startup_value(name, overrides.get(name, defaults[name]))
+            try:
+                node.declare_parameter(
+                    name,
+                    defaults[name] if name != "scene" else scene_name,
+                    P.descriptor(SCHEMA[name]),
+                )
+            except (
+                ParameterException
+            ):  # e.g. an integer given for a double: rclpy's types are strict
+                raise StartupError(
+                    f"{name} = {overrides.get(name)!r} is not accepted: expected "
+                    f"{SCHEMA[name].range_text()}, as a ROS "
+                    f"{P.type_name(SCHEMA[name])} (write 1.0, not 1, for a "
+                    f"double)"
+                ) from None
+            cfg[name] = value
+        model = self._model(cfg, scene)
+        # the combination checks a parameter change passes (thickness, camera, stable step)
+        reason, _, stable_dt = settings.refusal(cfg, model)
+        if reason:
+            raise StartupError(reason)
+        self.session = Session(scene, cfg, settings.build_simulator(cfg, model, scene), stable_dt)
+        self._rates_run = {cfg["publish_rate"]}  # rates the node has run with: never refused
+        self._fit_solver(cfg)
+
+    def open(self, manipulation, publishing, ticker) -> None:
+        """Take changes from now on."""
+        self.manipulation, self.publishing, self.ticker = manipulation, publishing, ticker
+        self.node.add_pre_set_parameters_callback(self.pre_set)
+        self.node.add_on_set_parameters_callback(self.on_set)
+        self.node.add_post_set_parameters_callback(self.post_set)
+        self._ready = True
 
     def _model(self, cfg: dict, scene):
         """The model for ``cfg``'s rebuild values (kept: validation and application share it)."""
@@ -66,13 +135,11 @@ class ParameterGate:
             self._models[key] = model
         return model
 
-    _build_simulator = staticmethod(settings.build_simulator)
-
     def _fit_solver(self, cfg: dict) -> None:
         """vbd's options from ``cfg``: its iterations, and under ``vbd.fit_tick`` a time budget a
         step (:data:`FIT_SHARE` of a step's share of the tick at the target real-time factor; the
         rest of the step, its stages and the publishing take the other part)."""
-        sim = self.sim
+        sim = self.session.sim
         if sim.integrator != "vbd":
             return
         options = settings.integrator_options(cfg)
@@ -81,10 +148,11 @@ class ParameterGate:
         if options != sim.integrator_options:
             sim.set_integrator("vbd", **options)
 
-    def _pre_set(self, parameters: list[Parameter]) -> list[Parameter]:
+    def pre_set(self, parameters: list[Parameter]) -> list[Parameter]:
         """The gate every value passes first (it runs before rclpy's own type and range checks,
         whose refusals do not name the parameter): a value the schema refuses is noted, and stands
-        in the batch as the parameter's current value, so that the on-set callback refuses the batch
+        in the batch as the parameter's current value, so that the on-set callback refuses the
+        batch
         with the schema's reason. A scene change brings the scene's values for every parameter the
         batch does not set."""
         self._gate_errors = []
@@ -95,40 +163,53 @@ class ParameterGate:
                 self._gate_errors.append(reason)
                 # a stand-in that passes rclpy's checks, so the on-set callback gives the reason
                 # (an unknown name would raise before it, with an empty list in rclpy 7.1's text)
-                gated.append(self.get_parameter(p.name if self.has_parameter(p.name) else "frame_id"))
+                gated.append(
+                    self.node.get_parameter(
+                        p.name if self.node.has_parameter(p.name) else "frame_id"
+                    )
+                )
                 continue
-            gated.append(_as_declared(p))
+            gated.append(as_declared(p))
         parameters = gated
         if self._gate_errors:
             return parameters
         scene = next((p for p in parameters if p.name == "scene"), None)
-        if scene is None or scene.value == self.cfg["scene"] or not isinstance(scene.value, str):
+        if (
+            scene is None
+            or scene.value == self.session.cfg["scene"]
+            or not isinstance(scene.value, str)
+        ):
             return parameters
         try:
             new = load_scene(scene.value)
         except SceneError:
             return parameters  # the on-set callback refuses it with the reason
         named = {p.name for p in parameters}
-        return list(parameters) + [Parameter(k, value=v) for k, v in P.scene_values(new).items()
-                                   if k not in named]
+        return list(parameters) + [
+            Parameter(k, value=v) for k, v in P.scene_values(new).items() if k not in named
+        ]
 
     def _gate(self, p: Parameter) -> str | None:
         """The schema's reason to refuse ``p`` (or the declared type's, for rclpy's own
         parameters), ``None`` when it may go on."""
-        if not self.has_parameter(p.name):
-            return (f"{p.name} is not a parameter of this node; its parameters are "
-                    f"{', '.join(sorted(SCHEMA))}")
+        if not self.node.has_parameter(p.name):
+            return (
+                f"{p.name} is not a parameter of this node; its parameters are "
+                f"{', '.join(sorted(SCHEMA))}"
+            )
         if p.type_ == Parameter.Type.NOT_SET:
             return f"{p.name} cannot be unset"
         if p.name in SCHEMA:
             return P.check_value(p.name, p.value)[1]
-        declared = self.describe_parameter(p.name)
+        declared = self.node.describe_parameter(p.name)
         if not declared.dynamic_typing and declared.type != p.type_.value:
-            return (f"{p.name} = {p.value!r} is not accepted: expected a "
-                    f"{Parameter.Type(declared.type).name.lower()}")
+            return (
+                f"{p.name} = {p.value!r} is not accepted: expected a "
+                f"{Parameter.Type(declared.type).name.lower()}"
+            )
         return None
 
-    def _on_set(self, parameters: list[Parameter]) -> SetParametersResult:
+    def on_set(self, parameters: list[Parameter]) -> SetParametersResult:
         """Validate the whole batch; nothing changes here (the post-set callback applies it)."""
         if not self._ready:
             return SetParametersResult(successful=True)
@@ -136,7 +217,7 @@ class ParameterGate:
         if self._gate_errors:
             reason, self._gate_errors = "; ".join(self._gate_errors), []
             return SetParametersResult(successful=False, reason=reason)
-        cand = dict(self.cfg)
+        cand = dict(self.session.cfg)
         for p in parameters:
             if p.name not in SCHEMA:
                 continue
@@ -144,18 +225,20 @@ class ParameterGate:
             if reason:
                 return SetParametersResult(successful=False, reason=reason)
             cand[p.name] = value
-        if cand == self.cfg:
-            self._validated = (cand, None, None, self._stable_dt)
+        if cand == self.session.cfg:
+            self._validated = (cand, None, None, self.session.stable_dt)
             return SetParametersResult(successful=True)
-        scene = self.scene
+        scene = self.session.scene
         try:
-            if cand["scene"] != self.cfg["scene"]:
+            if cand["scene"] != self.session.cfg["scene"]:
                 scene = load_scene(cand["scene"])
-            reason = P.not_applicable(scene, cand, self.cfg)
+            reason = P.not_applicable(scene, cand, self.session.cfg)
             if reason:
                 return SetParametersResult(successful=False, reason=reason)
-            rebuild = scene is not self.scene or any(cand[k] != self.cfg[k] for k in MODEL_KEYS)
-            model = self._model(cand, scene) if rebuild else self.sim.model
+            rebuild = scene is not self.session.scene or any(
+                cand[k] != self.session.cfg[k] for k in MODEL_KEYS
+            )
+            model = self._model(cand, scene) if rebuild else self.session.sim.model
         except (SceneError, ValueError) as e:  # e.g. a scene whose file changed since
             return SetParametersResult(successful=False, reason=f"scene: {e}")
         if cand["publish_rate"] not in self._rates_run:
@@ -164,68 +247,65 @@ class ParameterGate:
                 return SetParametersResult(successful=False, reason=reason)
         reason, named, limit = settings.refusal(cand, model)
         if reason:  # the refusal names what changed as well as what it is about
-            return SetParametersResult(successful=False,
-                                       reason=self._blame(parameters, cand, reason, named))
+            return SetParametersResult(
+                successful=False, reason=self._blame(parameters, cand, reason, named)
+            )
         self._validated = (cand, scene if rebuild else None, model if rebuild else None, limit)
         return SetParametersResult(successful=True)
 
     def _blame(self, parameters, cand: dict, reason: str, named: tuple) -> str:
         """``reason`` for a refusal of a combination, prefixed with the other values of the
         request that changed (``reason`` names ``named`` itself)."""
-        changed = [p.name for p in parameters if p.name in SCHEMA and p.name not in named
-                   and cand[p.name] != self.cfg[p.name]]
+        changed = [
+            p.name
+            for p in parameters
+            if p.name in SCHEMA
+            and p.name not in named
+            and cand[p.name] != self.session.cfg[p.name]
+        ]
         if not changed:
             return reason
-        return (f"{', '.join(f'{n} = {cand[n]!r}' for n in changed)}: with "
-                f"{'this value' if len(changed) == 1 else 'these values'}, {reason}")
+        return (
+            f"{', '.join(f'{n} = {cand[n]!r}' for n in changed)}: with "
+            f"{'this value' if len(changed) == 1 else 'these values'}, {reason}"
+        )
 
-    def _post_set(self, parameters: list[Parameter]) -> None:
-        """Apply what :meth:`_on_set` accepted."""
+    def post_set(self, parameters: list[Parameter]) -> None:
+        """Apply what :meth:`on_set` accepted."""
         if not self._ready or self._validated is None:
             return
         cand, scene, model, limit = self._validated
         self._validated = None
         if scene is not None:
-            self.sim = self._build_simulator(cand, model, scene)
-            self.balance = EnergyBalance(self.sim)
-            self.scene = scene
-            self.interfaces.restarted()  # the new simulation has the scene's colliders only
-            self._drop_grippers()
-            self._adopt_grippers()
-            self._subscribe_colliders()
-            self._carry = 0.0
-            self._history.clear()
-            self._checkpoints.clear()
-            self._change_checkpoint = None
-            _settle_garbage()
+            self.session.replace(settings.build_simulator(cand, model, scene), scene)
+            self.session.restarted()  # the new simulation has the scene's colliders only
+            self.manipulation.drop_grippers()
+            self.manipulation.adopt_grippers()
+            self.manipulation.subscribe_colliders()
+            settle_garbage()
         else:
-            if cand != self.cfg:
-                self._change_checkpoint = (self.sim.time, self.sim.save_state())
+            if cand != self.session.cfg:
+                self.session.change_checkpoint = (
+                    self.session.sim.time,
+                    self.session.sim.save_state(),
+                )
             self._apply_live(cand)
-            self.balance.restart()  # what the energy means may have changed (stiffness, gravity)
-        if cand["real_time_factor"] != self.cfg["real_time_factor"]:
-            self._carry = 0.0  # a backlog owed at the old pace is not owed at the new one
-            self._history.clear()
+            # what the energy means may have changed (stiffness, gravity)
+            self.session.balance.restart()
+        if cand["real_time_factor"] != self.session.cfg["real_time_factor"]:
+            self.session.carry = 0.0  # a backlog owed at the old pace is not owed at the new one
+            self.session.history.clear()
         self._fit_solver(cand)
         self._rates_run.add(cand["publish_rate"])
-        rate_changed = cand["publish_rate"] != self.cfg["publish_rate"]
-        self.cfg = cand
-        self._stable_dt = limit
-        self.frames.publish_static(cand["world_frame_id"], cand["frame_id"])
-        self.camera_pub.configure(cand)
+        rate_changed = cand["publish_rate"] != self.session.cfg["publish_rate"]
+        self.session.cfg = cand
+        self.session.stable_dt = limit
+        self.publishing.configure(cand)
         if rate_changed:
-            self.timer.cancel()
-            self.destroy_timer(self.timer)
-            self.timer = self.create_timer(1.0 / cand["publish_rate"], self._tick)
-            # the new timer's first tick comes a full new period from now; it is due a period
-            # after the last one, so it steps that much less (its budget's deadline) and the
-            # ~/stats interval across the change stays under 1.8 new periods (it reached 2)
-            self._next_tick = (None if self._last_tick is None
-                               else self._last_tick + 1.0 / cand["publish_rate"])
-            self._resync = True
+            self.ticker.set_rate(cand["publish_rate"])
 
     def _apply_live(self, cand: dict) -> None:
-        sim, cur = self.sim, self.cfg
+        sim, cur = self.session.sim, self.session.cfg
         for f in sim.model.family_names:
             if cand[f"stiffness.{f}"] != cur[f"stiffness.{f}"]:
                 sim.set_stiffness(f, cand[f"stiffness.{f}"])
@@ -237,8 +317,10 @@ class ParameterGate:
             sim.dt = cand["dt"]
         if cand["gravity"] != cur["gravity"]:
             sim.gravity = cand["gravity"]
-        if (cand["wind.strength"], cand["wind.direction"]) != (cur["wind.strength"],
-                                                              cur["wind.direction"]):
+        if (cand["wind.strength"], cand["wind.direction"]) != (
+            cur["wind.strength"],
+            cur["wind.direction"],
+        ):
             sim.wind = settings.wind(cand)
         if cand["drag"] != cur["drag"]:
             sim.drag = cand["drag"]
@@ -258,20 +340,18 @@ class ParameterGate:
         time available many times over (RATE_REFUSAL_LOAD): measured costs are noisy, and a tick
         that does not fit only lowers the real-time factor (ticks are bounded, /diagnostics warns).
         A rate the node has run with is never refused."""
-        if len(self._tick_costs) < 10:
+        if len(self.session.tick_costs) < 10:
             return None
-        steps = sum(c[0] for c in self._tick_costs)
-        step_wall = sum(c[1] for c in self._tick_costs)
-        pub_wall = sum(c[2] for c in self._tick_costs) / len(self._tick_costs)
+        steps = sum(c[0] for c in self.session.tick_costs)
+        step_wall = sum(c[1] for c in self.session.tick_costs)
+        pub_wall = sum(c[2] for c in self.session.tick_costs) / len(self.session.tick_costs)
         per_step = step_wall / steps if steps else 0.0
         load = per_step / cand["dt"] + cand["publish_rate"] * pub_wall
         if load > RATE_REFUSAL_LOAD:
-            return (f"publish_rate={cand['publish_rate']:g} Hz cannot be met: stepping "
-                    f"({1e3 * per_step:.3f} ms/step at dt={cand['dt']:g}) and publishing "
-                    f"({1e3 * pub_wall:.3f} ms/tick) would need {load:.2f} s of work per second; "
-                    f"lower publish_rate, or raise dt")
+            return (
+                f"publish_rate={cand['publish_rate']:g} Hz cannot be met: stepping "
+                f"({1e3 * per_step:.3f} ms/step at dt={cand['dt']:g}) and publishing "
+                f"({1e3 * pub_wall:.3f} ms/tick) would need {load:.2f} s of work per second; "
+                f"lower publish_rate, or raise dt"
+            )
         return None
-
-    def stable_dt(self) -> float:
-        """The current method's stable_dt (``inf`` for unconditionally stable methods)."""
-        return self._stable_dt

@@ -1,4 +1,5 @@
-"""The node's messages as pure functions of the simulation's numbers: testable without a ROS graph."""
+"""The node's messages as pure functions of the simulation's numbers: testable without a ROS
+graph."""
 
 from __future__ import annotations
 
@@ -13,8 +14,10 @@ from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-FIELDS = [PointField(name=n, offset=4 * i, datatype=PointField.FLOAT32, count=1)
-          for i, n in enumerate("xyz")]
+FIELDS = [
+    PointField(name=n, offset=4 * i, datatype=PointField.FLOAT32, count=1)
+    for i, n in enumerate("xyz")
+]
 
 
 def point_cloud(positions: np.ndarray, rows: int, cols: int, frame_id: str, stamp) -> PointCloud2:
@@ -53,31 +56,55 @@ _PROBE = np.array([[3e-310, 5e-310, 7e-310]])
 def mesh_bytes(positions: np.ndarray, triangles: np.ndarray, frame_id: str, stamp) -> bytes:
     """:func:`mesh` serialised (CDR, what rclpy publishes), built without a Python object per
     point: a one-point marker is serialised by rclpy as the template and the point data is spliced
-    in (``geometry_msgs/Point`` is three little-endian float64, 24 bytes, so every later field keeps
+    in (``geometry_msgs/Point`` is three little-endian float64, 24 bytes, so every later field
+    keeps
     its alignment). 0.3 ms at 32×32 where building and serialising the Point list took 70 ms."""
     from rclpy.serialization import serialize_message
 
     template = serialize_message(mesh(_PROBE, np.zeros((1, 1), dtype=np.int64), frame_id, stamp))
     at = template.find(_PROBE.astype("<f8").tobytes())
-    if at < 4 or template[at - 4:at] != (1).to_bytes(4, "little"):
+    if at < 4 or template[at - 4 : at] != (1).to_bytes(4, "little"):
         raise RuntimeError("unexpected Marker serialisation")  # not little-endian CDR
     points = np.ascontiguousarray(positions[triangles.ravel()], dtype="<f8")
-    return b"".join((template[:at - 4], len(points).to_bytes(4, "little"), points.tobytes(),
-                     template[at + 24:]))
+    return b"".join(
+        (
+            template[: at - 4],
+            len(points).to_bytes(4, "little"),
+            points.tobytes(),
+            template[at + 24 :],
+        )
+    )
 
 
 def stability_margin(dt: float, stable_dt: float | None) -> float:
-    """``dt / stable_dt``: 0 for an unconditionally stable method (or an unknown limit), inf when no
+    """``dt / stable_dt``: 0 for an unconditionally stable method (or an unknown limit), inf when
+    no
     step is stable."""
     if stable_dt is None or math.isinf(stable_dt):
         return 0.0
     return dt / stable_dt if stable_dt > 0 else math.inf
 
 
-def stats(Stats, *, stamp, frame_id: str, integrator: str, dt: float, steps: int, step_wall: float,
-          step_max: float, tick_wall: float, rtf: float, sim_time: float, energy: dict,
-          max_strain: float, overruns: int, stable_dt: float | None, paused: bool,
-          solver: dict | None = None):
+def stats(
+    Stats,
+    *,
+    stamp,
+    frame_id: str,
+    integrator: str,
+    dt: float,
+    steps: int,
+    step_wall: float,
+    step_max: float,
+    tick_wall: float,
+    rtf: float,
+    sim_time: float,
+    energy: dict,
+    max_strain: float,
+    overruns: int,
+    stable_dt: float | None,
+    paused: bool,
+    solver: dict | None = None,
+):
     """The package's ``Stats`` message (``Stats`` is the generated type); ``solver``: the
     integrator's counters (``last_iterations`` and ``last_residual`` of an iterative method)."""
     msg = Stats()
@@ -102,13 +129,23 @@ def stats(Stats, *, stamp, frame_id: str, integrator: str, dt: float, steps: int
     return msg
 
 
-def diagnostic_status(*, error: str | None, paused: bool, rtf: float, rtf_known: bool,
-                      rtf_warn: float, dt: float, stable_dt: float | None, warn_margin: float,
-                      values: dict, energy: str | None = None) -> DiagnosticStatus:
+def diagnostic_status(
+    *,
+    error: str | None,
+    paused: bool,
+    rtf: float,
+    rtf_known: bool,
+    rtf_warn: float,
+    dt: float,
+    stable_dt: float | None,
+    warn_margin: float,
+    values: dict,
+    energy: str | None = None,
+) -> DiagnosticStatus:
     """``cloth_sim: simulation``: ERROR after a blow-up, WARN when the real-time factor is below
     ``rtf_warn`` (while running; 0 when the node runs as fast as it can), dt is above
     ``warn_margin`` of stable_dt, or ``energy`` says the energy balance found energy no source put
-    in (:mod:`cloth_sim.energy_balance`), OK otherwise."""
+    in (:mod:`cloth_sim.physics.energy_balance`), OK otherwise."""
     level, message = DiagnosticStatus.OK, "running"
     if error:
         level, message = DiagnosticStatus.ERROR, f"simulation diverged and is paused: {error}"
@@ -117,16 +154,22 @@ def diagnostic_status(*, error: str | None, paused: bool, rtf: float, rtf_known:
         if not paused and rtf_known and rtf < rtf_warn:
             problems.append(f"real-time factor {rtf:.2f} below the target")
         if stable_dt is not None and math.isfinite(stable_dt) and dt > warn_margin * stable_dt:
-            problems.append(f"dt={dt:g} s is above {warn_margin:.0%} of stable_dt={stable_dt:.4g} s")
+            problems.append(
+                f"dt={dt:g} s is above {warn_margin:.0%} of stable_dt={stable_dt:.4g} s"
+            )
         if energy:
             problems.append(energy)
         if problems:
             level, message = DiagnosticStatus.WARN, "; ".join(problems)
         elif paused:
             message = "paused"
-    return DiagnosticStatus(level=level, name="cloth_sim: simulation", message=message,
-                            hardware_id="cloth_sim",
-                            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+    return DiagnosticStatus(
+        level=level,
+        name="cloth_sim: simulation",
+        message=message,
+        hardware_id="cloth_sim",
+        values=[KeyValue(key=k, value=str(v)) for k, v in values.items()],
+    )
 
 
 def diagnostic_array(status: DiagnosticStatus, stamp) -> DiagnosticArray:
@@ -172,7 +215,8 @@ def collider_markers(colliders, frame_id: str, stamp, grippers=None) -> MarkerAr
         m.type, m.action = kind, Marker.ADD
         m.pose.position.x, m.pose.position.y, m.pose.position.z = (float(v) for v in position)
         m.pose.orientation.w, m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z = (
-            float(v) for v in q)
+            float(v) for v in q
+        )
         m.scale.x, m.scale.y, m.scale.z = (float(v) for v in scale)
         m.color = grey
         out.markers.append(m)
@@ -180,8 +224,14 @@ def collider_markers(colliders, frame_id: str, stamp, grippers=None) -> MarkerAr
     for c in colliders:
         kind = type(c).__name__
         if kind == "Plane":
-            marker(c.name, 0, Marker.CUBE, c.position, _quaternion_between((0, 0, 1), c.normal),
-                   (2 * PLANE_EXTENT, 2 * PLANE_EXTENT, 1e-3))
+            marker(
+                c.name,
+                0,
+                Marker.CUBE,
+                c.position,
+                _quaternion_between((0, 0, 1), c.normal),
+                (2 * PLANE_EXTENT, 2 * PLANE_EXTENT, 1e-3),
+            )
         elif kind == "Sphere":
             marker(c.name, 0, Marker.SPHERE, c.position, (1, 0, 0, 0), [2 * c.radius] * 3)
         elif kind == "Box":
@@ -221,18 +271,26 @@ def transform(parent: str, child: str, position, orientation, stamp):
     t.header.frame_id = parent
     t.child_frame_id = child
     t.transform.translation.x, t.transform.translation.y, t.transform.translation.z = (
-        float(v) for v in position)
-    (t.transform.rotation.w, t.transform.rotation.x, t.transform.rotation.y,
-     t.transform.rotation.z) = (float(v) for v in orientation)
+        float(v) for v in position
+    )
+    (
+        t.transform.rotation.w,
+        t.transform.rotation.x,
+        t.transform.rotation.y,
+        t.transform.rotation.z,
+    ) = (float(v) for v in orientation)
     return t
 
 
 def entity_frames(sim, frame_id: str, stamp) -> list:
-    """The moving frames of a simulation for ``/tf``: each collider (``<frame_id>/collider/<name>``)
+    """The moving frames of a simulation for ``/tf``: each collider
+    (``<frame_id>/collider/<name>``)
     and each gripper (``<frame_id>/gripper/<name>``) in ``frame_id``, named as the standard's
     entities are."""
-    out = [transform(frame_id, f"{frame_id}/collider/{c.name}", c.position, c.orientation, stamp)
-           for c in sim.colliders]
+    out = [
+        transform(frame_id, f"{frame_id}/collider/{c.name}", c.position, c.orientation, stamp)
+        for c in sim.colliders
+    ]
     for name in sim.grippers:
         p, q = sim.gripper_pose(name)
         out.append(transform(frame_id, f"{frame_id}/gripper/{name}", p, q, stamp))
@@ -251,15 +309,31 @@ def checked_pose(pose, frame: str, frames, prefix: str = ""):
     position = np.array([p.x, p.y, p.z])
     orientation = np.array([q.w, q.x, q.y, q.z])
     if frame and frame not in frames:
-        return None, None, (f"{prefix}header.frame_id = {frame!r}: expected "
-                            f"{' or '.join(repr(f) for f in dict.fromkeys(frames))} (the node's "
-                            f"frame_id and world_frame_id, one frame on /tf_static), or empty; the "
-                            f"node does not look poses up in TF")
+        return (
+            None,
+            None,
+            (
+                f"{prefix}header.frame_id = {frame!r}: expected "
+                f"{' or '.join(repr(f) for f in dict.fromkeys(frames))} (the node's "
+                f"frame_id and world_frame_id, one frame on /tf_static), or empty; the "
+                f"node does not look poses up in TF"
+            ),
+        )
     if not np.all(np.isfinite(position)):
-        return None, None, f"{prefix}pose.position = {position.tolist()}: expected 3 finite numbers"
+        return (
+            None,
+            None,
+            f"{prefix}pose.position = {position.tolist()}: expected 3 finite numbers",
+        )
     if not (np.all(np.isfinite(orientation)) and np.linalg.norm(orientation) > 1e-6):
-        return None, None, (f"{prefix}pose.orientation = {orientation.tolist()} (w, x, y, z): "
-                            f"expected a finite, nonzero quaternion")
+        return (
+            None,
+            None,
+            (
+                f"{prefix}pose.orientation = {orientation.tolist()} (w, x, y, z): "
+                f"expected a finite, nonzero quaternion"
+            ),
+        )
     return position, orientation / np.linalg.norm(orientation), None
 
 
@@ -292,16 +366,23 @@ def _splice(template_msg, payload) -> bytes:
     """``template_msg`` (its ``data`` set to :data:`_DATA_PROBE`) serialised with ``payload`` (a
     buffer) as its ``data``: a ``uint8[]`` is a 4-byte length and the bytes, and what follows it in
     ``Image`` (nothing) and ``PointCloud2`` (``bool is_dense``) needs no alignment, so the rest of
-    the serialisation stands. One copy of the payload instead of three (array, array.array, CDR)."""
+    the serialisation stands. One copy of the payload instead of three (array, array.array,
+    CDR)."""
     from rclpy.serialization import serialize_message
 
     template = serialize_message(template_msg)
     at = template.rfind(_DATA_PROBE)
-    if at < 4 or template[at - 4:at] != len(_DATA_PROBE).to_bytes(4, "little"):
+    if at < 4 or template[at - 4 : at] != len(_DATA_PROBE).to_bytes(4, "little"):
         raise RuntimeError("unexpected serialisation")  # not little-endian CDR
     payload = memoryview(payload).cast("B")
-    return b"".join((template[:at - 4], len(payload).to_bytes(4, "little"), payload,
-                     template[at + len(_DATA_PROBE):]))
+    return b"".join(
+        (
+            template[: at - 4],
+            len(payload).to_bytes(4, "little"),
+            payload,
+            template[at + len(_DATA_PROBE) :],
+        )
+    )
 
 
 def image_bytes(values: np.ndarray, encoding: str, frame_id: str, stamp) -> bytes:
@@ -322,7 +403,7 @@ def point_cloud_bytes(points: np.ndarray, frame_id: str, stamp, dense: bool) -> 
 
 
 def camera_info(camera, frame_id: str, stamp):
-    """``sensor_msgs/CameraInfo`` of a :class:`~cloth_sim.camera.DepthCamera`: pinhole, no
+    """``sensor_msgs/CameraInfo`` of a :class:`~cloth_sim.sensors.camera.DepthCamera`: pinhole, no
     distortion (``plumb_bob`` with zeros), ``P = [K | 0]``."""
     from sensor_msgs.msg import CameraInfo
 

@@ -7,27 +7,44 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 
 from ..parameters import SCHEMA, Param, ParameterError
 
-_TYPES = {float: ParameterType.PARAMETER_DOUBLE, int: ParameterType.PARAMETER_INTEGER,
-          str: ParameterType.PARAMETER_STRING, bool: ParameterType.PARAMETER_BOOL,
-          "vector3": ParameterType.PARAMETER_DOUBLE_ARRAY}
+_TYPES = {
+    float: ParameterType.PARAMETER_DOUBLE,
+    int: ParameterType.PARAMETER_INTEGER,
+    str: ParameterType.PARAMETER_STRING,
+    bool: ParameterType.PARAMETER_BOOL,
+    "vector3": ParameterType.PARAMETER_DOUBLE_ARRAY,
+}
 
 
 def type_name(spec: Param) -> str:
-    return {float: "double", int: "integer", str: "string", bool: "bool",
-            "vector3": "double array"}[spec.type]
+    return {
+        float: "double",
+        int: "integer",
+        str: "string",
+        bool: "bool",
+        "vector3": "double array",
+    }[spec.type]
 
 
 def descriptor(spec: Param) -> ParameterDescriptor:
-    """``ros2 param describe``: description with unit and how it applies, the range, the choices."""
-    how = {"live": "live", "rebuild": "rebuilds the cloth and resets it",
-           "node": "the node's own setting"}[spec.apply]
+    """``ros2 param describe``: description with unit and how it applies, the range, the
+    choices."""
+    how = {
+        "live": "live",
+        "rebuild": "rebuilds the cloth and resets it",
+        "node": "the node's own setting",
+    }[spec.apply]
     unit = f" Unit: {spec.unit}." if spec.unit else ""
-    d = ParameterDescriptor(name=spec.name, type=_TYPES[spec.type],
-                            description=f"{spec.description}{unit} ({how})",
-                            additional_constraints=spec.range_text())
+    d = ParameterDescriptor(
+        name=spec.name,
+        type=_TYPES[spec.type],
+        description=f"{spec.description}{unit} ({how})",
+        additional_constraints=spec.range_text(),
+    )
     if spec.type is float:
-        d.floating_point_range = [FloatingPointRange(from_value=float(spec.lo),
-                                                     to_value=float(spec.hi), step=0.0)]
+        d.floating_point_range = [
+            FloatingPointRange(from_value=float(spec.lo), to_value=float(spec.hi), step=0.0)
+        ]
     elif spec.type is int:
         d.integer_range = [IntegerRange(from_value=int(spec.lo), to_value=int(spec.hi), step=1)]
     return d
@@ -43,8 +60,23 @@ def check_value(name: str, value):
 
 
 # the plain-value parts live in the core (the sweeps use them too)
-from ..settings import (GRID_ONLY, MESH_ONLY, UNUSED_VALUES, defaults,  # noqa: E402
-                        not_applicable, scene_values)
+from ..settings import (  # noqa: E402
+    GRID_ONLY,
+    MESH_ONLY,
+    UNUSED_VALUES,
+    defaults,
+    not_applicable,
+    scene_values,
+)
 
-__all__ = ["GRID_ONLY", "MESH_ONLY", "UNUSED_VALUES", "check_value", "defaults", "descriptor",
-           "not_applicable", "scene_values", "type_name"]
+__all__ = [
+    "GRID_ONLY",
+    "MESH_ONLY",
+    "UNUSED_VALUES",
+    "check_value",
+    "defaults",
+    "descriptor",
+    "not_applicable",
+    "scene_values",
+    "type_name",
+]

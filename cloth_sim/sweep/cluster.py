@@ -1,7 +1,8 @@
 """Joining a running Ray cluster (``cloth-sim sweep --address``) that may ask for a token.
 
 Ray 2.60 turns token authentication on for a cluster that ``ray start --head`` makes where a token
-exists (``~/.ray/auth_token``: a local ``ray.init()``, such as a sweep without ``--address``, writes
+exists (``~/.ray/auth_token``: a local ``ray.init()``, such as a sweep without ``--address``,
+writes
 one), and a driver that joins by address must then say ``RAY_AUTH_MODE=token`` and have the
 token (https://docs.ray.io/en/latest/ray-security/token-auth.html). Ray itself turns it on only
 for a cluster it finds by itself (``address="auto"``), never for an explicit address. So the sweep
@@ -42,7 +43,9 @@ def prepare_join(address: str | None) -> str | None:
     if source is None:
         return None
     os.environ[MODE] = "token"
-    if "ray" in sys.modules:  # Ray read its configuration when it was imported: again, with the mode
+    if (
+        "ray" in sys.modules
+    ):  # Ray read its configuration when it was imported: again, with the mode
         raylet = getattr(sys.modules["ray"], "_raylet", None)
         config = getattr(raylet, "Config", None)
         if config is not None:
@@ -57,10 +60,15 @@ def join_error(address: str, error: BaseException) -> str | None:
     if "InvalidAuthToken" not in text and "Authentication" not in text:
         return None
     mode = os.environ.get(MODE) or "unset"
-    then = ("and unset RAY_AUTH_MODE (or set it to token)" if mode.lower() not in ("token", "unset")
-            else "(RAY_AUTH_MODE=token is then set for you)")
-    return (f"--address {address}: the Ray cluster refused this driver's authentication "
-            f"(RAY_AUTH_MODE {mode}, token from {token_source() or 'nowhere'}). A cluster started "
-            f"with token authentication needs its token here: copy the head node's "
-            f"~/.ray/auth_token (`ray get-auth-token` on the head prints it) to ~/.ray/auth_token, "
-            f"or set RAY_AUTH_TOKEN to it, or RAY_AUTH_TOKEN_PATH to a file holding it, {then}")
+    then = (
+        "and unset RAY_AUTH_MODE (or set it to token)"
+        if mode.lower() not in ("token", "unset")
+        else "(RAY_AUTH_MODE=token is then set for you)"
+    )
+    return (
+        f"--address {address}: the Ray cluster refused this driver's authentication "
+        f"(RAY_AUTH_MODE {mode}, token from {token_source() or 'nowhere'}). A cluster started "
+        f"with token authentication needs its token here: copy the head node's "
+        f"~/.ray/auth_token (`ray get-auth-token` on the head prints it) to ~/.ray/auth_token, "
+        f"or set RAY_AUTH_TOKEN to it, or RAY_AUTH_TOKEN_PATH to a file holding it, {then}"
+    )

@@ -1,4 +1,5 @@
-"""The sweep's driver: every run of a spec on Ray, resumable, with a progress bar and ``runs.parquet``.
+"""The sweep's driver: every run of a spec on Ray, resumable, with a progress bar and
+``runs.parquet``.
 
 ``cloth-sim sweep SPEC.yaml -o OUT [--workers N] [--address ADDRESS]``:
 
@@ -30,34 +31,61 @@ from .run import STATUSES, execute, read_row
 from .spec import Spec, SpecError, load_spec, run_id
 
 #: the columns of runs.parquet after the swept values
-RESULT_COLUMNS = ("status", "message", "wall_s", "steps", "sim_time", "max_strain", "kinetic",
-                  "potential", "stable_dt", "frames", "worker")
+RESULT_COLUMNS = (
+    "status",
+    "message",
+    "wall_s",
+    "steps",
+    "sim_time",
+    "max_strain",
+    "kinetic",
+    "potential",
+    "stable_dt",
+    "frames",
+    "worker",
+)
 #: rows per Parquet row group (and per batch read while writing it)
 BATCH = 1000
 
 
 def canonical(spec: Spec) -> str:
     """What makes two specs the same sweep (not their comments or key order)."""
-    return json.dumps({"scene": spec.scene, "duration": spec.duration, "frames": spec.frames,
-                       "seed": spec.seed, "set": spec.fixed, "grid": spec.grid,
-                       "random": spec.random, "samples": spec.samples, "script": spec.script},
-                      sort_keys=True)
+    return json.dumps(
+        {
+            "scene": spec.scene,
+            "duration": spec.duration,
+            "frames": spec.frames,
+            "seed": spec.seed,
+            "set": spec.fixed,
+            "grid": spec.grid,
+            "random": spec.random,
+            "samples": spec.samples,
+            "script": spec.script,
+        },
+        sort_keys=True,
+    )
 
 
 def prepare(spec: Spec, out: Path) -> set[str]:
     """Make ``out`` (or check that it holds this spec), drop half-written runs; the ids done."""
     if "://" in str(out):
-        raise SpecError(f"-o {out}: object-store URLs are not supported (a run commits by renaming "
-                        f"its directory); use a local or shared (NFS) path")
+        raise SpecError(
+            f"-o {out}: object-store URLs are not supported (a run commits by renaming "
+            f"its directory); use a local or shared (NFS) path"
+        )
     if out.exists() and not out.is_dir():
         raise SpecError(f"-o {out}: exists and is not a directory")
     marker = out / "sweep.json"
     if out.exists() and any(out.iterdir()):
         if not marker.exists():
-            raise SpecError(f"-o {out}: exists and holds no sweep; choose a new or empty directory")
+            raise SpecError(
+                f"-o {out}: exists and holds no sweep; choose a new or empty directory"
+            )
         if json.loads(marker.read_text())["spec"] != json.loads(canonical(spec)):
-            raise SpecError(f"-o {out}: holds a sweep of another spec ({out / 'spec.yaml'}); "
-                            f"choose another directory to run this one")
+            raise SpecError(
+                f"-o {out}: holds a sweep of another spec ({out / 'spec.yaml'}); "
+                f"choose another directory to run this one"
+            )
     (out / "runs").mkdir(parents=True, exist_ok=True)
     if not marker.exists():
         (out / "spec.yaml").write_text(spec.text or "")
@@ -72,8 +100,9 @@ def _remote_execute(spec, run, out):
     return execute(spec, run, out)
 
 
-def sweep(spec_path, out, workers: int | None = None, address: str | None = None,
-          progress: bool = True) -> Counter:
+def sweep(
+    spec_path, out, workers: int | None = None, address: str | None = None, progress: bool = True
+) -> Counter:
     """Run every run of the spec at ``spec_path`` not yet in ``out``; returns the counts by status
     of all the sweep's runs. :class:`SpecError` for a bad spec or output, before anything runs."""
     spec = load_spec(spec_path)
@@ -103,15 +132,20 @@ def _run_on_ray(spec, out, pending, total, counts, workers, address, progress) -
     env = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1"}
     started = not ray.is_initialized()
     if started:
-        kw = dict(include_dashboard=False, logging_level=logging.WARNING,
-                  runtime_env={"env_vars": env})
+        kw = dict(
+            include_dashboard=False, logging_level=logging.WARNING, runtime_env={"env_vars": env}
+        )
         if address:
             if source:
-                print(f"joining {address} with token authentication (the token from {source})",
-                      file=sys.stderr)
+                print(
+                    f"joining {address} with token authentication (the token from {source})",
+                    file=sys.stderr,
+                )
             try:
                 ray.init(address=address, **kw)
-            except Exception as e:  # Ray raises ConnectionError, with the AuthenticationError as cause
+            except (
+                Exception
+            ) as e:  # Ray raises ConnectionError, with the AuthenticationError as cause
                 message = cluster.join_error(address, e)
                 if message is None:
                     raise
@@ -124,8 +158,15 @@ def _run_on_ray(spec, out, pending, total, counts, workers, address, progress) -
         task = ray.remote(num_cpus=1, max_retries=3)(_remote_execute)
         spec_ref = ray.put(spec)
         out_s = str(out.resolve())
-        bar = tqdm(total=total, initial=sum(counts.values()), unit="run", disable=not progress,
-                   file=sys.stderr, dynamic_ncols=True, smoothing=0.05)
+        bar = tqdm(
+            total=total,
+            initial=sum(counts.values()),
+            unit="run",
+            disable=not progress,
+            file=sys.stderr,
+            dynamic_ncols=True,
+            smoothing=0.05,
+        )
         bar.set_postfix(_postfix(counts), refresh=False)
         in_flight = []
         exhausted = False
@@ -157,8 +198,12 @@ def _ray_running() -> bool:
 
 
 def _postfix(counts: Counter) -> dict:
-    return {"unstable": counts["unstable"], "diverged": counts["diverged"], "refused": counts["refused"],
-            **({"failed": counts["failed"]} if counts["failed"] else {})}
+    return {
+        "unstable": counts["unstable"],
+        "diverged": counts["diverged"],
+        "refused": counts["refused"],
+        **({"failed": counts["failed"]} if counts["failed"] else {}),
+    }
 
 
 def _columns(spec: Spec) -> list[str]:
@@ -180,7 +225,9 @@ def write_parquet(spec: Spec, out: Path) -> Path:
 
         def flush():
             nonlocal writer, schema
-            table = pa.Table.from_pylist([{c: r.get(c) for c in columns} for r in batch], schema=schema)
+            table = pa.Table.from_pylist(
+                [{c: r.get(c) for c in columns} for r in batch], schema=schema
+            )
             if writer is None:
                 schema = table.schema
                 writer = pq.ParquetWriter(tmp, schema)
@@ -215,10 +262,16 @@ def summary(out) -> str:
         state = "complete"
     else:
         rows = [read_row(d) for d in sorted((out / "runs").iterdir()) if (d / "row.json").exists()]
-        state = f"incomplete: {len(rows)} of {total} runs done; run the same command again to finish"
+        state = (
+            f"incomplete: {len(rows)} of {total} runs done; run the same command again to finish"
+        )
     counts = Counter(r["status"] for r in rows)
     lines = [f"sweep {out}: {total} runs ({state})"]
-    lines += [f"  {s:9s} {counts[s]}" for s in STATUSES if counts[s] or s in ("ok", "unstable", "diverged", "refused")]
+    lines += [
+        f"  {s:9s} {counts[s]}"
+        for s in STATUSES
+        if counts[s] or s in ("ok", "unstable", "diverged", "refused")
+    ]
     wall = sum(r["wall_s"] for r in rows)
     lines.append(f"  run time {wall:.1f} s in all, {wall / max(len(rows), 1):.3f} s per run")
     slow = sorted(rows, key=lambda r: -r["wall_s"])[:5]

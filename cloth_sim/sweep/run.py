@@ -1,9 +1,11 @@
-"""One run of a sweep, headless (no ROS graph): build the simulation from the base scene and the run's
+"""One run of a sweep, headless (no ROS graph): build the simulation from the base scene and the
+run's
 values exactly as the node would (:func:`cloth_sim.settings.configure`), play the script, write a
 bag of its frames, and commit the run's directory whole.
 
 Files: the run is written under ``OUT/.partial/<token>/<run>/`` — the bag (``<run>_0.mcap``,
-``metadata.yaml``) and ``row.json`` (the run's row of ``runs.parquet`` but its wall time, which goes
+``metadata.yaml``) and ``row.json`` (the run's row of ``runs.parquet`` but its wall time, which
+goes
 to ``OUT/timings/<run>.json`` first) — and the directory is then renamed to ``OUT/runs/<run>/`` in
 one step, so ``runs/`` only ever holds whole runs. A run that
 finds its directory there already (another worker did it after a restart) drops its own copy: the
@@ -30,22 +32,31 @@ from pathlib import Path
 from .. import settings
 from ..bag import cdr
 from ..bag.store import BagWriter
-from ..energy_balance import EnergyBalance
+from ..physics.energy_balance import EnergyBalance
 from ..simulator import SimulationDiverged
 from .script import Script, ScriptError
 from .spec import Spec, resolve, run_id
 
 #: a run's fate: ``unstable`` is a run that stayed finite but holds energy no source put in
-#: (:mod:`cloth_sim.energy_balance`): a step past its limit that chatters instead of blowing up
+# : (:mod:`cloth_sim.physics.energy_balance`): a step past its limit that chatters instead of
+# blowing up
 STATUSES = ("ok", "unstable", "diverged", "refused", "failed")
-#: what a run measures rather than computes: kept beside its directory (``OUT/timings/<run>.json``),
+# : what a run measures rather than computes: kept beside its directory
+# (``OUT/timings/<run>.json``),
 #: so that the directory's bytes depend on the run's values alone
 TIMINGS = ("wall_s", "worker")
 #: the QoS the node offers on its topics (reliable, volatile, keep last 10; the camera's 5)
-_QOS = {"history": "keep_last", "depth": 10, "reliability": "reliable", "durability": "volatile",
-        "deadline": {"sec": 0, "nsec": 0}, "lifespan": {"sec": 0, "nsec": 0},
-        "liveliness": "automatic", "liveliness_lease_duration": {"sec": 0, "nsec": 0},
-        "avoid_ros_namespace_conventions": False}
+_QOS = {
+    "history": "keep_last",
+    "depth": 10,
+    "reliability": "reliable",
+    "durability": "volatile",
+    "deadline": {"sec": 0, "nsec": 0},
+    "lifespan": {"sec": 0, "nsec": 0},
+    "liveliness": "automatic",
+    "liveliness_lease_duration": {"sec": 0, "nsec": 0},
+    "avoid_ros_namespace_conventions": False,
+}
 
 
 def execute(spec: Spec, run: dict, out) -> dict:
@@ -81,21 +92,38 @@ def execute(spec: Spec, run: dict, out) -> dict:
 def _simulate(spec: Spec, run: dict, rid: str, tmp: Path) -> dict:
     t0 = time.perf_counter()
     params, variables = spec.values_for(run)
-    row = {"run": rid, **run, "status": "ok", "message": "", "wall_s": 0.0, "steps": 0,
-           "sim_time": 0.0, "max_strain": math.nan, "kinetic": math.nan, "potential": math.nan,
-           "stable_dt": math.nan, "frames": 0, "worker": _worker()}
+    row = {
+        "run": rid,
+        **run,
+        "status": "ok",
+        "message": "",
+        "wall_s": 0.0,
+        "steps": 0,
+        "sim_time": 0.0,
+        "max_strain": math.nan,
+        "kinetic": math.nan,
+        "potential": math.nan,
+        "stable_dt": math.nan,
+        "frames": 0,
+        "worker": _worker(),
+    }
     try:
         cfg, scene, sim, stable_dt = settings.configure(params.get("scene", spec.scene), params)
     except ValueError as e:
-        row.update(status="refused", message=str(e), wall_s=time.perf_counter() - t0, worker=_worker())
+        row.update(
+            status="refused", message=str(e), wall_s=time.perf_counter() - t0, worker=_worker()
+        )
         return row
     row["stable_dt"] = float(stable_dt)
     script = Script([resolve(e, variables) for e in spec.script])
     bag = _Bag(tmp, sim, cfg, stable_dt) if spec.frames > 0 else None
     n_steps = max(0, math.ceil(spec.duration / sim.dt - 1e-9))
     # frame k at the first step at or after k/frames
-    frame_times = ([k / spec.frames for k in range(int(math.floor(spec.duration * spec.frames + 1e-9)) + 1)]
-                   if bag else [])
+    frame_times = (
+        [k / spec.frames for k in range(int(math.floor(spec.duration * spec.frames + 1e-9)) + 1)]
+        if bag
+        else []
+    )
     next_frame = 0
     balance = EnergyBalance(sim)
     try:
@@ -121,9 +149,14 @@ def _simulate(spec: Spec, run: dict, rid: str, tmp: Path) -> dict:
     if row["status"] == "ok" and balance.unstable:
         row.update(status="unstable", message=balance.message())
     energy = sim.energy()
-    row.update(steps=int(sim.steps_taken), sim_time=float(sim.time), max_strain=float(sim.max_strain()),
-               kinetic=float(energy["kinetic"]), potential=float(energy["spring"] + energy["gravity"]),
-               wall_s=time.perf_counter() - t0)
+    row.update(
+        steps=int(sim.steps_taken),
+        sim_time=float(sim.time),
+        max_strain=float(sim.max_strain()),
+        kinetic=float(energy["kinetic"]),
+        potential=float(energy["spring"] + energy["gravity"]),
+        wall_s=time.perf_counter() - t0,
+    )
     return row
 
 
@@ -137,22 +170,32 @@ class _Bag:
     def __init__(self, path: Path, sim, cfg: dict, stable_dt: float):
         self.writer = BagWriter(path)
         dt = sim.dt
-        self.margin = 0.0 if not math.isfinite(stable_dt) else (dt / stable_dt if stable_dt > 0 else math.inf)
+        self.margin = (
+            0.0
+            if not math.isfinite(stable_dt)
+            else (dt / stable_dt if stable_dt > 0 else math.inf)
+        )
         self.frame_id = cfg["frame_id"]
         self.cfg = cfg
-        self.points = self.writer.add_topic("/cloth_sim/points", "sensor_msgs/msg/PointCloud2", [_QOS])
+        self.points = self.writer.add_topic(
+            "/cloth_sim/points", "sensor_msgs/msg/PointCloud2", [_QOS]
+        )
         self.stats = self.writer.add_topic("/cloth_sim/stats", "cloth_sim/msg/Stats", [_QOS])
         self.camera = None
         if cfg["camera.enable"]:
-            from ..camera import camera_from_settings
+            from ..sensors.camera import camera_from_settings
 
             self.camera = camera_from_settings(settings.camera_settings(cfg))
             qos = [dict(_QOS, depth=5)]
-            self.cam_topics = {name: self.writer.add_topic(f"/cloth_sim/camera/{name}", kind, qos)
-                               for name, kind in (("depth/image", "sensor_msgs/msg/Image"),
-                                                  ("depth/camera_info", "sensor_msgs/msg/CameraInfo"),
-                                                  ("labels", "sensor_msgs/msg/Image"),
-                                                  ("triangles", "sensor_msgs/msg/Image"))}
+            self.cam_topics = {
+                name: self.writer.add_topic(f"/cloth_sim/camera/{name}", kind, qos)
+                for name, kind in (
+                    ("depth/image", "sensor_msgs/msg/Image"),
+                    ("depth/camera_info", "sensor_msgs/msg/CameraInfo"),
+                    ("labels", "sensor_msgs/msg/Image"),
+                    ("triangles", "sensor_msgs/msg/Image"),
+                )
+            }
             self.optical = f"{self.frame_id}/camera_optical"
         model = sim.model
         self.shape = (model.rows, model.cols) if model.rows else (1, model.n_particles)
@@ -164,14 +207,30 @@ class _Bag:
         w = self.writer
         w.write(self.points, t, cdr.point_cloud(sim.positions, *self.shape, self.frame_id, t))
         energy = sim.energy()
-        w.write(self.stats, t, cdr.stats(
-            stamp_ns=t, frame_id=self.frame_id, integrator=sim.integrator, dt=sim.dt,
-            steps=int(sim.steps_taken - self.last_steps), step_time_mean=0.0, step_time_max=0.0,
-            tick_wall_time=0.0, real_time_factor=0.0, sim_time=sim.time,
-            kinetic_energy=energy["kinetic"], potential_energy=energy["spring"] + energy["gravity"],
-            max_strain=sim.max_strain(), overruns=0, stability_margin=self.margin, paused=False,
-            solver_iterations=int(sim.integrator_stats.get("last_iterations", 0)),
-            solver_residual=float(sim.integrator_stats.get("last_residual", 0.0))))
+        w.write(
+            self.stats,
+            t,
+            cdr.stats(
+                stamp_ns=t,
+                frame_id=self.frame_id,
+                integrator=sim.integrator,
+                dt=sim.dt,
+                steps=int(sim.steps_taken - self.last_steps),
+                step_time_mean=0.0,
+                step_time_max=0.0,
+                tick_wall_time=0.0,
+                real_time_factor=0.0,
+                sim_time=sim.time,
+                kinetic_energy=energy["kinetic"],
+                potential_energy=energy["spring"] + energy["gravity"],
+                max_strain=sim.max_strain(),
+                overruns=0,
+                stability_margin=self.margin,
+                paused=False,
+                solver_iterations=int(sim.integrator_stats.get("last_iterations", 0)),
+                solver_residual=float(sim.integrator_stats.get("last_residual", 0.0)),
+            ),
+        )
         self.last_steps = sim.steps_taken
         if self.camera is not None:
             f = self.camera.render(sim)
@@ -193,9 +252,9 @@ def read_row(run_dir) -> dict:
     run_dir = Path(run_dir)
     row = json.loads((run_dir / "row.json").read_text())
     try:
-        row.update(json.loads((run_dir.parent.parent / "timings" / f"{run_dir.name}.json").read_text()))
+        row.update(
+            json.loads((run_dir.parent.parent / "timings" / f"{run_dir.name}.json").read_text())
+        )
     except (OSError, ValueError):
         row.update(wall_s=math.nan, worker="")
     return row
-
-

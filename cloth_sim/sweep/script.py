@@ -21,7 +21,8 @@ class Script:
     def __init__(self, events: list):
         self.events = sorted(enumerate(events), key=lambda e: e[1]["at"])
         self._next = 0
-        self._moves: list = []  # (label, kind, key, start time, start position, end position, duration)
+        # (label, kind, key, start time, start position, end position, duration)
+        self._moves: list = []
 
     @property
     def idle(self) -> bool:
@@ -45,8 +46,10 @@ class Script:
             if kind == "grasp":
                 held = sim.grasp(body["gripper"], body["point"], body["radius"])
                 if len(held) == 0:
-                    raise ScriptError(f"{label}: no particle within radius {body['radius']:g} m of "
-                                      f"{np.round(body['point'], 4).tolist()}")
+                    raise ScriptError(
+                        f"{label}: no particle within radius {body['radius']:g} m of "
+                        f"{np.round(body['point'], 4).tolist()}"
+                    )
             elif kind == "release":
                 sim.release(body["gripper"])
                 self._moves = [m for m in self._moves if m[1:3] != ("gripper", body["gripper"])]
@@ -57,13 +60,24 @@ class Script:
                 else:
                     names = [c.name for c in sim.colliders]
                     if body["collider"] not in names:
-                        raise ScriptError(f"{label}.collider: {body['collider']!r} is not a collider "
-                                          f"of this run; its colliders are {', '.join(names) or 'none'}")
+                        raise ScriptError(
+                            f"{label}.collider: {body['collider']!r} is not a collider "
+                            f"of this run; its colliders are {', '.join(names) or 'none'}"
+                        )
                     key, what = names.index(body["collider"]), "collider"
                     start = sim.colliders[key].position.copy()
                 self._moves = [m for m in self._moves if m[1:3] != (what, key)]
-                self._moves.append((label, what, key, sim.time, np.array(start, float),
-                                    np.array(body["to"], float), float(body["duration"])))
+                self._moves.append(
+                    (
+                        label,
+                        what,
+                        key,
+                        sim.time,
+                        np.array(start, float),
+                        np.array(body["to"], float),
+                        float(body["duration"]),
+                    )
+                )
         except ScriptError:
             raise
         except (KeyError, ValueError) as e:  # an unknown gripper, a grasp by a name already held

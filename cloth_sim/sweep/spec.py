@@ -1,4 +1,5 @@
-"""A sweep's spec: a base scene, a grid and random draws over the node's parameters, fixed values, and
+"""A sweep's spec: a base scene, a grid and random draws over the node's parameters, fixed values,
+and
 a script of grasps and moves; checked whole before anything runs, expanded into runs lazily.
 
 ```yaml
@@ -22,15 +23,18 @@ script:                   # optional, in simulated time
   - {at: 0.0, move: {collider: ball, to: [0.5, -0.5, -0.3], duration: 1.0}}
 ```
 
-Every value and range is checked by the schema the node uses (:data:`~cloth_sim.parameters.SCHEMA`):
+Every value and range is checked by the schema the node uses
+(:data:`~cloth_sim.parameters.SCHEMA`):
 a grid value, both ends of a uniform or loguniform range and every choice. Keys of ``grid`` and
 ``random`` that are not parameters are script variables and must be used by the script. A bad spec
 raises :class:`SpecError` naming the key (``grid.dt[2]``, ``random.dt.loguniform``,
 ``script[1].move.to``) and what is accepted. Combinations (a dt above the method's stable step, a
 thickness too large for the cloth) are checked per run, where they make the run ``refused``.
 
-A run's values are its grid point's values, its draws and, with ``random``, its ``sample`` index; its
-id :func:`run_id` is a hash of those alone, and its draws come from a generator seeded by ``seed``, the
+A run's values are its grid point's values, its draws and, with ``random``, its ``sample`` index;
+its
+id :func:`run_id` is a hash of those alone, and its draws come from a generator seeded by ``seed``,
+the
 grid point's index and the sample's: the same spec gives the same runs in the same order, whatever
 runs them.
 """
@@ -134,7 +138,7 @@ def _draw(rng, dist: tuple):
     return arg[int(rng.integers(len(arg)))]
 
 
-# ------------------------------------------------------------------------------------------ loading
+# ----------------------------------------------------------------------------------------- loading
 def load_spec(path) -> Spec:
     """Read and check a spec file (:class:`SpecError` naming the file and the key)."""
     path = Path(path)
@@ -152,10 +156,12 @@ def load_spec(path) -> Spec:
 
 def spec_from_dict(data, source: str = "<dict>", text: str = "", base: Path | None = None) -> Spec:
     """Check a spec given as a mapping (what :func:`load_spec` reads)."""
+
     def fail(key, message):
         # (the schema's own messages name the key already)
-        raise SpecError(f"{source}: {message}" if message.startswith(key) else
-                        f"{source}: {key}: {message}")
+        raise SpecError(
+            f"{source}: {message}" if message.startswith(key) else f"{source}: {key}: {message}"
+        )
 
     if not isinstance(data, dict):
         fail("spec", f"must be a mapping with keys {', '.join(TOP_KEYS)}, got {_short(data)}")
@@ -172,7 +178,9 @@ def spec_from_dict(data, source: str = "<dict>", text: str = "", base: Path | No
         scene = str((base / scene).resolve())
     base_scene = _check_scene(scene, fail)
     duration = _number(data["duration"], "duration", fail, lo=0.0, lo_open=True, hi=1e6, unit="s")
-    frames = _number(data.get("frames", 0), "frames", fail, lo=0.0, hi=1e4, unit="per simulated second")
+    frames = _number(
+        data.get("frames", 0), "frames", fail, lo=0.0, hi=1e4, unit="per simulated second"
+    )
     seed = data.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or seed < 0:
         fail("seed", f"must be an integer >= 0, got {_short(seed)}")
@@ -200,7 +208,10 @@ def spec_from_dict(data, source: str = "<dict>", text: str = "", base: Path | No
     if random:
         samples = random.get("samples")
         if isinstance(samples, bool) or not isinstance(samples, numbers.Integral) or samples < 1:
-            fail("random.samples", f"must be an integer >= 1 (draws per grid point), got {_short(samples)}")
+            fail(
+                "random.samples",
+                f"must be an integer >= 1 (draws per grid point), got {_short(samples)}",
+            )
         for key, dist in random.items():
             if key == "samples":
                 continue
@@ -221,13 +232,27 @@ def spec_from_dict(data, source: str = "<dict>", text: str = "", base: Path | No
     used = {name for event in script for name in _variables_in(event)}
     for name in sorted(variables - used):
         where = "grid" if name in grid else ("random" if name in draws else "set")
-        fail(f"{where}.{name}", f"{name!r} is not a parameter of the node nor a variable the script "
-             f"uses (as ${name}); the parameters are {', '.join(sorted(SCHEMA))}")
+        fail(
+            f"{where}.{name}",
+            f"{name!r} is not a parameter of the node nor a variable the script "
+            f"uses (as ${name}); the parameters are {', '.join(sorted(SCHEMA))}",
+        )
     if "scene" not in grid and "scene" not in draws:
         _check_colliders(base_scene, script, fail)
 
-    spec = Spec(scene=scene, duration=duration, frames=frames, seed=int(seed), fixed=fixed,
-                grid=grid, random=draws, samples=int(samples), script=script, source=source, text=text)
+    spec = Spec(
+        scene=scene,
+        duration=duration,
+        frames=frames,
+        seed=int(seed),
+        fixed=fixed,
+        grid=grid,
+        random=draws,
+        samples=int(samples),
+        script=script,
+        source=source,
+        text=text,
+    )
     if len(spec) > MAX_RUNS:
         fail("grid", f"the spec expands to {len(spec)} runs; at most {MAX_RUNS} are accepted")
     return spec
@@ -243,8 +268,11 @@ def _mapping(x, key, fail) -> dict:
 
 def _key(where, key, fail) -> None:
     if not isinstance(key, str) or not (key in SCHEMA or _VARIABLE_NAME.match(key)):
-        fail(where, f"{key!r} is not a parameter of the node nor a script variable name (letters, "
-             f"digits, _); the parameters are {', '.join(sorted(SCHEMA))}")
+        fail(
+            where,
+            f"{key!r} is not a parameter of the node nor a script variable name (letters, "
+            f"digits, _); the parameters are {', '.join(sorted(SCHEMA))}",
+        )
 
 
 def _param(field, name, value, fail):
@@ -265,8 +293,11 @@ def _param(field, name, value, fail):
 def _distribution(key, dist, fail) -> tuple:
     where = f"random.{key}"
     if not isinstance(dist, dict) or len(dist) != 1 or next(iter(dist)) not in DISTRIBUTIONS:
-        fail(where, f"must be one of {{uniform: [lo, hi]}}, {{loguniform: [lo, hi]}}, "
-             f"{{choice: [a, b, ...]}}, got {_short(dist)}")
+        fail(
+            where,
+            f"must be one of {{uniform: [lo, hi]}}, {{loguniform: [lo, hi]}}, "
+            f"{{choice: [a, b, ...]}}, got {_short(dist)}",
+        )
     kind, arg = next(iter(dist.items()))
     where = f"{where}.{kind}"
     if kind == "choice":
@@ -305,7 +336,7 @@ def _number(x, key, fail, lo=None, hi=None, lo_open=False, unit=""):
 
 
 def _is_number(x) -> bool:
-    return (not isinstance(x, bool) and isinstance(x, numbers.Real) and math.isfinite(float(x)))
+    return not isinstance(x, bool) and isinstance(x, numbers.Real) and math.isfinite(float(x))
 
 
 def _check_scene(scene, fail):
@@ -323,32 +354,47 @@ def _check_colliders(scene, script, fail) -> None:
     for i, event in enumerate(script):
         move = event.get("move")
         if move and "collider" in move and move["collider"] not in names:
-            fail(f"script[{i}].move.collider", f"{move['collider']!r} is not a collider of scene "
-                 f"{scene.name}; its colliders are {', '.join(names) or 'none'}")
+            fail(
+                f"script[{i}].move.collider",
+                f"{move['collider']!r} is not a collider of scene "
+                f"{scene.name}; its colliders are {', '.join(names) or 'none'}",
+            )
 
 
-# ------------------------------------------------------------------------------------------- script
+# ------------------------------------------------------------------------------------------ script
 def _script(events, variables: set, fail) -> list:
     if events is None:
         return []
     if not isinstance(events, list):
-        fail("script", f"must be a list of events ({{at: t, grasp|move|release: ...}}), got {_short(events)}")
+        fail(
+            "script",
+            f"must be a list of events ({{at: t, grasp|move|release: ...}}), got {_short(events)}",
+        )
     out = []
     for i, ev in enumerate(events):
         where = f"script[{i}]"
         if not isinstance(ev, dict) or "at" not in ev:
-            fail(where, f"must be a mapping with at (s) and one of {', '.join(ACTIONS)}, got {_short(ev)}")
+            fail(
+                where,
+                f"must be a mapping with at (s) and one of {', '.join(ACTIONS)}, got {_short(ev)}",
+            )
         actions = [k for k in ev if k != "at"]
         if len(actions) != 1 or actions[0] not in ACTIONS:
-            fail(where, f"must hold exactly one of {', '.join(ACTIONS)} beside at, got {_short(list(ev))}")
+            fail(
+                where,
+                f"must hold exactly one of {', '.join(ACTIONS)} beside at, got {_short(list(ev))}",
+            )
         at = _scalar(ev["at"], f"{where}.at", variables, fail, lo=0.0)
         kind = actions[0]
         body = ev[kind]
         if not isinstance(body, dict):
             fail(f"{where}.{kind}", f"must be a mapping, got {_short(body)}")
         where = f"{where}.{kind}"
-        allowed = {"grasp": ("gripper", "point", "radius"), "move": ("gripper", "collider", "to", "duration"),
-                   "release": ("gripper",)}[kind]
+        allowed = {
+            "grasp": ("gripper", "point", "radius"),
+            "move": ("gripper", "collider", "to", "duration"),
+            "release": ("gripper",),
+        }[kind]
         extra = [k for k in body if k not in allowed]
         if extra:
             fail(f"{where}.{extra[0]}", f"unknown key; accepted: {', '.join(allowed)}")
@@ -361,16 +407,25 @@ def _script(events, variables: set, fail) -> list:
             if "to" not in body:
                 fail(f"{where}.to", "missing (the position to reach, [x, y, z] m)")
             event[kind]["to"] = _vector(body["to"], f"{where}.to", variables, fail)
-            event[kind]["duration"] = _scalar(body.get("duration", 0.0), f"{where}.duration",
-                                              variables, fail, lo=0.0)
+            event[kind]["duration"] = _scalar(
+                body.get("duration", 0.0), f"{where}.duration", variables, fail, lo=0.0
+            )
         else:
-            event[kind]["gripper"] = _name(body.get("gripper", "gripper"), f"{where}.gripper", fail)
+            event[kind]["gripper"] = _name(
+                body.get("gripper", "gripper"), f"{where}.gripper", fail
+            )
             if kind == "grasp":
                 if "point" not in body:
                     fail(f"{where}.point", "missing (where to grasp, [x, y, z] m)")
                 event[kind]["point"] = _vector(body["point"], f"{where}.point", variables, fail)
-                event[kind]["radius"] = _scalar(body.get("radius", 0.05), f"{where}.radius",
-                                                variables, fail, lo=0.0, lo_open=True)
+                event[kind]["radius"] = _scalar(
+                    body.get("radius", 0.05),
+                    f"{where}.radius",
+                    variables,
+                    fail,
+                    lo=0.0,
+                    lo_open=True,
+                )
         out.append(event)
     return out
 

@@ -1,6 +1,6 @@
 """The README's strip of frames: a scripted fold on ClothFold-v0, seed 0.
 
-    .venv/bin/python docs/envs/plot_fold_strip.py   # writes docs/envs/fold_strip.png
+.venv/bin/python docs/envs/plot_fold_strip.py   # writes docs/envs/fold_strip.png
 """
 
 from pathlib import Path
@@ -15,8 +15,13 @@ import numpy as np  # noqa: E402
 import cloth_sim.envs  # noqa: E402,F401
 from cloth_sim.envs import policies  # noqa: E402
 
-env = gym.make("cloth_sim/ClothFold-v0", render_mode="rgb_array", image_size=240, cache_dir=False,
-               num_variations=1000)
+env = gym.make(
+    "cloth_sim/ClothFold-v0",
+    render_mode="rgb_array",
+    image_size=240,
+    cache_dir=False,
+    num_variations=1000,
+)
 obs, info = env.reset(seed=0)
 frames, scores = [env.render()], [info["normalized_performance"]]
 for action in policies.fold(env.unwrapped):

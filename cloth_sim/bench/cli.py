@@ -1,0 +1,322 @@
+"""``cloth-sim bench …``: every benchmark's command line, over the modules of this package.
+
+Each subcommand prints its figures (tables, ratios measured side by side in one process);
+docs/BENCHMARKS.md reports them with the commands that gave them. Those that need rclpy, or an
+optional peer (``make bench-peers``), say so in their help.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from .. import integrators
+from ..kinds import STRAIN_LIMIT_METHODS
+
+
+def _bench_steps(args) -> int:
+    from .steps import print_step_table
+
+    print_step_table(args.sizes, args.integrators, args.seconds)
+    return 0
+
+
+def _bench_implicit(args) -> int:
+    from .steps import print_implicit_table
+
+    print_implicit_table(args.sizes, args.dt, args.seconds)
+    return 0
+
+
+def _bench_blowup(args) -> int:
+    from .steps import print_blowup_table
+
+    print_blowup_table(args.size)
+    return 0
+
+
+def _bench_params(args) -> int:
+    from .node import print_param_load_table
+
+    print_param_load_table(args.size, args.rate)
+    return 0
+
+
+def _bench_node(args) -> int:
+    from .node import print_grid_scene_table, print_node_table, print_scene_node_table
+
+    if args.scene:
+        if args.grid is not None:
+            print_grid_scene_table(args.scene, args.grid, args.seconds, args.rate)
+            return 0
+        for scene in args.scene:
+            print_scene_node_table(scene, args.seconds, args.rate)
+        return 0
+    print_node_table(
+        args.sizes,
+        args.seconds,
+        args.integrator,
+        args.dt,
+        args.rate,
+        args.strain_limit_passes,
+        args.stiffness,
+        (True,) if args.subscribed_only else (False, True),
+        args.strain_limit_method,
+    )
+    return 0
+
+
+def _bench_camera(args) -> int:
+    from .node import print_camera_node_table
+
+    print_camera_node_table(args.size, args.seconds, args.width, args.height, args.camera_rate)
+    return 0
+
+
+def _bench_lockstep(args) -> int:
+    from .node import print_lockstep_table
+
+    print_lockstep_table(args.size, args.calls)
+    return 0
+
+
+def _bench_startup(args) -> int:
+    from .node import print_startup_table
+
+    print_startup_table(args.trials, tuple(args.sizes))
+    return 0
+
+
+def _bench_contacts(args) -> int:
+    from .steps import print_contacts_table
+
+    print_contacts_table(tuple(args.sizes), args.seconds)
+    return 0
+
+
+def _bench_strain(args) -> int:
+    from .steps import print_strain_limit_table
+
+    print_strain_limit_table(tuple(args.sizes), args.seconds)
+    return 0
+
+
+def _bench_threading(args) -> int:
+    from .threading_layers import print_table
+
+    print_table(args.size, args.seconds, args.rounds)
+    return 0
+
+
+def _bench_peers(args) -> int:
+    from .peers import print_peer_table
+
+    return print_peer_table(tuple(args.sizes), rounds=args.rounds)
+
+
+def _bench_vbd_peers(args) -> int:
+    from .vbd_peers import print_vbd_peer_table
+
+    return print_vbd_peer_table(tuple(args.sizes), args.seconds, args.twist_seconds, args.device)
+
+
+def _bench_flex_peer(args) -> int:
+    from .flex_peer import print_flex_table
+
+    return print_flex_table(args.size, args.seconds)
+
+
+def _bench_record(args) -> int:
+    from .bag import print_record_table
+
+    print_record_table(args.size, args.rate, args.seconds)
+    return 0
+
+
+def _bench_suite(args) -> int:
+    import importlib
+    from pathlib import Path
+
+    module = importlib.import_module(f".{args.bench.replace('-', '_')}", __package__)
+    module.main(Path(args.out or f"bench_out/{args.bench}"), quick=args.quick)
+    return 0
+
+
+def add_parser(sub) -> argparse.ArgumentParser:
+    """The ``bench`` subcommand and its own subcommands, on the ``cloth-sim`` parser's ``sub``."""
+    b = sub.add_parser("bench", help="benchmarks")
+    bsub = b.add_subparsers(dest="bench", required=True)
+    s = bsub.add_parser("steps", help="ms/step per integrator and grid size on the hanging cloth")
+    s.add_argument("--sizes", type=int, nargs="+", default=[32, 64, 128])
+    s.add_argument(
+        "--integrators",
+        nargs="+",
+        default=["symplectic_euler", "rk4"],
+        choices=integrators.available(),
+    )
+    s.add_argument("--seconds", type=float, default=1.0, help="wall time per measurement")
+    s.set_defaults(func=_bench_steps)
+    i = bsub.add_parser(
+        "implicit", help="ms/step of the implicit methods, CG vs direct, CG iterations"
+    )
+    i.add_argument("--sizes", type=int, nargs="+", default=[32, 64])
+    i.add_argument("--dt", type=float, default=1.0 / 60, help="time step (default 1/60 s)")
+    i.add_argument("--seconds", type=float, default=1.0, help="wall time per measurement")
+    i.set_defaults(func=_bench_implicit)
+    sl = bsub.add_parser(
+        "strain", help="worst strain and cost of the strain limit on the hanging scene"
+    )
+    sl.add_argument("--sizes", type=int, nargs="+", default=[32, 64])
+    sl.add_argument("--seconds", type=float, default=3.0, help="simulated time per run")
+    sl.set_defaults(func=_bench_strain)
+    ct = bsub.add_parser(
+        "contacts", help="cost of colliders and self-collision on the hanging scene"
+    )
+    ct.add_argument("--sizes", type=int, nargs="+", default=[32, 64])
+    ct.add_argument("--seconds", type=float, default=1.5, help="simulated time per run")
+    ct.set_defaults(func=_bench_contacts)
+    th = bsub.add_parser(
+        "threading",
+        help="ms/step of the hanging cloth under each of numba's threading "
+        "layers (OpenMP, TBB, workqueue), each in its own process",
+    )
+    th.add_argument("--size", type=int, default=64)
+    th.add_argument("--seconds", type=float, default=0.5, help="simulated time per run")
+    th.add_argument("--rounds", type=int, default=3, help="rounds the layers take turns (median)")
+    th.set_defaults(func=_bench_threading)
+    pp = bsub.add_parser(
+        "peers",
+        help="NVIDIA Warp's CPU cloth kernel beside symplectic Euler and RK4 "
+        "(needs the optional warp-lang: make bench-peers)",
+    )
+    pp.add_argument("--sizes", type=int, nargs="+", default=[32, 64, 128])
+    pp.add_argument("--rounds", type=int, default=9, help="alternating bursts per size (median)")
+    pp.set_defaults(func=_bench_peers)
+    vp = bsub.add_parser(
+        "vbd-peers",
+        help="Newton's SolverVBD beside vbd: the hanging cloth's springs, "
+        "and Newton's cloth twist (needs the optional newton: make "
+        "bench-peers)",
+    )
+    vp.add_argument("--sizes", type=int, nargs="+", default=[32, 64])
+    vp.add_argument(
+        "--seconds", type=float, default=2.0, help="simulated time of the hanging runs"
+    )
+    vp.add_argument(
+        "--twist-seconds",
+        type=float,
+        default=5.0,
+        help="simulated time of the twist (Newton's example runs 300 frames: 5 s); 0: none",
+    )
+    vp.add_argument("--device", default="cpu", help="Warp device of Newton's side (cpu, cuda:0)")
+    vp.set_defaults(func=_bench_vbd_peers)
+    fp = bsub.add_parser(
+        "flex-peer",
+        help="MuJoCo's flex cloth beside cloth_sim on the drape scene "
+        "(needs the optional mujoco: make bench-peers)",
+    )
+    fp.add_argument("--size", type=int, default=32, help="cloth N×N (default 32)")
+    fp.add_argument("--seconds", type=float, default=2.0, help="simulated time per run")
+    fp.set_defaults(func=_bench_flex_peer)
+    bb = bsub.add_parser(
+        "blowup", help="how long a diverging step holds the caller, per integrator"
+    )
+    bb.add_argument("--size", type=int, default=32, help="cloth N×N (default 32)")
+    bb.set_defaults(func=_bench_blowup)
+    bp = bsub.add_parser(
+        "params", help="~/stats gaps while `ros2 param load` sets 26 parameters (needs rclpy)"
+    )
+    bp.add_argument("--size", type=int, default=32, help="cloth N×N (default 32)")
+    bp.add_argument("--rate", type=float, default=60.0, help="publish_rate (Hz, default 60)")
+    bp.set_defaults(func=_bench_params)
+    nb = bsub.add_parser("node", help="real-time factor of cloth_sim_node (needs rclpy)")
+    nb.add_argument("--sizes", type=int, nargs="+", default=[32, 64])
+    nb.add_argument(
+        "--scene",
+        default=None,
+        nargs="+",
+        help="scenes as they ship (e.g. tshirt): self-collision off and on, instead of the "
+        "hanging scene at --sizes; with --grid N, each grid scene as the node runs it under "
+        "-p rows:=N -p cols:=N",
+    )
+    nb.add_argument(
+        "--grid",
+        type=int,
+        default=None,
+        help="with --scene: rows and cols of the grid "
+        "scenes (their spacing and particle mass kept: a larger cloth)",
+    )
+    nb.add_argument("--seconds", type=float, default=10.0, help="measured wall time per row")
+    nb.add_argument("--integrator", default="symplectic_euler", choices=integrators.available())
+    nb.add_argument("--dt", type=float, default=1e-3)
+    nb.add_argument("--rate", type=float, default=60.0, help="publish_rate (Hz)")
+    nb.add_argument(
+        "--strain-limit-passes",
+        type=int,
+        default=None,
+        help="the node's strain_limit_passes (default: its own, 20)",
+    )
+    nb.add_argument(
+        "--strain-limit-method",
+        default=None,
+        choices=STRAIN_LIMIT_METHODS,
+        help="the node's strain_limit_method (default: the scene's, projection)",
+    )
+    nb.add_argument(
+        "--stiffness",
+        type=float,
+        default=None,
+        help="structural and shear stiffness, N/m (default: the scene's, 1000)",
+    )
+    nb.add_argument(
+        "--subscribed-only",
+        action="store_true",
+        help="only the rows with ~/points and ~/mesh subscribed",
+    )
+    nb.set_defaults(func=_bench_node)
+    cb = bsub.add_parser(
+        "camera",
+        help="real-time factor of cloth_sim_node with its depth camera "
+        "unsubscribed and subscribed (needs rclpy)",
+    )
+    cb.add_argument("--size", type=int, default=32, help="cloth N×N (default 32)")
+    cb.add_argument("--seconds", type=float, default=10.0, help="measured wall time per row")
+    cb.add_argument("--width", type=int, default=640)
+    cb.add_argument("--height", type=int, default=480)
+    cb.add_argument("--camera-rate", type=float, default=30.0, help="camera.rate (Hz, default 30)")
+    cb.set_defaults(func=_bench_camera)
+    ls = bsub.add_parser(
+        "lockstep", help="steps per second through ~/step from another process (needs rclpy)"
+    )
+    ls.add_argument("--size", type=int, default=32, help="cloth N×N (default 32)")
+    ls.add_argument("--calls", type=int, default=300, help="~/step calls per row")
+    ls.set_defaults(func=_bench_lockstep)
+    su = bsub.add_parser(
+        "startup", help="seconds from starting cloth_sim_node to its first cloud (needs rclpy)"
+    )
+    su.add_argument("--sizes", type=int, nargs="+", default=[32, 64])
+    su.add_argument(
+        "--trials", type=int, default=4, help="node starts per size (the first warms up)"
+    )
+    su.set_defaults(func=_bench_startup)
+    for name, text in [
+        (
+            "work-precision",
+            "wall time against error on hang16, reference DOP853; table, CSV, plot",
+        ),
+        ("stability", "largest stable dt by bisection vs linear theory; stress scenarios"),
+        ("scaling", "ms/step against N, fitted exponents; what skipping unused terms buys"),
+    ]:
+        sp = bsub.add_parser(name, help=text)
+        sp.add_argument("--out", metavar="DIR", help=f"output folder (default bench_out/{name})")
+        sp.add_argument("--quick", action="store_true", help="a short run (CI)")
+        sp.set_defaults(func=_bench_suite)
+    br = bsub.add_parser(
+        "record", help="write throughput of `cloth-sim record` against a running node"
+    )
+    br.add_argument("--size", type=int, default=64, help="cloth N×N (default 64)")
+    br.add_argument(
+        "--rate", type=float, default=60.0, help="the node's publish_rate (Hz, default 60)"
+    )
+    br.add_argument("--seconds", type=float, default=10.0, help="recorded wall time")
+    br.set_defaults(func=_bench_record)
+    return b

@@ -1,0 +1,385 @@
+"""Post-step stages: corrections of positions (and velocities) after each integrator step.
+
+A stage is an object with ``name``, ``active`` and ``apply(state, start, dt, velocity_follow)``.
+The
+simulator runs its active stages in order after every step; an inactive stage costs nothing (it is
+not even called). To add a stage (contacts, grippers): a class with those three members, and one
+line
+where :class:`~cloth_sim.simulator.Simulator` builds its ``stages`` list.
+
+Provot's super-elasticity correction (:class:`StrainLimit`)
+------------------------------------------------------------
+
+Provot (1995) keeps structural and shear springs from stretching beyond a critical deformation rate
+``τc``: after the particles move, every spring longer than ``(1 + τc)·L`` is shortened to exactly
+that length by moving both ends equally along the spring, or only the free end when the other is
+pinned. One pass visits every limited spring once (Gauss–Seidel), so a pass can stretch a spring an
+earlier correction had fixed. Springs are visited outward from the pins (by graph distance), so one
+pass carries a correction from a pin to the far edge, as the weight hangs; passes stop early once
+one corrects nothing.
+
+Provot's passes alone let a hanging cloth's stretch accumulate along its length: each pass moves a
+correction one spring down a chain that is N springs long, and at 64×64 twenty passes left the
+worst
+strain at 0.156 against τ = 0.1. So, for a pinned cloth, each step first applies **long-range
+attachments** (Kim, Chentanez & Müller 2012, "Long range attachments — a method to simulate
+inextensible clothing in computer games"): a particle may be no farther from a pin than ``(1 + τ)``
+times its rest geodesic distance to it (the shortest path along the springs at rest, an upper bound
+of
+the distance in the cloth, so the attachment never asks for less stretch than the springs allow);
+one
+pass, against each particle's two nearest pins, removes the stretch accumulated along the chain,
+the
+Provot passes then fix local excess, and the attachments are applied again after each pass (a pass
+moves a pin's neighbours back out, and for those the attachment is their spring's own limit).
+``long_range=False`` keeps Provot's passes alone, for
+comparison.
+
+``method="projection"`` replaces the passes by one projection of all the over-stretched springs
+together (:mod:`cloth_sim.constraints.strain_projection`, after the attachments): the stretch is
+held to
+``τ + tol`` exactly, for more work a step (hanging 64×64: worst strain 0.1001 against the passes'
+0.119; figures in docs/BENCHMARKS.md §3).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import shortest_path
+
+from ..kinds import STRAIN_LIMIT_METHODS
+from . import strain_projection
+
+#: Passes per step unless the simulator is told otherwise.
+DEFAULT_STRAIN_LIMIT_PASSES = 20
+#: From this many particles on, the attachments run on every core (below, waking the second core
+#: costs more than it saves: 64×64, 1.7 → 1.4 ms a step; 32×32, 4 % slower)
+PARALLEL_MIN_PARTICLES = 2048
+# : Strain above ``τc`` that a pass tolerates (so passes stop once nothing is meaningfully too
+# long).
+STRAIN_LIMIT_TOLERANCE = 1e-4
+
+
+#: ``l² ≤ this·bound²`` proves ``√l² ≤ bound`` after both roundings (their relative errors are
+#: ~1e-16), so the passes take a square root only for a length near or over its bound and decide
+#: exactly as with ``l = √l²`` for every one: the same bits. Most springs are within their bound;
+#: a square root per spring visit (20 passes over 16,000 springs at 64×64) was 8–13 % of the step.
+_SURELY_WITHIN = 1.0 - 1e-12
+
+
+@numba.njit(cache=True)
+def provot_pass(x, springs, rest, tau, tol, pinned):
+    """One Gauss–Seidel pass of Provot's correction; returns how many springs it shortened.
+
+    A spring counts as too long when its strain exceeds ``tau + tol``; it is then shortened to
+    strain ``tau`` exactly."""
+    corrected = 0
+    for s in range(springs.shape[0]):
+        i = springs[s, 0]
+        j = springs[s, 1]
+        pi, pj = pinned[i], pinned[j]
+        if pi and pj:
+            continue
+        dx = x[j, 0] - x[i, 0]
+        dy = x[j, 1] - x[i, 1]
+        dz = x[j, 2] - x[i, 2]
+        l2 = dx * dx + dy * dy + dz * dz
+        lmax = (1.0 + tau) * rest[s]
+        bound = lmax + tol * rest[s]
+        if l2 <= _SURELY_WITHIN * (
+            bound * bound
+        ):  # no square root for a spring surely short enough
+            continue
+        l = np.sqrt(l2)
+        if l <= bound:
+            continue
+        corrected += 1
+        excess = (l - lmax) / l  # fraction of the spring vector to remove
+        if pi:
+            wi, wj = 0.0, 1.0
+        elif pj:
+            wi, wj = 1.0, 0.0
+        else:
+            wi, wj = 0.5, 0.5
+        x[i, 0] += wi * excess * dx
+        x[i, 1] += wi * excess * dy
+        x[i, 2] += wi * excess * dz
+        x[j, 0] -= wj * excess * dx
+        x[j, 1] -= wj * excess * dy
+        x[j, 2] -= wj * excess * dz
+    return corrected
+
+
+@numba.njit(cache=True, inline="always")
+def _attach(x, anchor, reach, tau, p):
+    """Particle ``p``'s attachments (:func:`attachment_pass`); 1 if it moved, else 0."""
+    moved = 0
+    for a in range(anchor.shape[1]):
+        q = anchor[p, a]
+        if q < 0:
+            continue
+        dx, dy, dz = x[p, 0] - x[q, 0], x[p, 1] - x[q, 1], x[p, 2] - x[q, 2]
+        l2 = dx * dx + dy * dy + dz * dz
+        lmax = (1.0 + tau) * reach[p, a]
+        if l2 <= _SURELY_WITHIN * (lmax * lmax):
+            continue
+        l = np.sqrt(l2)
+        if l > lmax:
+            f = lmax / l
+            x[p, 0] = x[q, 0] + f * dx
+            x[p, 1] = x[q, 1] + f * dy
+            x[p, 2] = x[q, 2] + f * dz
+            moved = 1
+    return moved
+
+
+@numba.njit(cache=True)
+def attachment_pass(x, anchor, reach, tau):
+    """Long-range attachments: each particle ``p`` with an anchor ``anchor[p, a] >= 0`` (a pin) is
+    pulled back along the line to it when farther than ``(1 + τ)·reach[p, a]``; returns how many
+    particles were moved. :func:`attachment_pass_parallel` does the same on every core."""
+    moved = 0
+    for p in range(x.shape[0]):
+        moved += _attach(x, anchor, reach, tau, p)
+    return moved
+
+
+@numba.njit(cache=True, parallel=True)
+def attachment_pass_parallel(x, anchor, reach, tau):
+    """:func:`attachment_pass` on every core: each particle moves only itself and reads only pins,
+    which no attachment moves, so the same bits at any thread count."""
+    moved = 0
+    for p in numba.prange(x.shape[0]):
+        moved += _attach(x, anchor, reach, tau, p)
+    return moved
+
+
+def nearest_attachments(model, count: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """``(anchor, reach)``, ``(n, count)``: each free particle's ``count`` nearest pins by rest
+    geodesic distance (shortest paths along all springs, weighted by rest length) and those
+    distances; ``-1`` where there is none (a pin itself, or no pin reachable)."""
+    n = model.n_particles
+    anchor = np.full((n, count), -1, dtype=np.int64)
+    reach = np.zeros((n, count))
+    pins = np.flatnonzero(model.pinned)
+    if len(pins) == 0 or model.n_springs == 0:
+        return anchor, reach
+    s = model.springs
+    graph = sp.csr_matrix((model.rest_lengths, (s[:, 0], s[:, 1])), shape=(n, n))
+    dist = shortest_path(graph, directed=False, indices=pins)  # (pins, n)
+    k = min(count, len(pins))
+    order = np.argsort(dist, axis=0, kind="stable")[:k]  # (k, n)
+    near = np.take_along_axis(dist, order, axis=0)
+    ok = np.isfinite(near) & ~model.pinned[None, :]
+    anchor[:, :k] = np.where(ok, pins[order], -1).T
+    reach[:, :k] = np.where(ok, near, 0.0).T
+    return anchor, reach
+
+
+class Stage:
+    """A post-step correction. ``apply(state, start, dt, velocity_follow)`` changes ``state.x`` /
+    ``state.v`` in place; ``start`` is the state before the step. A position change ``Δx`` moves
+    the
+    velocity by ``velocity_follow·Δx/dt`` (the integrator's own factor: 1 for one-step methods, 1.5
+    for Verlet's BDF2 velocity)."""
+
+    name = ""
+
+    @property
+    def active(self) -> bool:
+        raise NotImplementedError
+
+    def apply(self, state, start, dt: float, velocity_follow: float) -> None:
+        raise NotImplementedError
+
+
+class StrainLimit(Stage):
+    """Provot's correction over a model's strain-limited springs, after long-range attachments to
+    the
+    pins (``long_range``); active when ``tau`` is set. ``method``: one of
+    :data:`STRAIN_LIMIT_METHODS` (``"projection"``: ``passes`` bounds its iterations instead)."""
+
+    name = "strain_limit"
+
+    def __init__(
+        self,
+        model,
+        tau: float | None = None,
+        passes: int = DEFAULT_STRAIN_LIMIT_PASSES,
+        long_range: bool = True,
+        method: str = "provot",
+    ):
+        if int(passes) < 1:
+            raise ValueError(f"strain_limit_passes must be >= 1, got {passes}")
+        if method not in STRAIN_LIMIT_METHODS:
+            raise ValueError(
+                f"strain_limit_method must be one of {', '.join(STRAIN_LIMIT_METHODS)}, "
+                f"got {method!r}"
+            )
+        self.passes = int(passes)
+        self.long_range = bool(long_range)
+        self.method = method
+        self._scratch = None
+        self.model = model
+        self._anchor = None
+        self.tau = None
+        self._springs = None  # built when first made active
+        self.last_passes = 0
+        self.set_tau(tau)
+
+    def set_tau(self, tau: float | None) -> None:
+        """``None`` (or 0 from the node's parameter, which maps it to ``None``) turns it off."""
+        if tau is not None:
+            tau = float(tau)
+            if not (math.isfinite(tau) and tau >= 0):
+                raise ValueError(f"strain_limit must be a finite number >= 0 (or None), got {tau}")
+            if self._springs is None:
+                model = self.model
+                sel = np.flatnonzero(model.strain_limited)
+                sel = sel[_outward_order(model, model.springs[sel])]
+                # 32-bit unsigned ends: a pass took 50 → 39 µs at 64×64 (numba wraps negative
+                # indices of a signed type around, at each use)
+                self._springs = model.springs[sel].astype(np.uint32)
+                self._rest = np.ascontiguousarray(model.rest_lengths[sel])
+                self._pinned = np.ascontiguousarray(model.pinned)
+            if self.long_range and self._anchor is None:
+                self._anchor, self._reach = nearest_attachments(self.model)
+                self._attach = (
+                    attachment_pass_parallel
+                    if self.model.n_particles >= PARALLEL_MIN_PARTICLES
+                    else attachment_pass
+                )
+        self.tau = tau
+
+    @property
+    def active(self) -> bool:
+        return self.tau is not None
+
+    def correct(self, x: np.ndarray) -> int:
+        """Correct ``x`` in place; returns the number of passes (or projection iterations) that
+        changed something."""
+        used = 0
+        lra = self.long_range
+        attach = self._attach if lra else None
+        if lra and attach(x, self._anchor, self._reach, self.tau):
+            used = 1
+        if self.method == "projection":
+            used += self._project(x)
+            self.last_passes = used
+            return used
+        for _ in range(self.passes):
+            changed = provot_pass(
+                x, self._springs, self._rest, self.tau, STRAIN_LIMIT_TOLERANCE, self._pinned
+            )
+            # the attachments again after each pass: a pass moves a pin's neighbours back out
+            if lra and changed:
+                attach(x, self._anchor, self._reach, self.tau)
+            if changed == 0:
+                break
+            used += 1
+        self.last_passes = used
+        return used
+
+    def _project(self, x) -> int:
+        if self._scratch is None:
+            model = self.model
+            w = np.where(model.pinned, 0.0, 1.0 / model.masses)
+            top = w.max()
+            self._w = np.ascontiguousarray(w / top if top > 0 else w)
+            self._scratch = strain_projection.Scratch(self._springs, model.n_particles)
+        sp = strain_projection
+        return sp.project(
+            x,
+            self._springs,
+            self._rest,
+            self._w,
+            self.tau,
+            STRAIN_LIMIT_TOLERANCE,
+            self.passes,
+            sp.MAX_CG_ITERATIONS,
+            sp.REGULARISATION,
+            sp.CG_TOLERANCE,
+            *self._scratch.arrays(),
+        )
+
+    def apply(self, state, start, dt, velocity_follow):
+        """Correct the positions; the velocities follow the part of each particle's correction no
+        longer than its own motion over the step. A correction beyond that undoes stretch that was
+        there before the step (the limit was just tightened, or a pass left some over): moving it
+        back is a projection, and divided by a small dt it would be a false speed (1.6 mm over
+        dt = 1e-6 s is 1600 m/s)."""
+        if self._before is None or self._before.shape != state.x.shape:
+            self._before = np.empty_like(state.x)
+        before = self._before
+        np.copyto(before, state.x)
+        if self.correct(state.x):
+            _follow_corrections(state.x, before, start.x, state.v, velocity_follow / dt)
+        if self.track_reaction:
+            self._react((state.x - before) / dt, dt)
+
+    _before = None
+    # : keep :attr:`reaction` (grippers ask for it): the force the limit's corrections put on the
+    # pins
+    track_reaction = False
+    #: ``(n, 3)``: per pinned particle, the force (N) the last step's corrections exerted on it
+    reaction = None
+
+    def _react(self, dv, dt):
+        """The momentum the corrections imply for each free particle (``Δv = Δx/dt``: the whole
+        correction, whether or not the velocity was let follow all of it) came from the
+        constraints holding the cloth up; each particle's share is put on its nearest pin (by rest
+        distance along the springs, as the long-range attachments use), as the reaction
+        ``−m·Δv/dt``."""
+        model = self.model
+        if self._nearest is None:
+            anchor = self._anchor if self._anchor is not None else nearest_attachments(model)[0]
+            self._nearest = anchor[:, 0]
+        if self.reaction is None:
+            self.reaction = np.zeros((model.n_particles, 3))
+        self.reaction[:] = 0.0
+        near = self._nearest
+        ok = near >= 0
+        np.add.at(self.reaction, near[ok], -(model.masses[ok, None] * dv[ok]) / dt)
+
+    _nearest = None
+
+
+@numba.njit(cache=True)
+def _follow_corrections(x, before, start, v, gain):
+    """``v += gain·Δx`` per particle, ``Δx = x − before`` shortened to at most ``|before −
+    start|``."""
+    for p in range(x.shape[0]):
+        d0, d1, d2 = x[p, 0] - before[p, 0], x[p, 1] - before[p, 1], x[p, 2] - before[p, 2]
+        corr2 = d0 * d0 + d1 * d1 + d2 * d2
+        if corr2 == 0.0:
+            continue
+        m0, m1, m2 = (
+            before[p, 0] - start[p, 0],
+            before[p, 1] - start[p, 1],
+            before[p, 2] - start[p, 2],
+        )
+        move2 = m0 * m0 + m1 * m1 + m2 * m2
+        scale = gain
+        if corr2 > move2:
+            scale *= np.sqrt(move2 / corr2)
+        v[p, 0] += scale * d0
+        v[p, 1] += scale * d1
+        v[p, 2] += scale * d2
+
+
+def _outward_order(model, springs) -> np.ndarray:
+    """Order of ``springs`` by hop distance of their nearer end from the nearest pin (stable)."""
+    pins = np.flatnonzero(model.pinned)
+    if len(pins) == 0 or len(springs) == 0:
+        return np.arange(len(springs))
+    n = model.n_particles
+    s = model.springs
+    graph = sp.csr_matrix((np.ones(len(s)), (s[:, 0], s[:, 1])), shape=(n, n))
+    hops = shortest_path(graph, directed=False, unweighted=True, indices=pins).min(axis=0)
+    near = np.minimum(hops[springs[:, 0]], hops[springs[:, 1]])
+    far = np.maximum(hops[springs[:, 0]], hops[springs[:, 1]])
+    return np.lexsort((far, near))

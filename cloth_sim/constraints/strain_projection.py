@@ -1,0 +1,344 @@
+"""The strain limit as one projection of every over-stretched spring at once.
+
+Provot's passes (:mod:`cloth_sim.constraints.strain_limit`) shorten one spring at a time, so a
+correction
+travels one spring per pass: a hanging 64×64 cloth kept its worst strain at 0.119 against τ = 0.1
+however many passes it was given (20: 0.119, 40: 0.120). This stage instead solves for all the
+springs longer than ``(1 + τ)·L`` together — Goldenthal, Harmon, Fattal, Bercovier & Grinspun
+(2007), "Efficient simulation of inextensible cloth", *fast projection*: with ``C_s = l_s − (1 +
+τ)L_s``
+over the active springs ``A``, ``J = ∂C/∂x`` and ``W`` the inverse masses (0 for a pin), each
+iteration takes the smallest mass-weighted change of the positions that zeroes the linearised
+constraints,
+
+    (J W Jᵀ + ε I) λ = C,        Δx = −W Jᵀ λ,
+
+then recomputes the lengths. Springs found too long after an iteration join ``A`` until no spring
+exceeds ``(1 + τ + tol)·L``; after the first iteration only the springs of the particles it moved
+are measured again. A spring of ``A`` within its bound is held at its length (``C_s = 0``), never
+pulled out to the bound: the projection adds no stretch. ``A`` only grows within a step.
+
+Each solve moves the set's particles, which stretches the ring of springs around the set: left to
+itself the set grows by about a ring an iteration (128×128 at the bottom of the swing: 14,000
+springs, and 20 iterations were not enough). So the first iteration's set also takes the last
+step's springs still within :data:`WARM_START` of their bound — held at their length if within it
+— which is most of the ring-by-ring growth at once (hanging cloth, side by side: 64×64 6.7 → 4.6
+iterations a step, 128×128 11.4 → 5.3, its worst strain 0.118 → 0.1001; the mean strain over 3 s
+the same to four digits, 0.01292, since no spring is pulled out). Tried and dropped: letting a
+spring
+within its bound whose ``λ`` came out negative (pushed out) leave the set and solving again — with
+the loose solves below ``λ``'s sign near 0 is noise, and the set cycled (64×64: 24 % of steps at
+the
+iteration limit, worst 0.105).
+
+The system is solved by conjugate gradients preconditioned by its diagonal, matrix-free, over the
+active springs and their particles only (a compact numbering, so a step with a few hundred active
+springs touches a few hundred), and loosely (:data:`CG_TOLERANCE`): the next iteration linearises
+again anyway. ``ε`` (:data:`REGULARISATION`, the inverse masses scaled so the
+largest is 1) keeps the system definite where the active springs are redundant — the four sides
+and two diagonals of a quad lying flat ask six things of its four points' five in-plane freedoms;
+with ε = 1e-6 a crumpled cloth with every spring over its bound diverged. Each iteration leaves
+``ε/(w_i + w_j + ε)`` of a lone spring's excess.
+
+What it costs (hanging 10.24 kg cloth, τ = 0.1, ``tools/strain_methods.py` (at 87a25b3``,
+docs/BENCHMARKS.md
+§3): at 64×64 4.6 iterations and 97 CG iterations a step over ~300 active springs, 0.68 ms a step
+against the passes' 0.95 ms, for a worst strain of 0.1001 where the passes leave 0.119 (32×32: 0.12
+against 0.32 ms, 0.1001 against 0.1057). At 128×128 the active set reaches 14,000 springs at the
+bottom of the swing: 5.3 iterations a step, 0.1001 at 1.5× the passes' cost. Tried: symmetric
+Gauss–Seidel as the preconditioner — 2.8× fewer CG iterations, each 3× the cost: 10 % faster,
+not kept. The worst case is a crumpled cloth with every spring over: all active and redundant,
+3e-4 above the bound after 20 iterations.
+
+Each iteration moves the particles by ``−W Jᵀ λ``, so the mass-weighted sum of the moves is zero
+where no pin takes part: the centre of mass (and the linear momentum, the velocities following the
+moves) is kept. It runs on one core in a fixed order: the same bits at any thread count.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+#: ``ε``, in units of the largest inverse mass (see the module docstring)
+REGULARISATION = 1e-3
+#: most conjugate-gradient iterations per solve
+MAX_CG_ITERATIONS = 400
+#: a solve stops once its residual is this fraction of the first (loose: the next iteration
+# : linearises again anyway). Hanging 64×64, side by side: 1e-4 2.8, 0.1 0.97, 0.3 0.81 ms a step,
+# the
+#: same worst 0.1001 (128×128: 0.1 11.9, 0.3 8.7 ms)
+CG_TOLERANCE = 0.3
+#: a spring joins the active set when its strain exceeds ``τ`` by more than this (rounding aside)
+_JOIN = 1e-9
+# : a spring of the last step's set joins the first iteration's set at once while its strain is
+# within
+#: this of ``τ`` (below it: held at its length, not pulled out to the bound; module docstring)
+WARM_START = 0.005
+
+
+@numba.njit(cache=True, inline="always")
+def _scatter(g, q, k, ea, eb, nrm, lam):
+    """``g = Jᵀ λ`` over the ``q`` local particles (row ``a`` of ``J``: ``−n_a`` at end ``ea[a]``,
+    ``+n_a`` at ``eb[a]``)."""
+    for p in range(q):
+        g[p, 0] = 0.0
+        g[p, 1] = 0.0
+        g[p, 2] = 0.0
+    for a in range(k):
+        i, j, v = ea[a], eb[a], lam[a]
+        g[j, 0] += nrm[a, 0] * v
+        g[j, 1] += nrm[a, 1] * v
+        g[j, 2] += nrm[a, 2] * v
+        g[i, 0] -= nrm[a, 0] * v
+        g[i, 1] -= nrm[a, 1] * v
+        g[i, 2] -= nrm[a, 2] * v
+
+
+@numba.njit(cache=True, inline="always")
+def _apply(a, ea, eb, nrm, wl, g, eps, lam):
+    """Row ``a`` of ``(J W Jᵀ + ε) λ`` given ``g = Jᵀ λ``."""
+    i, j = ea[a], eb[a]
+    return (
+        nrm[a, 0] * (wl[j] * g[j, 0] - wl[i] * g[i, 0])
+        + nrm[a, 1] * (wl[j] * g[j, 1] - wl[i] * g[i, 1])
+        + nrm[a, 2] * (wl[j] * g[j, 2] - wl[i] * g[i, 2])
+        + eps * lam[a]
+    )
+
+
+@numba.njit(cache=True)
+def _solve(k, q, ea, eb, wl, nrm, diag, c, lam, eps, rel_tol, max_it, r, z, p, ap, g):
+    """Preconditioned CG for ``(J W Jᵀ + ε) λ = c`` from ``λ = 0``; returns its iterations."""
+    rz = 0.0
+    r0 = 0.0
+    for a in range(k):
+        lam[a] = 0.0
+        r[a] = c[a]
+        z[a] = c[a] / diag[a]
+        p[a] = z[a]
+        rz += r[a] * z[a]
+        r0 += r[a] * r[a]
+    goal = rel_tol * rel_tol * r0
+    it = 0
+    while it < max_it and r0 > 0.0:
+        _scatter(g, q, k, ea, eb, nrm, p)
+        pap = 0.0
+        for a in range(k):
+            y = _apply(a, ea, eb, nrm, wl, g, eps, p)
+            ap[a] = y
+            pap += p[a] * y
+        if pap <= 0.0:
+            break
+        alpha = rz / pap
+        rr = 0.0
+        rz_new = 0.0
+        for a in range(k):
+            lam[a] += alpha * p[a]
+            r[a] -= alpha * ap[a]
+            z[a] = r[a] / diag[a]
+            rr += r[a] * r[a]
+            rz_new += r[a] * z[a]
+        it += 1
+        if rr <= goal:
+            break
+        beta = rz_new / rz
+        rz = rz_new
+        for a in range(k):
+            p[a] = z[a] + beta * p[a]
+    return it
+
+
+class Scratch:
+    """The arrays :func:`project` works in, made once per spring set (a step allocates none)."""
+
+    def __init__(self, springs: np.ndarray, n: int):
+        m = len(springs)
+        # each particle's springs (CSR): after a solve, only the moved particles' springs can have
+        # changed length, so only those are measured again (a full scan was 0.2 of 1.0 ms a step)
+        ends = np.concatenate([springs[:, 0], springs[:, 1]]).astype(np.int64)
+        order = np.argsort(ends, kind="stable")
+        self.inc_ptr = np.zeros(n + 1, np.int64)
+        np.add.at(self.inc_ptr, ends + 1, 1)
+        self.inc_ptr = np.cumsum(self.inc_ptr)
+        self.inc = np.ascontiguousarray(np.r_[np.arange(m), np.arange(m)][order], dtype=np.int64)
+        self.seen = np.full(m, -1, np.int64)
+        self.cand = np.empty(m, np.int64)
+        self.inset = np.zeros(m, np.uint8)
+        self.prev = np.zeros(m, np.uint8)  # the last call's set (the warm start)
+        self.act = np.empty(m, np.int64)
+        self.ea = np.empty(m, np.int64)
+        self.eb = np.empty(m, np.int64)
+        self.nrm = np.empty((m, 3))
+        self.spring = np.empty((7, m))  # c, diag, λ, r, z, p, Ap
+        self.pl = np.empty(n, np.int64)
+        self.loc = np.full(n, -1, np.int64)
+        self.wl = np.empty(n)
+        self.g = np.empty((n, 3))
+        #: the last call's (iterations, CG iterations, active springs, worst excess strain left)
+        self.stats = np.zeros(4)
+
+    def arrays(self):
+        return (
+            self.inc_ptr,
+            self.inc,
+            self.seen,
+            self.cand,
+            self.prev,
+            self.inset,
+            self.act,
+            self.ea,
+            self.eb,
+            self.nrm,
+            self.spring,
+            self.pl,
+            self.loc,
+            self.wl,
+            self.g,
+            self.stats,
+        )
+
+
+@numba.njit(cache=True)
+def project(
+    x,
+    springs,
+    rest,
+    w,
+    tau,
+    tol,
+    max_outer,
+    max_cg,
+    eps,
+    cg_tol,
+    inc_ptr,
+    inc,
+    seen,
+    cand,
+    prev,
+    inset,
+    act,
+    ea,
+    eb,
+    nrm,
+    spring,
+    pl,
+    loc,
+    wl,
+    g,
+    stats,
+):
+    """Shorten every spring of ``springs`` (``(m, 2)``, rest lengths ``rest``) to at most
+    ``(1 + tau)·rest``, to within ``tol`` of strain, by fast projection (module docstring), moving
+    ``x`` in place; ``w`` the particles' inverse masses (0: pinned), scaled so a free particle's
+    are about 1. The rest are :class:`Scratch`'s arrays; ``prev`` (the last call's set) is read and
+    then replaced by this call's. Returns the iterations (linearise and solve) it took; ``stats``:
+    those, the CG iterations, the active springs and the worst excess strain left."""
+    m = springs.shape[0]
+    c, diag, lam, r, z, p, ap = (
+        spring[0],
+        spring[1],
+        spring[2],
+        spring[3],
+        spring[4],
+        spring[5],
+        spring[6],
+    )
+    for s in range(m):
+        inset[s] = 0
+        seen[s] = -1
+    k = 0
+    q = 0
+    cg_total = 0
+    outer = 0
+    worst = 0.0
+    while True:
+        # the springs now too long join the set; the worst excess decides whether to go on. First
+        # every spring; after a solve, the springs of the particles it moved (the others' lengths
+        # are as they were: within the bound, or in the set, whose springs all moved)
+        worst = 0.0
+        count = m
+        if outer > 0:
+            count = 0
+            for t in range(q):
+                pp = pl[t]
+                for h in range(inc_ptr[pp], inc_ptr[pp + 1]):
+                    s = inc[h]
+                    if seen[s] != outer:
+                        seen[s] = outer
+                        cand[count] = s
+                        count += 1
+        for u in range(count):
+            s = u if outer == 0 else cand[u]
+            i = springs[s, 0]
+            j = springs[s, 1]
+            if w[i] == 0.0 and w[j] == 0.0:
+                continue
+            dx = x[j, 0] - x[i, 0]
+            dy = x[j, 1] - x[i, 1]
+            dz = x[j, 2] - x[i, 2]
+            l2 = dx * dx + dy * dy + dz * dz
+            b = (1.0 + tau + _JOIN) * rest[s]
+            if l2 <= b * b:
+                # within its bound: joins now only if it was in the last step's set and is near it
+                near = (1.0 + tau - WARM_START) * rest[s]
+                if not (outer == 0 and prev[s] == 1 and l2 > near * near):
+                    continue
+            else:
+                worst = max(worst, np.sqrt(l2) / rest[s] - 1.0 - tau)
+            if inset[s] == 0:
+                inset[s] = 1
+                act[k] = s
+                k += 1
+        if worst <= tol or outer >= max_outer:
+            break
+        # the set's particles, numbered locally
+        q = 0
+        for a in range(k):
+            s = act[a]
+            i = springs[s, 0]
+            j = springs[s, 1]
+            if loc[i] < 0:
+                loc[i] = q
+                pl[q] = i
+                wl[q] = w[i]
+                q += 1
+            if loc[j] < 0:
+                loc[j] = q
+                pl[q] = j
+                wl[q] = w[j]
+                q += 1
+            ea[a] = loc[i]
+            eb[a] = loc[j]
+        for a in range(k):
+            s = act[a]
+            i = springs[s, 0]
+            j = springs[s, 1]
+            dx = x[j, 0] - x[i, 0]
+            dy = x[j, 1] - x[i, 1]
+            dz = x[j, 2] - x[i, 2]
+            l = np.sqrt(dx * dx + dy * dy + dz * dz)
+            nrm[a, 0] = dx / l
+            nrm[a, 1] = dy / l
+            nrm[a, 2] = dz / l
+            c[a] = max(l - (1.0 + tau) * rest[s], 0.0)  # within the bound: held, not pulled out
+            diag[a] = wl[ea[a]] + wl[eb[a]] + eps
+        cg_total += _solve(
+            k, q, ea, eb, wl, nrm, diag, c, lam, eps, cg_tol, max_cg, r, z, p, ap, g
+        )
+        _scatter(g, q, k, ea, eb, nrm, lam)
+        for t in range(q):
+            pp = pl[t]
+            wt = wl[t]
+            x[pp, 0] -= wt * g[t, 0]
+            x[pp, 1] -= wt * g[t, 1]
+            x[pp, 2] -= wt * g[t, 2]
+            loc[pp] = -1
+        outer += 1
+    for s in range(m):
+        prev[s] = inset[s]
+    stats[0] = outer
+    stats[1] = cg_total
+    stats[2] = k
+    stats[3] = worst
+    return outer

@@ -1,0 +1,525 @@
+"""Rigid colliders the cloth rests on, drapes over and is dragged by: plane, sphere, box, capsule.
+
+A collider is a shape with a pose and Coulomb friction ``μ`` (static = kinetic). The cloth keeps at
+least the simulator's ``thickness`` from every collider surface. Colliders are kinematic: the
+simulation never moves them, :meth:`cloth_sim.simulator.Simulator.set_collider_pose` does, and a
+moved collider's velocity is its pose change over the next step (so friction drags what rests on
+it).
+
+Poses. ``orientation`` is a unit quaternion ``(w, x, y, z)``. A Box's ``orientation`` is absolute
+(its half extents are along its own axes); a Plane's and a Capsule's orientation is relative to the
+normal and segment they were built with, so ``set_collider_pose(i, position)`` with the default
+orientation moves them without turning them. The pose's ``position`` is a Sphere's or Box's centre,
+a Capsule's midpoint, and for a Plane a point on it (it starts at ``offset·normal``).
+
+Contact response: :class:`Contacts`, a post-step stage (see
+:mod:`cloth_sim.constraints.strain_limit`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+# noqa: F401 (quaternion_matrix: public here too)
+from .geometry import positive, quaternion_matrix, unit_quaternion, vector
+
+PLANE, SPHERE, BOX, CAPSULE = 0, 1, 2, 3
+#: the fraction of ``thickness`` within which a particle counts as touching (its velocity is
+#: filtered) though not inside (its position is not moved)
+CONTACT_TOLERANCE = 0.02
+#: a particle within this fraction of a thickness above a collider's skin is *supported* by it:
+#: self-collision moves it as if held (when both sides of a pair are, the one farther from the
+#: collider moves), so that cloth landing on cloth that lies on a collider does not drive it into
+# : the collider (when only touching particles were held, a T-shirt's lower layer was pushed 20 %
+# into
+#: a table's 4 mm skin: particles a hair above the skin were free). Below 1, so a second layer
+#: resting on the first (2h up) is free.
+SUPPORT = 0.5
+
+
+def _friction(value) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"friction must be a finite number >= 0, got {value!r}") from None
+    if not (math.isfinite(v) and v >= 0):
+        raise ValueError(f"friction must be a finite number >= 0, got {value!r}")
+    return v
+
+
+class Collider:
+    """Base class: ``kind``, ``friction``, ``name``, a pose (``position``, ``rotation``) and the
+    shape's local parameters ``geometry`` (4 numbers)."""
+
+    kind = -1
+
+    def __init__(self, position, geometry, friction, name, orientation=(1.0, 0.0, 0.0, 0.0)):
+        self.set_pose(position, orientation)
+        self.geometry = np.array(geometry, dtype=np.float64)
+        self.friction = _friction(friction)
+        self.name = str(name) if name is not None else type(self).__name__.lower()
+
+    def set_pose(self, position, orientation=(1.0, 0.0, 0.0, 0.0)) -> None:
+        """Place the collider (see the module docstring for what ``position`` and ``orientation``
+        mean for each shape)."""
+        p = vector("position", position)
+        q = unit_quaternion(orientation)
+        #: the pose: ``position``, the unit quaternion ``orientation`` (w, x, y, z) and its matrix
+        self.position, self.orientation, self.rotation = p, q, quaternion_matrix(q)
+
+    def signed_distance(self, points) -> np.ndarray:
+        """Signed distance of ``(k, 3)`` points from the surface (negative inside)."""
+        pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+        out = np.empty(len(pts))
+        for i, p in enumerate(pts):
+            out[i] = sdf(self.kind, self.position, self.rotation, self.geometry, p[0], p[1], p[2])[
+                0
+            ]
+        return out
+
+    def __repr__(self):
+        return f"{type(self).__name__}(name={self.name!r}, position={self.position.tolist()})"
+
+
+class Plane(Collider):
+    """The half-space boundary ``{x : normal·x = offset}``; the cloth lives where ``normal·x >
+    offset``."""
+
+    kind = PLANE
+
+    def __init__(
+        self, normal=(0.0, 0.0, 1.0), offset: float = 0.0, friction: float = 0.0, name=None
+    ):
+        n = vector("normal", normal)
+        norm = float(np.linalg.norm(n))
+        if not norm > 1e-12:
+            raise ValueError(f"normal must be a nonzero vector, got {n.tolist()}")
+        n = n / norm
+        try:
+            offset = float(offset)
+        except (TypeError, ValueError):
+            raise ValueError(f"offset must be a finite number, got {offset!r}") from None
+        if not math.isfinite(offset):
+            raise ValueError(f"offset must be a finite number, got {offset!r}")
+        super().__init__(offset * n, [n[0], n[1], n[2], 0.0], friction, name)
+
+    @property
+    def normal(self) -> np.ndarray:
+        return self.rotation @ self.geometry[:3]
+
+    @property
+    def offset(self) -> float:
+        return float(self.normal @ self.position)
+
+
+class Sphere(Collider):
+    """A solid ball."""
+
+    kind = SPHERE
+
+    def __init__(
+        self, center=(0.0, 0.0, 0.0), radius: float = 0.1, friction: float = 0.0, name=None
+    ):
+        super().__init__(
+            vector("center", center), [positive("radius", radius), 0, 0, 0], friction, name
+        )
+
+    @property
+    def center(self) -> np.ndarray:
+        return self.position.copy()
+
+    @property
+    def radius(self) -> float:
+        return float(self.geometry[0])
+
+
+class Box(Collider):
+    """A solid oriented box: ``center``, ``half_extents`` along its own axes, ``orientation``."""
+
+    kind = BOX
+
+    def __init__(
+        self,
+        center=(0.0, 0.0, 0.0),
+        half_extents=(0.5, 0.5, 0.5),
+        orientation=(1.0, 0.0, 0.0, 0.0),
+        friction: float = 0.0,
+        name=None,
+    ):
+        h = vector("half_extents", half_extents)
+        if not np.all(h > 0):
+            raise ValueError(f"half_extents must be 3 finite numbers > 0, got {h.tolist()}")
+        super().__init__(
+            vector("center", center), [h[0], h[1], h[2], 0.0], friction, name, orientation
+        )
+
+    @property
+    def center(self) -> np.ndarray:
+        return self.position.copy()
+
+    @property
+    def half_extents(self) -> np.ndarray:
+        return self.geometry[:3].copy()
+
+
+class Capsule(Collider):
+    """A solid capsule: the points within ``radius`` of the segment ``a``–``b``."""
+
+    kind = CAPSULE
+
+    def __init__(
+        self,
+        a=(0.0, 0.0, 0.0),
+        b=(0.0, 0.0, 1.0),
+        radius: float = 0.05,
+        friction: float = 0.0,
+        name=None,
+    ):
+        a, b = vector("a", a), vector("b", b)
+        half = 0.5 * (b - a)
+        super().__init__(
+            0.5 * (a + b), [half[0], half[1], half[2], positive("radius", radius)], friction, name
+        )
+
+    @property
+    def a(self) -> np.ndarray:
+        return self.position - self.rotation @ self.geometry[:3]
+
+    @property
+    def b(self) -> np.ndarray:
+        return self.position + self.rotation @ self.geometry[:3]
+
+    @property
+    def radius(self) -> float:
+        return float(self.geometry[3])
+
+
+KINDS = {"plane": Plane, "sphere": Sphere, "box": Box, "capsule": Capsule}
+
+
+# ---------------------------------------------------------------------------- kernels
+@numba.njit(cache=True, inline="always")
+def sdf(kind, p, R, g, x, y, z):
+    """Signed distance of the point ``(x, y, z)`` from a collider and the outward unit normal
+    there (the distance's gradient)."""
+    dx, dy, dz = x - p[0], y - p[1], z - p[2]
+    if kind == PLANE:
+        nx = R[0, 0] * g[0] + R[0, 1] * g[1] + R[0, 2] * g[2]
+        ny = R[1, 0] * g[0] + R[1, 1] * g[1] + R[1, 2] * g[2]
+        nz = R[2, 0] * g[0] + R[2, 1] * g[1] + R[2, 2] * g[2]
+        return nx * dx + ny * dy + nz * dz, nx, ny, nz
+    if kind == SPHERE:
+        r = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if r < 1e-300:
+            return -g[0], 0.0, 0.0, 1.0
+        return r - g[0], dx / r, dy / r, dz / r
+    if kind == CAPSULE:
+        hx = R[0, 0] * g[0] + R[0, 1] * g[1] + R[0, 2] * g[2]
+        hy = R[1, 0] * g[0] + R[1, 1] * g[1] + R[1, 2] * g[2]
+        hz = R[2, 0] * g[0] + R[2, 1] * g[1] + R[2, 2] * g[2]
+        hh = hx * hx + hy * hy + hz * hz
+        s = 0.0
+        if hh > 0.0:
+            s = (dx * hx + dy * hy + dz * hz) / hh
+            s = min(1.0, max(-1.0, s))
+        ex, ey, ez = dx - s * hx, dy - s * hy, dz - s * hz
+        r = math.sqrt(ex * ex + ey * ey + ez * ez)
+        if r < 1e-300:  # on the axis: any perpendicular direction
+            if abs(hx) < 0.9 * math.sqrt(hh) or hh == 0.0:
+                ux, uy, uz = 0.0, hz, -hy
+            else:
+                ux, uy, uz = -hz, 0.0, hx
+            u = math.sqrt(ux * ux + uy * uy + uz * uz)
+            if u == 0.0:
+                return -g[3], 0.0, 0.0, 1.0
+            return -g[3], ux / u, uy / u, uz / u
+        return r - g[3], ex / r, ey / r, ez / r
+    # BOX: the point in the box's frame
+    qx = R[0, 0] * dx + R[1, 0] * dy + R[2, 0] * dz
+    qy = R[0, 1] * dx + R[1, 1] * dy + R[2, 1] * dz
+    qz = R[0, 2] * dx + R[1, 2] * dy + R[2, 2] * dz
+    ax, ay, az = abs(qx) - g[0], abs(qy) - g[1], abs(qz) - g[2]
+    if ax > 0.0 or ay > 0.0 or az > 0.0:
+        ox, oy, oz = max(ax, 0.0), max(ay, 0.0), max(az, 0.0)
+        d = math.sqrt(ox * ox + oy * oy + oz * oz)
+        lx = math.copysign(ox, qx) / d
+        ly = math.copysign(oy, qy) / d
+        lz = math.copysign(oz, qz) / d
+    else:  # inside: out through the nearest face
+        lx = ly = lz = 0.0
+        if ax >= ay and ax >= az:
+            d = ax
+            lx = math.copysign(1.0, qx)
+        elif ay >= az:
+            d = ay
+            ly = math.copysign(1.0, qy)
+        else:
+            d = az
+            lz = math.copysign(1.0, qz)
+    return (
+        d,
+        R[0, 0] * lx + R[0, 1] * ly + R[0, 2] * lz,
+        R[1, 0] * lx + R[1, 1] * ly + R[1, 2] * lz,
+        R[2, 0] * lx + R[2, 1] * ly + R[2, 2] * lz,
+    )
+
+
+@numba.njit(cache=True, inline="always")
+def carried(p_old, R_old, p_new, R_new, x, y, z):
+    """Where the point ``(x, y, z)`` attached to the collider's new pose was at its old pose."""
+    dx, dy, dz = x - p_new[0], y - p_new[1], z - p_new[2]
+    lx = R_new[0, 0] * dx + R_new[1, 0] * dy + R_new[2, 0] * dz
+    ly = R_new[0, 1] * dx + R_new[1, 1] * dy + R_new[2, 1] * dz
+    lz = R_new[0, 2] * dx + R_new[1, 2] * dy + R_new[2, 2] * dz
+    return (
+        p_old[0] + R_old[0, 0] * lx + R_old[0, 1] * ly + R_old[0, 2] * lz,
+        p_old[1] + R_old[1, 0] * lx + R_old[1, 1] * ly + R_old[1, 2] * lz,
+        p_old[2] + R_old[2, 0] * lx + R_old[2, 1] * ly + R_old[2, 2] * lz,
+    )
+
+
+#: sphere-tracing steps along a particle's path before the hit is taken where the march stands
+_MARCH_STEPS = 64
+
+
+@numba.njit(cache=True)
+def resolve_contacts(
+    x, v, x0, pinned, kinds, pos, rot, pos0, rot0, geo, mu, h, dt, touching, clearance
+):
+    """The contact stage's kernel, per particle in index order (each particle is independent).
+
+    For each collider, in order: (1) continuous detection: the particle's path over the step, seen
+    from the collider (its start carried by the collider's motion), is marched by sphere tracing on
+    the distance minus ``h``; a path that reaches the surface stops there, so no particle crosses a
+    collider however thin or fast. (2) Projection: a particle closer than ``h`` moves out along the
+    normal by the depth ``δ``; its tangential motion relative to the collider over the step shrinks
+    by ``μ·δ`` (to zero when it is smaller: static friction). (3) Velocity filter, for a particle
+    within ``h·(1 + CONTACT_TOLERANCE)``: an approaching normal velocity relative to the collider
+    is removed and the tangential one shrinks by ``μ`` times what was removed (Coulomb's cone on
+    the impulse). Returns the number of particles touching; ``touching[p]`` says which, and
+    ``clearance[p]`` how far above the nearest collider's skin the particle ends (``inf``:
+    none)."""
+    n = x.shape[0]
+    count = 0
+    for p in range(n):
+        touching[p] = False
+        clearance[p] = np.inf
+        if pinned[p]:
+            continue
+        for c in range(kinds.shape[0]):
+            k = kinds[c]
+            # the start, carried with the collider to its new pose (equal to x0 for a static one)
+            sx, sy, sz = carried(pos[c], rot[c], pos0[c], rot0[c], x0[p, 0], x0[p, 1], x0[p, 2])
+            # where the collider's point under x[p] was at the start: its displacement over the
+            # step
+            cx, cy, cz = carried(pos0[c], rot0[c], pos[c], rot[c], x[p, 0], x[p, 1], x[p, 2])
+            ux, uy, uz = x[p, 0] - cx, x[p, 1] - cy, x[p, 2] - cz
+            # (1) continuous detection from a start outside the skin
+            d0, mx, my, mz = sdf(k, pos[c], rot[c], geo[c], sx, sy, sz)
+            d0 -= h
+            ex, ey, ez = x[p, 0] - sx, x[p, 1] - sy, x[p, 2] - sz
+            length = math.sqrt(ex * ex + ey * ey + ez * ez)
+            if d0 <= CONTACT_TOLERANCE * h:
+                # a start touching the surface: the end is projected below, unless the path went
+                # past the middle of the solid or through it (the normal at the end points the
+                # other way: a straight path between opposite sides crosses the solid): stay
+                de, fx, fy, fz = sdf(k, pos[c], rot[c], geo[c], x[p, 0], x[p, 1], x[p, 2])
+                if fx * mx + fy * my + fz * mz < 0.0:
+                    x[p, 0], x[p, 1], x[p, 2] = sx, sy, sz
+            elif length > d0:
+                t = 0.0
+                hit = False
+                for _ in range(_MARCH_STEPS):
+                    d = (
+                        sdf(k, pos[c], rot[c], geo[c], sx + t * ex, sy + t * ey, sz + t * ez)[0]
+                        - h
+                    )
+                    if d <= 1e-3 * h:
+                        hit = True
+                        break
+                    t += d / length
+                    if t >= 1.0:
+                        break
+                if not hit and t < 1.0:
+                    hit = True  # the march did not settle: stop where it stands (conservative)
+                if hit:
+                    x[p, 0], x[p, 1], x[p, 2] = sx + t * ex, sy + t * ey, sz + t * ez
+            # (2) projection with friction on the motion relative to the collider
+            d, nx, ny, nz = sdf(k, pos[c], rot[c], geo[c], x[p, 0], x[p, 1], x[p, 2])
+            clearance[p] = min(clearance[p], max(d - h, 0.0))  # (0 once projected onto the skin)
+            if d >= h * (1.0 + CONTACT_TOLERANCE):
+                continue
+            touching[p] = True
+            if d < h:
+                depth = h - d
+                x[p, 0] += depth * nx
+                x[p, 1] += depth * ny
+                x[p, 2] += depth * nz
+                rx, ry, rz = x[p, 0] - sx, x[p, 1] - sy, x[p, 2] - sz
+                rn = rx * nx + ry * ny + rz * nz
+                tx, ty, tz = rx - rn * nx, ry - rn * ny, rz - rn * nz
+                tl = math.sqrt(tx * tx + ty * ty + tz * tz)
+                budget = mu[c] * depth
+                if tl > 0.0:
+                    f = 1.0 if tl <= budget else budget / tl
+                    x[p, 0] -= f * tx
+                    x[p, 1] -= f * ty
+                    x[p, 2] -= f * tz
+            # (3) velocity filter relative to the collider's velocity at the point
+            wx, wy, wz = ux / dt, uy / dt, uz / dt
+            rx, ry, rz = v[p, 0] - wx, v[p, 1] - wy, v[p, 2] - wz
+            vn = rx * nx + ry * ny + rz * nz
+            if vn < 0.0:
+                tx, ty, tz = rx - vn * nx, ry - vn * ny, rz - vn * nz
+                tl = math.sqrt(tx * tx + ty * ty + tz * tz)
+                keep = 0.0
+                if tl > 0.0:
+                    keep = max(0.0, 1.0 - mu[c] * (-vn) / tl)
+                v[p, 0] = wx + keep * tx
+                v[p, 1] = wy + keep * ty
+                v[p, 2] = wz + keep * tz
+        if touching[p]:
+            count += 1
+    return count
+
+
+class Contacts:
+    """The post-step stage that keeps the cloth ``thickness`` away from its colliders (see
+    :func:`resolve_contacts` for the method). Active when there is at least one collider.
+
+    It works with every integrator because it acts on the step's result: positions are projected
+    and the velocity is filtered after the step, as a collision impulse applied at its end
+    (explicit
+    and Runge–Kutta methods, the implicit ones, whose solve does not see the contacts, and Verlet,
+    whose next step reads the corrected positions as its velocity). Friction acts on both the
+    position change and the velocity, so a particle on an incline under static friction does not
+    creep, and a sliding one accelerates by ``g (sin θ − μ cos θ)``.
+    """
+
+    name = "contacts"
+
+    def __init__(self, model, colliders=(), thickness: float = 0.005):
+        self.model = model
+        self.colliders = list(colliders)
+        for i, c in enumerate(self.colliders):
+            if not isinstance(c, Collider):
+                raise ValueError(
+                    f"colliders[{i}] must be a cloth_sim.contact.colliders shape (Plane, Sphere, "
+                    f"Box, Capsule), got {type(c).__name__}"
+                )
+        self.thickness = positive("thickness", thickness)
+        self.touching = np.zeros(model.n_particles, dtype=np.bool_)
+        # : per particle, the distance above the nearest collider's skin after the last step (inf:
+        # none)
+        self.clearance = np.full(model.n_particles, np.inf)
+        self.last_touching = 0
+        self._pinned = np.ascontiguousarray(model.pinned)
+        self._pack()
+        self._pos0, self._rot0 = self._pos.copy(), self._rot.copy()
+
+    def _pack(self):
+        cs = self.colliders
+        self._packed = list(cs)
+        self._kinds = np.array([c.kind for c in cs], dtype=np.int64)
+        self._pos = np.array([c.position for c in cs], dtype=np.float64).reshape(-1, 3)
+        self._rot = np.array([c.rotation for c in cs], dtype=np.float64).reshape(-1, 3, 3)
+        self._geo = np.array([c.geometry for c in cs], dtype=np.float64).reshape(-1, 4)
+        self._mu = np.array([c.friction for c in cs], dtype=np.float64)
+
+    @property
+    def active(self) -> bool:
+        return len(self.colliders) > 0
+
+    def set_pinned(self, pinned) -> None:
+        """Particles the stage leaves alone (pins and held particles)."""
+        self._pinned = np.ascontiguousarray(pinned)
+
+    def add(self, collider) -> int:
+        """Append a collider (its pose now is where its first step starts); returns its index."""
+        if not isinstance(collider, Collider):
+            raise ValueError(
+                f"a collider must be a cloth_sim.contact.colliders shape (Plane, Sphere, Box, "
+                f"Capsule), got {type(collider).__name__}"
+            )
+        if any(c.name == collider.name for c in self.colliders):
+            raise ValueError(
+                f"a collider named {collider.name!r} exists already; colliders: "
+                f"{', '.join(c.name for c in self.colliders)}"
+            )
+        self.colliders.append(collider)
+        self._repack()
+        return len(self.colliders) - 1
+
+    def remove(self, i: int):
+        """Remove collider ``i``; returns it."""
+        self._index(i, "remove")
+        c = self.colliders.pop(i)
+        self._repack()
+        return c
+
+    def _repack(self) -> None:
+        """The packed arrays again after the list changed; the others keep their step-start
+        poses."""
+        starts = {id(c): (p, r) for c, p, r in zip(self._packed, self._pos0, self._rot0)}
+        self._pack()
+        self._pos0, self._rot0 = self._pos.copy(), self._rot.copy()
+        for k, c in enumerate(self.colliders):
+            if id(c) in starts:
+                self._pos0[k], self._rot0[k] = starts[id(c)]
+
+    def _index(self, i, doing: str) -> None:
+        n = len(self.colliders)
+        if isinstance(i, bool) or not isinstance(i, (int, np.integer)) or not -n <= i < n:
+            raise ValueError(
+                f"collider index must be an integer in [0, {n - 1}], got {i!r}"
+                if n
+                else f"there are no colliders to {doing}"
+            )
+
+    def set_pose(
+        self, i: int, position, orientation=(1.0, 0.0, 0.0, 0.0), teleport: bool = False
+    ) -> None:
+        """Collider ``i``'s pose at the end of the next step (it sweeps there from where it is),
+        or,
+        with ``teleport``, at its start too (it stands there)."""
+        self._index(i, "move")
+        self.colliders[i].set_pose(position, orientation)
+        self._pos[i] = self.colliders[i].position
+        self._rot[i] = self.colliders[i].rotation
+        if teleport:
+            self._pos0[i] = self._pos[i]
+            self._rot0[i] = self._rot[i]
+
+    def apply(self, state, start, dt, velocity_follow):
+        self.last_touching = resolve_contacts(
+            state.x,
+            state.v,
+            start.x,
+            self._pinned,
+            self._kinds,
+            self._pos,
+            self._rot,
+            self._pos0,
+            self._rot0,
+            self._geo,
+            self._mu,
+            self.thickness,
+            dt,
+            self.touching,
+            self.clearance,
+        )
+        self.end_step()
+
+    def end_step(self) -> None:
+        """The poses this step ended at are where the next one starts."""
+        np.copyto(self._pos0, self._pos)
+        np.copyto(self._rot0, self._rot)
+
+    def packed(self) -> tuple:
+        """``(kinds, positions, rotations, positions at the step's start, rotations there,
+        geometry, friction)``: the colliders as the contact kernels read them (an integrator that
+        resolves contacts inside its step reads them here)."""
+        return self._kinds, self._pos, self._rot, self._pos0, self._rot0, self._geo, self._mu

@@ -1,0 +1,542 @@
+"""Self-collision's candidate pairs, from a bounding-volume hierarchy over the cloth's triangles.
+
+Built once from the rest layout (a median split of the triangles' centres along the longest axis of
+their box, down to one triangle a leaf; a particle in no triangle is a leaf of its own), refitted
+every step and traversed against itself (the usual choice in cloth codes: Bridson, Fedkiw &
+Anderson 2002; Tang et al. 2009 among many). Every primitive has a **reach**: each particle one of
+its own (self-collision gives it half the thickness plus its motion over the step), a triangle or
+an
+edge the largest of its corners'. A leaf's box is its triangle's box grown by that reach, so two
+leaves' boxes overlap whenever their primitives lie within the sum of their reaches. For each
+overlapping pair of leaves ``(T1, T2)`` the exact distances are measured:
+
+* **particle–triangle**: each corner of ``T1`` whose first triangle is ``T1`` against ``T2`` (not a
+  corner of ``T2``), and the other way round;
+* **edge–edge**: each edge of ``T1`` whose first triangle is ``T1`` against each of ``T2``'s alike,
+  sharing no particle.
+
+A pair of primitives within reach is seen from exactly one pair of leaves (their first triangles),
+so each is found once without a "seen" array. The traversal is split into fixed tasks (subtrees
+against themselves and pairs of subtrees, :func:`_tasks`), run on every core; each task writes its
+pairs to its own rows and the tasks are joined in order, so the result is the same at any thread
+count.
+
+Why a tree and not the spatial hash this replaced: with a reach per primitive (the fast-moving
+bottom of a swinging cloth no longer widens every particle's search) the hash still visited every
+entry of about four cells per edge — about 90 entries an edge, 1.1 million a step at 64×64, for 800
+pairs — while the refitted tree tests a few overlapping boxes per triangle (figures in
+docs/BENCHMARKS.md §3c).
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from .geometry import closest_on_segments, point_triangle_distance
+
+#: the traversal's tasks each hold at most 1/TASKS of the items against themselves or of all pairs
+#: of items between two subtrees (:func:`_tasks`: ~200 tasks at 64×64, fewer on a small cloth)
+TASKS = 64
+
+#: items (triangles, lone particles) a leaf holds at most; measured on recorded states of the
+#: swinging 64×64 cloth (7,938 triangles), ms a search in two runs: 1 → 3.9–4.2, 2 → 3.4–3.8,
+#: 4 → 3.5–3.9, 8 → 3.1–3.2, 16 → 3.4–3.9
+LEAF = 8
+
+
+@numba.njit(cache=True)
+def _build(centres, leaf):
+    """The tree over ``m`` item centres, at most ``leaf`` items a leaf: ``(left, right, first, end,
+    size, order)``, per node its children (−1 for a leaf), its items ``order[first:end]`` and how
+    many; the root is 0 and every child is numbered after its parent."""
+    m = centres.shape[0]
+    cap = 2 * m
+    left = np.full(cap, -1, np.int64)
+    right = np.full(cap, -1, np.int64)
+    first = np.zeros(cap, np.int64)
+    end = np.zeros(cap, np.int64)
+    order = np.arange(m)
+    stack = np.empty((cap, 3), np.int64)  # node, first and end in ``order``
+    stack[0, 0], stack[0, 1], stack[0, 2] = 0, 0, m
+    top = 0
+    n_nodes = 1
+    keys = np.empty(m)
+    while top >= 0:
+        node, s, e = stack[top, 0], stack[top, 1], stack[top, 2]
+        top -= 1
+        first[node], end[node] = s, e
+        if e - s <= leaf:
+            continue
+        axis, extent = 0, -1.0
+        for k in range(3):
+            lo, hi = np.inf, -np.inf
+            for q in range(s, e):
+                lo = min(lo, centres[order[q], k])
+                hi = max(hi, centres[order[q], k])
+            if hi - lo > extent:
+                axis, extent = k, hi - lo
+        for q in range(s, e):
+            keys[q] = centres[order[q], axis]
+        idx = np.argsort(keys[s:e], kind="mergesort")  # stable: ties keep their order
+        order[s:e] = order[s:e][idx]
+        mid = (s + e) // 2
+        lt, rt = n_nodes, n_nodes + 1
+        n_nodes += 2
+        left[node], right[node] = lt, rt
+        top += 1
+        stack[top, 0], stack[top, 1], stack[top, 2] = rt, mid, e
+        top += 1
+        stack[top, 0], stack[top, 1], stack[top, 2] = lt, s, mid
+    return (
+        left[:n_nodes].copy(),
+        right[:n_nodes].copy(),
+        first[:n_nodes].copy(),
+        end[:n_nodes].copy(),
+        (end - first)[:n_nodes].copy(),
+        order,
+    )
+
+
+def _tasks(left, right, size, least: int) -> np.ndarray:
+    """The traversal split into independent tasks, ``(a, b)`` rows: ``(a, a)`` the subtree ``a``
+    against itself, ``(a, b)`` subtree ``a`` against ``b``. A subtree is split into its two halves
+    and their pair while it holds more than ``1/least`` of the items (a spread-out cloth's pairs
+    are
+    mostly inside small subtrees), and a pair by opening its larger side while it could hold more
+    than ``1/least`` of all pairs of items (a crumpled cloth's, where most boxes overlap, are
+    mostly
+    between subtrees); the tasks are listed depth first, so that equal runs of the list cover equal
+    parts of the cloth and every core gets a like share either way."""
+    budget = max(1, int(size[0]) * int(size[0]) // (2 * least))
+    tasks = []
+
+    def visit(a, b):
+        if a == b:
+            if left[a] < 0 or int(size[a]) * least <= int(size[0]):
+                tasks.append((a, a))
+                return
+            lt, rt = int(left[a]), int(right[a])
+            visit(lt, lt)
+            visit(rt, rt)
+            visit(lt, rt)
+            return
+        if int(size[a]) * int(size[b]) <= budget or (left[a] < 0 and left[b] < 0):
+            tasks.append((a, b))
+            return
+        if left[a] >= 0 and (left[b] < 0 or size[a] >= size[b]):
+            visit(int(left[a]), b)
+            visit(int(right[a]), b)
+        else:
+            visit(a, int(left[b]))
+            visit(a, int(right[b]))
+
+    visit(0, 0)
+    return np.array(tasks, np.int64).reshape(-1, 2)
+
+
+@numba.njit(cache=True)
+def _refit(x0, reach, tris, orphans, order, left, right, first, end, ilo, ihi, lo, hi, tri_reach):
+    """Each triangle's reach; each item's box (``ilo``/``ihi`` in leaf order: row ``q`` is item
+    ``order[q]``), its primitive's box at the start grown by its reach; and every node's box, the
+    union of its items' (children first)."""
+    n_tris = tris.shape[0]
+    for t in range(n_tris):
+        tri_reach[t] = max(reach[tris[t, 0]], reach[tris[t, 1]], reach[tris[t, 2]])
+    for q in range(order.shape[0]):
+        k = order[q]
+        if k < n_tris:
+            a, b, c = tris[k, 0], tris[k, 1], tris[k, 2]
+            r = tri_reach[k]
+            for d in range(3):
+                ilo[q, d] = min(x0[a, d], x0[b, d], x0[c, d]) - r
+                ihi[q, d] = max(x0[a, d], x0[b, d], x0[c, d]) + r
+        else:
+            p = orphans[k - n_tris]
+            for d in range(3):
+                ilo[q, d] = x0[p, d] - reach[p]
+                ihi[q, d] = x0[p, d] + reach[p]
+    for node in range(left.shape[0] - 1, -1, -1):
+        if left[node] < 0:
+            for d in range(3):
+                lo[node, d], hi[node, d] = np.inf, -np.inf
+            for q in range(first[node], end[node]):
+                for d in range(3):
+                    lo[node, d] = min(lo[node, d], ilo[q, d])
+                    hi[node, d] = max(hi[node, d], ihi[q, d])
+        else:
+            lt, rt = left[node], right[node]
+            for d in range(3):
+                lo[node, d] = min(lo[lt, d], lo[rt, d])
+                hi[node, d] = max(hi[lt, d], hi[rt, d])
+
+
+@numba.njit(cache=True, inline="always")
+def _apart(lo, hi, a, b):
+    return (
+        lo[a, 0] > hi[b, 0]
+        or lo[b, 0] > hi[a, 0]
+        or lo[a, 1] > hi[b, 1]
+        or lo[b, 1] > hi[a, 1]
+        or lo[a, 2] > hi[b, 2]
+        or lo[b, 2] > hi[a, 2]
+    )
+
+
+@numba.njit(cache=True, inline="always")
+def _put(pairs, dist, row, m, cap, i, j, d):
+    """Pair ``(i, j)`` at distance ``d`` as its task's ``m``-th (at ``row + m``) if the task has
+    room; returns the task's count, ``m + 1``, either way (:meth:`TriangleTree.pairs` runs again
+    with more rows when a count exceeds ``cap``)."""
+    if m < cap:
+        pairs[row + m, 0] = i
+        pairs[row + m, 1] = j
+        dist[row + m] = d
+    return m + 1
+
+
+@numba.njit(cache=True, inline="always")
+def _point_triangle(x0, reach, tri_reach, tris, ilo, ihi, p, t, qt, vf, vf_d, row, m, cap):
+    """Particle ``p`` against triangle ``t`` (item row ``qt``): kept when within their reaches."""
+    if p == tris[t, 0] or p == tris[t, 1] or p == tris[t, 2]:
+        return m
+    r = reach[p]
+    if (
+        x0[p, 0] < ilo[qt, 0] - r
+        or x0[p, 0] > ihi[qt, 0] + r
+        or x0[p, 1] < ilo[qt, 1] - r
+        or x0[p, 1] > ihi[qt, 1] + r
+        or x0[p, 2] < ilo[qt, 2] - r
+        or x0[p, 2] > ihi[qt, 2] + r
+    ):
+        return m
+    d = point_triangle_distance(x0, p, tris[t, 0], tris[t, 1], tris[t, 2])[0]
+    if d >= r + tri_reach[t]:
+        return m
+    return _put(vf, vf_d, row, m, cap, p, t, d)
+
+
+@numba.njit(cache=True, inline="always")
+def _items(
+    x0,
+    reach,
+    tri_reach,
+    tris,
+    orphans,
+    edges,
+    own_v,
+    own_e,
+    order,
+    ilo,
+    ihi,
+    qs,
+    qt,
+    vf,
+    vf_d,
+    row_vf,
+    m_vf,
+    cap_vf,
+    ee,
+    ee_d,
+    row_ee,
+    m_ee,
+    cap_ee,
+):
+    """The primitives of items ``order[qs]`` and ``order[qt]``, whose boxes overlap (module
+    docstring); returns the two counts."""
+    n_tris = tris.shape[0]
+    s, t = order[qs], order[qt]
+    for side in range(2):  # the corners first seen in one triangle against the other
+        u, v, qv = (s, t, qt) if side == 0 else (t, s, qs)
+        if v >= n_tris:
+            continue  # against a lone particle: nothing to measure
+        for c in range(3):
+            p = own_v[u, c] if u < n_tris else (orphans[u - n_tris] if c == 0 else -1)
+            if p < 0:
+                break
+            m_vf = _point_triangle(
+                x0, reach, tri_reach, tris, ilo, ihi, p, v, qv, vf, vf_d, row_vf, m_vf, cap_vf
+            )
+    if s >= n_tris or t >= n_tris:
+        return m_vf, m_ee  # a lone particle has no edges
+    for c1 in range(3):  # the edges first seen in one triangle against the other's
+        e = own_e[s, c1]
+        if e < 0:
+            break
+        e0, e1 = edges[e, 0], edges[e, 1]
+        r_e = max(reach[e0], reach[e1])
+        for c2 in range(3):
+            f = own_e[t, c2]
+            if f < 0:
+                break
+            f0, f1 = edges[f, 0], edges[f, 1]
+            if f0 == e0 or f0 == e1 or f1 == e0 or f1 == e1:
+                continue
+            r = r_e + max(reach[f0], reach[f1])
+            if (
+                min(x0[e0, 0], x0[e1, 0]) - max(x0[f0, 0], x0[f1, 0]) >= r
+                or min(x0[f0, 0], x0[f1, 0]) - max(x0[e0, 0], x0[e1, 0]) >= r
+                or min(x0[e0, 1], x0[e1, 1]) - max(x0[f0, 1], x0[f1, 1]) >= r
+                or min(x0[f0, 1], x0[f1, 1]) - max(x0[e0, 1], x0[e1, 1]) >= r
+                or min(x0[e0, 2], x0[e1, 2]) - max(x0[f0, 2], x0[f1, 2]) >= r
+                or min(x0[f0, 2], x0[f1, 2]) - max(x0[e0, 2], x0[e1, 2]) >= r
+            ):
+                continue  # farther apart than r along an axis
+            d = closest_on_segments(x0, e0, e1, f0, f1)[2]
+            if d >= r:
+                continue
+            if e < f:
+                m_ee = _put(ee, ee_d, row_ee, m_ee, cap_ee, e, f, d)
+            else:
+                m_ee = _put(ee, ee_d, row_ee, m_ee, cap_ee, f, e, d)
+    return m_vf, m_ee
+
+
+@numba.njit(cache=True, parallel=True)
+def _traverse(
+    tasks,
+    left,
+    right,
+    first,
+    end,
+    size,
+    lo,
+    hi,
+    ilo,
+    ihi,
+    order,
+    stack_size,
+    x0,
+    reach,
+    tri_reach,
+    tris,
+    orphans,
+    edges,
+    own_v,
+    own_e,
+    cap_vf,
+    cap_ee,
+    vf,
+    vf_d,
+    ee,
+    ee_d,
+    counts,
+):
+    """Every task (:func:`_tasks`) walks its pairs of overlapping nodes depth first, and measures
+    the primitives of each overlapping pair of items in two overlapping leaves (module docstring);
+    its particle–triangle pairs go to rows ``task·cap_vf`` on of ``vf``, its edge pairs to
+    ``task·cap_ee`` on of ``ee``, and ``counts[task]`` says how many (possibly more than the rows:
+    then run again)."""
+    for k in numba.prange(tasks.shape[0]):
+        stack = np.empty((stack_size, 2), np.int64)
+        stack[0, 0], stack[0, 1] = tasks[k, 0], tasks[k, 1]
+        top = 0
+        m_vf = m_ee = 0
+        row_vf, row_ee = k * cap_vf, k * cap_ee
+        while top >= 0:
+            a, b = stack[top, 0], stack[top, 1]
+            top -= 1
+            if a == b:  # a subtree against itself: each child against itself, and the two
+                if left[a] >= 0:
+                    stack[top + 1, 0], stack[top + 1, 1] = left[a], right[a]
+                    stack[top + 2, 0], stack[top + 2, 1] = right[a], right[a]
+                    stack[top + 3, 0], stack[top + 3, 1] = left[a], left[a]
+                    top += 3
+                    continue
+            elif _apart(lo, hi, a, b):
+                continue
+            elif left[a] >= 0 and (left[b] < 0 or size[a] >= size[b]):  # open the larger
+                stack[top + 1, 0], stack[top + 1, 1] = right[a], b
+                stack[top + 2, 0], stack[top + 2, 1] = left[a], b
+                top += 2
+                continue
+            elif left[b] >= 0:
+                stack[top + 1, 0], stack[top + 1, 1] = a, right[b]
+                stack[top + 2, 0], stack[top + 2, 1] = a, left[b]
+                top += 2
+                continue
+            for qs in range(first[a], end[a]):  # two leaves (or one, against itself)
+                for qt in range(first[b] if a != b else qs + 1, end[b]):
+                    if _apart(ilo, ihi, qs, qt):
+                        continue
+                    m_vf, m_ee = _items(
+                        x0,
+                        reach,
+                        tri_reach,
+                        tris,
+                        orphans,
+                        edges,
+                        own_v,
+                        own_e,
+                        order,
+                        ilo,
+                        ihi,
+                        qs,
+                        qt,
+                        vf,
+                        vf_d,
+                        row_vf,
+                        m_vf,
+                        cap_vf,
+                        ee,
+                        ee_d,
+                        row_ee,
+                        m_ee,
+                        cap_ee,
+                    )
+        counts[k, 0] = m_vf
+        counts[k, 1] = m_ee
+
+
+@numba.njit(cache=True)
+def _join(counts, cap, pairs, dist):
+    """Each task's rows (``counts[k]`` from row ``k·cap``), joined in task order: the cost is the
+    pairs', not the rows'."""
+    total = 0
+    for k in range(counts.shape[0]):
+        total += counts[k]
+    out, out_d = np.empty((total, 2), np.int64), np.empty(total)
+    m = 0
+    for k in range(counts.shape[0]):
+        for q in range(k * cap, k * cap + counts[k]):
+            out[m, 0], out[m, 1], out_d[m] = pairs[q, 0], pairs[q, 1], dist[q]
+            m += 1
+    return out, out_d
+
+
+def _owned(slots, owner_of) -> np.ndarray:
+    """Per triangle, the (up to three) primitives of its ``slots`` it is the first triangle of, in
+    slot order, −1 after them."""
+    slots = np.asarray(slots, np.int64)
+    mine = owner_of[slots] == np.arange(len(slots))[:, None]
+    first = np.argsort(~mine, axis=1, kind="stable")  # its own primitives first, in slot order
+    return np.where(
+        np.take_along_axis(mine, first, axis=1), np.take_along_axis(slots, first, axis=1), -1
+    )
+
+
+def reaches(radius, n: int) -> np.ndarray:
+    """Per-particle reaches from a search radius: a number ``R`` (every pair within ``R``) is half
+    of
+    it for each particle; an array of ``n`` is taken as it is."""
+    if np.ndim(radius) == 0:
+        return np.full(n, 0.5 * float(radius))
+    reach = np.ascontiguousarray(radius, dtype=np.float64)
+    if reach.shape != (n,):
+        raise ValueError(
+            f"radius: expected a number or one reach per particle ({n}), got shape {reach.shape}"
+        )
+    return reach
+
+
+class TriangleTree:
+    """The hierarchy over a cloth's triangles (and its particles in no triangle), built from
+    ``rest`` positions; :meth:`pairs` refits it to any positions. ``features``: the topology
+    self-collision keeps (``self_collision._features``)."""
+
+    def __init__(self, tris, rest, features, leaf: int = LEAF):
+        self.tris = np.ascontiguousarray(tris, dtype=np.int64)
+        rest = np.asarray(rest, dtype=np.float64)
+        n = len(rest)
+        self.edges, tri_edge, edge_owner, _, vertex_owner = features[:5]
+        used = np.zeros(n, bool)
+        used[self.tris.ravel()] = True
+        self.orphans = np.flatnonzero(~used).astype(np.int64)
+        centres = np.concatenate([rest[self.tris].mean(axis=1), rest[self.orphans]])
+        self.empty = len(centres) == 0
+        if self.empty:
+            return
+        self.own_v = _owned(self.tris, vertex_owner)
+        self.own_e = _owned(tri_edge, edge_owner)
+        (self.left, self.right, self.first, self.end, self.size, self.order) = _build(
+            np.ascontiguousarray(centres), int(leaf)
+        )
+        self.tasks = _tasks(self.left, self.right, self.size, TASKS)
+        depth = np.zeros(len(self.left), np.int64)
+        for node in range(len(self.left)):  # children are numbered after their parent
+            if self.left[node] >= 0:
+                depth[self.left[node]] = depth[self.right[node]] = depth[node] + 1
+        # depth first, a walk keeps at most two pending entries per level of a subtree against
+        # itself and one per level of each side of a pair
+        self.stack_size = int(6 * (depth.max() + 2) + 8)
+        self.lo = np.empty((len(self.left), 3))
+        self.hi = np.empty((len(self.left), 3))
+        self.ilo = np.empty((len(self.order), 3))
+        self.ihi = np.empty((len(self.order), 3))
+        self.tri_reach = np.empty(len(self.tris))
+        self.caps = np.array([16, 16], np.int64)  # rows per task, grown as a cloth needs
+
+    def pairs(self, x0, radius):
+        """``(vf, vf_distance, ee, ee_distance)``: every (particle, triangle) pair, the particle
+        not
+        a corner, and every pair of edges ``(e, f)``, ``e < f``, sharing no particle, whose start
+        positions ``x0`` lie within ``radius`` — a number, or a reach per particle
+        (:func:`reaches`;
+        a pair is kept when its distance is below the sum of its two sides' reaches, a triangle's
+        or an edge's the largest of its corners') — with those distances, in a fixed order, the
+        same at any thread count."""
+        x0 = np.ascontiguousarray(x0, dtype=np.float64)
+        if self.empty:
+            return (
+                np.empty((0, 2), np.int64),
+                np.empty(0),
+                np.empty((0, 2), np.int64),
+                np.empty(0),
+            )
+        reach = reaches(radius, len(x0))
+        _refit(
+            x0,
+            reach,
+            self.tris,
+            self.orphans,
+            self.order,
+            self.left,
+            self.right,
+            self.first,
+            self.end,
+            self.ilo,
+            self.ihi,
+            self.lo,
+            self.hi,
+            self.tri_reach,
+        )
+        n_tasks = len(self.tasks)
+        while True:
+            cap_vf, cap_ee = (int(c) for c in self.caps)
+            vf, vf_d = np.empty((n_tasks * cap_vf, 2), np.int64), np.empty(n_tasks * cap_vf)
+            ee, ee_d = np.empty((n_tasks * cap_ee, 2), np.int64), np.empty(n_tasks * cap_ee)
+            counts = np.zeros((n_tasks, 2), np.int64)
+            _traverse(
+                self.tasks,
+                self.left,
+                self.right,
+                self.first,
+                self.end,
+                self.size,
+                self.lo,
+                self.hi,
+                self.ilo,
+                self.ihi,
+                self.order,
+                self.stack_size,
+                x0,
+                reach,
+                self.tri_reach,
+                self.tris,
+                self.orphans,
+                self.edges,
+                self.own_v,
+                self.own_e,
+                cap_vf,
+                cap_ee,
+                vf,
+                vf_d,
+                ee,
+                ee_d,
+                counts,
+            )
+            most = counts.max(axis=0)
+            if most[0] <= cap_vf and most[1] <= cap_ee:
+                break
+            self.caps = np.maximum(self.caps, most + most // 4)
+        return _join(counts[:, 0], cap_vf, vf, vf_d) + _join(counts[:, 1], cap_ee, ee, ee_d)

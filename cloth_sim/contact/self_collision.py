@@ -1,0 +1,585 @@
+"""Self-collision: the cloth keeps ``thickness`` from its own non-adjacent triangles and never
+passes
+through one.
+
+A post-step stage (see :mod:`cloth_sim.constraints.strain_limit`) over particle–triangle pairs, the
+triangle not
+containing the particle. Each step:
+
+1. **Candidates**, from a bounding-volume hierarchy over the triangles
+   (:mod:`cloth_sim.contact.collision_tree`: built once from the rest layout, refitted to the
+   step's start
+   positions and traversed against itself). Each particle **reaches** half the thickness beyond its
+   own motion over the step, ``h/2 + |Δx|``; a triangle or an edge reaches as far as its farthest
+   corner. A pair is a candidate when its distance at the start is below its two reaches: farther
+   apart, it can neither come within ``h`` nor cross over the step. (A search radius of
+   ``h + 2·max|Δx|`` for every pair, the cloth's fastest particle widening everyone's search, found
+   9,800 edge pairs and 3,400 particle–triangle pairs a step on the swinging 64×64 cloth; the reach
+   of each pair's own motions keeps 800 and 260 of them. A spatial hash of the particles and of
+   the edges did the search before, 9 ms a step there, 6 ms with the reaches: it visited about 90
+   hash entries per edge for those 800 pairs; the tree, 2.5 ms. Figures in docs/BENCHMARKS.md §3c.)
+   A particle is paired with every triangle it is not a corner of (Bridson et al.): excluding the
+   triangles of its neighbours too was tried and lets the ``fold`` scene cross itself where a
+   crease
+   is one triangle wide. Neighbours in a flat or compressed cloth are never pushed out of its plane
+   (step 2), and the no-crossing bound (step 3) slows them only when they move by most of an edge.
+2. **Proximity** (Bridson, Fedkiw & Anderson 2002): a pair closer than ``thickness`` at the end of
+   the step is pushed apart, shared by inverse mass between its two sides (each moved as a whole,
+   held particles staying), and an approaching normal velocity between them is removed alike (an
+   inelastic impulse). By where the particle's nearest point on the triangle lies:
+
+   * inside the face: along the triangle's normal, on the side the particle was at the start (so
+     neighbours in a flat or compressed cloth are never pushed out of its plane);
+   * on an edge (**point–edge**) or at a corner (**point–point**): along the line from that point
+   to
+     the particle, each edge and corner handled once (from the first triangle that has it), and
+     only
+     when the particle shares no triangle with it. Without these, the hems and openings of a
+     garment
+     — where the nearest point is an edge — kept no distance: the edge particles of a U-folded
+     cloth
+     came within 1.5–1.9 mm of the other layer at a thickness of 5 mm;
+   * and **edge–edge**: two edges sharing no particle whose nearest points both lie inside them
+   (two
+     hems crossing), found by the same traversal (each edge from its first triangle), pushed
+     apart along the line between those points. In a flat cloth two edges are nearest at an end of
+     one of them, so this never acts between neighbours lying flat.
+3. **No crossing**, guaranteed: the distance from a moving point to a moving triangle, with every
+   vertex on a straight path over the step, changes at most by ``|Δp| + max|Δv_i|`` (the triangle's
+   points are convex combinations of its corners). A pair whose distance at the start ``d₀`` is
+   below that has the displacements of its four particles scaled by ``0.9·d₀ / (|Δp| + max|Δv_i|)``
+   (the smallest factor over the pairs a particle is in; velocities scaled alike), so the distance
+   stays above 10 % of ``d₀`` over the whole step: no particle passes through a triangle between
+   two steps, whatever the speed. The same bound holds for two moving edges (``max`` of each edge's
+   two ends' displacements, summed), so edge pairs get factors alike and no edge passes through
+   another. One pass suffices, because every factor only shrinks motion.
+   A particle that starts touching a triangle (``d₀ = 0``) does not move that step.
+
+The cost is one refit and traversal of the tree and one distance test per pair of overlapping
+boxes; ``self_collision=False`` (the default) runs none of it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from .colliders import SUPPORT
+from .geometry import closest_on_segments, point_triangle_distance
+
+
+@numba.njit(cache=True)
+def proximity(x, x0, v, tris, pairs, held_inv_mass, free_inv_mass, clearance, h):
+    """Push pairs closer than ``h`` apart (on the particle's side at the start) and remove their
+    approaching normal velocity; returns how many pairs were pushed. ``held_inv_mass`` is 0 where a
+    collider supports the particle (:func:`_separate` for the rest)."""
+    pushed = 0
+    for q in range(pairs.shape[0]):
+        p, i = pairs[q, 0], pairs[q, 1]
+        a, b, c = tris[i, 0], tris[i, 1], tris[i, 2]
+        # the triangle's normal now, oriented to the side the particle started on
+        e1x, e1y, e1z = x[b, 0] - x[a, 0], x[b, 1] - x[a, 1], x[b, 2] - x[a, 2]
+        e2x, e2y, e2z = x[c, 0] - x[a, 0], x[c, 1] - x[a, 1], x[c, 2] - x[a, 2]
+        nx, ny, nz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
+        nl = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if nl == 0.0:
+            continue
+        nx, ny, nz = nx / nl, ny / nl, nz / nl
+        d, wa, wb, wc = point_triangle_distance(x, p, a, b, c)
+        if d >= h or wa <= 0.0 or wb <= 0.0 or wc <= 0.0:
+            continue  # far, or nearest to an edge or a corner: the face is not in front of it
+        d0, wa0, wb0, wc0 = point_triangle_distance(x0, p, a, b, c)
+        side = (
+            (x0[p, 0] - (wa0 * x0[a, 0] + wb0 * x0[b, 0] + wc0 * x0[c, 0])) * nx
+            + (x0[p, 1] - (wa0 * x0[a, 1] + wb0 * x0[b, 1] + wc0 * x0[c, 1])) * ny
+            + (x0[p, 2] - (wa0 * x0[a, 2] + wb0 * x0[b, 2] + wc0 * x0[c, 2])) * nz
+        )
+        if side < 0.0:
+            nx, ny, nz = -nx, -ny, -nz
+        sd = (
+            (x[p, 0] - (wa * x[a, 0] + wb * x[b, 0] + wc * x[c, 0])) * nx
+            + (x[p, 1] - (wa * x[a, 1] + wb * x[b, 1] + wc * x[c, 1])) * ny
+            + (x[p, 2] - (wa * x[a, 2] + wb * x[b, 2] + wc * x[c, 2])) * nz
+        )
+        if sd >= h:
+            continue
+        # the particle takes the share α of the push and the triangle, moved as a whole (its held
+        # corners staying), the rest: every particle moves at most the push, however lopsided the
+        # weights (barycentric mass weighting would move a lone free corner by push / w)
+        if not _separate(
+            x,
+            v,
+            held_inv_mass,
+            free_inv_mass,
+            clearance,
+            (p, p, p),
+            (1.0, 0.0, 0.0),
+            (a, b, c),
+            (wa, wb, wc),
+            nx,
+            ny,
+            nz,
+            min(h - sd, 2.0 * h),
+        ):
+            continue
+        pushed += 1
+    return pushed
+
+
+@numba.njit(cache=True)
+def displacement_factors(disp, tris, pairs, start_distance, factor):
+    """The no-crossing factors of particle–triangle pairs (module docstring, step 3), from each
+    particle's displacement over the step (:func:`displacements`), written into ``factor``
+    (1 = unchanged); :func:`scale_displacements` applies them."""
+    factor[:] = 1.0
+    for q in range(pairs.shape[0]):
+        p, i = pairs[q, 0], pairs[q, 1]
+        a, b, c = tris[i, 0], tris[i, 1], tris[i, 2]
+        need = disp[p] + max(disp[a], disp[b], disp[c])
+        if need == 0.0:
+            continue
+        d0 = start_distance[q]
+        if d0 > need:
+            continue
+        r = 0.9 * d0 / need
+        for vert in (p, a, b, c):
+            if r < factor[vert]:
+                factor[vert] = r
+
+
+@numba.njit(cache=True, inline="always")
+def _separate(x, v, held_inv_mass, free_inv_mass, clearance, s1, w1, s2, w2, nx, ny, nz, push):
+    """Push side 1 (the points ``Σ w1·x[s1]``) along ``+n`` and side 2 along ``−n`` by ``push`` in
+    all, shared by their inverse masses (each side moved as a whole, held particles staying), and
+    remove an approaching velocity along ``n`` alike. ``s1, s2``: 3 particle indices each, ``w1,
+    w2``
+    their weights (0 for an unused slot). A side held by a collider (``held_inv_mass`` 0) stays;
+    when
+    both are, the side farther above the colliders (``clearance``) moves alone, by its own masses.
+    Returns whether anything could move."""
+    inv_mass = held_inv_mass
+    i1 = w1[0] * inv_mass[s1[0]] + w1[1] * inv_mass[s1[1]] + w1[2] * inv_mass[s1[2]]
+    i2 = w2[0] * inv_mass[s2[0]] + w2[1] * inv_mass[s2[1]] + w2[2] * inv_mass[s2[2]]
+    if i1 + i2 != 0.0:
+        alpha = i1 / (i1 + i2)
+    else:
+        inv_mass = free_inv_mass
+        c1, c2 = np.inf, np.inf
+        for k in range(3):
+            if w1[k] > 0.0:
+                c1 = min(c1, clearance[s1[k]])
+            if w2[k] > 0.0:
+                c2 = min(c2, clearance[s2[k]])
+        alpha = 1.0 if c1 >= c2 else 0.0
+        moving = (
+            w1[0] * inv_mass[s1[0]] + w1[1] * inv_mass[s1[1]] + w1[2] * inv_mass[s1[2]]
+            if alpha == 1.0
+            else w2[0] * inv_mass[s2[0]] + w2[1] * inv_mass[s2[1]] + w2[2] * inv_mass[s2[2]]
+        )
+        if moving == 0.0:
+            return False
+    vn = 0.0
+    for k in range(3):
+        vn += (w1[k] * v[s1[k], 0] - w2[k] * v[s2[k], 0]) * nx
+        vn += (w1[k] * v[s1[k], 1] - w2[k] * v[s2[k], 1]) * ny
+        vn += (w1[k] * v[s1[k], 2] - w2[k] * v[s2[k], 2]) * nz
+    vn = min(vn, 0.0)  # only an approaching velocity goes
+    for k in range(3):
+        p = s1[k]
+        if w1[k] > 0.0 and inv_mass[p] > 0.0 and alpha > 0.0:
+            x[p, 0] += alpha * push * nx
+            x[p, 1] += alpha * push * ny
+            x[p, 2] += alpha * push * nz
+            v[p, 0] -= alpha * vn * nx
+            v[p, 1] -= alpha * vn * ny
+            v[p, 2] -= alpha * vn * nz
+        q = s2[k]
+        if w2[k] > 0.0 and inv_mass[q] > 0.0 and alpha < 1.0:
+            x[q, 0] -= (1.0 - alpha) * push * nx
+            x[q, 1] -= (1.0 - alpha) * push * ny
+            x[q, 2] -= (1.0 - alpha) * push * nz
+            v[q, 0] += (1.0 - alpha) * vn * nx
+            v[q, 1] += (1.0 - alpha) * vn * ny
+            v[q, 2] += (1.0 - alpha) * vn * nz
+    return True
+
+
+@numba.njit(cache=True, inline="always")
+def _direction(x, x0, p, s2, w2):
+    """Unit vector from the point ``Σ w2·x[s2]`` to particle ``p`` now, turned to the side it had
+    at
+    the start (from the start positions when they coincide now); and the distance now."""
+    nx = x[p, 0] - (w2[0] * x[s2[0], 0] + w2[1] * x[s2[1], 0] + w2[2] * x[s2[2], 0])
+    ny = x[p, 1] - (w2[0] * x[s2[0], 1] + w2[1] * x[s2[1], 1] + w2[2] * x[s2[2], 1])
+    nz = x[p, 2] - (w2[0] * x[s2[0], 2] + w2[1] * x[s2[1], 2] + w2[2] * x[s2[2], 2])
+    ox = x0[p, 0] - (w2[0] * x0[s2[0], 0] + w2[1] * x0[s2[1], 0] + w2[2] * x0[s2[2], 0])
+    oy = x0[p, 1] - (w2[0] * x0[s2[0], 1] + w2[1] * x0[s2[1], 1] + w2[2] * x0[s2[2], 1])
+    oz = x0[p, 2] - (w2[0] * x0[s2[0], 2] + w2[1] * x0[s2[1], 2] + w2[2] * x0[s2[2], 2])
+    d = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if d == 0.0:
+        nx, ny, nz = ox, oy, oz
+    elif nx * ox + ny * oy + nz * oz < 0.0:
+        nx, ny, nz = -nx, -ny, -nz
+    nl = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if nl == 0.0:
+        return 0.0, 0.0, 0.0, d
+    return nx / nl, ny / nl, nz / nl, d
+
+
+@numba.njit(cache=True, inline="always")
+def _adjacent(p, q, adj_ptr, adj):
+    for k in range(adj_ptr[q], adj_ptr[q + 1]):
+        if adj[k] == p:
+            return True
+    return False
+
+
+@numba.njit(cache=True)
+def proximity_features(
+    x,
+    x0,
+    v,
+    tris,
+    pairs,
+    held_inv_mass,
+    free_inv_mass,
+    clearance,
+    h,
+    tri_edge,
+    edge_owner,
+    edge_tris,
+    vertex_owner,
+    adj_ptr,
+    adj,
+):
+    """The point–edge and point–point cases of the proximity pass (module docstring): candidate
+    pairs whose nearest point on the triangle is on an edge or a corner; returns how many were
+    pushed."""
+    pushed = 0
+    for q in range(pairs.shape[0]):
+        p, i = pairs[q, 0], pairs[q, 1]
+        a, b, c = tris[i, 0], tris[i, 1], tris[i, 2]
+        d, wa, wb, wc = point_triangle_distance(x, p, a, b, c)
+        if d >= h or (wa > 0.0 and wb > 0.0 and wc > 0.0):
+            continue  # far, or in front of the face (the face case)
+        if wa > 0.0 and wb > 0.0 or wb > 0.0 and wc > 0.0 or wc > 0.0 and wa > 0.0:
+            # on an edge: slot 0 = a–b (wc = 0), 1 = b–c (wa = 0), 2 = c–a (wb = 0)
+            slot = 0 if wc <= 0.0 else (1 if wa <= 0.0 else 2)
+            e = tri_edge[i, slot]
+            if edge_owner[e] != i:
+                continue
+            other = edge_tris[e, 1] if edge_tris[e, 0] == i else edge_tris[e, 0]
+            if other >= 0 and (tris[other, 0] == p or tris[other, 1] == p or tris[other, 2] == p):
+                continue  # the particle is a corner of the edge's other triangle
+            s2 = (a, b, c)
+            w2 = (wa, wb, wc)
+        else:
+            vert = a if wa > 0.0 else (b if wb > 0.0 else c)
+            if vertex_owner[vert] != i or _adjacent(p, vert, adj_ptr, adj):
+                continue
+            s2 = (vert, vert, vert)
+            w2 = (1.0, 0.0, 0.0)
+        nx, ny, nz, d = _direction(x, x0, p, s2, w2)
+        if nx == 0.0 and ny == 0.0 and nz == 0.0:
+            continue
+        if _separate(
+            x,
+            v,
+            held_inv_mass,
+            free_inv_mass,
+            clearance,
+            (p, p, p),
+            (1.0, 0.0, 0.0),
+            s2,
+            w2,
+            nx,
+            ny,
+            nz,
+            min(h - d, 2.0 * h),
+        ):
+            pushed += 1
+    return pushed
+
+
+@numba.njit(cache=True)
+def proximity_edges(x, x0, v, edges, pairs, held_inv_mass, free_inv_mass, clearance, h):
+    """The edge–edge case of the proximity pass: pairs whose nearest points both lie inside their
+    edges, closer than ``h``, pushed apart; returns how many."""
+    pushed = 0
+    for q in range(pairs.shape[0]):
+        e, f = pairs[q, 0], pairs[q, 1]
+        a, b, c, d = edges[e, 0], edges[e, 1], edges[f, 0], edges[f, 1]
+        sv, tv, dist = closest_on_segments(x, a, b, c, d)
+        if dist >= h or not (0.0 < sv < 1.0 and 0.0 < tv < 1.0):
+            continue
+        nx = (1 - sv) * x[a, 0] + sv * x[b, 0] - (1 - tv) * x[c, 0] - tv * x[d, 0]
+        ny = (1 - sv) * x[a, 1] + sv * x[b, 1] - (1 - tv) * x[c, 1] - tv * x[d, 1]
+        nz = (1 - sv) * x[a, 2] + sv * x[b, 2] - (1 - tv) * x[c, 2] - tv * x[d, 2]
+        ox = (1 - sv) * x0[a, 0] + sv * x0[b, 0] - (1 - tv) * x0[c, 0] - tv * x0[d, 0]
+        oy = (1 - sv) * x0[a, 1] + sv * x0[b, 1] - (1 - tv) * x0[c, 1] - tv * x0[d, 1]
+        oz = (1 - sv) * x0[a, 2] + sv * x0[b, 2] - (1 - tv) * x0[c, 2] - tv * x0[d, 2]
+        if dist == 0.0:
+            nx, ny, nz = ox, oy, oz
+        elif nx * ox + ny * oy + nz * oz < 0.0:
+            nx, ny, nz = -nx, -ny, -nz
+        nl = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if nl == 0.0:
+            continue
+        if _separate(
+            x,
+            v,
+            held_inv_mass,
+            free_inv_mass,
+            clearance,
+            (a, b, b),
+            (1.0 - sv, sv, 0.0),
+            (c, d, d),
+            (1.0 - tv, tv, 0.0),
+            nx / nl,
+            ny / nl,
+            nz / nl,
+            min(h - dist, 2.0 * h),
+        ):
+            pushed += 1
+    return pushed
+
+
+@numba.njit(cache=True)
+def edge_displacement_factors(disp, edges, pairs, start_distance, factor):
+    """Step 3's factors for edge pairs, lowering those :func:`displacement_factors` wrote (it runs
+    first and resets them); the positions are scaled by the caller."""
+    for q in range(pairs.shape[0]):
+        e, f = pairs[q, 0], pairs[q, 1]
+        a, b, c, d = edges[e, 0], edges[e, 1], edges[f, 0], edges[f, 1]
+        da = max(disp[a], disp[b])
+        dc = max(disp[c], disp[d])
+        need = da + dc
+        if need == 0.0 or start_distance[q] > need:
+            continue
+        r = 0.9 * start_distance[q] / need
+        for vert in (a, b, c, d):
+            if r < factor[vert]:
+                factor[vert] = r
+
+
+@numba.njit(cache=True)
+def scale_displacements(x, x0, factor):
+    """Positions moved back towards the start by each particle's factor; returns how many moved."""
+    slowed = 0
+    for p in range(x.shape[0]):
+        f = factor[p]
+        if f < 1.0:
+            for k in range(3):
+                x[p, k] = x0[p, k] + f * (x[p, k] - x0[p, k])
+            slowed += 1
+    return slowed
+
+
+@numba.njit(cache=True)
+def displacements(x, x0, out):
+    """Each particle's displacement over the step, ``|x − x0|``, written into ``out``."""
+    for p in range(x.shape[0]):
+        out[p] = math.sqrt(
+            (x[p, 0] - x0[p, 0]) ** 2 + (x[p, 1] - x0[p, 1]) ** 2 + (x[p, 2] - x0[p, 2]) ** 2
+        )
+    return out
+
+
+#: self-collision's thickness may be at most this fraction of the shortest triangle edge at rest
+MAX_THICKNESS_FRACTION = 0.5
+
+
+def thickness_limit(model) -> float:
+    """The largest thickness self-collision accepts on ``model``: half its shortest triangle edge
+    at rest. A thicker skin reaches past the triangles next to a particle in a flat cloth (they
+    are about one edge away), so the search finds every neighbour of every particle (at 128×128
+    with 5 mm, 400,000 pairs a step) and a crumpled cloth is pushed apart from itself."""
+    t = model.triangles
+    if len(t) == 0:
+        return 0.0
+    x = model.positions
+    edges = np.concatenate(
+        [x[t[:, 1]] - x[t[:, 0]], x[t[:, 2]] - x[t[:, 1]], x[t[:, 0]] - x[t[:, 2]]]
+    )
+    return MAX_THICKNESS_FRACTION * float(np.sqrt((edges * edges).sum(axis=1)).min())
+
+
+def check_thickness(model, thickness: float) -> None:
+    """``ValueError`` naming thickness and self_collision when self-collision cannot use it."""
+    limit = thickness_limit(model)
+    if not thickness <= limit * (1 + 1e-9):  # a spacing of 0.02 measures 0.0199999…
+        raise ValueError(
+            f"thickness = {thickness:g} m is too thick for self_collision on this cloth: "
+            f"expected at most {limit:.4g} m (half its shortest triangle edge at rest); "
+            f"lower thickness or turn self_collision off"
+        )
+
+
+class SelfCollision:
+    """The self-collision stage (module docstring); active when ``enabled``."""
+
+    name = "self_collision"
+
+    def __init__(self, model, thickness: float = 0.005, enabled: bool = False):
+        self.model = model
+        self.thickness = float(thickness)
+        self.enabled = False
+        self._tris = np.ascontiguousarray(model.triangles, dtype=np.int64)
+        self._features = _features(self._tris, model.n_particles)
+        self.set_enabled(enabled)
+        inv = np.where(model.pinned, 0.0, 1.0 / model.masses)
+        self._inv_mass = np.ascontiguousarray(inv)
+        self._factor = np.ones(model.n_particles)
+        self._moved = np.zeros(model.n_particles)
+        self._no_clearance = np.full(model.n_particles, np.inf)
+        self._tree = None  # the candidate pairs' hierarchy, built at the first step
+        self.last_pairs = self.last_pushed = self.last_slowed = self.last_edge_pairs = 0
+
+    @property
+    def active(self) -> bool:
+        return self.enabled
+
+    @property
+    def features(self) -> tuple:
+        """The topology the contacts read: ``(edges, tri_edge, edge_owner, edge_tris,
+        vertex_owner, adj_ptr, adj)`` (:func:`_features`)."""
+        return self._features
+
+    @property
+    def edges(self) -> np.ndarray:
+        """``(e, 2)``: the cloth's unique edges (the edge–edge pairs' indices)."""
+        return self._features[0]
+
+    def candidates(self, x0, reach):
+        """``(vf, vf_distance, ee, ee_distance)``: the particle–triangle and edge–edge pairs within
+        ``reach`` of each other at ``x0``
+        (:meth:`cloth_sim.contact.collision_tree.TriangleTree.pairs`)."""
+        if self._tree is None:
+            from .collision_tree import TriangleTree  # (it measures with this module's distances)
+
+            self._tree = TriangleTree(self._tris, self.model.positions, self._features)
+        return self._tree.pairs(x0, reach)
+
+    def set_enabled(self, on: bool) -> None:
+        """Turn it on or off; on needs the model's triangles and a thickness it can use
+        (``ValueError`` otherwise, and nothing changes)."""
+        if on and len(self._tris) == 0:
+            raise ValueError(
+                "self_collision needs the model's triangles (a grid has them; "
+                "ClothModel.from_springs takes triangles=...)"
+            )
+        if on:
+            check_thickness(self.model, self.thickness)
+        self.enabled = bool(on)
+
+    # : per particle, how far above a collider's skin the contact stage left it (``inf``: no
+    # collider;
+    # : set by the simulator): within ``SUPPORT·thickness`` self-collision moves it as if pinned,
+    # so it
+    #: never pushes the cloth into a collider
+    clearance = None
+
+    def apply(self, state, start, dt, velocity_follow):
+        x, x0, v = state.x, start.x, state.v
+        h = self.thickness
+        inv_mass = self._inv_mass
+        clearance = self._no_clearance if self.clearance is None else self.clearance
+        held = clearance < SUPPORT * h
+        if held.any():
+            inv_mass = np.where(held, 0.0, inv_mass)
+        # each particle reaches half the thickness beyond its own motion: a pair farther apart at
+        # the start than its two reaches can neither come within h nor cross over the step
+        moved = displacements(x, x0, self._moved)
+        if not np.isfinite(moved).all():
+            return  # a diverged step: the simulator's check after the stages restores the state
+        reach = 0.5 * h + moved
+        tris, (edges, tri_edge, edge_owner, edge_tris, vertex_owner, adj_ptr, adj) = (
+            self._tris,
+            self._features,
+        )
+        pairs, dist, e_pairs, e_dist = self.candidates(x0, reach)
+        free = self._inv_mass
+        self.last_pushed = (
+            proximity(x, x0, v, tris, pairs, inv_mass, free, clearance, h)
+            + proximity_features(
+                x,
+                x0,
+                v,
+                tris,
+                pairs,
+                inv_mass,
+                free,
+                clearance,
+                h,
+                tri_edge,
+                edge_owner,
+                edge_tris,
+                vertex_owner,
+                adj_ptr,
+                adj,
+            )
+            + proximity_edges(x, x0, v, edges, e_pairs, inv_mass, free, clearance, h)
+        )
+        # a pair the no-crossing pass must see is closer at the start than its two motions: the
+        # search covered that unless the pushes moved some particle more than h / 2 further
+        moved = displacements(x, x0, self._moved)
+        if (moved > reach).any():
+            pairs, dist, e_pairs, e_dist = self._tree.pairs(x0, moved)
+        self.last_pairs, self.last_edge_pairs = len(pairs), len(e_pairs)
+        displacement_factors(moved, tris, pairs, dist, self._factor)
+        edge_displacement_factors(moved, edges, e_pairs, e_dist, self._factor)
+        self.last_slowed = scale_displacements(x, x0, self._factor)
+        if self.last_slowed:
+            v *= self._factor[:, None]
+
+
+def _features(tris: np.ndarray, n: int):
+    """What the point–edge, point–point and edge–edge cases need of the topology: the unique edges
+    ``(e, 2)``; each triangle's edge in slots 0 (a–b), 1 (b–c), 2 (c–a); each edge's first triangle
+    (its owner) and its (up to) two triangles (−1 for none); each particle's first triangle; and
+    the
+    particles' neighbours along edges (CSR ``adj_ptr``, ``adj``)."""
+    if len(tris) == 0:
+        z = np.zeros((0, 2), np.int64)
+        return (
+            z,
+            np.zeros((0, 3), np.int64),
+            np.zeros(0, np.int64),
+            z,
+            np.full(n, -1, np.int64),
+            np.zeros(n + 1, np.int64),
+            np.zeros(0, np.int64),
+        )
+    from ..physics.mesh import half_edges  # the unique edges, and each half-edge's
+
+    a = tris.ravel()
+    edges, group, _ = half_edges(tris, n)
+    tri_edge = group.reshape(-1, 3).astype(np.int64)
+    edges = edges.astype(np.int64)
+    half_tri = np.repeat(np.arange(len(tris), dtype=np.int64), 3)
+    order = np.lexsort((half_tri, tri_edge.ravel()))
+    e_sorted, t_sorted = tri_edge.ravel()[order], half_tri[order]
+    first = np.r_[True, e_sorted[1:] != e_sorted[:-1]]
+    edge_tris = np.full((len(edges), 2), -1, np.int64)
+    edge_tris[e_sorted[first], 0] = t_sorted[first]
+    edge_tris[e_sorted[~first], 1] = t_sorted[~first]  # a cloth edge has at most two triangles
+    edge_owner = np.ascontiguousarray(edge_tris[:, 0])
+    vertex_owner = np.full(n, np.iinfo(np.int64).max, np.int64)
+    np.minimum.at(vertex_owner, a, half_tri)
+    vertex_owner[vertex_owner == np.iinfo(np.int64).max] = -1
+    ends = np.concatenate([edges[:, 0], edges[:, 1]])
+    other = np.concatenate([edges[:, 1], edges[:, 0]])
+    order = np.argsort(ends, kind="stable")
+    adj_ptr = np.zeros(n + 1, np.int64)
+    np.add.at(adj_ptr, ends + 1, 1)
+    return (
+        edges,
+        tri_edge,
+        edge_owner,
+        edge_tris,
+        vertex_owner,
+        np.cumsum(adj_ptr),
+        np.ascontiguousarray(other[order]),
+    )

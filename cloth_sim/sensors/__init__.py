@@ -1,0 +1,1 @@
+"""Sensors that look at the simulation: the depth camera (:mod:`.camera`)."""

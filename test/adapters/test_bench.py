@@ -1,0 +1,85 @@
+"""`cloth-sim bench … --quick`: the outputs exist and are well formed, the quick sweep's observed
+orders
+are the methods' orders, and the stability bisection finds symplectic Euler's linear limit.
+
+Nothing here times anything: the figures are the benchmarks' business (docs/BENCHMARKS.md).
+"""
+
+import csv
+import json
+
+import pytest
+
+from cloth_sim.cli import main as cli_main
+
+
+def outputs(out, stem):
+    assert (out / f"{stem}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with open(out / f"{stem}.csv") as f:
+        rows = list(csv.DictReader(f))
+
+    def no_nan(constant):
+        raise AssertionError(f"{stem}.json holds {constant}, which is not JSON")
+
+    data = json.loads((out / f"{stem}.json").read_text(), parse_constant=no_nan)
+    md = (out / f"{stem}.md").read_text()
+    assert rows and len(rows) == len(data["rows"]) and md.count("\n|") > len(rows)
+    return rows, data, md
+
+
+@pytest.fixture(scope="module")
+def bench_dir(tmp_path_factory):
+    return tmp_path_factory.mktemp("bench")
+
+
+def test_work_precision_quick(bench_dir, monkeypatch):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(bench_dir / "cache"))
+    out = bench_dir / "wp"
+    assert cli_main(["bench", "work-precision", "--quick", "--out", str(out)]) == 0
+    rows, data, md = outputs(out, "work_precision")
+    expected = {
+        "explicit_euler": 1,
+        "symplectic_euler": 1,
+        "midpoint": 2,
+        "rk4": 4,
+        "verlet": 2,
+        "implicit_euler": 1,
+    }
+    for name, order in expected.items():
+        assert data["orders"][name] == pytest.approx(order, abs=0.2), name
+    assert data["reference"]["agreement_m"] < 1e-9
+    assert {r["integrator"] for r in rows} >= set(expected) | {
+        "implicit_euler_prefactored",
+        "kang",
+    }
+    for r in data["rows"]:
+        assert (r["stable"] and r["rms_error"] <= r["max_error"] and r["wall_s"] > 0) or r[
+            "failure"
+        ]
+        assert r["rms_error"] is not None or r["failure"]
+    assert data["pareto"] and "Pareto" in md
+    # the reference is cached on disk: a second run reads it instead of solving again
+    assert list((bench_dir / "cache" / "cloth_sim" / "bench").glob("reference-*.npz"))
+
+
+def test_stability_quick_brackets_the_linear_limit(bench_dir):
+    out = bench_dir / "st"
+    assert cli_main(["bench", "stability", "--quick", "--out", str(out)]) == 0
+    rows, data, md = outputs(out, "stability")
+    se = next(r for r in data["rows"] if r["integrator"] == "symplectic_euler")
+    assert se["measured_dt"] == pytest.approx(se["linear_dt"], rel=0.15)
+    assert se["measured_dt"] < se["unstable_dt"] <= se["measured_dt"] * 1.06
+    assert data["stress"] and all(
+        isinstance(s["survived"], bool) and s["what"] for s in data["stress"]
+    )
+
+
+def test_scaling_quick(bench_dir):
+    out = bench_dir / "sc"
+    assert cli_main(["bench", "scaling", "--quick", "--out", str(out)]) == 0
+    rows, data, md = outputs(out, "scaling")
+    assert all(float(r["ms_per_step"]) > 0 for r in rows)
+    assert set(data["exponents"]) == {r["integrator"] for r in rows}
+    names = [s["variant"] for s in data["skipping"]]
+    assert names[0].startswith("everything on") and "none of them" in names
+    assert "wind" in data["skipping"][0]["terms"] and "wind" not in data["skipping"][1]["terms"]

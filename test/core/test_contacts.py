@@ -1,0 +1,452 @@
+"""Contacts: colliders with Coulomb friction, thickness, continuous detection, self-collision.
+
+Checked against closed forms (a particle on an incline), rest states (a cloth on the ground) and an
+independent crossing test (a particle against a triangle between consecutive steps, solved here
+from
+the coplanarity cubic, not with the simulator's code).
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from cloth_sim import ClothModel, Simulator, colliders, integrators
+from cloth_sim.bench.crossings import crossings  # the independent crossing check
+from cloth_sim.scene import SceneError, load_scene, scene_from_dict
+
+G = 9.81
+H = 0.005
+
+
+def _particle_on(plane_normal, friction, integrator, dt=1e-3):
+    """One free particle resting on a plane through the origin (and a far-away partner: a model
+    needs a spring, of zero stiffness here)."""
+    n = np.asarray(plane_normal, float) / np.linalg.norm(plane_normal)
+    model = ClothModel.from_springs(
+        [H * n, [50.0, 50.0, 50.0]], [1.0, 1.0], [[0, 1]], [0.0], [0.0]
+    )
+    sim = Simulator(
+        model,
+        integrator=integrator,
+        dt=dt,
+        thickness=H,
+        colliders=[colliders.Plane(normal=n, offset=0.0, friction=friction)],
+    )
+    return sim, n
+
+
+@pytest.mark.parametrize("integrator", integrators.available())
+@pytest.mark.parametrize("theta,mu", [(0.5, 0.3), (0.5, 0.0), (0.3, 0.5), (0.5, 0.6)])
+def test_particle_on_an_incline_obeys_coulomb(integrator, theta, mu):
+    """Stays put when tan θ < μ; slides with g (sin θ − μ cos θ) when tan θ > μ (g sin θ without
+    friction), at the contact distance all the way."""
+    sim, n = _particle_on((-math.sin(theta), 0.0, math.cos(theta)), mu, integrator)
+    downhill = np.array([-math.cos(theta), 0.0, -math.sin(theta)])
+    x0 = sim.positions[0].copy()
+    T = 1.0
+    sim.advance(T)
+    s = float((sim.positions[0] - x0) @ downhill)
+    assert abs(float(n @ sim.positions[0]) - H) < 1e-9
+    if math.tan(theta) < mu:
+        assert abs(s) < 1e-12
+        assert np.linalg.norm(sim.velocities[0]) < 1e-12
+    else:
+        a = G * (math.sin(theta) - mu * math.cos(theta))
+        assert s == pytest.approx(0.5 * a * T * T, rel=5e-3)  # first order in dt = 1e-3
+        assert float(sim.velocities[0] @ downhill) == pytest.approx(a * T, rel=5e-3)
+
+
+def _ground_cloth(integrator, dt, n=8):
+    model = ClothModel.grid(
+        n,
+        n,
+        0.05,
+        0.01,
+        stiffness={"structural": 500, "shear": 500, "bend": 50},
+        damping={"structural": 0.05, "shear": 0.05, "bend": 0.01},
+        origin=(0.0, 0.0, 0.03),
+    )
+    return Simulator(
+        model, integrator=integrator, dt=dt, thickness=H, colliders=[colliders.Plane(friction=0.5)]
+    )
+
+
+@pytest.mark.parametrize("integrator", integrators.available())
+def test_cloth_dropped_on_the_ground_settles_at_the_contact_distance(integrator):
+    probe = _ground_cloth(integrator, 1e-3)
+    limit = probe.stable_dt()
+    dt = 1.0 / 60.0 if math.isinf(limit) else min(1e-3, 0.5 * limit)
+    sim = _ground_cloth(integrator, dt)
+    sim.advance(2.0)
+    z = sim.positions[:, 2]
+    assert np.all(np.abs(z - H) <= 0.03 * H), (z.min(), z.max())
+    assert np.abs(sim.velocities).max() < 1e-3
+
+
+def test_cloth_drapes_over_a_sphere():
+    scene = load_scene("drape")
+    sim = scene.build_simulator()
+    ball = sim.colliders[0]
+    r, c = ball.radius, ball.center
+    sim.advance(2.0)
+    d = np.linalg.norm(sim.positions - c, axis=1) - r
+    assert d.min() >= sim.thickness * (1 - 0.03)  # nothing inside r + thickness
+    assert d.min() <= sim.thickness * 1.03  # it touches
+    below = sim.positions[:, 2] < c[2]
+    x = sim.positions[below]
+    # it hangs on both sides of the ball, in both directions
+    assert x[:, 0].min() < c[0] - r and x[:, 0].max() > c[0] + r
+    assert x[:, 1].min() < c[1] - r and x[:, 1].max() > c[1] + r
+
+
+@pytest.mark.parametrize(
+    "integrator", ["symplectic_euler", "explicit_euler", "rk4", "verlet", "implicit_euler"]
+)
+@pytest.mark.parametrize("speed", [30.0, 300.0])
+def test_a_fast_particle_does_not_tunnel_through_a_thin_box(integrator, speed):
+    model = ClothModel.from_springs(
+        [[0.0, 0.0, 0.1], [50.0, 50.0, 50.0]], [1.0, 1.0], [[0, 1]], [0.0], [0.0]
+    )
+    box = colliders.Box(center=(0.0, 0.0, 0.0), half_extents=(0.5, 0.5, 0.001), friction=0.2)
+    sim = Simulator(
+        model,
+        integrator=integrator,
+        dt=1e-3,
+        gravity=(0, 0, 0),
+        thickness=H,
+        colliders=[box],
+        max_speed=1e4,
+    )
+    v = np.zeros((2, 3))
+    v[0] = (0.0, 0.0, -speed)
+    sim.velocities = v
+    for _ in range(20):
+        sim.step()
+        assert sim.positions[0, 2] >= 0.001 + H * (1 - 0.03)
+
+
+def test_a_moving_box_carries_a_resting_particle_at_its_speed():
+    model = ClothModel.from_springs(
+        [[0.0, 0.0, 0.1 + H], [50.0, 50.0, 50.0]], [1.0, 1.0], [[0, 1]], [0.0], [0.0]
+    )
+    box = colliders.Box(center=(0.0, 0.0, 0.05), half_extents=(1.0, 1.0, 0.05), friction=1.0)
+    dt, u = 1e-3, 0.5
+    sim = Simulator(model, integrator="symplectic_euler", dt=dt, colliders=[box], thickness=H)
+    for k in range(1, 1001):
+        sim.set_collider_pose(0, (u * k * dt, 0.0, 0.05))
+        sim.step()
+    # it reaches the box's speed after u / (μ g) = 51 ms and then rides along
+    assert sim.velocities[0, 0] == pytest.approx(u, rel=1e-9)
+    assert sim.positions[0, 2] == pytest.approx(0.1 + H, abs=1e-9)
+    slip = u * u / (2 * G)  # distance lost while it caught up
+    assert sim.positions[0, 0] == pytest.approx(u * 1.0 - slip, rel=0.02)
+
+
+def test_without_colliders_no_contact_code_runs_and_trajectories_are_unchanged():
+    model = ClothModel.grid(8, 8, 0.05, 0.01, stiffness=300.0, damping=0.02, pinned=[(0, 0)])
+    plain = Simulator(model, integrator="rk4", dt=1e-3, strain_limit=0.1)
+    with_none = Simulator(
+        model, integrator="rk4", dt=1e-3, strain_limit=0.1, colliders=[], self_collision=False
+    )
+    assert "contacts" not in with_none.active_stages
+    assert "self_collision" not in with_none.active_stages
+    plain.step(300)
+    with_none.step(300)
+    assert np.array_equal(plain.positions, with_none.positions)
+
+
+def test_bad_collider_arguments_name_the_field():
+    with pytest.raises(ValueError, match="radius"):
+        colliders.Sphere(center=(0, 0, 0), radius=-1.0)
+    with pytest.raises(ValueError, match="normal"):
+        colliders.Plane(normal=(0, 0, 0))
+    with pytest.raises(ValueError, match="half_extents"):
+        colliders.Box(half_extents=(1, 1, 0))
+    with pytest.raises(ValueError, match="friction"):
+        colliders.Capsule(friction=float("nan"))
+    model = ClothModel.grid(4, 4, 0.1, 0.01, stiffness=100.0)
+    sim = Simulator(model, colliders=[colliders.Sphere(radius=0.1)])
+    with pytest.raises(ValueError, match="index"):
+        sim.set_collider_pose(3, (0, 0, 0))
+    with pytest.raises(ValueError, match="position"):
+        sim.set_collider_pose(0, (0, float("inf"), 0))
+    with pytest.raises(ValueError, match="orientation"):
+        sim.set_collider_pose(0, (0, 0, 0), (0, 0, 0, 0))
+    assert np.array_equal(sim.colliders[0].center, (0, 0, 0))
+
+
+def test_collider_distances_match_their_closed_forms():
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(-1, 1, (200, 3))
+    s = colliders.Sphere(center=(0.1, 0.2, 0.3), radius=0.4)
+    assert np.allclose(s.signed_distance(pts), np.linalg.norm(pts - (0.1, 0.2, 0.3), axis=1) - 0.4)
+    c = colliders.Capsule(a=(0, 0, -0.3), b=(0, 0, 0.3), radius=0.1)
+    zc = np.clip(pts[:, 2], -0.3, 0.3)
+    ref = np.linalg.norm(pts - np.stack([0 * zc, 0 * zc, zc], 1), axis=1) - 0.1
+    assert np.allclose(c.signed_distance(pts), ref)
+    # a box turned 90° about z swaps its x and y extents
+    b = colliders.Box(
+        center=(0, 0, 0),
+        half_extents=(0.5, 0.1, 0.2),
+        orientation=(math.cos(math.pi / 4), 0, 0, math.sin(math.pi / 4)),
+    )
+    q = np.abs(pts) - (0.1, 0.5, 0.2)
+    ref = np.linalg.norm(np.maximum(q, 0), axis=1) + np.minimum(q.max(axis=1), 0)
+    assert np.allclose(b.signed_distance(pts), ref)
+    p = colliders.Plane(normal=(0, 0, 2), offset=0.25)
+    assert np.allclose(p.signed_distance(pts), pts[:, 2] - 0.25)
+    # moving: a plane lifted by set_pose keeps its normal
+    p.set_pose((0, 0, 1.0))
+    assert np.allclose(p.signed_distance(pts), pts[:, 2] - 1.0)
+
+
+# --------------------------------------------------------------------------- self-collision
+def _fold(self_collision: bool):
+    scene = load_scene("fold")
+    return scene.build_simulator(
+        rows=12, cols=12, spacing=1.0 / 11, particle_mass=0.04, self_collision=self_collision
+    )
+
+
+def _count_crossings(sim, seconds, stop_at_first=False):
+    tris = sim.model.triangles
+    total = 0
+    for _ in range(int(round(seconds / sim.dt))):
+        x0 = sim.positions.copy()
+        sim.step()
+        total += len(crossings(x0, sim.positions, tris))
+        if total and stop_at_first:
+            break
+    return total
+
+
+def test_crossing_check_finds_a_particle_passing_through_a_triangle():
+    x0 = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.2, 0.2, 0.5]], float)
+    x1 = x0.copy()
+    x1[3, 2] = -0.5
+    assert crossings(x0, x1, np.array([[0, 1, 2]])) == [(3, 0)]
+    x1[3, 0] = 2.0  # passes beside it
+    assert crossings(x0, x1, np.array([[0, 1, 2]])) == []
+
+
+def test_fold_without_self_collision_crosses_itself():
+    assert _count_crossings(_fold(False), 1.5, stop_at_first=True) > 0
+
+
+def test_fold_with_self_collision_never_crosses_itself():
+    sim = _fold(True)
+    assert _count_crossings(sim, 1.5) == 0
+    # and it did fold: layers over each other (cloth above cloth in the same place)
+    assert sim.positions[:, 2].max() > 2 * sim.thickness
+
+
+# --------------------------------------------------------------------------- scenes
+@pytest.mark.parametrize("name", ["table", "drape", "fold"])
+def test_contact_scenes_load_and_keep_the_thickness(name):
+    sim = load_scene(name).build_simulator()
+    assert "contacts" in sim.active_stages
+    sim.advance(0.5)
+    for c in sim.colliders:
+        assert c.signed_distance(sim.positions).min() >= sim.thickness * (1 - 0.03)
+
+
+def test_table_scene_half_hangs_over_the_edge():
+    sim = load_scene("table").build_simulator()
+    sim.advance(2.0)
+    table = sim.colliders[0]
+    edge = table.center[0] + table.half_extents[0]
+    top = table.center[2] + table.half_extents[2]
+    on = sim.positions[:, 0] < edge
+    assert np.all(
+        np.abs(sim.positions[on & (sim.positions[:, 0] < edge - 0.1), 2] - top - sim.thickness)
+        < 0.03 * sim.thickness
+    )
+    assert sim.positions[~on, 2].min() < top - 0.2  # the rest hangs down
+
+
+@pytest.mark.parametrize(
+    "bad,field",
+    [
+        ({"colliders": {"type": "plane"}}, "colliders"),
+        ({"colliders": [{"type": "cone"}]}, "colliders[0].type"),
+        ({"colliders": [{"type": "sphere", "center": [0, 0, 0]}]}, "colliders[0].radius"),
+        (
+            {"colliders": [{"type": "sphere", "center": [0, 0], "radius": 1}]},
+            "colliders[0].center",
+        ),
+        (
+            {"colliders": [{"type": "sphere", "center": [0, 0, 0], "radius": -1}]},
+            "colliders[0].radius",
+        ),
+        (
+            {
+                "colliders": [
+                    {
+                        "type": "box",
+                        "center": [0, 0, 0],
+                        "half_extents": [1, 1, 1],
+                        "orientation": [0, 0, 0, 0],
+                    }
+                ]
+            },
+            "colliders[0].orientation",
+        ),
+        (
+            {"colliders": [{"type": "plane", "normal": [0, 0, 1], "friction": -0.1}]},
+            "colliders[0].friction",
+        ),
+        ({"colliders": [{"type": "plane", "normal": [0, 0, 1], "size": 3}]}, "colliders[0].size"),
+        (
+            {"colliders": [{"type": "capsule", "a": [0, 0, 0], "b": [1, 0, 0], "radius": "x"}]},
+            "colliders[0].radius",
+        ),
+        ({"thickness": 0.0}, "thickness"),
+        ({"thickness": "thin"}, "thickness"),
+        ({"self_collision": "yes"}, "self_collision"),
+        ({"grid": {"rows": 4, "cols": 4, "spacing": 0.1, "origin": [0, 0]}}, "grid.origin"),
+    ],
+)
+def test_scene_collider_fields_are_validated(bad, field):
+    data = {"grid": {"rows": 4, "cols": 4, "spacing": 0.1}}
+    data.update(bad)
+    with pytest.raises(SceneError) as e:
+        scene_from_dict(data, source="bad.yaml")
+    assert field in str(e.value) and "bad.yaml" in str(e.value)
+
+
+def test_self_collision_refuses_a_thickness_beyond_half_an_edge():
+    model = ClothModel.grid(8, 8, 0.02, 0.01, stiffness=100.0)
+    with pytest.raises(ValueError, match="thickness"):
+        Simulator(model, thickness=0.011, self_collision=True)
+    sim = Simulator(model, thickness=0.011)
+    with pytest.raises(ValueError, match="thickness"):
+        sim.self_collision = True
+    assert not sim.self_collision
+    sim.thickness = 0.01
+    sim.self_collision = True
+    with pytest.raises(ValueError, match="thickness"):
+        sim.thickness = 0.02
+    assert sim.thickness == 0.01
+    with pytest.raises(SceneError, match="thickness"):
+        scene_from_dict(
+            {
+                "grid": {"rows": 4, "cols": 4, "spacing": 0.02},
+                "thickness": 0.011,
+                "self_collision": True,
+            }
+        )
+
+
+def _brute_force_pairs(x, tris, edges, reach):
+    """Every (particle, triangle) pair within the particle's ``reach`` plus the triangle's (the
+    largest of its corners') with its exact distance (the projection on the plane when it falls
+    inside, else the nearest of the three sides), and every (edge, edge) pair sharing no particle
+    whose distance, sampled at 401 points along the first edge, is within 1 % above the two edges'
+    reaches — all by testing every pair with numpy."""
+
+    def seg_point(p, a, b):
+        ab = b - a
+        t = np.clip(((p - a) * ab).sum(-1) / (ab * ab).sum(-1), 0.0, 1.0)
+        return np.linalg.norm(p - (a + t[..., None] * ab), axis=-1)
+
+    tri_pairs = {}
+    for i, (a, b, c) in enumerate(tris):
+        p = np.setdiff1d(np.arange(len(x)), [a, b, c])
+        A, B, C, P = x[a], x[b], x[c], x[p]
+        nrm = np.cross(B - A, C - A)
+        nrm /= np.linalg.norm(nrm)
+        h = (P - A) @ nrm
+        q = P - h[:, None] * nrm  # projection onto the plane
+        # barycentric inside test of the projection
+        v0, v1, v2 = C - A, B - A, q - A
+        d00, d01, d11 = v0 @ v0, v0 @ v1, v1 @ v1
+        d02, d12 = v2 @ v0, v2 @ v1
+        den = d00 * d11 - d01 * d01
+        u = (d11 * d02 - d01 * d12) / den
+        v = (d00 * d12 - d01 * d02) / den
+        inside = (u >= 0) & (v >= 0) & (u + v <= 1)
+        d = np.where(
+            inside,
+            np.abs(h),
+            np.minimum.reduce([seg_point(P, A, B), seg_point(P, B, C), seg_point(P, C, A)]),
+        )
+        within = d < reach[p] + reach[[a, b, c]].max()
+        for pp, dd in zip(p[within], d[within]):
+            tri_pairs[(int(pp), i)] = dd
+    edge_pairs = {}
+    s = np.linspace(0.0, 1.0, 401)
+    edge_reach = reach[edges].max(axis=1)
+    for e, (a, b) in enumerate(edges):
+        f = np.arange(e + 1, len(edges))
+        f = f[~np.isin(edges[f], [a, b]).any(axis=1)]
+        # segment–segment distance, densely sampled along e against f exactly
+        pts = x[a] + s[:, None] * (x[b] - x[a])  # (401, 3)
+        c, d = x[edges[f, 0]], x[edges[f, 1]]
+        dist = seg_point(pts[:, None, :], c[None], d[None]).min(axis=0)
+        within = dist < (edge_reach[e] + edge_reach[f]) * 1.01
+        for ff, dd in zip(f[within], dist[within]):
+            edge_pairs[(e, int(ff))] = dd
+    return tri_pairs, edge_pairs
+
+
+@pytest.mark.parametrize("reaches", ["radius", "per particle"])
+def test_self_collision_search_finds_every_pair_within_reach_at_any_thread_count(reaches):
+    """The particle–triangle and edge–edge searches (a hierarchy over the triangles, traversed in
+    tasks on every core) against a brute-force test of every pair on a crumpled cloth with a lone
+    particle in no triangle: one radius for all, or a reach per particle (a pair within the sum of
+    its sides' reaches); the same arrays at 1 and 2 threads, and with rows too few for the pairs
+    (the search runs again, larger)."""
+    import numba
+
+    from cloth_sim.contact.collision_tree import TriangleTree
+    from cloth_sim.contact.self_collision import _features
+
+    rng = np.random.default_rng(3)
+    model = ClothModel.grid(10, 10, 0.02, 0.01, stiffness=100.0)
+    r, c = np.divmod(np.arange(100), 10)  # rows folded over at row 4.5, 6 mm above, jittered
+    x = np.stack(
+        [0.02 * c, 0.02 * np.where(r < 5, r, 9 - r) + 0.01 * (r >= 5), 0.006 * (r >= 5)], axis=1
+    ) + rng.normal(scale=0.002, size=(100, 3))
+    tris = model.triangles[~(model.triangles == 44).any(axis=1)]  # particle 44 in no triangle
+    features = _features(tris, 100)
+    edges = features[0]
+    radius = 0.012 if reaches == "radius" else rng.uniform(0.002, 0.008, 100)
+    reach = np.full(100, radius / 2) if reaches == "radius" else radius
+    tri_truth, edge_truth = _brute_force_pairs(x, tris, edges, reach)
+    assert len(tri_truth) > 150 and len(edge_truth) > 150  # plenty to find
+    assert any(p == 44 for p, _ in tri_truth)  # the lone particle is near triangles
+    threads = numba.get_num_threads()
+    runs = []
+    try:
+        for n_threads, rows in (
+            (1, None),
+            (min(2, numba.config.NUMBA_NUM_THREADS), None),
+            (min(2, numba.config.NUMBA_NUM_THREADS), 1),
+        ):
+            numba.set_num_threads(n_threads)
+            tree = TriangleTree(tris, model.positions, features)
+            if rows is not None:
+                tree.caps[:] = rows
+            runs.append(tree.pairs(x, radius))
+    finally:
+        numba.set_num_threads(threads)
+    pairs, dist, e_pairs, e_dist = runs[0]
+    found = {tuple(p): d for p, d in zip(pairs.tolist(), dist)}
+    assert found.keys() == tri_truth.keys()
+    assert max(abs(found[k] - tri_truth[k]) for k in found) < 1e-12
+    e_found = {tuple(p): d for p, d in zip(e_pairs.tolist(), e_dist)}
+    # the sampled truth is within 1 % of the reach of the exact distance: every exact pair is in
+    # it, and what it adds lies within that band
+    assert e_found.keys() <= edge_truth.keys()
+    edge_reach = reach[edges].max(axis=1)
+    assert all(
+        edge_truth[k] >= edge_reach[k[0]] + edge_reach[k[1]]
+        for k in edge_truth.keys() - e_found.keys()
+    )
+    step = np.linalg.norm(x[edges[:, 1]] - x[edges[:, 0]], axis=1).max() / 400  # the sampling's
+    assert all(-1e-12 <= edge_truth[k] - e_found[k] <= step for k in e_found)
+    assert len(found) == len(pairs) and len(e_found) == len(e_pairs)  # each pair once
+    assert np.all(e_pairs[:, 0] < e_pairs[:, 1])
+    for other in runs[1:]:
+        assert all(np.array_equal(a, b) for a, b in zip(runs[0], other))
