@@ -337,7 +337,7 @@ def test_changing_dt_and_assigning_velocities_keep_the_state_consistent(name):
 def test_runge_kutta_closed_form_radius_is_the_amplification_matrix_radius(name):
     """The stability limits use |R(hλ)| of the tableau's stability polynomial; it must be the
     spectral radius of the amplification matrix the tableau's stages build."""
-    from cloth_sim import stability
+    from cloth_sim.physics import stability
 
     cls = integrators.get(name)
     rng = np.random.default_rng(2)
