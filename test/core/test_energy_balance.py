@@ -6,7 +6,6 @@ driven by wind, pins or grippers is not."""
 import math
 
 import numpy as np
-import pytest
 
 from cloth_sim.physics.energy_balance import EnergyBalance
 from cloth_sim.scene import load_scene
@@ -76,25 +75,3 @@ def test_a_sweep_row_is_unstable_and_the_message_says_why(tmp_path):
     assert rows[0.0015]["status"] == "ok"
     assert rows[0.0706]["status"] == "unstable" and "energy balance" in rows[0.0706]["message"]
     assert math.isfinite(rows[0.0706]["kinetic"])
-
-
-def test_diagnostics_warn_with_the_balances_message():
-    pytest.importorskip("rclpy")
-    from diagnostic_msgs.msg import DiagnosticStatus
-
-    from cloth_sim.ros import messages
-
-    common = dict(
-        error=None,
-        paused=False,
-        rtf=1.0,
-        rtf_known=True,
-        rtf_warn=0.95,
-        dt=1e-3,
-        stable_dt=1e-2,
-        warn_margin=0.8,
-        values={},
-    )
-    assert messages.diagnostic_status(**common).level == DiagnosticStatus.OK
-    s = messages.diagnostic_status(**common, energy="energy balance: 40 J more …")
-    assert s.level == DiagnosticStatus.WARN and "energy balance" in s.message
