@@ -23,7 +23,6 @@ import math
 import numba
 import numpy as np
 
-# noqa: F401 (quaternion_matrix: public here too)
 from .geometry import positive, quaternion_matrix, unit_quaternion, vector
 
 PLANE, SPHERE, BOX, CAPSULE = 0, 1, 2, 3

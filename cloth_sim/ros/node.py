@@ -34,8 +34,6 @@ from rclpy.signals import SignalHandlerOptions
 
 from ..simulator import compile_kernels
 from .control import SimulationControl
-
-# noqa: F401 (MODEL_KEYS: fuzz_node)
 from .gate import ParameterGate, StartupError, as_declared, settle_garbage
 from .manipulation import Manipulation
 from .publishing import Publishing

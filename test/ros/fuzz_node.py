@@ -43,8 +43,9 @@ from std_srvs.srv import SetBool, Trigger
 from cloth_sim.model import GRID_FAMILIES
 from cloth_sim.msg import Stats
 from cloth_sim.parameters import REBUILD, SCHEMA, ParameterError
-from cloth_sim.ros.node import MODEL_KEYS, ClothSimNode
+from cloth_sim.ros.node import ClothSimNode
 from cloth_sim.scene import load_scene
+from cloth_sim.settings import MODEL_KEYS
 from cloth_sim.simulator import SimulationDiverged, Simulator
 
 RATE = 30.0

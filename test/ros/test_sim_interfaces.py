@@ -50,7 +50,6 @@ def test_state_changes_are_visible_in_stats_and_follow_the_standard_transitions(
     node = ros.start()
     stats = ros.collect(Stats, f"{NS}/stats")
 
-    # noqa: E731
     def get():
         return call(ros, srv.GetSimulationState, "get_simulation_state").state.state
 
