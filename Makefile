@@ -7,6 +7,9 @@ STAMP  := $(VENV)/.installed
 # the package's own interfaces (msg/, srv/) and the standard ones no wheel has (interfaces/), generated
 # with rosidl + cmake from the wheels: tools/build_interfaces.py
 MSGS   := build/interfaces/.built
+# numba's kernels compiled into their on-disk cache (again when the package's code changes: a
+# fraction of a second when the cache holds them)
+KERNELS := $(VENV)/.kernels
 # scipy's sparse solvers and numpy's BLAS oversubscribe 2 cores badly when threaded.
 export OPENBLAS_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
@@ -14,15 +17,21 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export ROS_LOG_DIR ?= $(CURDIR)/.ros_log
 
 SCENE    ?= hanging
+# the kernels and the interfaces build side by side (each about a minute and a half on a fresh
+# install here; the interfaces' cmake steps leave a core idle)
+MAKEFLAGS += --jobs=2
 
 .PHONY: install run test lint fuzz bench bench-peers clean
-install: $(STAMP) $(MSGS)
+install: $(STAMP) $(KERNELS) $(MSGS)
 
 $(STAMP): requirements.txt setup.py pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --disable-pip-version-check -q -r requirements.txt
 	$(PY) -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation \
 		--config-settings editable_mode=compat -e .
+	@touch $@
+
+$(KERNELS): $(STAMP) $(shell find cloth_sim -name '*.py')
 	$(PY) -c "from cloth_sim.simulator import compile_kernels as c; print(f'kernels compiled in {c():.1f} s')"
 	@touch $@
 
@@ -35,11 +44,14 @@ $(MSGS): $(STAMP) msg/Stats.msg $(wildcard srv/*.srv) CMakeLists.txt package.xml
 run: install
 	$(VENV)/bin/cloth_sim_node --ros-args --params-file config/cloth_sim.yaml -p scene:=$(SCENE)
 
-# the core's tests in a process of their own (test/core/conftest.py fails the run if rclpy was
-# imported), then the adapters' and the node's
+# the core's tests in a run of their own (test/core/conftest.py fails a test after which rclpy is
+# imported), then the adapters' and the node's; PYTEST_WORKERS test processes (pytest-xdist, a file
+# to a worker; each worker's DDS domains its own: test/ros/ros_helpers.py), 0 for one process
+PYTEST_WORKERS ?= 2
+PYTEST_N := $(if $(filter 0,$(PYTEST_WORKERS)),,-n $(PYTEST_WORKERS) --dist loadfile)
 test: install
-	$(PY) -m pytest test/core $(PYTEST_ARGS)
-	$(PY) -m pytest test/adapters test/ros $(PYTEST_ARGS)
+	$(PY) -m pytest $(PYTEST_N) test/core $(PYTEST_ARGS)
+	$(PY) -m pytest $(PYTEST_N) test/adapters test/ros $(PYTEST_ARGS)
 
 # ruff (pinned in requirements.txt, configured in pyproject.toml): the linter and the formatter's check
 lint: $(STAMP)

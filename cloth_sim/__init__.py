@@ -20,21 +20,19 @@ __path__ = extend_path(__path__, __name__)
 # after a parallel kernel ran (Gymnasium's async vector envs, multiprocessing's fork pools, data
 # loaders) had its children killed ("fork() called from a process already using GNU OpenMP").
 # "forksafe" takes Intel TBB (the ``tbb`` wheel, pinned in requirements.txt: as fast as OpenMP
-# here,
-# docs/BENCHMARKS.md) and falls back to numba's own workqueue where TBB cannot be loaded. A user's
-# own NUMBA_THREADING_LAYER wins. Read when the first parallel kernel loads: set before that, and
-# inherited by the processes this one starts (Ray's workers, a vector env's workers).
+# here, docs/BENCHMARKS.md) and falls back to numba's own workqueue where TBB cannot be loaded. A
+# user's own NUMBA_THREADING_LAYER wins. Read when the first parallel kernel loads: set before
+# that, and inherited by the processes this one starts (Ray's workers, a vector env's workers).
 os.environ.setdefault("NUMBA_THREADING_LAYER", "forksafe")
 if "numba" in sys.modules and sys.modules["numba"].config.THREADING_LAYER == "default":
     # numba was imported first (its configuration read the environment then): tell it directly
     sys.modules["numba"].config.THREADING_LAYER = os.environ["NUMBA_THREADING_LAYER"]
 
 # For a user who chooses OpenMP (NUMBA_THREADING_LAYER=omp): its idle workers must not spin for
-# long,
-# or they take a core from the ROS executor between ticks; put to sleep at once (OMP_WAIT_POLICY=
-# PASSIVE) they must be woken for each of a step's parallel regions. A bounded spin (10,000 rounds)
-# keeps them awake within a tick, then lets them sleep. A user's OMP_WAIT_POLICY or GOMP_SPINCOUNT
-# wins. Read when the OpenMP runtime starts.
+# long, or they take a core from the ROS executor between ticks; put to sleep at once
+# (OMP_WAIT_POLICY= PASSIVE) they must be woken for each of a step's parallel regions. A bounded
+# spin (10,000 rounds) keeps them awake within a tick, then lets them sleep. A user's
+# OMP_WAIT_POLICY or GOMP_SPINCOUNT wins. Read when the OpenMP runtime starts.
 if "OMP_WAIT_POLICY" not in os.environ:
     os.environ.setdefault("GOMP_SPINCOUNT", "10000")
 

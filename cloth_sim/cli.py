@@ -12,22 +12,19 @@
     Print the ~/stats gap while a 26-parameter file is loaded the way `ros2 param load` does (needs
     rclpy).
 ``cloth-sim bench node [--sizes 32 64] [--seconds 10]`` (or ``--scene tshirt``, or ``--scene
-hanging
-drape … --grid 64``)
+hanging drape … --grid 64``)
 
 ``cloth-sim bench peers [--sizes 32 64 128] [--rounds 9]`` (NVIDIA Warp's CPU cloth kernel beside
-ours)
-``cloth-sim bench vbd-peers [--sizes 32 64] [--device cpu]`` (Newton's VBD beside ours, and its
-cloth twist)
-``cloth-sim bench flex-peer [--size 32]`` (MuJoCo's flex cloth beside ours on the drape scene)
+ours) ``cloth-sim bench vbd-peers [--sizes 32 64] [--device cpu]`` (Newton's VBD beside ours, and
+its cloth twist) ``cloth-sim bench flex-peer [--size 32]`` (MuJoCo's flex cloth beside ours on the
+drape scene)
 
 ``cloth-sim bench strain [--sizes 32 64] [--seconds 3]`` (worst strain and cost of the strain
-limit)
-``cloth-sim bench contacts [--sizes 32 64] [--seconds 1.5]`` (cost of colliders and self-collision)
-``cloth-sim bench camera [--size 32] [--seconds 10]`` (the node's real-time factor, camera topics
-subscribed)
-``cloth-sim bench lockstep [--size 32]`` (steps per second through ~/step from another process)
-``cloth-sim bench startup [--sizes 32 64] [--trials 4]`` (process start to the first cloud)
+limit) ``cloth-sim bench contacts [--sizes 32 64] [--seconds 1.5]`` (cost of colliders and
+self-collision) ``cloth-sim bench camera [--size 32] [--seconds 10]`` (the node's real-time factor,
+camera topics subscribed) ``cloth-sim bench lockstep [--size 32]`` (steps per second through ~/step
+from another process) ``cloth-sim bench startup [--sizes 32 64] [--trials 4]`` (process start to
+the first cloud)
     Print the node's real-time factor with and without a ~/points subscriber (needs rclpy).
 ``cloth-sim record -o BAG [TOPIC ...]``, ``play BAG``, ``info BAG``, ``reindex BAG``
     rosbag2-compatible MCAP bags: record the ROS graph, replay it, inspect it, repair an unclosed

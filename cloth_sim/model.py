@@ -2,8 +2,7 @@
 
 A :class:`ClothModel` is read-only once built. Integrators never touch it: they advance a state
 (positions, velocities) that a :class:`~cloth_sim.simulator.Simulator` owns, so several simulators
-can
-share one model.
+can share one model.
 """
 
 from __future__ import annotations
@@ -130,20 +129,15 @@ class ClothModel:
         Springs: structural ``[i,j]–[i+1,j]``, ``[i,j]–[i,j+1]``; shear ``[i,j]–[i+1,j+1]``,
         ``[i+1,j]–[i,j+1]``; bend ``[i,j]–[i+2,j]``, ``[i,j]–[i,j+2]`` and, for ``choi_ko``, also
         ``[i,j]–[i+2,j+2]``, ``[i+2,j]–[i,j+2]``. Particle ``(row, col)`` has index ``row*cols +
-        col``
-        and starts at ``(col·s, row·s, 0)`` (``horizontal``) or ``(col·s, 0, −row·s)``
-        (``vertical``,
-        row 0 on top), plus ``origin`` (the position of particle ``(0, 0)``).
+        col`` and starts at ``(col·s, row·s, 0)`` (``horizontal``) or ``(col·s, 0, −row·s)``
+        (``vertical``, row 0 on top), plus ``origin`` (the position of particle ``(0, 0)``).
 
         In ``choi_ko`` the structural and shear springs resist stretching only (type 1) and the
-        bend
-        springs follow the immediate-buckling model (type 2), whose compressed branch reads the
-        bend
-        stiffness as the flexural rigidity ``k_b`` (see :mod:`cloth_sim.physics.forces`).
+        bend springs follow the immediate-buckling model (type 2), whose compressed branch reads
+        the bend stiffness as the flexural rigidity ``k_b`` (see :mod:`cloth_sim.physics.forces`).
 
         ``stiffness`` and ``damping`` are dicts keyed by family (missing families get 0) or one
-        number
-        for all. ``pinned`` lists ``(row, col)`` pairs; negative indices count from the end.
+        number for all. ``pinned`` lists ``(row, col)`` pairs; negative indices count from the end.
         """
         from .parameters import SCHEMA, ParameterError  # the schema imports this module
 
@@ -255,9 +249,8 @@ class ClothModel:
     ) -> "ClothModel":
         """Any spring network: ``positions (n,3)``, ``masses (n,)``, ``springs (m,2)``, per-spring
         ``stiffness (m,)`` and ``damping (m,)``, ``rest_lengths`` (default: the current lengths)
-        and
-        ``pinned`` particle indices. All springs are Hooke springs in one family, ``"spring"``, and
-        all are strain-limited when the simulator has a strain limit. ``triangles (t,3)`` are
+        and ``pinned`` particle indices. All springs are Hooke springs in one family, ``"spring"``,
+        and all are strain-limited when the simulator has a strain limit. ``triangles (t,3)`` are
         optional; without them there are no normals and so no wind force."""
         x = np.array(positions, dtype=np.float64).reshape(-1, 3)
         n = len(x)
@@ -319,12 +312,11 @@ class ClothModel:
         curved. Masses: ``density`` (kg/m²) × a third of each adjacent triangle's area. Vertices at
         the same position are welded into one particle (a mesh without duplicates keeps its vertex
         order). ``model="choi_ko"``: structural springs resist stretching only and bend springs
-        buckle
-        (as on a grid). ``pinned`` lists vertex indices of the source (mapped through the welding).
-        ``scale`` is metres per file unit; the scaled mesh is then rotated by ``orientation`` (a
-        unit
-        quaternion ``(w, x, y, z)``) and moved by ``position``. ``stiffness``/``damping``: dicts
-        keyed by ``structural`` and ``bend``, or one number for both.
+        buckle (as on a grid). ``pinned`` lists vertex indices of the source (mapped through the
+        welding). ``scale`` is metres per file unit; the scaled mesh is then rotated by
+        ``orientation`` (a unit quaternion ``(w, x, y, z)``) and moved by ``position``.
+        ``stiffness``/``damping``: dicts keyed by ``structural`` and ``bend``, or one number for
+        both.
 
         A mesh that cannot be cloth raises ``ValueError`` naming the source and the element (see
         :func:`cloth_sim.physics.mesh.check_mesh`); nothing is built."""

@@ -2,13 +2,11 @@
 applies.
 
 Scene files (:mod:`cloth_sim.scene`), the model and simulator
-(:class:`~cloth_sim.model.ClothModel`,
-:class:`~cloth_sim.simulator.Simulator`), the ``cloth-sim`` command line and the ROS node's
-parameter
-descriptors and checks (:mod:`cloth_sim.ros.params`) all read their bounds from :data:`SCHEMA`, so
-a
-quantity has one range everywhere. :meth:`Param.check` turns a value into its canonical form or
-raises :class:`ParameterError`, whose message names the parameter, the value and what is accepted.
+(:class:`~cloth_sim.model.ClothModel`, :class:`~cloth_sim.simulator.Simulator`), the ``cloth-sim``
+command line and the ROS node's parameter descriptors and checks (:mod:`cloth_sim.ros.params`) all
+read their bounds from :data:`SCHEMA`, so a quantity has one range everywhere. :meth:`Param.check`
+turns a value into its canonical form or raises :class:`ParameterError`, whose message names the
+parameter, the value and what is accepted.
 
 ``apply`` says what a change does: ``live`` (the running simulation takes it and keeps its state),
 ``rebuild`` (the cloth is rebuilt from the scene and reset) or ``node`` (the node's own settings).
@@ -54,8 +52,7 @@ class Param:
 
     ``type`` is ``float``, ``int``, ``bool``, ``str`` or ``"vector3"`` (three floats). Numbers and
     vector components lie in ``[lo, hi]`` (``(lo, hi]`` with ``lo_open``); strings in ``choices``
-    when
-    given, and non-empty when ``nonempty``. ``scene_key`` is the field's path in a scene file
+    when given, and non-empty when ``nonempty``. ``scene_key`` is the field's path in a scene file
     (``grid.rows``), ``None`` for parameters only the node has.
     """
 

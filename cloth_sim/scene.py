@@ -2,22 +2,14 @@
 
 A scene is a YAML mapping (see ``config/scenes/*.yaml``)::
 
-    grid: {rows: 24, cols: 24, spacing: 0.04, orientation: horizontal}
-    model: provot                  # or choi_ko
-    particle_mass: 0.01
-    stiffness: {structural: 1000, shear: 1000, bend: 100}
-    damping: {structural: 0.05, shear: 0.05, bend: 0.01}
-    pinned: [[0, 0], [0, -1]]      # (row, col) pairs, negative counts from the end
-    pinned_edges: []               # any of first_row, last_row, first_col, last_col
-    gravity: [0, 0, -9.81]
-    wind: {direction: [0, 1, 0], strength: 0}
-    drag: 0.0
-    strain_limit: 0.1              # or null
-    integrator: symplectic_euler
-    dt: 0.001
-    thickness: 0.005               # kept from colliders (and from itself with self_collision)
-    self_collision: false
-    grippers:                      # holding the cloth from the start (moved by
+    grid: {rows: 24, cols: 24, spacing: 0.04, orientation: horizontal} model: provot
+    # or choi_ko particle_mass: 0.01 stiffness: {structural: 1000, shear: 1000, bend: 100} damping:
+    {structural: 0.05, shear: 0.05, bend: 0.01} pinned: [[0, 0], [0, -1]]      # (row, col) pairs,
+    negative counts from the end pinned_edges: []               # any of first_row, last_row,
+    first_col, last_col gravity: [0, 0, -9.81] wind: {direction: [0, 1, 0], strength: 0} drag: 0.0
+    strain_limit: 0.1              # or null integrator: symplectic_euler dt: 0.001 thickness:
+    0.005               # kept from colliders (and from itself with self_collision) self_collision:
+    false grippers:                      # holding the cloth from the start (moved by
     ~/grippers/<name>/pose)
       - {name: left, point: [0, 0, 0], radius: 0.02}         # the particles within radius of point
       - {name: edge, box: {min: [x, y, z], max: [x, y, z]}}  # or every particle inside a box
@@ -44,8 +36,7 @@ A garment or any triangle mesh takes the place of ``grid`` (see :meth:`ClothMode
     pinned_box: {min: [x, y, z], max: [x, y, z]}   # and every vertex inside this box (placed)
 
 Every field but ``grid`` (or ``mesh``) has a default. A malformed file raises :class:`SceneError`
-naming the file,
-the field and what was expected.
+naming the file, the field and what was expected.
 """
 
 from __future__ import annotations
@@ -123,8 +114,8 @@ class Scene:
     source: str = "<dict>"
     #: a mesh scene: ``{file (Path), scale, density, position, orientation}``; ``None`` for a grid
     mesh: dict | None = None
-    # : the depth camera's settings (the node's camera.* parameters), CAMERA_DEFAULTS where not
-    # given
+    #: the depth camera's settings (the node's camera.* parameters), CAMERA_DEFAULTS where not
+    #: given
     camera: dict = field(default_factory=lambda: dict(CAMERA_DEFAULTS))
     #: a mesh scene's pins by place: ``(lo, hi)`` corners of a box in world coordinates, or None
     pinned_box: tuple | None = None

@@ -1,8 +1,7 @@
 """The node's settings as plain values — what a scene implies, which combinations are refused, and
 the simulator they build — with no ROS, so that the node's parameter gate
 (:mod:`cloth_sim.ros.gate`) and the sweeps (:mod:`cloth_sim.sweep`) give a value the same meaning
-and
-refuse it for the same reason.
+and refuse it for the same reason.
 
 A *configuration* is a dict holding a value for every name of :data:`~cloth_sim.parameters.SCHEMA`
 (:func:`defaults` gives a scene's). :func:`configure` checks one made from a scene and overrides
@@ -26,8 +25,8 @@ from .simulator import Simulator
 
 #: the rebuild parameters that shape the model (``scene`` is the other one)
 MODEL_KEYS = tuple(name for name in REBUILD if name != "scene")
-# : the parameters that shape a grid only, and a mesh only: a scene of the other kind refuses a
-# change
+#: the parameters that shape a grid only, and a mesh only: a scene of the other kind refuses a
+#: change
 GRID_ONLY = ("rows", "cols", "spacing", "particle_mass", "stiffness.shear", "damping.shear")
 MESH_ONLY = ("density",)
 #: what those parameters hold while the scene does not use them (start-up on a scene of the other
@@ -213,8 +212,7 @@ def build_simulator(cfg: dict, model, scene: Scene) -> Simulator:
 def check_stability(cfg: dict, model) -> tuple[str | None, float]:
     """``(reason, stable_dt)``: the limit of ``cfg``'s method on ``model`` with ``cfg``'s material
     (computed once per material and method, :mod:`cloth_sim.physics.stability`), and the reason to
-    refuse
-    ``cfg["dt"]`` above it (``None`` when fine or ``allow_unstable``)."""
+    refuse ``cfg["dt"]`` above it (``None`` when fine or ``allow_unstable``)."""
     k, c = material(model, cfg)
     analysis = stab.analysis_for(model, k, c, cfg["drag"])
     integ = integrators.get(cfg["integrator"])(model)

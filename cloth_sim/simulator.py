@@ -139,8 +139,8 @@ class Simulator:
         self_collision: bool = False,
     ):
         self.model = model
-        # : the model as given; ``model`` is it with the held particles pinned while grippers hold
-        # some
+        #: the model as given; ``model`` is it with the held particles pinned while grippers hold
+        #: some
         self.base_model = model
         self._grippers: dict[str, Gripper] = {}
         self._integrator_options = dict(integrator_options or {})
@@ -363,8 +363,7 @@ class Simulator:
     @property
     def strain_limit_passes(self) -> int:
         """Most correction passes of the strain limit per step (the limit stops once a pass
-        corrects
-        nothing); fewer is faster and lets the cloth stretch more."""
+        corrects nothing); fewer is faster and lets the cloth stretch more."""
         return self._strain.passes
 
     @strain_limit_passes.setter
@@ -395,20 +394,18 @@ class Simulator:
     ) -> None:
         """Move collider ``i`` to ``position`` with ``orientation`` (a unit quaternion ``(w, x, y,
         z)``; see :mod:`cloth_sim.contact.colliders` for what they mean per shape). The next step
-        sweeps it
-        there: its velocity over that step is the pose change divided by ``dt``, so friction drags
-        what rests on it and nothing it meets on the way passes through. With ``teleport`` it is
-        there now, at rest: the next step sees it standing at the new pose, drags nothing, and
-        pushes out of it whatever it now overlaps (the ROS simulation standard's
+        sweeps it there: its velocity over that step is the pose change divided by ``dt``, so
+        friction drags what rests on it and nothing it meets on the way passes through. With
+        ``teleport`` it is there now, at rest: the next step sees it standing at the new pose,
+        drags nothing, and pushes out of it whatever it now overlaps (the ROS simulation standard's
         ``set_entity_state``). A bad index or a non-finite pose raises ``ValueError`` and moves
         nothing."""
         self._contacts.set_pose(i, position, orientation, teleport=teleport)
 
     def add_collider(self, collider) -> int:
         """Add a collider (a shape of :mod:`cloth_sim.contact.colliders`, its name not in use) from
-        the next
-        step on; returns its index in :attr:`colliders`. A bad shape or a name in use raises
-        ``ValueError`` and changes nothing."""
+        the next step on; returns its index in :attr:`colliders`. A bad shape or a name in use
+        raises ``ValueError`` and changes nothing."""
         i = self._contacts.add(collider)
         self._refresh_stages()
         return i
@@ -439,8 +436,7 @@ class Simulator:
     @property
     def contact_counts(self) -> tuple[int, int]:
         """``(touching, pairs)`` of the last step: particles touching a collider, and
-        self-collision's
-        pairs within reach (0 when it is off)."""
+        self-collision's pairs within reach (0 when it is off)."""
         pairs = self._self_collision.last_pairs if self._self_collision.enabled else 0
         return int(self._contacts.last_touching), int(pairs)
 
@@ -548,8 +544,7 @@ class Simulator:
     def step_is_stable(self, dt: float | None = None) -> bool:
         """Whether ``dt`` (the current one by default) is a step the current method is expected to
         survive: at most :meth:`stable_dt`, or, for a method without a step limit, above the band
-        of
-        steps where Choi–Ko's onset load throws the cloth about
+        of steps where Choi–Ko's onset load throws the cloth about
         (:func:`cloth_sim.physics.stability.buckling_onset_band`)."""
         return self._integrator.step_is_stable(
             self.analysis, self._dt if dt is None else float(dt)
@@ -642,9 +637,8 @@ class Simulator:
 
     def gripper_wrench(self, name: str) -> tuple[np.ndarray, np.ndarray]:
         """``(force, torque)`` the cloth exerts on gripper ``name`` at the end of the last step:
-        the
-        springs' pull on the particles it holds, plus the strain limit's constraint force on them
-        when it is on (N), and its moment about the gripper's position (N·m), world frame (see
+        the springs' pull on the particles it holds, plus the strain limit's constraint force on
+        them when it is on (N), and its moment about the gripper's position (N·m), world frame (see
         :mod:`cloth_sim.constraints.grippers`)."""
         g = self._gripper(name)
         term = self.forces.spring_term
@@ -687,8 +681,7 @@ class Simulator:
 
     def _set_held(self) -> None:
         """The model with the scene's pins and every held particle pinned; everything built from
-        the
-        model is rebuilt around the same state and parameters."""
+        the model is rebuilt around the same state and parameters."""
         mask = np.array(self.base_model.pinned)
         for g in self._grippers.values():
             mask[g.indices] = True

@@ -1,6 +1,5 @@
 """Render what the depth camera sees of the drape scene (a cloth over a ball, a floor below) after
-1.5 s
-into docs/img/drape_depth.png (depth, metres) and docs/img/drape_labels.png (the ground-truth
+1.5 s into docs/img/drape_depth.png (depth, metres) and docs/img/drape_labels.png (the ground-truth
 labels:
 cloth, ball, floor, nothing), as shown in the README.
 

@@ -1,6 +1,5 @@
 """Render the contact and garment scenes (table, drape, fold, tshirt, towel) after a few seconds of
-simulation into
-docs/img/<scene>.png, as shown in the README.
+simulation into docs/img/<scene>.png, as shown in the README.
 
     .venv/bin/python docs/render_scenes.py [--seconds 3] [--out docs/img] [scene[:seconds] ...]
 """

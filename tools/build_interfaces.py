@@ -7,9 +7,8 @@ package's CMakeLists.txt with CLOTH_SIM_INTERFACES_ONLY=ON, builds, and installs
 build/interfaces/install (its libraries linked into the venv's lib/); a .pth file then puts the
 generated Python package behind the hand-written one, which extends its __path__ to it (see
 cloth_sim/__init__.py). The ament index entries and share/cloth_sim are linked into the venv, so
-the
-venv is an ament prefix of cloth_sim (`ros2 interface show`, `ros2 run`, `ros2 launch` find it).
-On a real ROS 2 install none of this is used: `colcon build` builds the same CMakeLists.txt.
+the venv is an ament prefix of cloth_sim (`ros2 interface show`, `ros2 run`, `ros2 launch` find
+it). On a real ROS 2 install none of this is used: `colcon build` builds the same CMakeLists.txt.
 """
 
 from __future__ import annotations

@@ -2,20 +2,16 @@
 ``twist`` scene's sheet, ``config/meshes/twist_sheet.obj``.
 
 Each outline is a polygon in metres, its sides cut into pieces of about ``EDGE`` and triangulated
-by
-Shewchuk's Triangle (the ``triangle`` package) as a quality mesh: no angle below 28°, no triangle
-larger than an equilateral one of side ``EDGE``, and no point added on the outline (``Y``), so two
-panels cut from one outline share their seam vertices exactly.
+by Shewchuk's Triangle (the ``triangle`` package) as a quality mesh: no angle below 28°, no
+triangle larger than an equilateral one of side ``EDGE``, and no point added on the outline
+(``Y``), so two panels cut from one outline share their seam vertices exactly.
 
 * **T-shirt**: a front and a back panel from one outline, joined along the side, sleeve and
 shoulder
   seams (their vertices are shared), open at the neck, the two cuffs and the waist. The panels
-  bulge
-  apart by up to ``DEPTH`` away from the seams (a garment modelled around a body), so the shirt
-  rests
-  as made, with a few centimetres between its layers. The back panel's triangles are wound the
-  other
-  way, so every normal points out of the shirt.
+  bulge apart by up to ``DEPTH`` away from the seams (a garment modelled around a body), so the
+  shirt rests as made, with a few centimetres between its layers. The back panel's triangles are
+  wound the other way, so every normal points out of the shirt.
 * **Towel**: a 0.5 m × 0.8 m rectangle, hung from its two top corners by the ``towel`` scene.
 * **Twist sheet**: the cloth of Newton's ``example_cloth_twist`` (its asset ``square_cloth.usd``
 scaled

@@ -1,13 +1,10 @@
 """``cloth-sim play``: publish a bag's recorded bytes with their original relative timing and QoS,
-as
-``ros2 bag play`` does.
+as ``ros2 bag play`` does.
 
 Message i is published at wall time ``start + (log_time_i − log_time_first − offset) / rate``; the
 schedule is absolute, so sleeping late for one message does not shift the ones after it. Each topic
-gets
-one publisher with the QoS its recorded publishers offered (the first offer; an unknown or
-system-default
-history becomes keep-last with the recorded depth, at least 10).
+gets one publisher with the QoS its recorded publishers offered (the first offer; an unknown or
+system-default history becomes keep-last with the recorded depth, at least 10).
 """
 
 from __future__ import annotations
@@ -146,8 +143,8 @@ class Player:
 
     def wait_for_all_acked(self) -> bool:
         """Let reliable subscribers acknowledge what was sent before the publishers go away (a DDS
-        writer
-        destroyed at exit drops what it has not delivered yet); at most ``ack_timeout`` seconds."""
+        writer destroyed at exit drops what it has not delivered yet); at most ``ack_timeout``
+        seconds."""
         deadline = time.monotonic() + self.ack_timeout
         ok = True
         for pub in self.publishers.values():

@@ -2,14 +2,11 @@
 record``.
 
 The main thread spins rclpy and only queues (topic, bytes, times) from each callback; a writer
-thread owns
-the MCAP writer (Zstd compression releases the GIL), so compression never delays the subscriptions.
-Topics are looked up every ``poll`` seconds, so topics that appear after the start are recorded
-too. A
-subscription's QoS is adapted to its publishers' offers as rosbag2 does (reliable only if every
-publisher
-is; transient-local only if every publisher is), and the offers are stored as the channel's
-``offered_qos_profiles``.
+thread owns the MCAP writer (Zstd compression releases the GIL), so compression never delays the
+subscriptions. Topics are looked up every ``poll`` seconds, so topics that appear after the start
+are recorded too. A subscription's QoS is adapted to its publishers' offers as rosbag2 does
+(reliable only if every publisher is; transient-local only if every publisher is), and the offers
+are stored as the channel's ``offered_qos_profiles``.
 """
 
 from __future__ import annotations

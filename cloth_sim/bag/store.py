@@ -2,21 +2,17 @@
 
 A bag is a directory ``BAG/`` holding ``metadata.yaml`` (top key ``rosbag2_bagfile_information``,
 version 9, storage ``mcap``) and ``BAG_0.mcap``: MCAP profile ``ros2``, one ``ros2msg`` schema per
-type
-(the ``.msg`` text and its dependencies' texts), one ``cdr`` channel per topic carrying
+type (the ``.msg`` text and its dependencies' texts), one ``cdr`` channel per topic carrying
 ``offered_qos_profiles`` and ``topic_type_hash``, Zstd chunks of 768 KiB, and at close a metadata
-record
-``rosbag2`` holding the same YAML as ``metadata.yaml`` without its top key. This is what rosbag2
-writes
-(see ROS_ON_PYPI.md), so ``ros2 bag info/play``, Foxglove and ``rosbags`` read these bags, and
-``cloth-sim info/play`` read theirs.
+record ``rosbag2`` holding the same YAML as ``metadata.yaml`` without its top key. This is what
+rosbag2 writes (see ROS_ON_PYPI.md), so ``ros2 bag info/play``, Foxglove and ``rosbags`` read these
+bags, and ``cloth-sim info/play`` read theirs.
 
 While recording, ``metadata.yaml`` holds a provisional entry (no messages) and the MCAP file has no
 footer yet. A recorder that dies leaves both so: every complete chunk stays readable (chunks are
-flushed
-to the file as they are finished), ``bag_info`` reports the bag as not closed, and ``reindex``
-rewrites
-the readable part as a complete MCAP file and rebuilds ``metadata.yaml``, keeping the originals.
+flushed to the file as they are finished), ``bag_info`` reports the bag as not closed, and
+``reindex`` rewrites the readable part as a complete MCAP file and rebuilds ``metadata.yaml``,
+keeping the originals.
 """
 
 from __future__ import annotations
@@ -60,8 +56,7 @@ _BUILTIN_TYPES = {
     "wstring",
 }
 # What parsing a damaged file raises varies (mcap's McapError, CRCValidationError, struct and zstd
-# errors,
-# unicode errors in names, …): any of them means "damaged here".
+# errors, unicode errors in names, …): any of them means "damaged here".
 _MCAP_ERRORS = Exception
 
 
@@ -105,10 +100,8 @@ def time_ns(d) -> int:
 # ----------------------------------------------------------------------------- message definitions
 def interface_file(type_name: str, ext: str) -> Path | None:
     """Where ``pkg/msg/Type.<ext>`` is installed: under an AMENT_PREFIX_PATH prefix, or the
-    ``share/``
-    beside the install prefix of the Python package ``pkg`` (a ROS install, the wheels' venv, or
-    the
-    package's own generated interfaces)."""
+    ``share/`` beside the install prefix of the Python package ``pkg`` (a ROS install, the wheels'
+    venv, or the package's own generated interfaces)."""
     pkg, sub, name = _split_type(type_name)
     rel = Path("share") / pkg / sub / f"{name}.{ext}"
     prefixes = [Path(p) for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
@@ -149,8 +142,7 @@ def _field_types(text: str, pkg: str) -> list[str]:
 
 def message_definition(type_name: str) -> str:
     """The ``ros2msg`` schema rosbag2 stores: the type's .msg text, then each dependency's (depth
-    first,
-    once each) after a line of 80 '=' and ``MSG: pkg/Type``."""
+    first, once each) after a line of 80 '=' and ``MSG: pkg/Type``."""
 
     def text_of(t: str) -> str:
         path = interface_file(t, "msg")
@@ -321,10 +313,9 @@ class BagWriter:
     """Writes one rosbag2 bag directory (a single MCAP file; no splitting).
 
     ``add_topic`` registers a topic (schema + channel); ``write`` adds one message's CDR bytes;
-    ``close``
-    writes the ``rosbag2`` metadata record, the MCAP summary and ``metadata.yaml``. Every finished
-    chunk
-    is handed to the OS at once, so a killed writer loses at most the chunk it was filling.
+    ``close`` writes the ``rosbag2`` metadata record, the MCAP summary and ``metadata.yaml``. Every
+    finished chunk is handed to the OS at once, so a killed writer loses at most the chunk it was
+    filling.
     """
 
     def __init__(self, path, overwrite: bool = False, chunk_size: int = CHUNK_SIZE):
@@ -575,11 +566,9 @@ def _describe(e: BaseException) -> str:
 
 def _scan(path: Path, info: FileInfo, strict: bool = False) -> Iterator:
     """Read a file record by record, chunk CRCs checked, filling ``info``; yields its Schema,
-    Channel and
-    Message records in file order. Stops quietly at the first incomplete or damaged record of an
-    unclosed file (``info.fault`` says which); with ``strict`` (a closed file) a damaged record
-    raises
-    BagError."""
+    Channel and Message records in file order. Stops quietly at the first incomplete or damaged
+    record of an unclosed file (``info.fault`` says which); with ``strict`` (a closed file) a
+    damaged record raises BagError."""
     schemas: dict[int, Schema] = {}
     with open(path, "rb") as f:
         records = StreamReader(f, emit_chunks=True).records
@@ -632,10 +621,8 @@ def bag_info(path) -> BagInfo:
 
 def iter_messages(path, topics: set[str] | None = None) -> Iterator[tuple[TopicInfo, Message]]:
     """Every readable message of the bag in file order (log-time order for bags rosbag2 or
-    cloth-sim
-    wrote), as (topic, mcap Message). A damaged chunk of a closed file raises BagError; an unclosed
-    file
-    ends at its last complete chunk."""
+    cloth-sim wrote), as (topic, mcap Message). A damaged chunk of a closed file raises BagError;
+    an unclosed file ends at its last complete chunk."""
     _, files, _ = bag_files(path)
     for f in files:
         closed = _is_closed(f)
@@ -650,10 +637,8 @@ def iter_messages(path, topics: set[str] | None = None) -> Iterator[tuple[TopicI
 # ----------------------------------------------------------------------------------------- reindex
 def reindex(path) -> list[str]:
     """Make an unclosed bag whole: rewrite each unclosed MCAP file from its complete chunks (the
-    original
-    kept as ``<name>.unclosed``) and rebuild metadata.yaml (the old one kept as
-    ``metadata.yaml.orig``).
-    Returns what was done, one line each."""
+    original kept as ``<name>.unclosed``) and rebuild metadata.yaml (the old one kept as
+    ``metadata.yaml.orig``). Returns what was done, one line each."""
     path = Path(path)
     if not path.exists():
         raise BagError(f"{path}: no such bag (neither a directory nor a file)")
@@ -710,8 +695,7 @@ def _split_index(p: Path) -> int:
 
 def _rewrite(src: Path, dst: Path) -> int:
     """Copy every readable schema, channel and message of ``src`` into a complete MCAP file
-    ``dst``;
-    returns the number of messages copied."""
+    ``dst``; returns the number of messages copied."""
     info = FileInfo(src, src.stat().st_size, False)
     with open(dst, "wb") as out:
         w = Writer(out, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD)

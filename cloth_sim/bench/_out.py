@@ -16,8 +16,7 @@ G = (0.0, 0.0, -9.81)
 
 def hang16(k: float = 1000.0, damping: float = 0.0) -> ClothModel:
     """Scene hang16: 16×16 grid, 1 m square, k for every family, 0.01 kg particles, two corners of
-    one
-    edge pinned, flat and at rest (no wind, no strain limit are the simulator's defaults)."""
+    one edge pinned, flat and at rest (no wind, no strain limit are the simulator's defaults)."""
     return ClothModel.grid(
         16, 16, 1.0 / 15, 0.01, stiffness=k, damping=damping, pinned=[(0, 0), (0, 15)]
     )

@@ -1,16 +1,12 @@
 """Write throughput of ``cloth-sim record`` against a running node.
 
 ``cloth-sim bench record --size 64 --rate 60 --seconds 10`` starts ``cloth_sim_node`` in its own
-process
-(N×N cloth, the given publish rate, strain limit off so the node itself keeps the rate on 2 cores),
-records ``~/points`` and ``~/stats`` in this process for the given time, and prints messages/s,
-MB/s of
-message data and on disk, the recorder's CPU load, and how many messages the node sent in the
-recorded
-window against how many were written. "Sent" is read from the node's own tick sequence: consecutive
-``~/stats`` messages advance ``sim_time`` by exactly ``steps·dt``, so a tick missing from the bag
-shows
-as a jump; each tick sends one cloud and one stats message.
+process (N×N cloth, the given publish rate, strain limit off so the node itself keeps the rate on 2
+cores), records ``~/points`` and ``~/stats`` in this process for the given time, and prints
+messages/s, MB/s of message data and on disk, the recorder's CPU load, and how many messages the
+node sent in the recorded window against how many were written. "Sent" is read from the node's own
+tick sequence: consecutive ``~/stats`` messages advance ``sim_time`` by exactly ``steps·dt``, so a
+tick missing from the bag shows as a jump; each tick sends one cloud and one stats message.
 """
 
 from __future__ import annotations

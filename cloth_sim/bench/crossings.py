@@ -5,10 +5,9 @@ collision handling).
 Every particle moves on a straight path between the states and so does every triangle's corner; a
 particle ``p`` not a corner of triangle ``abc`` crosses it when the coplanarity cubic ``f(s) = (p −
 a)·((b − a) × (c − a))`` has a root in ``[0, 1]`` at which ``p`` lies inside the triangle. The
-cubic's
-coefficients come from four samples, its real roots from monotone brackets (split at the roots of
-``f'``) and bisection. Candidate pairs are those whose swept boxes overlap, found with SciPy's
-k-d tree over the boxes' centres.
+cubic's coefficients come from four samples, its real roots from monotone brackets (split at the
+roots of ``f'``) and bisection. Candidate pairs are those whose swept boxes overlap, found with
+SciPy's k-d tree over the boxes' centres.
 """
 
 from __future__ import annotations

@@ -1,6 +1,5 @@
 """Seconds from `ros2 run cloth_sim cloth_sim_node` to the first ~/points cloud, as a ROS user sees
-it
-after `colcon build` (run in a shell with the ROS set-up and the workspace's install/setup.bash
+it after `colcon build` (run in a shell with the ROS set-up and the workspace's install/setup.bash
 sourced; ../shared/rostools gives both here):
 
     python3 tools/ros_first_cloud.py [--runs 3]

@@ -1,19 +1,16 @@
 """cloth_sim beside MuJoCo's flex cloth on the drape scene, in one process.
 
 ``cloth-sim bench flex-peer [--size 32] [--seconds 2]`` (``make bench-peers`` runs it). MuJoCo is
-an
-optional extra (``requirements-peers.txt``), never installed by ``make test``.
+an optional extra (``requirements-peers.txt``), never installed by ``make test``.
 
 The drape scene at N×N with its 1 m side and its 5.76 kg kept (the 24×24 scene's cloth, finer): a
 cloth dropped flat from 0.6 m over a 0.25 m ball on a floor. MuJoCo 4.0 builds the same grid as a
 ``flexcomp`` (``type="grid"``, ``dim="2"``) of the same mass, its edges held by equality
-constraints
-(MuJoCo's own way to a cloth that does not stretch: cloth_sim holds its springs with the strain
-limit), ``implicitfast`` at each step given; cloth_sim runs its shipped method and the two
-large-step ones at theirs. Figures: wall seconds per simulated second over the run after one
-warm-up
-step, and where the cloth ends — its highest point against the ball's top (0.55 m; the cloth's
-thickness, 5 mm, above it: a lower top means the cloth sank into the ball).
+constraints (MuJoCo's own way to a cloth that does not stretch: cloth_sim holds its springs with
+the strain limit), ``implicitfast`` at each step given; cloth_sim runs its shipped method and the
+two large-step ones at theirs. Figures: wall seconds per simulated second over the run after one
+warm-up step, and where the cloth ends — its highest point against the ball's top (0.55 m; the
+cloth's thickness, 5 mm, above it: a lower top means the cloth sank into the ball).
 """
 
 from __future__ import annotations

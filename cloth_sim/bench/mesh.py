@@ -1,8 +1,7 @@
 """Meshes against grids, side by side in one process: from_mesh time at 10k and 100k triangles
-(arrays
-and an OBJ file), ms/step of a mesh and a grid of the same vertices (symplectic Euler,
-Baraff–Witkin
-at 1/60 s), and the time to answer a stiffness change (stable_dt) on a 10,000-vertex mesh.
+(arrays and an OBJ file), ms/step of a mesh and a grid of the same vertices (symplectic Euler,
+Baraff–Witkin at 1/60 s), and the time to answer a stiffness change (stable_dt) on a 10,000-vertex
+mesh.
 
     .venv/bin/python -m cloth_sim.bench.mesh
 """

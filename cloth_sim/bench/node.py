@@ -63,9 +63,8 @@ def measure(
 def measure_node(overrides: list, seconds: float, subscribe: bool) -> dict:
     """The node started with ``overrides``, run ``seconds`` after a 2 s warm-up, with or without
     ``~/points`` and ``~/mesh`` subscribed: real-time factor, step and tick costs, overruns, and
-    the
-    worst strain of a strain-limited spring, sampled every 0.1 s of wall time over the whole run
-    (the warm-up, the cloth's fall from flat, included)."""
+    the worst strain of a strain-limited spring, sampled every 0.1 s of wall time over the whole
+    run (the warm-up, the cloth's fall from flat, included)."""
     with _node_and_probe(overrides) as (node, probe, ex, stats):
         worst = [0.0]
 
@@ -79,8 +78,7 @@ def measure_node(overrides: list, seconds: float, subscribe: bool) -> dict:
             subscribe
         ):  # what RViz's two displays ask for; raw: this probe shares the node's thread,
             # so it only counts the messages, without deserialising or keeping them (RViz does that
-            # in
-            # its own process)
+            # in its own process)
             def counter(box):
                 def count(_):
                     box[0] += 1
@@ -120,8 +118,7 @@ def measure_node(overrides: list, seconds: float, subscribe: bool) -> dict:
 @contextmanager
 def _node_and_probe(overrides):
     """A cloth_sim node with ``overrides`` and a probe node collecting ~/stats, both on one
-    executor
-    in a context of their own; everything is shut down on the way out."""
+    executor in a context of their own; everything is shut down on the way out."""
     from cloth_sim.msg import Stats
 
     from ..ros.node import ClothSimNode
@@ -159,8 +156,7 @@ def _rss_mb() -> float:
 
 def print_scene_node_table(scene: str, seconds: float, rate: float) -> list[dict]:
     """A named scene (a garment) in the node as it ships (its integrator and dt), with
-    self-collision
-    off and on, ``~/points`` and ``~/mesh`` subscribed."""
+    self-collision off and on, ``~/points`` and ``~/mesh`` subscribed."""
     print(
         f"# cloth_sim_node, scene {scene} as it ships, {rate:g} Hz, ~/points + ~/mesh subscribed, "
         f"{seconds:g} s per row after 2 s warm-up; {platform.machine()}, {os.cpu_count()} cores"
@@ -478,10 +474,9 @@ def _lockstep_rows(client, ex, size, calls, chunks) -> list[dict]:
 
 def print_startup_table(trials: int = 4, sizes=(32, 64)) -> list[dict]:
     """Seconds from starting ``cloth_sim_node`` (a new process, the default scene resized to N×N)
-    to
-    the first ``~/points`` cloud a subscriber in this process receives: interpreter, rclpy, numba's
-    cached kernels (:func:`~cloth_sim.simulator.compile_kernels`), the stability analysis, DDS
-    discovery. The first trial also warms the OS's file cache; the median of the rest is
+    to the first ``~/points`` cloud a subscriber in this process receives: interpreter, rclpy,
+    numba's cached kernels (:func:`~cloth_sim.simulator.compile_kernels`), the stability analysis,
+    DDS discovery. The first trial also warms the OS's file cache; the median of the rest is
     printed."""
     import statistics
 
@@ -539,8 +534,7 @@ def print_camera_node_table(
 ) -> list[dict]:
     """The node's real-time factor with the depth camera on (``width``×``height`` at
     ``camera_rate``), its topics unsubscribed and all five subscribed: ``cloth_sim_node`` in its
-    own
-    process (the ``size``×``size`` hanging scene, the camera at (0.5, −0.8, 0.6) looking at the
+    own process (the ``size``×``size`` hanging scene, the camera at (0.5, −0.8, 0.6) looking at the
     cloth), this process subscribing as a viewer in another process does (raw: it counts the
     messages without deserialising them) and reading ~/stats. The real-time factor is simulated
     time over wall time between the first and last ~/stats received in each window."""

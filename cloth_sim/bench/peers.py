@@ -1,15 +1,14 @@
 """cloth_sim beside NVIDIA Warp's own CPU cloth benchmark, on Warp's scene, in one process.
 
 Warp's scene (``warp/examples/benchmarks/benchmark_cloth.py``): an N×N grid at 0.1 m spacing, 0.1
-kg
-particles, structural, shear and bend springs with k = 1000 N/m and damping 10 N·s/m, two corners
-pinned, gravity, symplectic Euler at dt = 1/960 s. Warp runs its own kernels
+kg particles, structural, shear and bend springs with k = 1000 N/m and damping 10 N·s/m, two
+corners pinned, gravity, symplectic Euler at dt = 1/960 s. Warp runs its own kernels
 (``benchmark_cloth_warp.WpIntegrator``, float32, on the CPU device); cloth_sim runs
 ``symplectic_euler`` (float64), ``rk4`` and the two post-seed methods (``liu2013`` with 10
 iterations, ``xpbd`` with 10 substeps, at the same dt: their cost per step) on the same springs.
-The runs alternate in short bursts and
-the medians are compared, so a load change on a shared machine hits both. Warp is an optional extra
-(``requirements-peers.txt``, installed by ``make bench-peers``, never by ``make test``).
+The runs alternate in short bursts and the medians are compared, so a load change on a shared
+machine hits both. Warp is an optional extra (``requirements-peers.txt``, installed by ``make
+bench-peers``, never by ``make test``).
 """
 
 from __future__ import annotations

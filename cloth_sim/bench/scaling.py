@@ -1,17 +1,13 @@
 """``cloth-sim bench scaling``: ms/step against grid size per integrator, with the fitted exponent
-of
-cost against particle count, and what skipping unused force terms buys.
+of cost against particle count, and what skipping unused force terms buys.
 
 Sizes N = 8 … 256 (N×N particles; the hanging scene resized: 1 m square, its stiffness, damping and
 mass, strain limit off, dt = 1 ms for the explicit methods and Kang, 1/60 s for implicit Euler). An
 integrator stops growing N once one step took more than ``budget`` seconds. The exponent is the
 least-squares slope of log(ms/step) against log(particles) over N ≥ 32 (below, fixed per-step
-overheads
-dominate). "Skipping" times the N = 64 hanging scene with wind, bend springs, Provot's strain limit
-and
-damping each switched off in turn (a term that is off is never evaluated), and the node's tick with
-and
-without a ~/points subscriber.
+overheads dominate). "Skipping" times the N = 64 hanging scene with wind, bend springs, Provot's
+strain limit and damping each switched off in turn (a term that is off is never evaluated), and the
+node's tick with and without a ~/points subscriber.
 """
 
 from __future__ import annotations
@@ -97,9 +93,8 @@ def step_traffic(sim: Simulator) -> int:
     """The bytes one symplectic Euler step must move at least: each array the step reads, once, and
     each it writes, once (positions and velocities both ways; the force array written; the springs'
     ends, rest lengths, stiffness, damping and kind, gravity's force and the inverse masses read;
-    with
-    the parallel gather, its incidence lists read and its per-spring force array written and read
-    back). Caches and the particles' repeated reads by their springs are not counted: a lower
+    with the parallel gather, its incidence lists read and its per-spring force array written and
+    read back). Caches and the particles' repeated reads by their springs are not counted: a lower
     bound."""
     forces = sim.forces
     term = forces.spring_term
@@ -131,8 +126,7 @@ def main(out: Path, quick: bool = False) -> dict:
     for name in progress(methods, "scaling"):
         for n in sizes:
             # cost per step does not depend on dt for the explicit methods; one that diverges at 1
-            # ms
-            # (explicit Euler, midpoint: no stable step with this little damping) is timed at a
+            # ms (explicit Euler, midpoint: no stable step with this little damping) is timed at a
             # smaller dt
             for shrink in (1, 10, 100, 1000):
                 sim = build(n, name)

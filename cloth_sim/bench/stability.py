@@ -1,19 +1,14 @@
 """``cloth-sim bench stability``: the largest stable dt per integrator, measured against linear
-theory,
-and stress scenarios that jolt a running simulation.
+theory, and stress scenarios that jolt a running simulation.
 
 Scene: hang16 (16×16, 1 m, 0.01 kg particles, two corners pinned) with k ∈ {1e2, 1e3, 1e4, 1e5} N/m
-for
-every family and spring damping c = 2ζ·√(k·m) for damping ratios ζ ∈ {0, 0.01, 0.1} (ζ of one
-spring holding one
-particle). A run is unstable if within the horizon the simulator's guard trips (non-finite, speed
-or
-coordinate runaway), the kinetic energy exceeds 100·M·g·W (M the cloth's mass, W its width), or any
-structural/shear strain exceeds 100 %. The horizon is 1 s, shortened to 20 000 steps for tiny steps
-(explicit Euler without damping, which has no stable step at all). Bisection in log dt to 2 %.
-Linear
-theory: ``Simulator.stable_dt()`` — ω_max from a sparse eigensolver and each method's amplification
-matrix with the fastest mode's damping.
+for every family and spring damping c = 2ζ·√(k·m) for damping ratios ζ ∈ {0, 0.01, 0.1} (ζ of one
+spring holding one particle). A run is unstable if within the horizon the simulator's guard trips
+(non-finite, speed or coordinate runaway), the kinetic energy exceeds 100·M·g·W (M the cloth's
+mass, W its width), or any structural/shear strain exceeds 100 %. The horizon is 1 s, shortened to
+20 000 steps for tiny steps (explicit Euler without damping, which has no stable step at all).
+Bisection in log dt to 2 %. Linear theory: ``Simulator.stable_dt()`` — ω_max from a sparse
+eigensolver and each method's amplification matrix with the fastest mode's damping.
 """
 
 from __future__ import annotations
@@ -94,8 +89,8 @@ def largest_stable_dt(name, k, zeta, linear, horizon, max_steps, rtol) -> dict:
         lo /= 2
         if lo < guess / 64:
             # a failure that no step size cures is the physics meeting a criterion (e.g. a soft
-            # cloth
-            # stretching past 100 % under its own weight), not an instability: no limit to report
+            # cloth stretching past 100 % under its own weight), not an instability: no limit to
+            # report
             return {
                 "measured_dt": math.nan,
                 "note": f"fails at every dt down to {2 * lo:.2g} s ({why}): "
@@ -194,8 +189,7 @@ def stress(name, dt, event, after: float) -> dict:
 
 def plot(rows: list[dict], zetas: list[float], methods: list[str], path: Path) -> None:
     """Measured (solid) against linear theory (dashed) per damping ratio; open markers: a horizon
-    cut
-    short by the step cap, where "stable" means only "survived that long"."""
+    cut short by the step cap, where "stable" means only "survived that long"."""
     plt = pyplot()
     fig, axes = plt.subplots(1, len(zetas), figsize=(6 * len(zetas), 4.6), squeeze=False)
     for ax, zeta in zip(axes[0], zetas):

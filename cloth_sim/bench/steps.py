@@ -82,10 +82,8 @@ def print_implicit_table(sizes, dt: float, seconds: float = 1.0) -> list[dict]:
     """ms/step of the implicit methods (and the linear solver behind them) at a large step, on the
     hanging scene at N×N (the 1 m, 10.24 kg cloth: spacing 1/(N−1), mass 10.24/N², as the strain
     and node benchmarks), each also as a multiple of a symplectic Euler step of the same cloth
-    timed
-    in the same run (at dt = 0.1 ms, where it is stable at every size: a step's cost does not
-    depend
-    on dt; at 1 ms, 81×81 without the strain limit diverges)."""
+    timed in the same run (at dt = 0.1 ms, where it is stable at every size: a step's cost does not
+    depend on dt; at 1 ms, 81×81 without the strain limit diverges)."""
     from ..simulator import SimulationDiverged
 
     print(
@@ -227,10 +225,9 @@ def _ms_per_step(sim, seconds: float, every_10=None) -> float:
 def print_strain_limit_table(sizes=(32, 64), seconds: float = 3.0, tau: float = 0.1) -> list[dict]:
     """The hanging scene at N×N (the 1 m, 10.24 kg cloth: spacing 1/(N−1), mass 10.24/N²) over
     ``seconds``: worst structural/shear strain (sampled every 10 steps) and ms/step without the
-    strain
-    limit, with Provot's passes alone, with long-range attachments at 20 (the default), 10 and 5
-    passes, and with the projection method; the cost ratios to the run without, measured in one
-    process."""
+    strain limit, with Provot's passes alone, with long-range attachments at 20 (the default), 10
+    and 5 passes, and with the projection method; the cost ratios to the run without, measured in
+    one process."""
     print(
         f"# strain limit τ = {tau} on the hanging scene, {seconds:g} s, symplectic Euler dt = 1 "
         "ms; "

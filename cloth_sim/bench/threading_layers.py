@@ -2,8 +2,7 @@
 
 numba picks its threading layer once per process, so each layer runs in its own child process
 (``NUMBA_THREADING_LAYER`` set), the layers taking turns for ``rounds`` rounds; the table gives
-each
-layer's median. Two ways of stepping, both from the same state, 0.5 s after the release:
+each layer's median. Two ways of stepping, both from the same state, 0.5 s after the release:
 
 * *steady*: steps back to back (a sweep, a benchmark, ``cloth-sim run``);
 * *ticks*: the steps of one 1/60 s tick, then the rest of the tick idle, as the node steps (the

@@ -11,22 +11,19 @@ Newton's examples do.
    one by one (``ModelBuilder.add_spring``: Newton's VBD takes springs beside its FEM triangles),
    with our colour groups (Newton colours triangles and bending edges only, none here), no strain
    limit on either side. Both step each 1/60 s frame in 10 substeps of 10 iterations (the numbers
-   of
-   Newton's cloth examples). Figures: wall seconds per simulated second, the worst stretch of any
-   spring and the bottom row's swing (the range of its mean y), each over the run, sampled a frame.
+   of Newton's cloth examples). Figures: wall seconds per simulated second, the worst stretch of
+   any spring and the bottom row's swing (the range of its mean y), each over the run, sampled a
+   frame.
 2. **Newton's twist** (``example_cloth_twist``): Newton's own set-up — its FEM cloth of 50 × 50
    vertices (Lamé μ = λ = 1000 N/m, 0.2 kg/m², bending 1e-3), the two short edges fixed and turned
    in opposite senses at π/3 rad/s about the long axis, zero gravity, self-contact at a 2 mm
-   margin,
-   10 substeps × 4 iterations a frame, the BVH rebuilt every frame — rebuilt here without its USD
-   asset (the same vertices and triangles, written by ``tools/make_garments.py``), beside
-   cloth_sim's
-   ``twist`` scene (springs on the same triangles, grippers turning the edges at the same rate) as
-   it
-   ships. Figures: wall seconds per simulated second, and crossings by the independent check
-   (:mod:`cloth_sim.bench.crossings`) between every two steps of ours and every two substeps of
-   Newton's (every two frames on a GPU, where a frame is one captured graph), outside the timed
-   part.
+   margin, 10 substeps × 4 iterations a frame, the BVH rebuilt every frame — rebuilt here without
+   its USD asset (the same vertices and triangles, written by ``tools/make_garments.py``), beside
+   cloth_sim's ``twist`` scene (springs on the same triangles, grippers turning the edges at the
+   same rate) as it ships. Figures: wall seconds per simulated second, and crossings by the
+   independent check (:mod:`cloth_sim.bench.crossings`) between every two steps of ours and every
+   two substeps of Newton's (every two frames on a GPU, where a frame is one captured graph),
+   outside the timed part.
 """
 
 from __future__ import annotations

@@ -2,17 +2,14 @@
 integrator.
 
 Reference: ``scipy.integrate.solve_ivp`` (DOP853, rtol 1e-10, atol 1e-12) on the same forces,
-cached on
-disk under a key of the scene and tolerances, and checked against a solve 100× tighter (they must
-agree
-below 1e-9 m). Error at T: RMS over particles of |x(T) − x_ref(T)|, and the max. Steps
-dt = 1e-3·2^−k (k = 0…5; explicit Euler k = 5…7) for the explicit methods and (1/60)·2^−k for the
-implicit ones; ``vbd`` at 1, 2, 5, 10 and 20 iterations a step, a line each (``vbd-N``). Time:
-``perf_counter`` around the stepping loop only, the minimum of ``repeats`` runs
-after a warm-up. A run that diverges (the simulator's guard), or ends with a non-finite or > 1 m
-error,
-is recorded as a failure. Observed orders: least-squares slope of log error against log dt on a
-T = 0.1 s sweep, over the stable runs whose error is above 1000× the reference's own error.
+cached on disk under a key of the scene and tolerances, and checked against a solve 100× tighter
+(they must agree below 1e-9 m). Error at T: RMS over particles of |x(T) − x_ref(T)|, and the max.
+Steps dt = 1e-3·2^−k (k = 0…5; explicit Euler k = 5…7) for the explicit methods and (1/60)·2^−k for
+the implicit ones; ``vbd`` at 1, 2, 5, 10 and 20 iterations a step, a line each (``vbd-N``). Time:
+``perf_counter`` around the stepping loop only, the minimum of ``repeats`` runs after a warm-up. A
+run that diverges (the simulator's guard), or ends with a non-finite or > 1 m error, is recorded as
+a failure. Observed orders: least-squares slope of log error against log dt on a T = 0.1 s sweep,
+over the stable runs whose error is above 1000× the reference's own error.
 """
 
 from __future__ import annotations

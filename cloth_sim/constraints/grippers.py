@@ -3,16 +3,13 @@ with.
 
 ``Simulator.grasp(name, point, radius)`` takes every particle within ``radius`` of ``point`` (none
 already held) and holds them rigidly: they keep their offsets from the gripper's pose at the moment
-of
-the grasp (position ``point``, orientation identity), rotated with it. Held particles are
-kinematic,
-as pins are: the integrators give them no acceleration, and before a step in which the gripper
-moves
-each held particle gets the velocity that carries it from where it is to its place at the new pose
-over the step (every integrator then moves it there: its position update is ``x += dt·v`` for a
-particle with no acceleration, and Verlet's history is set to match), and after the step it is put
-exactly there. So the springs and their damping see the gripper's real motion, and a released
-particle keeps the gripper's last velocity (no jerk).
+of the grasp (position ``point``, orientation identity), rotated with it. Held particles are
+kinematic, as pins are: the integrators give them no acceleration, and before a step in which the
+gripper moves each held particle gets the velocity that carries it from where it is to its place at
+the new pose over the step (every integrator then moves it there: its position update is ``x +=
+dt·v`` for a particle with no acceleration, and Verlet's history is set to match), and after the
+step it is put exactly there. So the springs and their damping see the gripper's real motion, and a
+released particle keeps the gripper's last velocity (no jerk).
 
 The wrench is what the cloth's springs exert on the held particles at the end of the last step:
 force ``Σ f_i`` and torque ``Σ (x_i − p) × f_i`` about the gripper's position ``p`` (world frame).

@@ -1,11 +1,9 @@
 """Post-step stages: corrections of positions (and velocities) after each integrator step.
 
 A stage is an object with ``name``, ``active`` and ``apply(state, start, dt, velocity_follow)``.
-The
-simulator runs its active stages in order after every step; an inactive stage costs nothing (it is
-not even called). To add a stage (contacts, grippers): a class with those three members, and one
-line
-where :class:`~cloth_sim.simulator.Simulator` builds its ``stages`` list.
+The simulator runs its active stages in order after every step; an inactive stage costs nothing (it
+is not even called). To add a stage (contacts, grippers): a class with those three members, and one
+line where :class:`~cloth_sim.simulator.Simulator` builds its ``stages`` list.
 
 Provot's super-elasticity correction (:class:`StrainLimit`)
 ------------------------------------------------------------
@@ -20,26 +18,20 @@ one corrects nothing.
 
 Provot's passes alone let a hanging cloth's stretch accumulate along its length: each pass moves a
 correction one spring down a chain that is N springs long, and at 64×64 twenty passes left the
-worst
-strain at 0.156 against τ = 0.1. So, for a pinned cloth, each step first applies **long-range
+worst strain at 0.156 against τ = 0.1. So, for a pinned cloth, each step first applies **long-range
 attachments** (Kim, Chentanez & Müller 2012, "Long range attachments — a method to simulate
 inextensible clothing in computer games"): a particle may be no farther from a pin than ``(1 + τ)``
 times its rest geodesic distance to it (the shortest path along the springs at rest, an upper bound
-of
-the distance in the cloth, so the attachment never asks for less stretch than the springs allow);
-one
-pass, against each particle's two nearest pins, removes the stretch accumulated along the chain,
-the
-Provot passes then fix local excess, and the attachments are applied again after each pass (a pass
-moves a pin's neighbours back out, and for those the attachment is their spring's own limit).
-``long_range=False`` keeps Provot's passes alone, for
-comparison.
+of the distance in the cloth, so the attachment never asks for less stretch than the springs
+allow); one pass, against each particle's two nearest pins, removes the stretch accumulated along
+the chain, the Provot passes then fix local excess, and the attachments are applied again after
+each pass (a pass moves a pin's neighbours back out, and for those the attachment is their spring's
+own limit). ``long_range=False`` keeps Provot's passes alone, for comparison.
 
 ``method="projection"`` replaces the passes by one projection of all the over-stretched springs
 together (:mod:`cloth_sim.constraints.strain_projection`, after the attachments): the stretch is
-held to
-``τ + tol`` exactly, for more work a step (hanging 64×64: worst strain 0.1001 against the passes'
-0.119; figures in docs/BENCHMARKS.md §3).
+held to ``τ + tol`` exactly, for more work a step (hanging 64×64: worst strain 0.1001 against the
+passes' 0.119; figures in docs/BENCHMARKS.md §3).
 """
 
 from __future__ import annotations
@@ -59,8 +51,8 @@ DEFAULT_STRAIN_LIMIT_PASSES = 20
 #: From this many particles on, the attachments run on every core (below, waking the second core
 #: costs more than it saves: 64×64, 1.7 → 1.4 ms a step; 32×32, 4 % slower)
 PARALLEL_MIN_PARTICLES = 2048
-# : Strain above ``τc`` that a pass tolerates (so passes stop once nothing is meaningfully too
-# long).
+#: Strain above ``τc`` that a pass tolerates (so passes stop once nothing is meaningfully too
+#: long).
 STRAIN_LIMIT_TOLERANCE = 1e-4
 
 
@@ -183,9 +175,8 @@ def nearest_attachments(model, count: int = 2) -> tuple[np.ndarray, np.ndarray]:
 class Stage:
     """A post-step correction. ``apply(state, start, dt, velocity_follow)`` changes ``state.x`` /
     ``state.v`` in place; ``start`` is the state before the step. A position change ``Δx`` moves
-    the
-    velocity by ``velocity_follow·Δx/dt`` (the integrator's own factor: 1 for one-step methods, 1.5
-    for Verlet's BDF2 velocity)."""
+    the velocity by ``velocity_follow·Δx/dt`` (the integrator's own factor: 1 for one-step methods,
+    1.5 for Verlet's BDF2 velocity)."""
 
     name = ""
 
@@ -199,8 +190,7 @@ class Stage:
 
 class StrainLimit(Stage):
     """Provot's correction over a model's strain-limited springs, after long-range attachments to
-    the
-    pins (``long_range``); active when ``tau`` is set. ``method``: one of
+    the pins (``long_range``); active when ``tau`` is set. ``method``: one of
     :data:`STRAIN_LIMIT_METHODS` (``"projection"``: ``passes`` bounds its iterations instead)."""
 
     name = "strain_limit"
@@ -322,8 +312,8 @@ class StrainLimit(Stage):
             self._react((state.x - before) / dt, dt)
 
     _before = None
-    # : keep :attr:`reaction` (grippers ask for it): the force the limit's corrections put on the
-    # pins
+    #: keep :attr:`reaction` (grippers ask for it): the force the limit's corrections put on the
+    #: pins
     track_reaction = False
     #: ``(n, 3)``: per pinned particle, the force (N) the last step's corrections exerted on it
     reaction = None

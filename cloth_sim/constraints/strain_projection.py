@@ -1,15 +1,13 @@
 """The strain limit as one projection of every over-stretched spring at once.
 
 Provot's passes (:mod:`cloth_sim.constraints.strain_limit`) shorten one spring at a time, so a
-correction
-travels one spring per pass: a hanging 64×64 cloth kept its worst strain at 0.119 against τ = 0.1
-however many passes it was given (20: 0.119, 40: 0.120). This stage instead solves for all the
-springs longer than ``(1 + τ)·L`` together — Goldenthal, Harmon, Fattal, Bercovier & Grinspun
-(2007), "Efficient simulation of inextensible cloth", *fast projection*: with ``C_s = l_s − (1 +
-τ)L_s``
-over the active springs ``A``, ``J = ∂C/∂x`` and ``W`` the inverse masses (0 for a pin), each
-iteration takes the smallest mass-weighted change of the positions that zeroes the linearised
-constraints,
+correction travels one spring per pass: a hanging 64×64 cloth kept its worst strain at 0.119
+against τ = 0.1 however many passes it was given (20: 0.119, 40: 0.120). This stage instead solves
+for all the springs longer than ``(1 + τ)·L`` together — Goldenthal, Harmon, Fattal, Bercovier &
+Grinspun (2007), "Efficient simulation of inextensible cloth", *fast projection*: with ``C_s = l_s
+− (1 + τ)L_s`` over the active springs ``A``, ``J = ∂C/∂x`` and ``W`` the inverse masses (0 for a
+pin), each iteration takes the smallest mass-weighted change of the positions that zeroes the
+linearised constraints,
 
     (J W Jᵀ + ε I) λ = C,        Δx = −W Jᵀ λ,
 
@@ -21,15 +19,13 @@ pulled out to the bound: the projection adds no stretch. ``A`` only grows within
 Each solve moves the set's particles, which stretches the ring of springs around the set: left to
 itself the set grows by about a ring an iteration (128×128 at the bottom of the swing: 14,000
 springs, and 20 iterations were not enough). So the first iteration's set also takes the last
-step's springs still within :data:`WARM_START` of their bound — held at their length if within it
-— which is most of the ring-by-ring growth at once (hanging cloth, side by side: 64×64 6.7 → 4.6
+step's springs still within :data:`WARM_START` of their bound — held at their length if within it —
+which is most of the ring-by-ring growth at once (hanging cloth, side by side: 64×64 6.7 → 4.6
 iterations a step, 128×128 11.4 → 5.3, its worst strain 0.118 → 0.1001; the mean strain over 3 s
 the same to four digits, 0.01292, since no spring is pulled out). Tried and dropped: letting a
-spring
-within its bound whose ``λ`` came out negative (pushed out) leave the set and solving again — with
-the loose solves below ``λ``'s sign near 0 is noise, and the set cycled (64×64: 24 % of steps at
-the
-iteration limit, worst 0.105).
+spring within its bound whose ``λ`` came out negative (pushed out) leave the set and solving again
+— with the loose solves below ``λ``'s sign near 0 is noise, and the set cycled (64×64: 24 % of
+steps at the iteration limit, worst 0.105).
 
 The system is solved by conjugate gradients preconditioned by its diagonal, matrix-free, over the
 active springs and their particles only (a compact numbering, so a step with a few hundred active
@@ -41,14 +37,13 @@ with ε = 1e-6 a crumpled cloth with every spring over its bound diverged. Each 
 ``ε/(w_i + w_j + ε)`` of a lone spring's excess.
 
 What it costs (hanging 10.24 kg cloth, τ = 0.1, ``tools/strain_methods.py` (at 87a25b3``,
-docs/BENCHMARKS.md
-§3): at 64×64 4.6 iterations and 97 CG iterations a step over ~300 active springs, 0.68 ms a step
-against the passes' 0.95 ms, for a worst strain of 0.1001 where the passes leave 0.119 (32×32: 0.12
-against 0.32 ms, 0.1001 against 0.1057). At 128×128 the active set reaches 14,000 springs at the
-bottom of the swing: 5.3 iterations a step, 0.1001 at 1.5× the passes' cost. Tried: symmetric
-Gauss–Seidel as the preconditioner — 2.8× fewer CG iterations, each 3× the cost: 10 % faster,
-not kept. The worst case is a crumpled cloth with every spring over: all active and redundant,
-3e-4 above the bound after 20 iterations.
+docs/BENCHMARKS.md §3): at 64×64 4.6 iterations and 97 CG iterations a step over ~300 active
+springs, 0.68 ms a step against the passes' 0.95 ms, for a worst strain of 0.1001 where the passes
+leave 0.119 (32×32: 0.12 against 0.32 ms, 0.1001 against 0.1057). At 128×128 the active set reaches
+14,000 springs at the bottom of the swing: 5.3 iterations a step, 0.1001 at 1.5× the passes' cost.
+Tried: symmetric Gauss–Seidel as the preconditioner — 2.8× fewer CG iterations, each 3× the cost:
+10 % faster, not kept. The worst case is a crumpled cloth with every spring over: all active and
+redundant, 3e-4 above the bound after 20 iterations.
 
 Each iteration moves the particles by ``−W Jᵀ λ``, so the mass-weighted sum of the moves is zero
 where no pin takes part: the centre of mass (and the linear momentum, the velocities following the
@@ -65,15 +60,14 @@ REGULARISATION = 1e-3
 #: most conjugate-gradient iterations per solve
 MAX_CG_ITERATIONS = 400
 #: a solve stops once its residual is this fraction of the first (loose: the next iteration
-# : linearises again anyway). Hanging 64×64, side by side: 1e-4 2.8, 0.1 0.97, 0.3 0.81 ms a step,
-# the
-#: same worst 0.1001 (128×128: 0.1 11.9, 0.3 8.7 ms)
+#: linearises again anyway). Hanging 64×64, side by side: 1e-4 2.8, 0.1 0.97, 0.3 0.81 ms a step,
+#: the same worst 0.1001 (128×128: 0.1 11.9, 0.3 8.7 ms)
 CG_TOLERANCE = 0.3
 #: a spring joins the active set when its strain exceeds ``τ`` by more than this (rounding aside)
 _JOIN = 1e-9
-# : a spring of the last step's set joins the first iteration's set at once while its strain is
-# within
-#: this of ``τ`` (below it: held at its length, not pulled out to the bound; module docstring)
+#: a spring of the last step's set joins the first iteration's set at once while its strain is
+#: within this of ``τ`` (below it: held at its length, not pulled out to the bound; module
+#: docstring)
 WARM_START = 0.005
 
 

@@ -32,9 +32,8 @@ CONTACT_TOLERANCE = 0.02
 #: a particle within this fraction of a thickness above a collider's skin is *supported* by it:
 #: self-collision moves it as if held (when both sides of a pair are, the one farther from the
 #: collider moves), so that cloth landing on cloth that lies on a collider does not drive it into
-# : the collider (when only touching particles were held, a T-shirt's lower layer was pushed 20 %
-# into
-#: a table's 4 mm skin: particles a hair above the skin were free). Below 1, so a second layer
+#: the collider (when only touching particles were held, a T-shirt's lower layer was pushed 20 %
+#: into a table's 4 mm skin: particles a hair above the skin were free). Below 1, so a second layer
 #: resting on the first (2h up) is free.
 SUPPORT = 0.5
 
@@ -391,11 +390,10 @@ class Contacts:
 
     It works with every integrator because it acts on the step's result: positions are projected
     and the velocity is filtered after the step, as a collision impulse applied at its end
-    (explicit
-    and Runge–Kutta methods, the implicit ones, whose solve does not see the contacts, and Verlet,
-    whose next step reads the corrected positions as its velocity). Friction acts on both the
-    position change and the velocity, so a particle on an incline under static friction does not
-    creep, and a sliding one accelerates by ``g (sin θ − μ cos θ)``.
+    (explicit and Runge–Kutta methods, the implicit ones, whose solve does not see the contacts,
+    and Verlet, whose next step reads the corrected positions as its velocity). Friction acts on
+    both the position change and the velocity, so a particle on an incline under static friction
+    does not creep, and a sliding one accelerates by ``g (sin θ − μ cos θ)``.
     """
 
     name = "contacts"
@@ -411,8 +409,8 @@ class Contacts:
                 )
         self.thickness = positive("thickness", thickness)
         self.touching = np.zeros(model.n_particles, dtype=np.bool_)
-        # : per particle, the distance above the nearest collider's skin after the last step (inf:
-        # none)
+        #: per particle, the distance above the nearest collider's skin after the last step (inf:
+        #: none)
         self.clearance = np.full(model.n_particles, np.inf)
         self.last_touching = 0
         self._pinned = np.ascontiguousarray(model.pinned)
@@ -482,8 +480,7 @@ class Contacts:
         self, i: int, position, orientation=(1.0, 0.0, 0.0, 0.0), teleport: bool = False
     ) -> None:
         """Collider ``i``'s pose at the end of the next step (it sweeps there from where it is),
-        or,
-        with ``teleport``, at its start too (it stands there)."""
+        or, with ``teleport``, at its start too (it stands there)."""
         self._index(i, "move")
         self.colliders[i].set_pose(position, orientation)
         self._pos[i] = self.colliders[i].position

@@ -5,8 +5,7 @@ their box, down to one triangle a leaf; a particle in no triangle is a leaf of i
 every step and traversed against itself (the usual choice in cloth codes: Bridson, Fedkiw &
 Anderson 2002; Tang et al. 2009 among many). Every primitive has a **reach**: each particle one of
 its own (self-collision gives it half the thickness plus its motion over the step), a triangle or
-an
-edge the largest of its corners'. A leaf's box is its triangle's box grown by that reach, so two
+an edge the largest of its corners'. A leaf's box is its triangle's box grown by that reach, so two
 leaves' boxes overlap whenever their primitives lie within the sum of their reaches. For each
 overlapping pair of leaves ``(T1, T2)`` the exact distances are measured:
 
@@ -102,12 +101,10 @@ def _tasks(left, right, size, least: int) -> np.ndarray:
     """The traversal split into independent tasks, ``(a, b)`` rows: ``(a, a)`` the subtree ``a``
     against itself, ``(a, b)`` subtree ``a`` against ``b``. A subtree is split into its two halves
     and their pair while it holds more than ``1/least`` of the items (a spread-out cloth's pairs
-    are
-    mostly inside small subtrees), and a pair by opening its larger side while it could hold more
-    than ``1/least`` of all pairs of items (a crumpled cloth's, where most boxes overlap, are
-    mostly
-    between subtrees); the tasks are listed depth first, so that equal runs of the list cover equal
-    parts of the cloth and every core gets a like share either way."""
+    are mostly inside small subtrees), and a pair by opening its larger side while it could hold
+    more than ``1/least`` of all pairs of items (a crumpled cloth's, where most boxes overlap, are
+    mostly between subtrees); the tasks are listed depth first, so that equal runs of the list
+    cover equal parts of the cloth and every core gets a like share either way."""
     budget = max(1, int(size[0]) * int(size[0]) // (2 * least))
     tasks = []
 
@@ -417,8 +414,7 @@ def _owned(slots, owner_of) -> np.ndarray:
 
 def reaches(radius, n: int) -> np.ndarray:
     """Per-particle reaches from a search radius: a number ``R`` (every pair within ``R``) is half
-    of
-    it for each particle; an array of ``n`` is taken as it is."""
+    of it for each particle; an array of ``n`` is taken as it is."""
     if np.ndim(radius) == 0:
         return np.full(n, 0.5 * float(radius))
     reach = np.ascontiguousarray(radius, dtype=np.float64)
@@ -468,13 +464,11 @@ class TriangleTree:
 
     def pairs(self, x0, radius):
         """``(vf, vf_distance, ee, ee_distance)``: every (particle, triangle) pair, the particle
-        not
-        a corner, and every pair of edges ``(e, f)``, ``e < f``, sharing no particle, whose start
-        positions ``x0`` lie within ``radius`` — a number, or a reach per particle
-        (:func:`reaches`;
-        a pair is kept when its distance is below the sum of its two sides' reaches, a triangle's
-        or an edge's the largest of its corners') — with those distances, in a fixed order, the
-        same at any thread count."""
+        not a corner, and every pair of edges ``(e, f)``, ``e < f``, sharing no particle, whose
+        start positions ``x0`` lie within ``radius`` — a number, or a reach per particle
+        (:func:`reaches`; a pair is kept when its distance is below the sum of its two sides'
+        reaches, a triangle's or an edge's the largest of its corners') — with those distances, in
+        a fixed order, the same at any thread count."""
         x0 = np.ascontiguousarray(x0, dtype=np.float64)
         if self.empty:
             return (

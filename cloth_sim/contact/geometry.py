@@ -128,9 +128,8 @@ def point_triangle_distance(x, p, a, b, c):
 @numba.njit(cache=True, inline="always")
 def closest_on_segment_pair(ax, ay, az, bx, by, bz, cx, cy, cz, dx, dy, dz):
     """``(s, t)``: the nearest points ``a + s(b − a)`` and ``c + t(d − c)`` of two segments given
-    by
-    their ends' coordinates (Ericson, Real-Time Collision Detection, 5.1.9; a parallel pair takes
-    ``s = 0``)."""
+    by their ends' coordinates (Ericson, Real-Time Collision Detection, 5.1.9; a parallel pair
+    takes ``s = 0``)."""
     d1x, d1y, d1z = bx - ax, by - ay, bz - az
     d2x, d2y, d2z = dx - cx, dy - cy, dz - cz
     rx, ry, rz = ax - cx, ay - cy, az - cz
@@ -154,8 +153,7 @@ def closest_on_segment_pair(ax, ay, az, bx, by, bz, cx, cy, cz, dx, dy, dz):
 @numba.njit(cache=True, inline="always")
 def closest_on_segments(x, a, b, c, d):
     """``(s, t, distance)``: the nearest points ``a + s(b − a)`` and ``c + t(d − c)`` of two
-    segments
-    (:func:`closest_on_segment_pair` of the particles ``a``, ``b``, ``c``, ``d``)."""
+    segments (:func:`closest_on_segment_pair` of the particles ``a``, ``b``, ``c``, ``d``)."""
     sv, tv = closest_on_segment_pair(
         x[a, 0],
         x[a, 1],

@@ -1,28 +1,25 @@
 """Self-collision: the cloth keeps ``thickness`` from its own non-adjacent triangles and never
-passes
-through one.
+passes through one.
 
 A post-step stage (see :mod:`cloth_sim.constraints.strain_limit`) over particle–triangle pairs, the
-triangle not
-containing the particle. Each step:
+triangle not containing the particle. Each step:
 
 1. **Candidates**, from a bounding-volume hierarchy over the triangles
    (:mod:`cloth_sim.contact.collision_tree`: built once from the rest layout, refitted to the
-   step's start
-   positions and traversed against itself). Each particle **reaches** half the thickness beyond its
-   own motion over the step, ``h/2 + |Δx|``; a triangle or an edge reaches as far as its farthest
-   corner. A pair is a candidate when its distance at the start is below its two reaches: farther
-   apart, it can neither come within ``h`` nor cross over the step. (A search radius of
-   ``h + 2·max|Δx|`` for every pair, the cloth's fastest particle widening everyone's search, found
-   9,800 edge pairs and 3,400 particle–triangle pairs a step on the swinging 64×64 cloth; the reach
-   of each pair's own motions keeps 800 and 260 of them. A spatial hash of the particles and of
-   the edges did the search before, 9 ms a step there, 6 ms with the reaches: it visited about 90
-   hash entries per edge for those 800 pairs; the tree, 2.5 ms. Figures in docs/BENCHMARKS.md §3c.)
-   A particle is paired with every triangle it is not a corner of (Bridson et al.): excluding the
-   triangles of its neighbours too was tried and lets the ``fold`` scene cross itself where a
-   crease
-   is one triangle wide. Neighbours in a flat or compressed cloth are never pushed out of its plane
-   (step 2), and the no-crossing bound (step 3) slows them only when they move by most of an edge.
+   step's start positions and traversed against itself). Each particle **reaches** half the
+   thickness beyond its own motion over the step, ``h/2 + |Δx|``; a triangle or an edge reaches as
+   far as its farthest corner. A pair is a candidate when its distance at the start is below its
+   two reaches: farther apart, it can neither come within ``h`` nor cross over the step. (A search
+   radius of ``h + 2·max|Δx|`` for every pair, the cloth's fastest particle widening everyone's
+   search, found 9,800 edge pairs and 3,400 particle–triangle pairs a step on the swinging 64×64
+   cloth; the reach of each pair's own motions keeps 800 and 260 of them. A spatial hash of the
+   particles and of the edges did the search before, 9 ms a step there, 6 ms with the reaches: it
+   visited about 90 hash entries per edge for those 800 pairs; the tree, 2.5 ms. Figures in
+   docs/BENCHMARKS.md §3c.) A particle is paired with every triangle it is not a corner of (Bridson
+   et al.): excluding the triangles of its neighbours too was tried and lets the ``fold`` scene
+   cross itself where a crease is one triangle wide. Neighbours in a flat or compressed cloth are
+   never pushed out of its plane (step 2), and the no-crossing bound (step 3) slows them only when
+   they move by most of an edge.
 2. **Proximity** (Bridson, Fedkiw & Anderson 2002): a pair closer than ``thickness`` at the end of
    the step is pushed apart, shared by inverse mass between its two sides (each moved as a whole,
    held particles staying), and an approaching normal velocity between them is removed alike (an
@@ -33,12 +30,9 @@ containing the particle. Each step:
    * on an edge (**point–edge**) or at a corner (**point–point**): along the line from that point
    to
      the particle, each edge and corner handled once (from the first triangle that has it), and
-     only
-     when the particle shares no triangle with it. Without these, the hems and openings of a
-     garment
-     — where the nearest point is an edge — kept no distance: the edge particles of a U-folded
-     cloth
-     came within 1.5–1.9 mm of the other layer at a thickness of 5 mm;
+     only when the particle shares no triangle with it. Without these, the hems and openings of a
+     garment — where the nearest point is an edge — kept no distance: the edge particles of a
+     U-folded cloth came within 1.5–1.9 mm of the other layer at a thickness of 5 mm;
    * and **edge–edge**: two edges sharing no particle whose nearest points both lie inside them
    (two
      hems crossing), found by the same traversal (each edge from its first triangle), pushed
@@ -154,11 +148,9 @@ def _separate(x, v, held_inv_mass, free_inv_mass, clearance, s1, w1, s2, w2, nx,
     """Push side 1 (the points ``Σ w1·x[s1]``) along ``+n`` and side 2 along ``−n`` by ``push`` in
     all, shared by their inverse masses (each side moved as a whole, held particles staying), and
     remove an approaching velocity along ``n`` alike. ``s1, s2``: 3 particle indices each, ``w1,
-    w2``
-    their weights (0 for an unused slot). A side held by a collider (``held_inv_mass`` 0) stays;
-    when
-    both are, the side farther above the colliders (``clearance``) moves alone, by its own masses.
-    Returns whether anything could move."""
+    w2`` their weights (0 for an unused slot). A side held by a collider (``held_inv_mass`` 0)
+    stays; when both are, the side farther above the colliders (``clearance``) moves alone, by its
+    own masses. Returns whether anything could move."""
     inv_mass = held_inv_mass
     i1 = w1[0] * inv_mass[s1[0]] + w1[1] * inv_mass[s1[1]] + w1[2] * inv_mass[s1[2]]
     i2 = w2[0] * inv_mass[s2[0]] + w2[1] * inv_mass[s2[1]] + w2[2] * inv_mass[s2[2]]
@@ -209,8 +201,7 @@ def _separate(x, v, held_inv_mass, free_inv_mass, clearance, s1, w1, s2, w2, nx,
 @numba.njit(cache=True, inline="always")
 def _direction(x, x0, p, s2, w2):
     """Unit vector from the point ``Σ w2·x[s2]`` to particle ``p`` now, turned to the side it had
-    at
-    the start (from the start positions when they coincide now); and the distance now."""
+    at the start (from the start positions when they coincide now); and the distance now."""
     nx = x[p, 0] - (w2[0] * x[s2[0], 0] + w2[1] * x[s2[1], 0] + w2[2] * x[s2[2], 0])
     ny = x[p, 1] - (w2[0] * x[s2[0], 1] + w2[1] * x[s2[1], 1] + w2[2] * x[s2[2], 1])
     nz = x[p, 2] - (w2[0] * x[s2[0], 2] + w2[1] * x[s2[1], 2] + w2[2] * x[s2[2], 2])
@@ -474,11 +465,9 @@ class SelfCollision:
             check_thickness(self.model, self.thickness)
         self.enabled = bool(on)
 
-    # : per particle, how far above a collider's skin the contact stage left it (``inf``: no
-    # collider;
-    # : set by the simulator): within ``SUPPORT·thickness`` self-collision moves it as if pinned,
-    # so it
-    #: never pushes the cloth into a collider
+    #: per particle, how far above a collider's skin the contact stage left it (``inf``: no
+    #: collider; set by the simulator): within ``SUPPORT·thickness`` self-collision moves it as if
+    #: pinned, so it never pushes the cloth into a collider
     clearance = None
 
     def apply(self, state, start, dt, velocity_follow):
@@ -539,8 +528,7 @@ def _features(tris: np.ndarray, n: int):
     """What the point–edge, point–point and edge–edge cases need of the topology: the unique edges
     ``(e, 2)``; each triangle's edge in slots 0 (a–b), 1 (b–c), 2 (c–a); each edge's first triangle
     (its owner) and its (up to) two triangles (−1 for none); each particle's first triangle; and
-    the
-    particles' neighbours along edges (CSR ``adj_ptr``, ``adj``)."""
+    the particles' neighbours along edges (CSR ``adj_ptr``, ``adj``)."""
     if len(tris) == 0:
         z = np.zeros((0, 2), np.int64)
         return (

@@ -13,10 +13,9 @@ What SoftGym's ``ClothEnv``/``FlexEnv`` do (Lin et al. 2020), on cloth_sim's phy
 * **Observations.** ``"key_point"``: the cloth's four corners and the pickers, world frame
 (SoftGym's
   reduced state). ``"point_cloud"``: what the depth camera sees of the cloth, in the camera's
-  optical
-  frame, ``max_points`` points (a seeded random subset when more are visible, zeros after the last
-  when fewer; ``info["points"]`` is the count), then the pickers in the same frame. ``"depth"``:
-  the depth image (metres, 0 where nothing is seen).
+  optical frame, ``max_points`` points (a seeded random subset when more are visible, zeros after
+  the last when fewer; ``info["points"]`` is the count), then the pickers in the same frame.
+  ``"depth"``: the depth image (metres, 0 where nothing is seen).
 * **Initial states** come from :mod:`.initial_states`: variation ``i`` of ``num_variations`` is
   generated from the seed ``[task, i]`` the first time it is needed and cached on disk, so
   ``reset(seed=s)`` is the same episode wherever and whenever it runs.
@@ -24,8 +23,7 @@ What SoftGym's ``ClothEnv``/``FlexEnv`` do (Lin et al. 2020), on cloth_sim's phy
   ``info["performance"]`` (also the reward, as in SoftGym).
 
 Subclasses (:mod:`.tasks`) give the cloth, how a variation is generated, where the pickers start
-and
-the metric.
+and the metric.
 """
 
 from __future__ import annotations
@@ -98,9 +96,8 @@ class ClothEnv(gym.Env):
     task = "Cloth"
     defaults = dict(horizon=100, action_repeat=8)
     #: bounds of the pickers' centres, (x, y, z) low and high before centring, z up: SoftGym's
-    # : ``(-0.4, 0, -0.4)``–``(1.0, 0.5, 0.4)`` (y up) less the picker's radius, but down to the
-    # height
-    #: of a particle on the floor (see :mod:`.pickers`)
+    #: ``(-0.4, 0, -0.4)``–``(1.0, 0.5, 0.4)`` (y up) less the picker's radius, but down to the
+    #: height of a particle on the floor (see :mod:`.pickers`)
     picker_bounds = ((-0.38, -0.38, 0.004), (0.98, 0.38, 0.48))
     picker_radius = 0.02
     camera = dict(position=(0.0, -0.82, 0.82), look_at=(0.0, 0.0, 0.0), fov=45.0)
@@ -343,8 +340,7 @@ class ClothEnv(gym.Env):
 
     def _pick_place(self, a) -> None:
         """SoftGym's ``PickerPickPlace.step``: straight to the (clipped) targets at 0.01 m per
-        frame
-        for the farthest picker, the pick flags held throughout, at most 300 frames."""
+        frame for the farthest picker, the pick flags held throughout, at most 300 frames."""
         end = np.array([self.pickers.clip(p) for p in a[:, :3]])
         dist = np.linalg.norm(end - self.pickers.positions, axis=1)
         n = int(np.ceil(dist.max() / PICK_PLACE_MOVE))

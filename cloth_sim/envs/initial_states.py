@@ -2,14 +2,11 @@
 
 Variation ``i`` of a task is made by the task's generator from ``numpy.random.default_rng([task id,
 i])`` (SoftGym's ``generate_env_variation``, one variation at a time), so it depends on the task,
-its
-settings and ``i`` alone: generating it again anywhere gives the same float64 state bit for bit,
-and
-a cached one is that state. The cache is a folder per task and settings (a hash of them and of
-:data:`VERSION`) under ``$CLOTH_SIM_CACHE`` or ``~/.cache/cloth_sim/initial_states``, a ``.npz``
-per
-variation written to a temporary name and renamed, so processes sharing it (vector envs) never read
-half a file. ``cache_dir=False`` keeps them in memory only.
+its settings and ``i`` alone: generating it again anywhere gives the same float64 state bit for
+bit, and a cached one is that state. The cache is a folder per task and settings (a hash of them
+and of :data:`VERSION`) under ``$CLOTH_SIM_CACHE`` or ``~/.cache/cloth_sim/initial_states``, a
+``.npz`` per variation written to a temporary name and renamed, so processes sharing it (vector
+envs) never read half a file. ``cache_dir=False`` keeps them in memory only.
 """
 
 from __future__ import annotations

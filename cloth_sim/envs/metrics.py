@@ -49,8 +49,7 @@ def fold_groups(rows: int, cols: int) -> tuple[np.ndarray, np.ndarray]:
 def fold_distance(positions, initial, group_a, group_b) -> tuple[float, float, float]:
     """``(performance, group distance, fixation distance)``: the group distance is the mean of
     ``|x_a − x_b|`` over the mirrored pairs, the fixation distance the mean of ``|x_b − x_b(0)|``,
-    and
-    the performance ``−group − 1.2·fixation``."""
+    and the performance ``−group − 1.2·fixation``."""
     x = np.asarray(positions, float)
     group = float(np.mean(np.linalg.norm(x[group_a] - x[group_b], axis=1)))
     fixation = float(np.mean(np.linalg.norm(x[group_b] - np.asarray(initial)[group_b], axis=1)))

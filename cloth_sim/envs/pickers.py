@@ -1,18 +1,15 @@
 """SoftGym's pickers on cloth_sim's grippers.
 
 A picker is a point that moves by at most ``max_move`` per frame inside a box (``low``, ``high``:
-the
-bounds of its centre) and, while its pick
-flag is on, holds the one free particle that was nearest to it, within ``reach``, when the flag
-went
-on (SoftGym's ``Picker``: Lin et al. 2020, ``softgym/action_space/action_space.py``). The particle
-is held rigidly at its offset from the picker: it is a cloth_sim gripper (``Simulator.grasp``), so
-the strain limit, contacts and the gripper's wrench all see it. Turning the flag off releases it
-with the picker's velocity. Unlike SoftGym's spheres, pickers do not collide with the cloth, so
-their
-centres may go down to the height of a particle lying on the floor: SoftGym's spheres stop 5 cm up
-and take the nearest particle within 6 cm, which in a crumpled pile is often one on top of the
-corner aimed at rather than the corner itself.
+the bounds of its centre) and, while its pick flag is on, holds the one free particle that was
+nearest to it, within ``reach``, when the flag went on (SoftGym's ``Picker``: Lin et al. 2020,
+``softgym/action_space/action_space.py``). The particle is held rigidly at its offset from the
+picker: it is a cloth_sim gripper (``Simulator.grasp``), so the strain limit, contacts and the
+gripper's wrench all see it. Turning the flag off releases it with the picker's velocity. Unlike
+SoftGym's spheres, pickers do not collide with the cloth, so their centres may go down to the
+height of a particle lying on the floor: SoftGym's spheres stop 5 cm up and take the nearest
+particle within 6 cm, which in a crumpled pile is often one on top of the corner aimed at rather
+than the corner itself.
 
 Coordinates are cloth_sim's (z up); SoftGym's FleX scenes are y up, so its ``(x, y, z)`` bounds are
 ``(x, z, y)`` here.

@@ -1,6 +1,6 @@
 """Scripted (oracle) policies for the picker tasks: they read the cloth's corners from the
-simulation,
-so they work with any observation mode. Used by the tests, the README's frames and the benchmark.
+simulation, so they work with any observation mode. Used by the tests, the README's frames and the
+benchmark.
 
 Each is a generator of actions: ``for action in fold(env.unwrapped): env.step(action)``. A policy
 moves its pickers through waypoints, each at the pickers' top speed (0.01 m per frame), holding or
@@ -36,10 +36,8 @@ def _action(env, delta, pick: bool) -> np.ndarray:
 def flatten(env):
     """Pick the two corners of an edge (the pair farthest apart of the cloth's four corners that
     share an edge), lift them until the cloth hangs free, pull them apart to the edge's length,
-    then
-    drag them across the floor away from where the cloth hangs while lowering, and let go: the
-    cloth
-    is laid down flat behind them."""
+    then drag them across the floor away from where the cloth hangs while lowering, and let go: the
+    cloth is laid down flat behind them."""
     x = env.sim.positions
     c = env.corners
     # the four edges: their corners, their rest length and the other side's
@@ -78,8 +76,7 @@ def flatten(env):
 def fold(env):
     """Fold the left half (columns ``< cols/2``) onto the right: pick the left edge's two corners,
     carry them over in a half circle about the middle to 3 cm above the right edge's corners and
-    let
-    go there."""
+    let go there."""
     x = env.sim.positions
     c = env.corners
     src, dst = x[[c[0], c[1]]], x[[c[2], c[3]]]

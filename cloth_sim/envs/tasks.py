@@ -11,9 +11,8 @@ cloth
 * :class:`ClothDropEnv` — a cloth hanging from its two top corners (0.1–0.2 m above the floor at
   its lowest, at least 0.5 m at its top, a random ±0.1 m along x); lay it flat at its target, the
   cloth lying along +x from x = 0. The pickers start at the two corners (not holding them: the
-  first
-  action must pick) and stay at least 0.5 m up. Performance: minus the mean distance to the target;
-  normalized: from the start (0) to on target (1).
+  first action must pick) and stay at least 0.5 m up. Performance: minus the mean distance to the
+  target; normalized: from the start (0) to on target (1).
 """
 
 from __future__ import annotations

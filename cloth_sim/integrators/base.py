@@ -7,8 +7,7 @@ one place. A method is constructed for one model (``cls(model, **options)``) and
   ``state.v`` (called when the state, ``dt`` or the method changes);
 * ``step(state, forces, dt)`` — advance ``state.x``, ``state.v`` by one step in place, reading
   forces only through ``forces`` (a :class:`~cloth_sim.physics.forces.Forces`, rebuilt by the
-  simulator
-  when parameters change, so a method never holds stale forces);
+  simulator when parameters change, so a method never holds stale forces);
 * ``pins_moved(state)`` — pinned particles were placed; keep them at rest;
 * ``kinematic_velocities(state, indices, dt)`` — pinned particles move with ``state.v`` over the
   next step (grippers);
@@ -25,10 +24,8 @@ It declares ``name``, ``order``, ``stability``, ``counter_names`` (the counters 
 import nothing from the simulator.
 
 To add a method: a subclass in this package decorated with ``@register`` (or a module imported at
-the
-end of ``integrators/__init__.py``); the tests parametrised over ``integrators.available()`` then
-check
-its free fall, momentum, declared order and stability limit.
+the end of ``integrators/__init__.py``); the tests parametrised over ``integrators.available()``
+then check its free fall, momentum, declared order and stability limit.
 """
 
 from __future__ import annotations
@@ -107,10 +104,9 @@ class Integrator:
 
     def attach(self, contacts, self_collision) -> None:
         """The simulator's contact stage (:class:`~cloth_sim.contact.colliders.Contacts`) and
-        self-collision
-        stage (:class:`~cloth_sim.contact.self_collision.SelfCollision`), for a method that
-        resolves them
-        (:attr:`handles`); called whenever they or the method change (no-op by default)."""
+        self-collision stage (:class:`~cloth_sim.contact.self_collision.SelfCollision`), for a
+        method that resolves them (:attr:`handles`); called whenever they or the method change
+        (no-op by default)."""
 
     # ------------------------------------------------------------------ stability
     @classmethod
@@ -141,8 +137,7 @@ class Integrator:
         amplification matrix's limit on the fastest mode, or the method's own analysis; each
         computed once per material and kept in ``analysis``; at most
         :func:`~cloth_sim.physics.stability.buckling_onset_limit` (Choi–Ko's onset load, a jump
-        that no
-        mode analysis sees)."""
+        that no mode analysis sees)."""
         if self.stability is Stability.UNCONDITIONAL:
             return analysis.onset_band[0]
         if self.stability is Stability.AMPLIFICATION:

@@ -48,11 +48,9 @@ class ExplicitRungeKutta(Integrator):
     @classmethod
     def spectral_radii(cls, h, omega, zeta):
         """``max |R(hλ)|`` over the oscillator's eigenvalues ``λ = ω(−ζ ± √(ζ²−1))``, with ``R``
-        the
-        tableau's stability polynomial ``1 + Σ_k (b·A^{k−1}·1) z^k`` (the eigenvalues of a
-        polynomial
-        of a matrix are the polynomial of its eigenvalues): the same as the amplification matrix's
-        radius, without building it."""
+        the tableau's stability polynomial ``1 + Σ_k (b·A^{k−1}·1) z^k`` (the eigenvalues of a
+        polynomial of a matrix are the polynomial of its eigenvalues): the same as the
+        amplification matrix's radius, without building it."""
         h, omega, zeta = (np.asarray(a, dtype=np.float64) for a in (h, omega, zeta))
         root = np.sqrt((zeta * zeta - 1.0).astype(np.complex128))
         radius = 0.0
@@ -107,9 +105,8 @@ def combine_parallel(xo, vo, x, v, kx, kv, coef):
 @numba.njit(cache=True)
 def _verlet_update(x, v, prev, a, dt, pinned):
     """``x' = 2x − x_prev + dt²·a``, ``v' = (3x' − 4x + x_prev)/(2dt)`` (``(x' − x)/dt`` on pins:
-    exactly 0 for one at rest), then
-    ``x_prev = x``, ``x = x'``: one pass, no temporaries, the same operations in the same order as
-    the array expressions."""
+    exactly 0 for one at rest), then ``x_prev = x``, ``x = x'``: one pass, no temporaries, the same
+    operations in the same order as the array expressions."""
     h2, inv = dt * dt, 2.0 * dt
     for p in range(x.shape[0]):
         for d in range(3):
@@ -127,8 +124,7 @@ def _verlet_update(x, v, prev, a, dt, pinned):
 @register
 class ExplicitEuler(ExplicitRungeKutta):
     """Explicit (forward) Euler, order 1: ``x += dt·v``, ``v += dt·a(x, v)``, both from the old
-    state
-    (Provot 1995; review eq. 1.11). Unstable for any ``dt`` on an undamped oscillator."""
+    state (Provot 1995; review eq. 1.11). Unstable for any ``dt`` on an undamped oscillator."""
 
     name = "explicit_euler"
     order = 1
@@ -139,9 +135,8 @@ class ExplicitEuler(ExplicitRungeKutta):
 
 @register
 class SymplecticEuler(Integrator):
-    """Symplectic (semi-implicit) Euler, order 1, in Provot's form (review eq. 1.12):
-    ``v += dt·a(x, v)``, then ``x += dt·v`` with the new velocity. Undamped, it keeps the energy
-    error
+    """Symplectic (semi-implicit) Euler, order 1, in Provot's form (review eq. 1.12): ``v +=
+    dt·a(x, v)``, then ``x += dt·v`` with the new velocity. Undamped, it keeps the energy error
     bounded and is stable for ``ω·dt < 2``."""
 
     name = "symplectic_euler"
@@ -188,13 +183,10 @@ class Verlet(Integrator):
     """Position (Störmer) Verlet, order 2 (review eq. 1.15): ``x⁺ = 2x − x⁻ + dt²·a(x, v)``.
 
     It is started consistently, ``x⁻ = x − dt·v + ½dt²·a``, and rebuilt that way whenever the
-    state,
-    ``dt`` or the method changes. Its velocity, used for damping and diagnostics, is the
-    second-order
-    one-sided estimate ``v = (3x − 4x⁻ + x⁻⁻)/(2dt)`` from the last three positions. Stable for
-    ``ω·dt < 2`` undamped; with damping the lagged velocity estimate lowers the limit below
-    symplectic
-    Euler's (about 20 % at ζ = 0.1), which :meth:`amplification` accounts for.
+    state, ``dt`` or the method changes. Its velocity, used for damping and diagnostics, is the
+    second-order one-sided estimate ``v = (3x − 4x⁻ + x⁻⁻)/(2dt)`` from the last three positions.
+    Stable for ``ω·dt < 2`` undamped; with damping the lagged velocity estimate lowers the limit
+    below symplectic Euler's (about 20 % at ζ = 0.1), which :meth:`amplification` accounts for.
     """
 
     name = "verlet"

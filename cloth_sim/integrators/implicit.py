@@ -11,16 +11,14 @@ and differ in the matrix they use and how they solve with it:
   once; solved by block-Jacobi-preconditioned conjugate gradients or a direct sparse solve.
 * ``implicit_euler_prefactored`` (eqs. 1.19–1.20): ∂f/∂x replaced by the constant graph matrix
   ``H`` (``H_ij = k_ij``, ``H_ii = −Σ_j k_ij``, the same for each coordinate) and ∂f/∂v by ``C``
-  built
-  the same way from the damping coefficients, so the matrix is constant: one sparse Cholesky
+  built the same way from the damping coefficients, so the matrix is constant: one sparse Cholesky
   factorisation (``cholespy``) serves every step until stiffness, damping, drag or dt change.
 * ``kang`` (Kang, Choi & Cho 2000): the same ``H`` with no solve at all; one Jacobi sweep per step
   with the neighbours' ``Δv`` from the previous step.
 
 Pinned particles are eliminated: the unknowns are the free particles' velocity changes only, so
-pins
-never move. Gravity and wind are explicit (in ``f``); wind depends on the positions through the
-triangle normals and is not linearised.
+pins never move. Gravity and wind are explicit (in ``f``); wind depends on the positions through
+the triangle normals and is not linearised.
 """
 
 from __future__ import annotations
@@ -46,8 +44,7 @@ def _block_pattern(springs: np.ndarray, free_index: np.ndarray, n_free: int):
 
     Returns ``(indptr, indices, slot, dslot)``: ``slot[s, b, p, q]`` is where entry ``(p, q)`` of
     block ``b`` (0: ii, 1: jj, 2: ij, 3: ji) of spring ``s`` lives in the data array (−1 where a
-    pin
-    eliminates it), ``dslot[i, p]`` the diagonal entry of particle ``i``'s coordinate ``p``."""
+    pin eliminates it), ``dslot[i, p]`` the diagonal entry of particle ``i``'s coordinate ``p``."""
     i, j = springs[:, 0], springs[:, 1]
     pairs = np.stack(
         [np.stack([i, i], 1), np.stack([j, j], 1), np.stack([i, j], 1), np.stack([j, i], 1)], 1
@@ -83,9 +80,8 @@ def _assemble_baraff_witkin(springs, kx, cv, f, v, h, diag, slot, dslot, data, r
     the springs' Jacobian blocks ``kx`` (elastic) and ``cv`` (damping), as
     :meth:`~cloth_sim.physics.forces.SpringTerm.jacobian_blocks` gives them (the same blocks
     :meth:`~cloth_sim.physics.forces.Forces.jacobians` reports). ``diag[i]`` is ``m_i + h·drag``.
-    The damping
-    force's dependence on positions is left out (it would make the matrix unsymmetric), as Baraff &
-    Witkin do."""
+    The damping force's dependence on positions is left out (it would make the matrix unsymmetric),
+    as Baraff & Witkin do."""
     data[:] = 0.0
     _baraff_witkin_rhs(springs, kx, f, v, h, rhs)
     for p in range(f.shape[0]):
@@ -124,9 +120,8 @@ def _baraff_witkin_rhs(springs, kx, f, v, h, rhs):
 
 #: a symmetric 3×3 block stored as its upper triangle: (0,0) (0,1) (0,2) (1,1) (1,2) (2,2)
 _SYM = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
-# : CG's sums run over this many fixed slices of the particles, each summed on one core and the
-# slices'
-#: sums added in order: the same bits at any thread count
+#: CG's sums run over this many fixed slices of the particles, each summed on one core and the
+#: slices' sums added in order: the same bits at any thread count
 _SLICES = 64
 
 
@@ -134,11 +129,9 @@ _SLICES = 64
 def _system_blocks(springs, kx, cv, f, v, h, diag, rhs, blocks, D):
     """The Baraff–Witkin system without its matrix: ``rhs`` as :func:`_assemble_baraff_witkin`
     fills it, each spring's coupling block ``B_s = h·cv + h²·kx`` into ``blocks`` and each
-    particle's
-    diagonal block ``m_i + h·drag + Σ_{s∋i} B_s`` into ``D``, both symmetric and kept as their
-    upper
-    triangles (:data:`_SYM`): ``A`` is then ``(A·x)_i = D_i·x_i − Σ_{s∋i} B_s·x_j`` over the free
-    ``j``."""
+    particle's diagonal block ``m_i + h·drag + Σ_{s∋i} B_s`` into ``D``, both symmetric and kept as
+    their upper triangles (:data:`_SYM`): ``A`` is then ``(A·x)_i = D_i·x_i − Σ_{s∋i} B_s·x_j``
+    over the free ``j``."""
     _baraff_witkin_rhs(springs, kx, f, v, h, rhs)
     h2 = h * h
     for p in range(f.shape[0]):
@@ -175,10 +168,9 @@ def _system_product(particles, ptr, adj, other, blocks, D, x, out, partial):
     """``out = A·x`` over the free particles (``particles[k]``: the particle of free index ``k``;
     ``other[e]``: the free index of the far end of incidence ``e``'s spring, −1 for a pin), each
     particle summing its springs in incidence order, and ``partial[c, 0]`` the sum of ``x·out``
-    over
-    slice ``c`` of the particles; the slices on every core (the same bits at any thread count).
-    Reads 6 numbers per spring and particle where the assembled CSR matrix streamed 9 per coupling
-    and index (5.6 MB at 64×64, 0.22 ms a product)."""
+    over slice ``c`` of the particles; the slices on every core (the same bits at any thread
+    count). Reads 6 numbers per spring and particle where the assembled CSR matrix streamed 9 per
+    coupling and index (5.6 MB at 64×64, 0.22 ms a product)."""
     nf = particles.shape[0]
     for c in numba.prange(_SLICES):
         acc = 0.0
@@ -271,14 +263,12 @@ def _dot(a, b):
 def _pcg(system, inv, b, x, rtol, maxiter, r, z, p, q, partial):
     """Conjugate gradients on ``A·x = b`` (``x`` holds the start and receives the solution), ``A``
     applied by :func:`_system_product` from ``system = (particles, ptr, adj, other, blocks, D)``,
-    preconditioned with the 3×3 diagonal blocks' inverses ``inv``; stops when
-    ``|b − A·x| ≤ rtol·|b|`` (the recurrence's residual, as ``scipy.sparse.linalg.cg``). Returns
-    the
-    iterations taken, or −1 when ``maxiter`` did not reach the tolerance. ``r``, ``z``, ``p``,
-    ``q``
-    are scratch of ``b``'s length, ``partial`` of ``(_SLICES, 3)``. Each iteration is three passes
-    on every core — the product with ``p·Ap``, the update with ``r·r`` and ``r·z``, the new
-    direction — whose sums are taken over fixed slices (the same bits at any thread count)."""
+    preconditioned with the 3×3 diagonal blocks' inverses ``inv``; stops when ``|b − A·x| ≤
+    rtol·|b|`` (the recurrence's residual, as ``scipy.sparse.linalg.cg``). Returns the iterations
+    taken, or −1 when ``maxiter`` did not reach the tolerance. ``r``, ``z``, ``p``, ``q`` are
+    scratch of ``b``'s length, ``partial`` of ``(_SLICES, 3)``. Each iteration is three passes on
+    every core — the product with ``p·Ap``, the update with ``r·r`` and ``r·z``, the new direction
+    — whose sums are taken over fixed slices (the same bits at any thread count)."""
     particles, ptr, adj, other, blocks, D = system
     n = b.shape[0]
     _system_product(particles, ptr, adj, other, blocks, D, x, q, partial)
@@ -324,9 +314,8 @@ def graph_product(springs, w, v, out):
 @numba.njit(cache=True)
 def _kang_sweeps(f, v, dv, springs, k, h, sweeps, inv_den, acc, new):
     """Kang et al.'s update ``Δv_i = (h f_i + h² Σ_j k_ij (v_j − v_i + Δv_j)) / (m_i + h² Σ_j
-    k_ij)``,
-    ``sweeps`` Jacobi sweeps starting from ``dv`` (the previous step's ``Δv``); result in ``dv``.
-    ``inv_den`` is ``1/(m_i + h² Σ_j k_ij)``, 0 for pinned particles."""
+    k_ij)``, ``sweeps`` Jacobi sweeps starting from ``dv`` (the previous step's ``Δv``); result in
+    ``dv``. ``inv_den`` is ``1/(m_i + h² Σ_j k_ij)``, 0 for pinned particles."""
     n = f.shape[0]
     h2 = h * h
     for _ in range(sweeps):
@@ -368,10 +357,10 @@ def constant_system(model, forces, dt: float):
     """``M + dt·c_d·I + dt·C + dt²·H`` over the free particles: one ``n_free×n_free`` matrix (CSC)
     for the three coordinates, with ``H`` the graph Laplacian of the springs' linearised stiffness
     (a Choi–Ko buckling pair resists compression with ``k·max|h''|/L³``, far above ``k``: with
-    ``k``
-    the prefactored matrix was too soft and the step diverged) and ``C`` that of their damping
-    coefficients. Returns ``(A, h, w, index)``: ``h`` those stiffnesses, ``w = dt·c + dt²·h`` the
-    Laplacian's weights and ``index`` each particle's row (−1 on pins, which are eliminated)."""
+    ``k`` the prefactored matrix was too soft and the step diverged) and ``C`` that of their
+    damping coefficients. Returns ``(A, h, w, index)``: ``h`` those stiffnesses, ``w = dt·c +
+    dt²·h`` the Laplacian's weights and ``index`` each particle's row (−1 on pins, which are
+    eliminated)."""
     free = ~model.pinned
     index = np.full(model.n_particles, -1, dtype=np.int64)
     n_free = int(free.sum())
@@ -446,23 +435,20 @@ class ImplicitEuler(_LinearisedImplicitEuler):
       direct solve 220 ms, at 81×81 ~0.15 and 460 ms; the hanging scene at dt = 1/60 with its mass
       spread over the finer grid needs 150–190 iterations there (200, the cap until the solve was
       compiled, sent it to the direct solve at 0.2–0.5 s a step); ``"direct"``: a direct solve
-      every
-      step, sparse Cholesky (``cholespy``) of the symmetric positive definite matrix, or SuperLU's
-      LU when ``clamp_compression`` is off and the matrix may be indefinite.
+      every step, sparse Cholesky (``cholespy``) of the symmetric positive definite matrix, or
+      SuperLU's LU when ``clamp_compression`` is off and the matrix may be indefinite.
     * ``clamp_compression`` (default on) — drop the compressive, indefinite part of each spring's
       stiffness block (``E''`` and ``E'/l`` below zero), which keeps the matrix symmetric positive
       definite so CG applies at any step. It changes the Jacobian, not the force: the step stays
       first-order accurate here, but the linearisation is no longer exact for compressed springs,
-      so
-      it costs accuracy there, and a method built on the exact Jacobian (a BDF2 step, a full Newton
-      iteration) would lose its higher order.
+      so it costs accuracy there, and a method built on the exact Jacobian (a BDF2 step, a full
+      Newton iteration) would lose its higher order.
 
     The matrix is assembled from the spring term's Jacobian blocks (the ones
     :meth:`~cloth_sim.physics.forces.Forces.jacobians` reports and the tests check by finite
-    differences)
-    refilled into a sparsity pattern built once. The damping force's dependence on positions is
-    left out of the matrix (Baraff & Witkin do the same: it is small and unsymmetric). Wind and
-    gravity are explicit.
+    differences) refilled into a sparsity pattern built once. The damping force's dependence on
+    positions is left out of the matrix (Baraff & Witkin do the same: it is small and unsymmetric).
+    Wind and gravity are explicit.
     """
 
     name = "implicit_euler"
@@ -587,8 +573,7 @@ class ImplicitEuler(_LinearisedImplicitEuler):
         from each spring's 3×3 block), preconditioned with the inverses of the particles' 3×3
         diagonal blocks (a particle's own coupling, which the plain diagonal leaves out), compiled
         (:func:`_pcg`: the products on every core, the sums of the dot products in a fixed order,
-        so
-        the same bits at any thread count), warm-started from the last two steps' ``Δv`` (the
+        so the same bits at any thread count), warm-started from the last two steps' ``Δv`` (the
         state's ``history["dv"]``, which receives the solution, and ``history["dv_before"]``);
         solved as ``A·y = b/s`` with ``s`` the power of two nearest ``|b|`` (exact, so the iterates
         are those of the unscaled solve) so that a right-hand side near zero (a cloth coming to
@@ -640,8 +625,7 @@ class ImplicitEuler(_LinearisedImplicitEuler):
 @numba.njit(cache=True)
 def _update(x, v, particles, dv, h):
     """``v += Δv`` on the free particles (``particles[k]`` takes ``dv[3k:3k+3]``), then ``x +=
-    h·v``:
-    the array expressions' operations, in one pass and without temporaries."""
+    h·v``: the array expressions' operations, in one pass and without temporaries."""
     for k in range(particles.shape[0]):
         p = particles[k]
         for a in range(3):
@@ -653,11 +637,10 @@ def _update(x, v, particles, dv, h):
 
 @register
 class ImplicitEulerPrefactored(_LinearisedImplicitEuler):
-    """The review's eqs. 1.16–1.20: implicit Euler with the constant matrix
-    ``M − dt·C − dt²·H`` (``H_ij = k_ij``, ``H_ii = −Σ_j k_ij``; ``C`` the same from the damping
-    coefficients; drag on the diagonal), one ``n×n`` matrix shared by the three coordinates. For
-    Choi & Ko's buckling pairs ``k_ij`` is their linearised stiffness, the stiffer of the two
-    branches
+    """The review's eqs. 1.16–1.20: implicit Euler with the constant matrix ``M − dt·C − dt²·H``
+    (``H_ij = k_ij``, ``H_ii = −Σ_j k_ij``; ``C`` the same from the damping coefficients; drag on
+    the diagonal), one ``n×n`` matrix shared by the three coordinates. For Choi & Ko's buckling
+    pairs ``k_ij`` is their linearised stiffness, the stiffer of the two branches
     (:func:`cloth_sim.physics.stability.effective_stiffness`); with the bare ``k`` the step
     diverges.
 
@@ -725,20 +708,17 @@ class ImplicitEulerPrefactored(_LinearisedImplicitEuler):
 class Kang(_LinearisedImplicitEuler):
     """Kang, Choi & Cho (2000), the approximated implicit method: the linear system of
     :class:`ImplicitEulerPrefactored` without damping in the matrix, not solved but approximated
-    per
-    particle by ``sweeps`` Jacobi sweeps (the paper: one),
+    per particle by ``sweeps`` Jacobi sweeps (the paper: one),
 
         Δv_i = (dt·f_i + dt²·Σ_j k_ij·(v_j − v_i + Δv_j)) / (m_i + dt²·Σ_j k_ij),
 
     with the neighbours' ``Δv_j`` from the previous step (kept in ``state.history["dv"]``). Spring
     damping stays explicit in ``f``. Not unconditionally stable: the lagged ``Δv_j`` and explicit
     damping limit the step, which its own analysis finds
-    (:func:`cloth_sim.physics.stability.kang_stable_dt`:
-    a von Neumann analysis of the grid, tens of milliseconds; the whole linearised step for other
-    spring
-    networks), and the simulator's guard catches a blow-up like any explicit method's. The
-    per-particle
-    scaling does not conserve linear momentum while ``Δv`` changes from step to step.
+    (:func:`cloth_sim.physics.stability.kang_stable_dt`: a von Neumann analysis of the grid, tens
+    of milliseconds; the whole linearised step for other spring networks), and the simulator's
+    guard catches a blow-up like any explicit method's. The per-particle scaling does not conserve
+    linear momentum while ``Δv`` changes from step to step.
     """
 
     name = "kang"

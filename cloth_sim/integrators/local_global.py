@@ -1,14 +1,12 @@
 """Liu, O'Sullivan, Sifakis & Kavan (2013), "Fast simulation of mass-spring systems": backward
-Euler
-for springs solved by block coordinate descent.
+Euler for springs solved by block coordinate descent.
 
 One step of backward Euler is the minimiser of
 
     g(x) = 1/(2h²)·‖x − y‖²_M + E(x),      y = xₙ + h·vₙ + h²·M⁻¹·f_ext,
 
 and for a Hooke spring ``½k(|x_ij| − L)² = min_{|d| = L} ½k|x_ij − d|²`` (``x_ij = x_j − x_i``).
-With
-the directions ``d`` as extra unknowns, ``g`` is minimised by alternating
+With the directions ``d`` as extra unknowns, ``g`` is minimised by alternating
 
 * a **local step**: each spring's ``d = L·x_ij/|x_ij|`` (independent per spring), and
 * a **global step**: ``(M + h²L) x = M y + h² J d``, with ``L`` the graph Laplacian of the
@@ -17,29 +15,24 @@ the directions ``d`` as extra unknowns, ``g`` is minimised by alternating
 
 Each iteration lowers ``g``, and the iterates converge to the backward-Euler step.
 
-Other spring laws. A spring whose energy is any ``E(l)`` of its length gets the target
-``d = (l − E'(l)/w)·x_ij/l`` with a weight ``w`` in the matrix: for Hooke (``w = k``) this is Liu's
-``d = L·x_ij/l``; in general the fixed point is still the backward-Euler step (``w·(x_ij − d)`` is
-the
+Other spring laws. A spring whose energy is any ``E(l)`` of its length gets the target ``d = (l −
+E'(l)/w)·x_ij/l`` with a weight ``w`` in the matrix: for Hooke (``w = k``) this is Liu's ``d =
+L·x_ij/l``; in general the fixed point is still the backward-Euler step (``w·(x_ij − d)`` is the
 spring's force), and the iteration is the quasi-Newton method with the constant Laplacian as the
 Hessian that Liu, Bouaziz & Kavan (2017) derive. Choi & Ko's tension-only pairs (``E' = 0`` when
 compressed: ``d = x_ij``, no force) and buckling pairs (``E'`` from the arc model) take this form
-with
-``w`` their linearised stiffness, the stiffer branch
+with ``w`` their linearised stiffness, the stiffer branch
 (:func:`cloth_sim.physics.stability.springs_effective_stiffness`), so that ``w`` bounds the
-energy's
-curvature and each iteration still lowers ``g``. At the buckling onset the force jumps (the
-immediate-buckling load ``12 k/L²``): there ``E`` has a kink, which the iteration approaches
-without
-oscillating but converges to more slowly.
+energy's curvature and each iteration still lowers ``g``. At the buckling onset the force jumps
+(the immediate-buckling load ``12 k/L²``): there ``E`` has a kink, which the iteration approaches
+without oscillating but converges to more slowly.
 
 Damping (Rayleigh, as the issue allows, since the paper leaves springs undamped). Spring damping
 ``c`` enters as the graph Laplacian ``C`` of the damping coefficients acting on the new velocity
 ``(x − xₙ)/h``: it damps the relative velocity of a spring's ends in every direction, not only
-along
-the spring (that would make the matrix depend on the directions), conserves linear momentum, and
-keeps the matrix constant; drag ``−c_d·v`` is implicit too. The global matrix is then
-``M + h·c_d·I + h·C + h²·L``. Gravity and wind are explicit, in ``y`` (wind at the step's start).
+along the spring (that would make the matrix depend on the directions), conserves linear momentum,
+and keeps the matrix constant; drag ``−c_d·v`` is implicit too. The global matrix is then ``M +
+h·c_d·I + h·C + h²·L``. Gravity and wind are explicit, in ``y`` (wind at the step's start).
 
 Pinned particles are eliminated; a pinned particle moves with its velocity (a gripper's), so it is
 at ``xₙ + h·vₙ`` in the step's constraint.
@@ -60,10 +53,8 @@ from .registry import register
 @numba.njit(cache=True)
 def _local_global_rhs(x, springs, rest, k, w, kind, tab, h2, base, rhs):
     """``rhs = base + h²·J·d``: the local step (each spring's target ``d`` from the positions
-    ``x``)
-    and its contribution to the global step's right-hand side, ``−h²·w·d`` on ``i`` and ``+h²·w·d``
-    on
-    ``j`` for the spring ``(i, j)``."""
+    ``x``) and its contribution to the global step's right-hand side, ``−h²·w·d`` on ``i`` and
+    ``+h²·w·d`` on ``j`` for the spring ``(i, j)``."""
     rhs[:] = base
     for s in range(springs.shape[0]):
         ws = w[s]
@@ -97,11 +88,10 @@ class Liu2013(Integrator):
     100 iterations land 80× closer to the step than without; at 10 it does not help).
 
     First order (backward Euler, whatever the iteration count: the iteration starts at ``y``,
-    within
-    ``O(h²)`` of the step, and only shrinks that error); linear momentum conserved (every spring
-    and the damping act in equal and opposite pairs); no step limit (each iteration lowers the
-    step's objective). The matrix is refactorised when stiffness, damping, drag or dt change (the
-    counter ``factorizations``); see the module docstring for damping, Choi–Ko and pins.
+    within ``O(h²)`` of the step, and only shrinks that error); linear momentum conserved (every
+    spring and the damping act in equal and opposite pairs); no step limit (each iteration lowers
+    the step's objective). The matrix is refactorised when stiffness, damping, drag or dt change
+    (the counter ``factorizations``); see the module docstring for damping, Choi–Ko and pins.
     """
 
     name = "liu2013"

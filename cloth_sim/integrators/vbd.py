@@ -6,9 +6,9 @@ A step of ``h`` is backward Euler written as the minimum of the incremental pote
     G(x) = Σ_i m_i/(2h²) |x_i − y_i|² + E(x),      y = x^t + h v^t + h² a_ext,
 
 ``E`` the springs' energy (every family, Hooke or Choi–Ko's), their damping along the spring and
-the
-air drag as dissipation potentials of ``(x − x^t)/h``, and the contacts' energies. Block coordinate
-descent over the vertices: each vertex in turn takes one Newton step on ``G`` with the others held,
+the air drag as dissipation potentials of ``(x − x^t)/h``, and the contacts' energies. Block
+coordinate descent over the vertices: each vertex in turn takes one Newton step on ``G`` with the
+others held,
 
     Δx_i = H_i⁻¹ f_i,   f_i = −∂G/∂x_i,   H_i = m_i/h² I + Σ_springs ∂²E/∂x_i² (+ contacts),
 
@@ -34,16 +34,14 @@ Contacts inside the solve (when the simulator lets the method handle them, :attr
 * **Self-contact** between the cloth's own primitives, vertex–triangle and edge–edge, the same
   energy on their distance. Candidates come from the self-collision stage's tree
   (:mod:`cloth_sim.contact.collision_tree`) at the start of the step and every
-  ``collision_interval``
-  iterations, each vertex reaching ``τ/2`` plus its allowance of motion (:data:`ALLOWANCE`: a tenth
-  of ``τ`` and its motion to the step's initial guess). **Conservative bound** (the paper's):
-  between two searches a vertex moves at
-  most ``γ = 0.45`` of the smallest distance the search found between its primitives (itself, its
-  triangles, its edges) and any other, and at most its allowance; so two primitives that were
-  ``d`` apart stay ``(1 − 2γ)·d > 0`` apart, those not found stay beyond ``τ``, and no vertex
-  passes
-  through the cloth or a collider (its allowance is also kept below the distance to the far side of
-  the thinnest collider near it). Over a whole step the cloth never crosses itself.
+  ``collision_interval`` iterations, each vertex reaching ``τ/2`` plus its allowance of motion
+  (:data:`ALLOWANCE`: a tenth of ``τ`` and its motion to the step's initial guess). **Conservative
+  bound** (the paper's): between two searches a vertex moves at most ``γ = 0.45`` of the smallest
+  distance the search found between its primitives (itself, its triangles, its edges) and any
+  other, and at most its allowance; so two primitives that were ``d`` apart stay ``(1 − 2γ)·d > 0``
+  apart, those not found stay beyond ``τ``, and no vertex passes through the cloth or a collider
+  (its allowance is also kept below the distance to the far side of the thinnest collider near it).
+  Over a whole step the cloth never crosses itself.
 
 The self-collision stage does not run after the method (:attr:`VBD.handles`); the contact stage
 does, as an exact finish of what the iterations did (the distance and static friction to rounding),
@@ -52,8 +50,8 @@ and so does the strain limit where one is set.
 Counters (:attr:`Simulator.integrator_stats`): ``steps``, ``iterations``, ``last_iterations``,
 ``last_residual`` (the root mean square of the free vertices' Newton steps in the last iteration,
 m), ``detections`` (candidate searches), ``last_contacts`` (self-contact pairs and vertices
-touching
-a collider at the last search) and ``truncated`` (vertex updates the conservative bound shortened).
+touching a collider at the last search) and ``truncated`` (vertex updates the conservative bound
+shortened).
 """
 
 from __future__ import annotations
@@ -117,8 +115,7 @@ def colour_greedy(ptr, nbr, free):
 
 def colour_groups(springs: np.ndarray, n: int, free: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(ptr, verts)``: colour ``c``'s vertices are ``verts[ptr[c]:ptr[c+1]]``, in increasing
-    order;
-    no two vertices of a colour share a spring. Pinned vertices are in none."""
+    order; no two vertices of a colour share a spring. Pinned vertices are in none."""
     a = np.concatenate([springs[:, 0], springs[:, 1]])
     b = np.concatenate([springs[:, 1], springs[:, 0]])
     order = np.lexsort((b, a))
@@ -374,13 +371,12 @@ def _self_contacts_at(
     h5,
 ):
     """Vertex ``i``'s self-contacts: ``½ k (τ − d)²`` on each pair's distance ``d`` along the
-    normal
-    the search found, ``d = n·Σ_k w_k x_k`` over the pair's four vertices (:func:`contact_pairs`:
-    the normal and the nearest points' weights held between two searches), for the pairs ``i`` is
-    in (its records ``4·pair + slot``); and friction ``μ`` between the two sides as on a collider
-    (IPC's smoothed, lagged friction on their relative tangential motion over the step, ``Σ_k w_k
-    (x_k − x_k^t)``, with the pressing force of the iterate). The partners' positions by
-    :func:`_pick`."""
+    normal the search found, ``d = n·Σ_k w_k x_k`` over the pair's four vertices
+    (:func:`contact_pairs`: the normal and the nearest points' weights held between two searches),
+    for the pairs ``i`` is in (its records ``4·pair + slot``); and friction ``μ`` between the two
+    sides as on a collider (IPC's smoothed, lagged friction on their relative tangential motion
+    over the step, ``Σ_k w_k (x_k − x_k^t)``, with the pressing force of the iterate). The
+    partners' positions by :func:`_pick`."""
     for q in range(rec_ptr[i], rec_ptr[i + 1]):
         r = rec[q]
         pair = r // 4
@@ -421,11 +417,10 @@ def _self_contacts_at(
 @numba.njit(cache=True, parallel=True)
 def contact_pairs(x, vt, ee, tris, edges, tri_edge, edge_owner, vertex_owner):
     """Every candidate pair as its four vertices, the weights of its nearest points and the unit
-    normal between them at ``x``: a vertex–triangle pair ``(p; a, b, c)`` with weights
-    ``(1, −w_a, −w_b, −w_c)``, an edge pair ``(a, b; c, d)`` with ``(1 − s, s, −(1 − t), −t)``, so
-    that ``n·Σ_k w_k x_k`` is their distance along ``n`` (where the two touch, the triangle's
-    normal
-    or the normal to both edges); and whether the pair carries the contact energy.
+    normal between them at ``x``: a vertex–triangle pair ``(p; a, b, c)`` with weights ``(1, −w_a,
+    −w_b, −w_c)``, an edge pair ``(a, b; c, d)`` with ``(1 − s, s, −(1 − t), −t)``, so that ``n·Σ_k
+    w_k x_k`` is their distance along ``n`` (where the two touch, the triangle's normal or the
+    normal to both edges); and whether the pair carries the contact energy.
 
     Every pair bounds its vertices' motion (:func:`_truncate`); the energy is carried by each
     contact once, as Bridson, Fedkiw & Anderson (2002) count them: a vertex against the inside of a
@@ -645,12 +640,11 @@ def _sweep(
 ):
     """The Newton steps of vertices ``verts[lo:hi]`` in order, each on the incremental potential,
     written to its row of ``x``, within its bounds (:func:`_truncate`). ``sp``: each vertex's
-    springs (CSR:
-    the other end, rest length, k, c, kind, in the vertex's order) and Choi–Ko's table; ``co``: the
-    colliders (:meth:`~cloth_sim.contact.colliders.Contacts.packed`); ``sc``: the self-contact
-    records, pairs
-    and topology. (The arrays are unpacked here, once a chunk: unpacked per vertex, or passed one
-    by one to a function per vertex, their reference counting cost more than the vertex's work.)"""
+    springs (CSR: the other end, rest length, k, c, kind, in the vertex's order) and Choi–Ko's
+    table; ``co``: the colliders (:meth:`~cloth_sim.contact.colliders.Contacts.packed`); ``sc``:
+    the self-contact records, pairs and topology. (The arrays are unpacked here, once a chunk:
+    unpacked per vertex, or passed one by one to a function per vertex, their reference counting
+    cost more than the vertex's work.)"""
     inc_ptr, nbr, rest, k, c, kind, tab, nonsmooth = sp
     ckind, cpos, crot, cpos0, crot0, cgeo, cmu = co
     rec_ptr, rec, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d, colour = sc
@@ -948,9 +942,8 @@ class VBD(Integrator):
     ``collision_interval`` (default 5): iterations between candidate searches when the cloth
     self-collides and a vertex met its bound; ``self_friction`` (default 0.5): Coulomb's μ between
     the cloth's own layers; ``time_budget`` (s, default None): when set, iterate until that much
-    wall time
-    has passed (at least one iteration, at most ``iterations``) — a node that must keep its tick,
-    whose results then depend on the machine.
+    wall time has passed (at least one iteration, at most ``iterations``) — a node that must keep
+    its tick, whose results then depend on the machine.
 
     First order (backward Euler); no step limit; any iteration count gives a usable state.
     """

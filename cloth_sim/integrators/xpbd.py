@@ -5,8 +5,7 @@ simulation".
 Each spring is a distance constraint ``C = |x_j − x_i| − L`` with compliance ``α = 1/k``. A step of
 ``dt`` is ``substeps`` substeps of ``h = dt/substeps``; in each, the velocities take the external
 forces (gravity, wind; drag implicitly, with them held), the positions are predicted, ``p = x +
-h·v``, and
-``iterations`` Gauss–Seidel sweeps over the springs, in a fixed order, project
+h·v``, and ``iterations`` Gauss–Seidel sweeps over the springs, in a fixed order, project
 
     Δλ = (−C − α̃·λ − γ·∇C·(p − x)) / ((1 + γ)·(w_i + w_j) + α̃),      α̃ = α/h²,  γ = α·β/h,
 
@@ -14,8 +13,7 @@ with ``w`` the inverse masses (0 on pins), ``λ`` the constraint's multiplier ac
 substep's sweeps, and ``β`` the spring's damping coefficient: the papers' constraint damping, which
 resists the relative velocity of the ends along the spring like ``−c·(u·v_ij)·u``. The new velocity
 is ``(p − x)/h``. The update is evaluated multiplied through by ``k·h²``, so ``k = 0`` (a
-damping-only
-spring) and ``c = 0`` need no special case.
+damping-only spring) and ``c = 0`` need no special case.
 
 Spring laws other than Hooke. A spring with energy ``E(l)`` projects with its force in place of
 ``k·C``: ``Δλ = (−h²E'(l) − λ − h·c·∇C·(p − x)) / ((h²·w_s + h·c)(w_i + w_j) + 1)`` in the scaled
@@ -43,9 +41,8 @@ from .registry import register
 @numba.njit(cache=True)
 def _project(p, x, springs, rest, k, w, c, kind, tab, inv_mass, h, lam):
     """One Gauss–Seidel sweep over the springs in their order, in place on ``p``; ``lam`` holds
-    each
-    spring's multiplier accumulated over the substep's sweeps (an impulse times ``h``: the force is
-    ``lam/h²``)."""
+    each spring's multiplier accumulated over the substep's sweeps (an impulse times ``h``: the
+    force is ``lam/h²``)."""
     h2 = h * h
     for s in range(springs.shape[0]):
         i = springs[s, 0]
@@ -84,16 +81,14 @@ def _project(p, x, springs, rest, k, w, c, kind, tab, inv_mass, h, lam):
 class XPBD(Integrator):
     """XPBD (Macklin, Müller & Chentanez 2016) with substeps (Macklin et al. 2019): compliant
     distance constraints (compliance ``1/k``) projected by Gauss–Seidel, constraint damping from
-    the
-    spring damping coefficients.
+    the spring damping coefficients.
 
     Options: ``substeps`` (default 10) per step and ``iterations`` (default 1, as "Small steps"
     recommends: substeps buy more accuracy than iterations) per substep.
 
     First order; linear momentum conserved (each projection moves the two ends by opposite
     impulses); no step limit (see the module docstring). External forces are applied at the start
-    of
-    each substep (symplectic Euler in the substep), drag implicitly per particle.
+    of each substep (symplectic Euler in the substep), drag implicitly per particle.
     """
 
     name = "xpbd"
@@ -134,16 +129,13 @@ class XPBD(Integrator):
         if lam is None or len(lam) != len(forces.springs):
             lam = self._lam = np.empty(len(forces.springs))
         external = [t for t in forces.terms if isinstance(t, (GravityTerm, WindTerm))]
-        # Drag is backward Euler within the substep, coupled with the constraints: from
-        # (m + h·d)·v' = m·(v + h·a) + h·f_constraints, the prediction is v' = (v + h·a)/(1 +
-        # h·d/m)
-        # and the projections move the particles with inverse masses 1/(m + h·d). A free particle
-        # then
+        # Drag is backward Euler within the substep, coupled with the constraints: from (m +
+        # h·d)·v' = m·(v + h·a) + h·f_constraints, the prediction is v' = (v + h·a)/(1 + h·d/m) and
+        # the projections move the particles with inverse masses 1/(m + h·d). A free particle then
         # falls at exactly the terminal velocity m·a/d at any h (damping the substep's starting
         # velocity and then kicking it by h·a left a full kick on top: 19 mg particles in a 24 N
-        # wind
-        # with drag 60 ended a 1 ms step above 1000 m/s, against a terminal velocity of a few m/s),
-        # and a cloth at rest hangs at the springs' static extension under its full weight.
+        # wind with drag 60 ended a 1 ms step above 1000 m/s, against a terminal velocity of a few
+        # m/s), and a cloth at rest hangs at the springs' static extension under its full weight.
         damp, inv_solve = None, inv_mass
         if forces.drag > 0:
             damp = 1.0 / (1.0 + h * forces.drag * inv_mass)  # 1 on pins

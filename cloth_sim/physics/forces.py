@@ -11,8 +11,7 @@ Terms (the review's equations in brackets):
 
 A family whose stiffness is zero contributes no ``spring:`` term, one whose damping is zero no
 ``damping:`` term; no wind, no gravity, no drag: no such term. :attr:`Forces.active_terms` lists
-what
-is evaluated, and springs belonging to no active term are not even visited.
+what is evaluated, and springs belonging to no active term are not even visited.
 
 Choi & Ko's immediate-buckling model
 ------------------------------------
@@ -251,8 +250,7 @@ def _block_forces(d, rest, k, c, kind, tab, with_damping, fx, fy, fz):
     arrays that the compiler turns into SIMD (four or eight springs' square roots and divisions at
     once; a per-spring loop reading the ends through their indices stays scalar). IEEE square root
     and division give the same bits in SIMD lanes as alone, so this is :func:`spring_forces`'s
-    result
-    bit for bit. Hooke's law first for every spring; then, one by one with the serial loop's
+    result bit for bit. Hooke's law first for every spring; then, one by one with the serial loop's
     :func:`_spring_force`, the compressed springs of a kind other than
     :data:`~cloth_sim.model.LINEAR` (Choi–Ko's tension-only and buckling pairs).
     ``error_model="numpy"``: ``1/l`` is computed in every lane and discarded where ``l < 1e-300``
@@ -310,8 +308,7 @@ def spring_forces_gather(
     """:func:`spring_forces` on every core, deterministically: each spring's force into ``fs`` (one
     spring per iteration), then each particle gathers its springs' forces in increasing spring
     order (``ptr``/``adj``/``sign``: :func:`incidence`) — the order the serial loop adds them in,
-    so
-    the result is bit-identical to it at any thread count (no racy scatter). Each particle's sum
+    so the result is bit-identical to it at any thread count (no racy scatter). Each particle's sum
     starts from ``base`` (``f`` itself to add to it, or gravity's force: no pass to copy it first).
     The arrays are :func:`gather_arrays`' (32-bit indices, ``fs`` by coordinate, (3, springs)).
 
@@ -334,8 +331,7 @@ def spring_forces_gather(
     update, and ``xo``, ``vo`` are then :data:`_NO_STATE`; ``inv_mass``: (n, 1), 0 on pins), the
     operations of :func:`kick_drift` in its order. No particle's position is read after the first
     loop, and each core updates the particles whose forces it summed, while they are in its cache
-    (a
-    separate serial pass cost a 128×128 step 0.06 ms and most of what the second core saved)."""
+    (a separate serial pass cost a 128×128 step 0.06 ms and most of what the second core saved)."""
     m = springs.shape[0]
     for b in numba.prange((m + GATHER_BLOCK - 1) // GATHER_BLOCK):
         lo = b * GATHER_BLOCK
@@ -425,11 +421,10 @@ def runge_kutta_fused(
 ):
     """A whole explicit Runge–Kutta step of tableau ``(A, b)`` in place on ``x``, ``v``, each stage
     one pass of :func:`spring_forces_gather` in :data:`GATHER_RK_STAGE` (its forces, the division
-    by
-    the mass and the next stage's state, or in the last stage the step's update): the operations of
-    the stage-by-stage Python loop in :class:`~cloth_sim.integrators.explicit.ExplicitRungeKutta`,
-    in one call instead of one per stage. ``kx``, ``kv`` (stages, n, 3), ``xs`` (n, 3) and ``coef``
-    (stages,) are scratch."""
+    by the mass and the next stage's state, or in the last stage the step's update): the operations
+    of the stage-by-stage Python loop in
+    :class:`~cloth_sim.integrators.explicit.ExplicitRungeKutta`, in one call instead of one per
+    stage. ``kx``, ``kv`` (stages, n, 3), ``xs`` (n, 3) and ``coef`` (stages,) are scratch."""
     stages = b.shape[0]
     for p in range(x.shape[0]):
         for d in range(3):
@@ -570,8 +565,7 @@ def spring_layout(springs: np.ndarray, n: int) -> tuple:
     32-bit). ``ptr``, ``adj``, ``sign``: :func:`incidence` of the springs as given — each particle
     still sums its springs in their given order, the serial loop's, so the bits do not change —
     with ``adj`` pointing at where each spring's force sits in ``order`` (32-bit indices: the
-    64-bit
-    ones' loads were 10–12 % of the gather's time)."""
+    64-bit ones' loads were 10–12 % of the gather's time)."""
     if n >= 2**32 or len(springs) >= 2**32:
         raise ValueError(
             f"the spring gather indexes with 32 bits: {n} particles, {len(springs)} springs"
@@ -591,11 +585,9 @@ def spring_layout(springs: np.ndarray, n: int) -> tuple:
 
 def gather_arrays(springs, rest, k, c, kind, with_damping: bool, n: int, layout=None) -> tuple:
     """The arguments :func:`spring_forces_gather` takes before ``base``, for these springs and
-    their
-    material: their ends and material in :func:`spring_layout`'s order, the Choi–Ko table, the
-    incidence, and the per-spring force scratch by coordinate (3, springs). ``layout``: the
-    springs'
-    :func:`spring_layout`, if already at hand."""
+    their material: their ends and material in :func:`spring_layout`'s order, the Choi–Ko table,
+    the incidence, and the per-spring force scratch by coordinate (3, springs). ``layout``: the
+    springs' :func:`spring_layout`, if already at hand."""
     order, ends, ptr, adj, sign = spring_layout(springs, n) if layout is None else layout
     return (
         ends,
@@ -950,8 +942,7 @@ class Forces:
 
     def jacobians(self, x: np.ndarray, v: np.ndarray, clamp: bool = False):
         """``(∂f/∂x, ∂f/∂v)`` as ``3n×3n`` sparse matrices (row ``3i + a`` is component ``a`` of
-        the
-        force on particle ``i``), exact for every term that depends on the state: Hooke and the
+        the force on particle ``i``), exact for every term that depends on the state: Hooke and the
         Choi–Ko interactions, spring damping (including its dependence on positions) and drag.
         Gravity is constant. Wind is left out: its force depends on the normals of the adjacent
         triangles, and every implicit method here treats it explicitly. ``clamp`` drops the

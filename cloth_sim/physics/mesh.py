@@ -152,8 +152,8 @@ def weld(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 def check_indices(vertices: np.ndarray, faces: np.ndarray, name: str) -> None:
     """``ValueError`` naming ``name`` and the element for: no triangles, a vertex index out of
-    range,
-    a non-finite coordinate (what welding needs sound; :func:`check_mesh` checks the rest)."""
+    range, a non-finite coordinate (what welding needs sound; :func:`check_mesh` checks the
+    rest)."""
     n, t = len(vertices), len(faces)
     if t == 0:
         raise ValueError(f"{name}: the mesh has no triangles")
@@ -173,9 +173,8 @@ def check_indices(vertices: np.ndarray, faces: np.ndarray, name: str) -> None:
 
 def check_mesh(vertices: np.ndarray, faces: np.ndarray, name: str) -> None:
     """:func:`check_indices`, and a ``ValueError`` naming ``name`` and the element for: a
-    degenerate
-    triangle (a repeated corner or zero area), the same triangle twice, an edge shared by more
-    than two triangles, a vertex in no triangle."""
+    degenerate triangle (a repeated corner or zero area), the same triangle twice, an edge shared
+    by more than two triangles, a vertex in no triangle."""
     check_indices(vertices, faces, name)
     n = len(vertices)
     a, b, c = (vertices[faces[:, k]] for k in range(3))
@@ -221,8 +220,7 @@ def check_mesh(vertices: np.ndarray, faces: np.ndarray, name: str) -> None:
 def half_edges(faces: np.ndarray, n: int):
     """``(edges (e, 2), group, counts)``: the unique undirected edges (sorted ends, in key order),
     for each half-edge ``3·f + k`` (edge ``faces[f, k]–faces[f, k+1]``) its edge's index, and how
-    many
-    triangles share each edge."""
+    many triangles share each edge."""
     lo = np.minimum(faces, np.roll(faces, -1, axis=1)).ravel()
     hi = np.maximum(faces, np.roll(faces, -1, axis=1)).ravel()
     keys = lo * np.int64(n) + hi
@@ -233,9 +231,8 @@ def half_edges(faces: np.ndarray, n: int):
 
 def mesh_springs(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     """``(structural (e, 2), bend (b, 2))``: every unique edge (ends sorted, edges in order of
-    their
-    ends), and for each interior edge (two triangles), the two vertices opposite it, in the same
-    order. A mesh passed by :func:`check_mesh` has no edge of more than two triangles."""
+    their ends), and for each interior edge (two triangles), the two vertices opposite it, in the
+    same order. A mesh passed by :func:`check_mesh` has no edge of more than two triangles."""
     edges, group, counts = half_edges(faces, n)
     opposite = np.roll(faces, -2, axis=1).ravel()  # the corner facing half-edge 3f + k
     order = np.argsort(group, kind="stable")

@@ -15,8 +15,7 @@ shape.
 * :func:`kang_step_matrix`, :func:`kang_stable_dt` — Kang et al.'s approximated implicit step has
 no
   scalar mode model (its matrix ignores the springs' directions and lags the neighbours' ``Δv``),
-  so
-  its step is analysed as a whole: a von Neumann (Fourier) analysis of the infinite grid for a
+  so its step is analysed as a whole: a von Neumann (Fourier) analysis of the infinite grid for a
   regular grid with uniform families (20–90 ms), the spectral radius of the whole linearised step
   matrix otherwise (ARPACK: seconds at 16×16, minutes at 32×32).
 * :class:`Analysis` — one material's results, computed at most once: :func:`analysis_for` returns
@@ -77,8 +76,7 @@ ONSET_SPEED = 10.0
 def _onset_pairs(model: ClothModel, k: np.ndarray):
     """The buckling pairs that a step can kick: their rest lengths, ``a_i + a_j`` (the onset loads
     on their ends per mass) and ``w·(1/m_i + 1/m_j)`` (their linearised stiffness per mass);
-    ``None``
-    without any."""
+    ``None`` without any."""
     k = np.asarray(k, dtype=np.float64)
     buck = (model.kind == BUCKLING) & (k > 0)
     if not buck.any():
@@ -125,9 +123,9 @@ def buckling_onset_band(model: ClothModel, k: np.ndarray) -> tuple[float, float]
     ``w`` (the unconditionally stable ones) is thrown about by Choi–Ko's onset load: there the
     kick's speed ``a·dt/(1 + dt²·s)``, ``s = w·(1/m_i + 1/m_j)``, exceeds :data:`ONSET_SPEED` for
     some pair (between the roots of ``V·s·dt² − a·dt + V = 0``). Small steps kick little, large
-    ones
-    are absorbed by the stiffness (``choi_ko`` with the prefactored method at 1 ms is calm while
-    1e-5 s is not). ``(inf, inf)`` when no step is: always for a real cloth's bend rigidity."""
+    ones are absorbed by the stiffness (``choi_ko`` with the prefactored method at 1 ms is calm
+    while 1e-5 s is not). ``(inf, inf)`` when no step is: always for a real cloth's bend
+    rigidity."""
     found = _onset_pairs(model, k)
     if found is None:
         return math.inf, math.inf
@@ -172,9 +170,8 @@ def rest_matrices(
 
 class _ModeBasis(NamedTuple):
     """Per model: ``B`` (m × free dofs), row ``s`` = ``u_sᵀ`` at ``j`` and ``−u_sᵀ`` at ``i``,
-    columns
-    scaled by ``m^-½``, so that ``M^-½ K M^-½ = Bᵀ diag(k_eff) B`` over the free particles; and the
-    squared scale per free dof (``1/m``)."""
+    columns scaled by ``m^-½``, so that ``M^-½ K M^-½ = Bᵀ diag(k_eff) B`` over the free particles;
+    and the squared scale per free dof (``1/m``)."""
 
     B: sp.csr_matrix
     inv_mass: np.ndarray
@@ -214,8 +211,7 @@ def _mode_basis(model: ClothModel) -> _ModeBasis:
 
 def fastest_mode(model: ClothModel, k: np.ndarray, c: np.ndarray, drag: float = 0.0) -> Mode:
     """``(ω_max, ζ)`` of the free particles linearised about the rest shape, ``ζ`` that mode's
-    damping
-    ratio (spring damping and drag).
+    damping ratio (spring damping and drag).
 
     On a regular grid whose families are uniform (:func:`grid_stencil`: every scene) it is the von
     Neumann analysis of the infinite grid: ``ω_max² = sup_θ λ_max(K̂(θ))/m``, an upper bound of the
@@ -276,8 +272,7 @@ def _plane_symbols(st: "GridStencil", weights: np.ndarray, which=slice(None)) ->
 
 def _stencil_mode(st: "GridStencil", drag: float) -> Mode:
     """``(ω, ζ)`` of the infinite grid's fastest Fourier mode: the largest eigenvalue of
-    ``K̂(θ)/m``
-    over the wavenumbers (in the cloth's plane: no spring acts across it at rest), and
+    ``K̂(θ)/m`` over the wavenumbers (in the cloth's plane: no spring acts across it at rest), and
     ``ζ = (qᵀĈq + drag)/(2mω)`` in its eigenvector ``q``."""
     lam, vec = _largest_eigenpairs(_plane_symbols(st, st.k_eff))
     t = int(np.argmax(lam))
@@ -294,11 +289,9 @@ def damping_rate(model: ClothModel, c: np.ndarray, drag: float) -> float:
     eigenvalue of ``M⁻¹(C(x) + drag·I)`` over all directions of the springs, which is that of the
     scalar graph Laplacian ``L = Σ c_s (e_j − e_i)(e_j − e_i)ᵀ`` (reached when each spring points
     along the motion across it; at rest a grid's bend springs are crossed and give half of it, and
-    a
-    heavily damped cloth stretched under gravity went unstable at 0.6× the rest shape's limit). An
-    explicit method overshoots a damping it takes explicitly: symplectic Euler needs ``rate·dt ≤
-    2``.
-    The infinite grid's bound on a regular grid, Lanczos elsewhere."""
+    a heavily damped cloth stretched under gravity went unstable at 0.6× the rest shape's limit).
+    An explicit method overshoots a damping it takes explicitly: symplectic Euler needs ``rate·dt ≤
+    2``. The infinite grid's bound on a regular grid, Lanczos elsewhere."""
     free = ~model.pinned
     if not free.any():
         return 0.0
@@ -372,11 +365,9 @@ def mode_set_limit(
 ) -> float:
     """Largest ``dt`` at which ``method``'s amplification matrix has spectral radius ≤ 1 on every
     point of :func:`mode_set`: the fastest mode, the fastest decay, and what lies between (a
-    heavily
-    damped soft family is limited by its damping, not by its stiffness: symplectic Euler needs
-    ``ω²dt² + 2c·dt ≤ 4``). ``inf`` when nothing oscillates or decays, 0 when some mode is unstable
-    at
-    every step (an undamped spring under explicit Euler)."""
+    heavily damped soft family is limited by its damping, not by its stiffness: symplectic Euler
+    needs ``ω²dt² + 2c·dt ≤ 4``). ``inf`` when nothing oscillates or decays, 0 when some mode is
+    unstable at every step (an undamped spring under explicit Euler)."""
     if omega <= 0 and rate <= 0:
         return math.inf
     if method.needs_damping and omega > 0 and alpha <= 0:
@@ -428,8 +419,7 @@ def kang_step_matrix(
     model: ClothModel, k: np.ndarray, c: np.ndarray, drag: float, dt: float, sweeps: int = 1
 ) -> sp.csr_matrix:
     """Kang's step as a linear map of ``(δx, v, Δv_prev)`` over the free coordinates, for the
-    system
-    linearised about its rest shape (force ``−K·δx − C·v − drag·v``), with ``sweeps`` Jacobi
+    system linearised about its rest shape (force ``−K·δx − C·v − drag·v``), with ``sweeps`` Jacobi
     sweeps:
     ``Δv⁽ˢ⁺¹⁾ = R + G·Δv⁽ˢ⁾`` from ``Δv⁽⁰⁾ = Δv_prev``, so ``Δv' = (I + G + … + G^{S−1}) R + G^S
     Δv_prev``
@@ -478,8 +468,7 @@ def spectral_radius(T: sp.spmatrix) -> float:
 class GridStencil(NamedTuple):
     """A regular grid's springs grouped by offset ``(dr, dc)``, each group uniform: per group the
     offset, rest direction ``u``, stiffness ``k``, linearised stiffness ``k_eff`` and damping
-    ``c``;
-    and the particle mass."""
+    ``c``; and the particle mass."""
 
     offsets: np.ndarray  # (g, 2)
     u: np.ndarray  # (g, 3)
@@ -576,8 +565,7 @@ def _per_group(layout: _Layout, values: np.ndarray) -> np.ndarray | None:
 
 def _mirror_symmetric(st: GridStencil) -> bool:
     """Whether reflecting the columns (offset ``(dr, dc)`` → ``(dr, −dc)``) maps the stencil onto
-    itself
-    with the same material: then ``θ_c`` and ``−θ_c`` have the same spectral radius."""
+    itself with the same material: then ``θ_c`` and ``−θ_c`` have the same spectral radius."""
     groups = {
         (float(o[0]), float(o[1])): (k, ke, c)
         for o, k, ke, c in zip(st.offsets, st.k, st.k_eff, st.c)
@@ -697,10 +685,9 @@ def _bisect_stable(
     stable, omega: float, rel_tol: float, guess: float = 1.0, ceiling: bool = False
 ) -> float:
     """Largest ``dt`` with ``stable(dt)`` on the grid ``dt_j = (1 + rel_tol)^j / ω``: bracketed
-    from
-    the point nearest ``guess/ω`` (the last material's ``ω·dt`` limit: a material change moves it
-    little, and a good guess is bracketed by 10 grid steps in two evaluations) by widening steps,
-    then bisected over ``j``. The answer is a grid point, so it does not depend on the guess
+    from the point nearest ``guess/ω`` (the last material's ``ω·dt`` limit: a material change moves
+    it little, and a good guess is bracketed by 10 grid steps in two evaluations) by widening
+    steps, then bisected over ``j``. The answer is a grid point, so it does not depend on the guess
     (stability being monotone near the limit), only the number of evaluations does. ``inf`` when
     still stable at ``1000/ω``, 0 when unstable at ``1e-6/ω``. ``ceiling``: ``guess/ω`` is a grid
     point above which every point is known to be unstable (an analysis of a subset of the modes
@@ -751,10 +738,8 @@ def kang_stable_dt(
     ``rel_tol``. ``method``: ``"fourier"`` (a regular grid with uniform families: the infinite
     grid's von Neumann analysis, which leaves out the boundary rows and the pins), ``"full"`` (the
     whole step matrix, seconds to minutes) or ``"auto"`` (Fourier where it applies). Linearised
-    about
-    the flat rest shape, it is conservative: a cloth hanging under gravity survives up to about
-    twice
-    this step."""
+    about the flat rest shape, it is conservative: a cloth hanging under gravity survives up to
+    about twice this step."""
     if omega is None:
         omega = fastest_mode(model, k, c, drag).omega
     if omega == 0.0:

@@ -1,8 +1,7 @@
 """The depth camera on the ROS side: renders :class:`cloth_sim.sensors.camera.DepthCamera` from the
-node's
-``camera.*`` parameters at ``camera.rate`` (wall time, its own timer), only while one of its topics
-has a subscriber, and publishes, stamped like every message of the node, in the optical frame
-``<frame_id>/camera_optical`` (on ``/tf`` via :mod:`cloth_sim.ros.frames`):
+node's ``camera.*`` parameters at ``camera.rate`` (wall time, its own timer), only while one of its
+topics has a subscriber, and publishes, stamped like every message of the node, in the optical
+frame ``<frame_id>/camera_optical`` (on ``/tf`` via :mod:`cloth_sim.ros.frames`):
 
 * ``~/camera/depth/image`` — ``sensor_msgs/Image`` ``32FC1``, metres, NaN where nothing is in range
   (REP 118);

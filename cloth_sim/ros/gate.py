@@ -1,10 +1,8 @@
 """The parameter gate: every value set on the node passes here, as rclpy intends it (ros2/demos
 ``set_parameters_callback.py``). The pre-set callback expands a scene change into the scene's
-values
-and turns values the schema takes but rclpy's types would not (an integer for a double, an integer
-array for a double array) into the declared type; the on-set callback validates the whole batch
-with
-no side effects (the stability analysis it needs is computed once per material and kept,
+values and turns values the schema takes but rclpy's types would not (an integer for a double, an
+integer array for a double array) into the declared type; the on-set callback validates the whole
+batch with no side effects (the stability analysis it needs is computed once per material and kept,
 :mod:`cloth_sim.physics.stability`); the post-set callback applies it, live or by rebuilding the
 cloth.
 """
@@ -52,8 +50,7 @@ def settle_garbage() -> None:
 
 def as_declared(p: Parameter) -> Parameter:
     """An integer given for a double parameter (``ros2 param set /cloth_sim dt 1``), as a double,
-    and
-    an integer array for a double array (``gravity: [0, 0, -9]`` in a params file), as a double
+    and an integer array for a double array (``gravity: [0, 0, -9]`` in a params file), as a double
     array: the schema accepts them, rclpy's type check would not (its refusal names no
     parameter)."""
     spec = SCHEMA.get(p.name)
@@ -152,9 +149,8 @@ class ParameterGate:
         """The gate every value passes first (it runs before rclpy's own type and range checks,
         whose refusals do not name the parameter): a value the schema refuses is noted, and stands
         in the batch as the parameter's current value, so that the on-set callback refuses the
-        batch
-        with the schema's reason. A scene change brings the scene's values for every parameter the
-        batch does not set."""
+        batch with the schema's reason. A scene change brings the scene's values for every
+        parameter the batch does not set."""
         self._gate_errors = []
         gated = []
         for p in parameters:

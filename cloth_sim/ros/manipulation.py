@@ -1,7 +1,6 @@
 """Manipulation: grippers (``~/grasp``, ``~/release``, ``~/grippers/<name>/pose`` in and
 ``~/grippers/<name>/wrench`` out) and the colliders' pose topics (``~/colliders/<name>/pose``). A
-pose
-received is reached over the next tick's steps (:meth:`cloth_sim.ros.ticker.Stepper.advance`).
+pose received is reached over the next tick's steps (:meth:`cloth_sim.ros.ticker.Stepper.advance`).
 """
 
 from __future__ import annotations

@@ -57,8 +57,8 @@ def mesh_bytes(positions: np.ndarray, triangles: np.ndarray, frame_id: str, stam
     """:func:`mesh` serialised (CDR, what rclpy publishes), built without a Python object per
     point: a one-point marker is serialised by rclpy as the template and the point data is spliced
     in (``geometry_msgs/Point`` is three little-endian float64, 24 bytes, so every later field
-    keeps
-    its alignment). 0.3 ms at 32×32 where building and serialising the Point list took 70 ms."""
+    keeps its alignment). 0.3 ms at 32×32 where building and serialising the Point list took 70
+    ms."""
     from rclpy.serialization import serialize_message
 
     template = serialize_message(mesh(_PROBE, np.zeros((1, 1), dtype=np.int64), frame_id, stamp))
@@ -78,8 +78,7 @@ def mesh_bytes(positions: np.ndarray, triangles: np.ndarray, frame_id: str, stam
 
 def stability_margin(dt: float, stable_dt: float | None) -> float:
     """``dt / stable_dt``: 0 for an unconditionally stable method (or an unknown limit), inf when
-    no
-    step is stable."""
+    no step is stable."""
     if stable_dt is None or math.isinf(stable_dt):
         return 0.0
     return dt / stable_dt if stable_dt > 0 else math.inf

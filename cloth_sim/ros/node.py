@@ -18,8 +18,7 @@ what the parts share about it):
 
 The process (:func:`cloth_sim.ros.main`, then :func:`run`) handles SIGINT/SIGTERM itself (rclpy's
 handlers are off): a signal at any moment, or two (``ros2 launch`` forwards Ctrl-C), only asks the
-spin
-loop to stop; the node is then destroyed and the process exits 0.
+spin loop to stop; the node is then destroyed and the process exits 0.
 """
 
 from __future__ import annotations

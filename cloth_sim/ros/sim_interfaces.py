@@ -11,13 +11,11 @@ supported (:data:`FEATURES`); every other service of the standard exists too and
 Entities, their names, categories and bounds: :mod:`cloth_sim.ros.entities`. A client may address
 an entity by the name it gave at spawn or by the full name the response returned. States are in the
 node's ``frame_id``; a pose may also be given in its ``world_frame_id`` (``/tf_static`` makes them
-one
-frame) or with an empty frame (the standard's default).
+one frame) or with an empty frame (the standard's default).
 
 ``set_entity_state`` sets a state, as the standard says: a pose is a teleport (the entity is there
 at once and at rest; the cloth is not dragged, and what a collider now overlaps is pushed out at
-the
-next step), a twist is what the entity then moves at — refused for a static object (a collider
+the next step), a twist is what the entity then moves at — refused for a static object (a collider
 unless ``set_entity_info`` made it, say, a DYNAMIC_OBJECT). Streaming poses on
 ``~/colliders/<name>/pose`` keeps its swept motion (friction drags what rests on the collider).
 

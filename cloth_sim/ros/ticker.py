@@ -1,6 +1,5 @@
 """The node's clock: every tick (``publish_rate`` Hz) advances the simulation by ``1/publish_rate``
-s
-in whole steps of ``dt`` (the remainder carries over) within a budget, then publishes.
+s in whole steps of ``dt`` (the remainder carries over) within a budget, then publishes.
 
 :class:`Stepper` takes the steps (reaching the poses received over them, moving the entities set
 moving at a twist); :class:`Ticker` owns the timer and the budget of each tick.
@@ -15,13 +14,13 @@ import numpy as np
 
 from ..simulator import SimulationDiverged
 
-#: a tick steps for at most this fraction of its period, so parameters and services are answered
-#: in time whatever dt is; what does not fit waits for the next ticks, up to MAX_BACKLOG s of
-# : simulated time, and beyond that is dropped (the real-time factor falls below 1, /diagnostics
-# warns).
-#: A tick that starts late (the executor was busy) steps that much less, so that it still ends by
-#: its own deadline: an overloaded node whose ticks each ran their full budget from a late start
-#: drifted past the timer's next period, which rcl then skips (gaps of 3–4 periods in the fuzz).
+#: a tick steps for at most this fraction of its period, so parameters and services are answered in
+#: time whatever dt is; what does not fit waits for the next ticks, up to MAX_BACKLOG s of
+#: simulated time, and beyond that is dropped (the real-time factor falls below 1, /diagnostics
+#: warns). A tick that starts late (the executor was busy) steps that much less, so that it still
+#: ends by its own deadline: an overloaded node whose ticks each ran their full budget from a late
+#: start drifted past the timer's next period, which rcl then skips (gaps of 3–4 periods in the
+#: fuzz).
 TICK_BUDGET = 0.8
 MAX_BACKLOG = 0.25
 #: with real_time_factor 0 a tick steps until its budget is spent, at most this many steps

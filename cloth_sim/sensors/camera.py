@@ -4,14 +4,12 @@ labels.
 :class:`DepthCamera` is a pinhole camera (no distortion) whose optical frame follows REP 103: z
 forward, x right, y down; ``orientation`` ``(1, 0, 0, 0)`` looks along world +z with image x along
 world +x and image y along world +y, ``(0, 1, 0, 0)`` looks straight down. Pixel ``(u, v)``
-(column,
-row; centres at integer coordinates, as OpenCV and ``sensor_msgs/CameraInfo``) samples the ray
-through ``K⁻¹(u, v, 1)``.
+(column, row; centres at integer coordinates, as OpenCV and ``sensor_msgs/CameraInfo``) samples the
+ray through ``K⁻¹(u, v, 1)``.
 
 :meth:`DepthCamera.render` is a pure function of the simulator's state and the camera's settings.
-Per
-pixel it finds the nearest surface along the ray with its depth ``z`` (along the optical axis) in
-``[near, far]``:
+Per pixel it finds the nearest surface along the ray with its depth ``z`` (along the optical axis)
+in ``[near, far]``:
 
 * the cloth's triangles, both sides, each pixel of a triangle's projected box tested by an exact
   ray–triangle intersection (Möller & Trumbore 1997), so the depth of a planar triangle is exact
@@ -33,15 +31,12 @@ exactly that, giving each pixel's place on the cloth at rest (UV-like ground tru
 correspondence and flow).
 
 Noise (``noise="kinect"``): Gaussian axial noise of standard deviation ``σ(z) = 0.0012 + 0.0019·(z
-−
-0.4)²`` metres (Nguyen, Izadi & Lovell 2012, "Modeling Kinect sensor noise for improved 3D
+− 0.4)²`` metres (Nguyen, Izadi & Lovell 2012, "Modeling Kinect sensor noise for improved 3D
 reconstruction and tracking", eq. 2 for surfaces facing the sensor), drawn from the camera's own
 generator seeded by ``seed``: a new camera with the same seed rendering the same scene gives the
-same
-images. Left out, as that paper's model allows: lateral noise (its σ_L ≈ 0.8 px, blur at edges),
-the
-angle dependence near grazing incidence, depth quantisation (the Kinect's disparity steps) and
-missing pixels at edges and dark or specular surfaces.
+same images. Left out, as that paper's model allows: lateral noise (its σ_L ≈ 0.8 px, blur at
+edges), the angle dependence near grazing incidence, depth quantisation (the Kinect's disparity
+steps) and missing pixels at edges and dark or specular surfaces.
 """
 
 from __future__ import annotations
@@ -78,8 +73,7 @@ class Frame:
 
     def points(self, out: np.ndarray | None = None) -> np.ndarray:
         """``(H, W, 3)`` float32 in the optical frame: ``depth · K⁻¹(u, v, 1)``, NaN where depth
-        is;
-        written into ``out`` (a C-contiguous float32 ``(H, W, 3)`` array) when given."""
+        is; written into ``out`` (a C-contiguous float32 ``(H, W, 3)`` array) when given."""
         h, w = self.depth.shape
         if out is None:
             out = np.empty((h, w, 3), np.float32)

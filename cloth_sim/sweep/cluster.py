@@ -2,12 +2,11 @@
 
 Ray 2.60 turns token authentication on for a cluster that ``ray start --head`` makes where a token
 exists (``~/.ray/auth_token``: a local ``ray.init()``, such as a sweep without ``--address``,
-writes
-one), and a driver that joins by address must then say ``RAY_AUTH_MODE=token`` and have the
-token (https://docs.ray.io/en/latest/ray-security/token-auth.html). Ray itself turns it on only
-for a cluster it finds by itself (``address="auto"``), never for an explicit address. So the sweep
-does what Ray's documentation asks of a user: when joining by address with ``RAY_AUTH_MODE`` unset
-and a token at hand (``RAY_AUTH_TOKEN``, the file ``RAY_AUTH_TOKEN_PATH`` names, or
+writes one), and a driver that joins by address must then say ``RAY_AUTH_MODE=token`` and have the
+token (https://docs.ray.io/en/latest/ray-security/token-auth.html). Ray itself turns it on only for
+a cluster it finds by itself (``address="auto"``), never for an explicit address. So the sweep does
+what Ray's documentation asks of a user: when joining by address with ``RAY_AUTH_MODE`` unset and a
+token at hand (``RAY_AUTH_TOKEN``, the file ``RAY_AUTH_TOKEN_PATH`` names, or
 ``~/.ray/auth_token``, in Ray's order), it joins with token authentication. A cluster without
 authentication accepts such a driver too. ``RAY_AUTH_MODE`` set by the user is left alone.
 """

@@ -1,15 +1,13 @@
 """One run of a sweep, headless (no ROS graph): build the simulation from the base scene and the
-run's
-values exactly as the node would (:func:`cloth_sim.settings.configure`), play the script, write a
-bag of its frames, and commit the run's directory whole.
+run's values exactly as the node would (:func:`cloth_sim.settings.configure`), play the script,
+write a bag of its frames, and commit the run's directory whole.
 
 Files: the run is written under ``OUT/.partial/<token>/<run>/`` — the bag (``<run>_0.mcap``,
 ``metadata.yaml``) and ``row.json`` (the run's row of ``runs.parquet`` but its wall time, which
-goes
-to ``OUT/timings/<run>.json`` first) — and the directory is then renamed to ``OUT/runs/<run>/`` in
-one step, so ``runs/`` only ever holds whole runs. A run that
-finds its directory there already (another worker did it after a restart) drops its own copy: the
-bytes are the same.
+goes to ``OUT/timings/<run>.json`` first) — and the directory is then renamed to
+``OUT/runs/<run>/`` in one step, so ``runs/`` only ever holds whole runs. A run that finds its
+directory there already (another worker did it after a restart) drops its own copy: the bytes are
+the same.
 
 Bags hold ``/cloth_sim/points`` and ``/cloth_sim/stats`` as the node publishes them (and, with
 ``camera.enable``, the camera's image, camera info, labels and triangles), stamped with simulated
@@ -38,11 +36,11 @@ from .script import Script, ScriptError
 from .spec import Spec, resolve, run_id
 
 #: a run's fate: ``unstable`` is a run that stayed finite but holds energy no source put in
-# : (:mod:`cloth_sim.physics.energy_balance`): a step past its limit that chatters instead of
-# blowing up
+#: (:mod:`cloth_sim.physics.energy_balance`): a step past its limit that chatters instead of
+#: blowing up
 STATUSES = ("ok", "unstable", "diverged", "refused", "failed")
-# : what a run measures rather than computes: kept beside its directory
-# (``OUT/timings/<run>.json``),
+#: what a run measures rather than computes: kept beside its directory
+#: (``OUT/timings/<run>.json``),
 #: so that the directory's bytes depend on the run's values alone
 TIMINGS = ("wall_s", "worker")
 #: the QoS the node offers on its topics (reliable, volatile, keep last 10; the camera's 5)

@@ -1,14 +1,11 @@
 """A sweep's spec: a base scene, a grid and random draws over the node's parameters, fixed values,
-and
-a script of grasps and moves; checked whole before anything runs, expanded into runs lazily.
+and a script of grasps and moves; checked whole before anything runs, expanded into runs lazily.
 
-```yaml
-scene: hanging            # a scene name or file: the base of every run
-duration: 1.0             # simulated seconds per run
-frames: 30                # frames per simulated second written to each run's bag; 0 writes no bag
-seed: 1                   # the random draws' seed
-set: {allow_unstable: true}          # values every run takes (optional)
-grid:                     # the cartesian product; keys are the node's parameter names
+```yaml scene: hanging            # a scene name or file: the base of every run duration: 1.0
+# simulated seconds per run frames: 30                # frames per simulated second written to each
+run's bag; 0 writes no bag seed: 1                   # the random draws' seed set: {allow_unstable:
+true}          # values every run takes (optional) grid:                     # the cartesian
+product; keys are the node's parameter names
   integrator: [symplectic_euler, rk4]
   stiffness.structural: [1.0e+3, 1.0e+4]
 random:                   # `samples` draws for each grid point
@@ -32,11 +29,9 @@ raises :class:`SpecError` naming the key (``grid.dt[2]``, ``random.dt.loguniform
 thickness too large for the cloth) are checked per run, where they make the run ``refused``.
 
 A run's values are its grid point's values, its draws and, with ``random``, its ``sample`` index;
-its
-id :func:`run_id` is a hash of those alone, and its draws come from a generator seeded by ``seed``,
-the
-grid point's index and the sample's: the same spec gives the same runs in the same order, whatever
-runs them.
+its id :func:`run_id` is a hash of those alone, and its draws come from a generator seeded by
+``seed``, the grid point's index and the sample's: the same spec gives the same runs in the same
+order, whatever runs them.
 """
 
 from __future__ import annotations

@@ -3,11 +3,9 @@
     .venv/bin/python docs/sweeps/plot_stability_map.py OUT [--png docs/sweeps/stability_map.png]
 
 One panel per integrator: dt across, structural stiffness up; each run a green dot (ok) or a red
-cross
-(diverged); the black steps are each stiffness's stable_dt, the limit the simulator computes before
-any step (cloth_sim.physics.stability). Prints, per integrator, how many runs theory calls right:
-ok below
-the limit, diverged above it.
+cross (diverged); the black steps are each stiffness's stable_dt, the limit the simulator computes
+before any step (cloth_sim.physics.stability). Prints, per integrator, how many runs theory calls
+right: ok below the limit, diverged above it.
 """
 
 from __future__ import annotations

@@ -1,6 +1,5 @@
 """rosbag2-compatible MCAP bags: record a running node, check the bag with independent readers
-(rosbags,
-mcap_ros2), replay it, recover a killed recording, and refuse bad input.
+(rosbags, mcap_ros2), replay it, recover a killed recording, and refuse bad input.
 
 Processes talk over DDS on their own ROS_DOMAIN_ID (1..19; test_node.py uses 20..99) with discovery
 limited to localhost.
@@ -137,8 +136,7 @@ def subscriber(domain: int, topic: str, msg_type, depth: int = 1000):
 
 def wait_until_publishing(domain: int, timeout: float = 90.0) -> None:
     """Until the node process sends ~/stats (its first tick comes after numba has compiled, which
-    takes
-    a while on a machine whose numba cache is cold)."""
+    takes a while on a machine whose numba cache is cold)."""
     from cloth_sim.msg import Stats
 
     with subscriber(domain, "/cloth_sim/stats", Stats, 10) as (spin_until, got):
@@ -234,8 +232,8 @@ def test_a_recorded_node_decodes_with_independent_readers(node_bag):
     stats = decoded["/cloth_sim/stats"]
     assert_gap_free(stats, stats[0].dt)
     # every tick sends a cloud and a stats message with one stamp: where both topics were being
-    # recorded
-    # (their subscriptions match at slightly different times), the two sets of stamps are the same
+    # recorded (their subscriptions match at slightly different times), the two sets of stamps are
+    # the same
     stat_stamps = [(s.header.stamp.sec, s.header.stamp.nanosec) for s in stats]
     cloud_stamps = [
         (c.header.stamp.sec, c.header.stamp.nanosec) for c in decoded["/cloth_sim/points"]
@@ -259,9 +257,8 @@ CAMERA_TOPICS = [
 
 def test_the_camera_topics_are_recorded_and_agree_in_the_bag(tmp_path):
     """The node's depth camera recorded by `cloth-sim record`: every camera topic in the bag,
-    decoded
-    by rosbags; per frame the image, camera info, labels and cloud share a stamp, and the cloud is
-    the image back-projected through the recorded K (computed here independently)."""
+    decoded by rosbags; per frame the image, camera info, labels and cloud share a stamp, and the
+    cloud is the image back-projected through the recorded K (computed here independently)."""
     domain = next_domain()
     bag = tmp_path / "camera"
     node = start_node(
@@ -341,11 +338,9 @@ def test_record_play_record_gives_the_same_bytes_in_the_same_order(node_bag, tmp
         a, b = first[topic], second[topic]
         assert [bytes(m.data) for m in b] == [bytes(m.data) for m in a], topic
         # Timing: the replayed receive times keep the recorded spacing. Offsets are taken against
-        # their
-        # median, which removes the constant transport latency; what is left is sleep and
-        # scheduling
-        # jitter of two processes on a loaded 2-core machine. 95 % within 15 ms, all within 100 ms,
-        # and the total span within 2 %.
+        # their median, which removes the constant transport latency; what is left is sleep and
+        # scheduling jitter of two processes on a loaded 2-core machine. 95 % within 15 ms, all
+        # within 100 ms, and the total span within 2 %.
         offs = np.array([mb.log_time - ma.log_time for ma, mb in zip(a, b)], dtype=float) / 1e6
         dev = np.abs(offs - np.median(offs))
         assert np.percentile(dev, 95) < 15.0 and dev.max() < 100.0, (

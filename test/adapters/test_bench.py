@@ -1,6 +1,5 @@
 """`cloth-sim bench … --quick`: the outputs exist and are well formed, the quick sweep's observed
-orders
-are the methods' orders, and the stability bisection finds symplectic Euler's linear limit.
+orders are the methods' orders, and the stability bisection finds symplectic Euler's linear limit.
 
 Nothing here times anything: the figures are the benchmarks' business (docs/BENCHMARKS.md).
 """

@@ -1,8 +1,8 @@
 """Sweeps on Ray (cloth-sim sweep): the spec refused whole with the key named, grid × random
-counts,
-the same bytes at 1 and 2 workers, resume after SIGKILL of the driver (every run exactly once, no
-partial bag), diverged and refused runs as rows, bags that rosbags and `cloth-sim info` open, a
-script's grasp, camera frames, and a two-node Ray cluster on this machine through --address.
+counts, the same bytes at 1 and 2 workers, resume after SIGKILL of the driver (every run exactly
+once, no partial bag), diverged and refused runs as rows, bags that rosbags and `cloth-sim info`
+open, a script's grasp, camera frames, and a two-node Ray cluster on this machine through
+--address.
 
 A real local Ray (2 CPUs) runs here; each sweep starts its own and stops it.
 """

@@ -35,8 +35,7 @@ def free_cloth(rng, rows=6, cols=6, damping=0.5, drift=(0.3, -0.1, 0.5)):
 
 def free_fall(sim, v0, steps):
     """Give ``sim`` the velocities ``v0`` and take ``steps``. Returns the centre of mass then, the
-    closed
-    form ``x0 + v0·t + g·t²/2`` of the centre of mass under gravity alone, and ``t``."""
+    closed form ``x0 + v0·t + g·t²/2`` of the centre of mass under gravity alone, and ``t``."""
     m = sim.model.masses[:, None]
     x0 = (m * sim.positions).sum(0) / m.sum()
     vc = (m * np.asarray(v0)).sum(0) / m.sum()

@@ -79,8 +79,7 @@ def test_the_limit_accounts_for_heavily_damped_springs():
     fastest mode's check (ω = 8 rad/s: dt ≤ 0.24 s) and blew up at dt = 2e-5 s: the fastest decay
     limits an explicit method (symplectic Euler: rate·dt ≤ 2), whatever the stiffness, and over the
     shapes the cloth takes, not only the rest shape (this one stretches 17-fold: at the rest
-    shape's
-    decay limit, twice this one, it blows up)."""
+    shape's decay limit, twice this one, it blows up)."""
 
     def sim_at(dt):
         return hanging(
@@ -101,8 +100,7 @@ def test_the_limit_accounts_for_heavily_damped_springs():
 
 def test_the_limit_accounts_for_drag():
     """drag = 100 with symplectic Euler was accepted at dt = 1 ms and blew up: a particle's drag is
-    a
-    damping c = drag/m that an explicit method overshoots beyond c·dt = 2."""
+    a damping c = drag/m that an explicit method overshoots beyond c·dt = 2."""
     sim = hanging(drag=100.0, strain_limit=None)
     limit = sim.stable_dt()
     assert 0.9 * 2 * 0.01 / 100.0 <= limit <= 2 * 0.01 / 100.0  # c·dt ≤ 2, and the fastest mode
@@ -123,8 +121,7 @@ def test_choi_ko_with_the_prefactored_method_is_stable():
 
 def test_the_strain_limit_behaves_at_the_smallest_dt():
     """Tightening the limit with dt = 1e-6 once gave a false 'speed above 1000 m/s': the correction
-    of
-    a stretch that was there before the step was divided by dt."""
+    of a stretch that was there before the step was divided by dt."""
     sim = hanging()
     sim.advance(1.0)
     sim.strain_limit = 0.05

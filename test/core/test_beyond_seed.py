@@ -109,8 +109,7 @@ def test_liu2013_chebyshev_converges_faster(rng):
 
 def test_liu2013_free_fall_has_implicit_eulers_offset(rng):
     """The centre of mass of a free cloth follows implicit Euler exactly: x₀ + v₀t + gt²/2 +
-    g·h·t/2
-    (the springs' pairs cancel in the global step whatever the iteration count)."""
+    g·h·t/2 (the springs' pairs cancel in the global step whatever the iteration count)."""
     model, v0 = free_cloth(rng)
     h, steps = 1e-2, 50
     sim = Simulator(model, integrator="liu2013", dt=h, integrator_options={"iterations": 3})
@@ -175,9 +174,8 @@ def hanging_chain(n=6, k=200.0, m=0.05, L=0.1, c=0.5):
 
 def test_xpbd_hanging_chain_settles_at_its_compliance_extension():
     """Spring s from the top carries the weight of the n − 1 − s particles below it: at rest it is
-    stretched by that weight times its compliance 1/k. Converged sweeps (20 per substep) land on
-    it to 1e-6; one sweep per substep (the default) leaves Gauss–Seidel's bias, which falls with
-    the
+    stretched by that weight times its compliance 1/k. Converged sweeps (20 per substep) land on it
+    to 1e-6; one sweep per substep (the default) leaves Gauss–Seidel's bias, which falls with the
     substep (1.1 %, 0.22 %, 0.05 % at 10, 40, 160 substeps of a 10 ms step)."""
     n, k, m, L = 6, 200.0, 0.05, 0.1
     want = m * 9.81 * np.arange(n - 1, 0, -1) / k
@@ -201,8 +199,7 @@ def test_xpbd_hanging_chain_settles_at_its_compliance_extension():
 
 def test_xpbd_constraint_violation_falls_with_substeps():
     """A near-inextensible cloth (k = 1e7) swinging from two corners: the worst strain over a
-    second
-    falls as the substeps rise, and is what a stiff cloth should show at 64 of them."""
+    second falls as the substeps rise, and is what a stiff cloth should show at 64 of them."""
     strains = []
     for substeps in (1, 4, 16, 64):
         model = ClothModel.grid(

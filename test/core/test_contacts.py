@@ -2,8 +2,7 @@
 
 Checked against closed forms (a particle on an incline), rest states (a cloth on the ground) and an
 independent crossing test (a particle against a triangle between consecutive steps, solved here
-from
-the coplanarity cubic, not with the simulator's code).
+from the coplanarity cubic, not with the simulator's code).
 """
 
 import math

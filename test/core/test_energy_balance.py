@@ -1,7 +1,6 @@
 """The energy balance (cloth_sim.physics.energy_balance): a run that stays finite but holds energy
-no source
-put in is marked unstable — in sweeps (status ``unstable``) and on /diagnostics (WARN) — and a run
-driven by wind, pins or grippers is not."""
+no source put in is marked unstable — in sweeps (status ``unstable``) and on /diagnostics (WARN) —
+and a run driven by wind, pins or grippers is not."""
 
 import math
 

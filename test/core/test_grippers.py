@@ -1,6 +1,5 @@
 """Grippers: rigid holds that follow their pose exactly, report the cloth's pull (checked against
-the
-weight of a cloth at rest), hand their velocity over on release, and refuse bad input."""
+the weight of a cloth at rest), hand their velocity over on release, and refuse bad input."""
 
 import math
 
@@ -178,8 +177,7 @@ def test_a_scene_declares_grippers_and_checks_them():
 def test_a_box_grips_a_whole_edge_and_turns_it_about_its_centre():
     """grasp_box holds every free particle inside the box (a grid's first column here, and nothing
     of the next one), placed at the box's centre: a quarter turn about x moves each held particle
-    to
-    its place turned about that centre."""
+    to its place turned about that centre."""
     model, sim = _cloth(integrator="symplectic_euler", dt=1e-3, gravity=(0.0, 0.0, 0.0))
     idx = sim.grasp_box("edge", (-0.01, -0.01, -0.01), (0.01, 0.46, 0.01))
     assert sorted(idx.tolist()) == [10 * r for r in range(10)]

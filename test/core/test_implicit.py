@@ -237,8 +237,7 @@ def test_cg_and_direct_solves_agree_and_cg_reports_its_iterations():
 
 def test_matrix_free_cg_is_the_assembled_system_and_meets_its_tolerance_at_any_thread_count():
     """The compiled solve (:func:`~cloth_sim.integrators.implicit._pcg`) on a step's own system:
-    its
-    matrix-free product is the assembled matrix's (the one the direct solve factorises), the
+    its matrix-free product is the assembled matrix's (the one the direct solve factorises), the
     preconditioner's blocks are that matrix's 3×3 diagonal blocks, the true residual |b − A·x| is
     within the tolerance of |b| (scipy's product, not the solver's recurrence), the blocks need
     fewer iterations than no preconditioner, and 1 and 2 threads give the same bits."""

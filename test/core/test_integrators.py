@@ -355,9 +355,8 @@ def test_runge_kutta_closed_form_radius_is_the_amplification_matrix_radius(name)
 )
 def test_a_step_allocates_no_array(name):
     """The hot loop reuses its buffers: over 20 steps of a 32×32 cloth with wind, drag and the
-    strain
-    limit, the traced memory never rises by as much as one (n, 3) array (24 kB) above where it
-    started. (Baraff–Witkin's direct solve, and the prefactored method's, still allocate per
+    strain limit, the traced memory never rises by as much as one (n, 3) array (24 kB) above where
+    it started. (Baraff–Witkin's direct solve, and the prefactored method's, still allocate per
     step; its CG does not.)"""
     import tracemalloc
 

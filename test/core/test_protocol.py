@@ -25,8 +25,7 @@ EXACT = {"implicit_euler": {"cg_tolerance": 1e-12}, "vbd": {"iterations": 200}}
 
 def chain(n=4, k=100.0, m=1.0, L=1e3, c=0.0):
     """Particle 0 pinned, ``n − 1`` free ones along x, springs between neighbours; long springs
-    keep
-    small motions linear."""
+    keep small motions linear."""
     x = np.zeros((n, 3))
     x[:, 0] = L * np.arange(n)
     return ClothModel.from_springs(
@@ -235,8 +234,7 @@ def test_damping_ratio_of_the_fastest_mode_includes_drag():
 
 def test_kangs_grid_analysis_is_conservative_against_the_whole_system():
     """The von Neumann analysis of the grid (tens of milliseconds) against the spectral radius of
-    the
-    whole 12×12 step matrix (seconds): below it, within 20 %."""
+    the whole 12×12 step matrix (seconds): below it, within 20 %."""
     model = load_scene("hanging").build_model(rows=12, cols=12, spacing=1 / 11)
     k, c = np.array(model.stiffness), np.array(model.damping)
     fourier = stab.kang_stable_dt(model, k, c, 0.0, method="fourier", rel_tol=0.005)
@@ -378,8 +376,8 @@ def test_cli_run_refuses_what_the_schema_refuses(tmp_path, capsys):
 def test_every_node_cloth_has_kangs_fast_analysis(scene, model):
     """The node's cloths are regular grids with uniform families: kang's limit comes from the
     Fourier analysis (a fraction of a second), never the whole-system one (minutes at 32×32).
-    Choi–Ko
-    rest lengths differ in their last bits from spring to spring; that once sent the node there."""
+    Choi–Ko rest lengths differ in their last bits from spring to spring; that once sent the node
+    there."""
     m = load_scene(scene).build_model(rows=12, cols=12, spacing=1 / 11, model=model)
     k, c = np.array(m.stiffness), np.array(m.damping)
     assert stab.grid_stencil(m, k, c) is not None

@@ -1,7 +1,6 @@
 """The strain limit's projection method (:mod:`cloth_sim.constraints.strain_projection`): closed
-forms for one
-spring, conservation of the centre of mass, the bound held where Provot's passes plateau, and bad
-values refused with the state kept."""
+forms for one spring, conservation of the centre of mass, the bound held where Provot's passes
+plateau, and bad values refused with the state kept."""
 
 import dataclasses
 

@@ -160,9 +160,8 @@ def test_the_same_bits_at_any_thread_count():
 def test_any_iteration_count_gives_a_usable_state(iterations):
     """A few iterations a step of a stiff cloth at a frame-rate step (hang16, whose work-precision
     run at 2 iterations diverged while the step could end on a Chebyshev extrapolation): finite,
-    its
-    kinetic energy never above what gravity can have put in (the fall from the start), whatever the
-    stiffness."""
+    its kinetic energy never above what gravity can have put in (the fall from the start), whatever
+    the stiffness."""
     for k, dt in ((1e3, 1 / 60), (1e3, 1 / 30), (1e5, 1 / 30)):
         model = ClothModel.grid(
             16, 16, 1 / 15, 0.01, stiffness=k, damping=0.0, pinned=[(0, 0), (0, 15)]
@@ -281,9 +280,8 @@ def test_the_twist_scene_turns_into_layers_and_never_crosses():
     """Newton's cloth twist rebuilt (the ``twist`` scene), its edges turned 4× faster than Newton's
     example (4π/3 rad/s each way) for 0.75 s: the sheet wraps into a rope of layers (self-contact
     pairs found, its middle narrowed to a few centimetres) and the independent check finds no
-    particle
-    passing through a triangle between any two steps; the held edges are where the turn puts
-    them."""
+    particle passing through a triangle between any two steps; the held edges are where the turn
+    puts them."""
     from cloth_sim.bench.crossings import crossings
     from cloth_sim.bench.vbd_peers import twist_sim
 

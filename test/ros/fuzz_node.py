@@ -9,15 +9,13 @@ names, dt near the method's limit, scenes good and bad — sent through ``~/set_
 (:data:`cloth_sim.parameters.SCHEMA`) and against what then runs; the figures printed at the end:
 crashes, hangs (a ~/stats interval over 2 ticks beyond the time the node spent in the request's
 parameter callbacks and beyond the longest single step or one-step tick — a tick cannot cut a step
-short —, outside a rebuild), slow answers (over 0.1 s in those callbacks, outside a
-rebuild), invalid values accepted, valid
-values refused (a refusal by the stability limit counts as right when an independent simulator
-agrees that dt is above it), refusals not naming a parameter of the set, non-finite points
-published, accepted values that are not what runs, and blow-ups after sets accepted without
-``allow_unstable`` (a blow-up that an independent run at a quarter of the step repeats, or that
-run passes half the guard's 1000 m/s, comes from the forces, not the step, e.g. a 400 N wind on 10
-g particles: counted apart, as
-``dt_independent_runaways``).
+short —, outside a rebuild), slow answers (over 0.1 s in those callbacks, outside a rebuild),
+invalid values accepted, valid values refused (a refusal by the stability limit counts as right
+when an independent simulator agrees that dt is above it), refusals not naming a parameter of the
+set, non-finite points published, accepted values that are not what runs, and blow-ups after sets
+accepted without ``allow_unstable`` (a blow-up that an independent run at a quarter of the step
+repeats, or that run passes half the guard's 1000 m/s, comes from the forces, not the step, e.g. a
+400 N wind on 10 g particles: counted apart, as ``dt_independent_runaways``).
 """
 
 from __future__ import annotations
@@ -403,8 +401,8 @@ def run(sets: int, seed: int, domain: int, quiet: bool = False, keep: int = 3) -
                 v = _value_msg(value)
                 msgs.append(ParameterMsg(name=name, value=v))
             # a fresh ~/stats just before the request: the interval measured below is the
-            # request's,
-            # not the time this harness spent on its own checks (they block the executor too)
+            # request's, not the time this harness spent on its own checks (they block the executor
+            # too)
             base = len(stats)
             wait_end = time.monotonic() + 3.0 / node.cfg["publish_rate"] + 0.2
             while len(stats) <= base and time.monotonic() < wait_end:

@@ -241,10 +241,9 @@ def test_a_malformed_scene_at_start_up_is_one_line_and_exit_2(tmp_path, name):
 def test_a_short_seeded_fuzz_of_the_live_node():
     """`make fuzz` runs 5,000 sets; here 60 (about 6 s): no crash, no invalid value accepted, no
     valid one refused, every refusal naming its parameter, no non-finite point, every accepted
-    value
-    what runs, no blow-up after a set accepted without allow_unstable that a smaller step would
-    have avoided. Its stall counts are timing figures that `make fuzz` reports (the README's "Bad
-    input" gives them); they are not asserted on a shared CI machine."""
+    value what runs, no blow-up after a set accepted without allow_unstable that a smaller step
+    would have avoided. Its stall counts are timing figures that `make fuzz` reports (the README's
+    "Bad input" gives them); they are not asserted on a shared CI machine."""
     from fuzz_node import run
 
     figures = run(60, seed=7, domain=next_domain(), quiet=True)
@@ -265,8 +264,7 @@ def test_a_short_seeded_fuzz_of_the_live_node():
 
 def test_every_malformed_scene_is_refused_at_start_up(ros, tmp_path):
     """The start-up path of all 41 (in this process; a few run as processes above): one
-    StartupError
-    naming the file, which `cloth_sim_node` prints as one line with exit status 2."""
+    StartupError naming the file, which `cloth_sim_node` prints as one line with exit status 2."""
     from cloth_sim.ros.node import ClothSimNode, StartupError
 
     for name, path in write_corpus(tmp_path).items():

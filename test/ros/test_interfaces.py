@@ -1,7 +1,6 @@
 """The standard interfaces no wheel has (interfaces/: simulation_interfaces, tf2_msgs), generated
-for
-the venv by tools/build_interfaces.py, carry the released Jazzy packages' RIHS01 type hashes, so a
-node here and any Jazzy install's clients agree on every type."""
+for the venv by tools/build_interfaces.py, carry the released Jazzy packages' RIHS01 type hashes,
+so a node here and any Jazzy install's clients agree on every type."""
 
 import json
 from pathlib import Path

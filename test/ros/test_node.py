@@ -443,8 +443,7 @@ def test_loading_a_parameter_file_keeps_the_stats_flowing(ros):
     """`ros2 param load` sets one parameter at a time, inside one service call. Each set used to
     recompute stable_dt on the thread that ticks: loading the node's own dump stopped ~/stats for
     3–10 s. Now a set that changes nothing costs nothing, and a material change one analysis (tens
-    of
-    ms at 32×32, kept per material)."""
+    of ms at 32×32, kept per material)."""
     rate = 30.0
     node = ros.start(rows=16, cols=16, spacing=1 / 15, publish_rate=rate)
     stats = ros.collect(Stats, "/cloth_sim/stats")

@@ -1,7 +1,6 @@
 """The ROS simulation standard (simulation_interfaces) through rclpy clients: every advertised
-feature
-does what the standard says, a feature not advertised answers with the standard's error result, and
-bad requests get the standard's codes with a message."""
+feature does what the standard says, a feature not advertised answers with the standard's error
+result, and bad requests get the standard's codes with a message."""
 
 import math
 
