@@ -11,6 +11,8 @@ exactly as the node checks a parameter change and builds its simulator.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -264,14 +266,54 @@ def refusal(cfg: dict, model) -> tuple[str | None, tuple[str, ...], float | None
     return reason, (("dt",) if reason else ()), limit
 
 
-def configure(scene: str | Scene, values: dict) -> tuple[dict, Scene, Simulator, float]:
-    """``(cfg, scene, simulator, stable_dt)`` for ``scene`` (a name, a path or a loaded scene) with
-    ``values`` (parameter name → value) set on it, checked as the node checks a parameter change:
-    each value by the schema, then the combination (a grid's parameters on a mesh, the thickness
-    self-collision needs, the camera, the method's stable step). A refusal raises ``ValueError``
-    (:class:`~cloth_sim.parameters.ParameterError` for a single value) naming the parameter."""
+class Refusal(ValueError):
+    """A set of values refused as a whole; ``str()`` is the reason, :attr:`named` the parameters it
+    names, :attr:`stage` where :func:`check` refused it: ``"applicable"`` (a parameter this
+    scene's cloth does not have), ``"model"`` (the model cannot be built) or ``"combination"`` (the
+    thickness self-collision needs, the camera, the method's stable step)."""
+
+    def __init__(self, reason: str, named: tuple = (), stage: str = "combination"):
+        super().__init__(reason)
+        self.named, self.stage = tuple(named), stage
+
+
+@dataclass(frozen=True)
+class Checked:
+    """Values checked whole on a scene, and the model they build: what :func:`build` turns into a
+    simulator (``stable_dt``: the method's limit on this model and material)."""
+
+    cfg: dict
+    scene: Scene
+    model: object
+    stable_dt: float
+
+
+#: :func:`check`'s ``changes_from`` for values set on a scene as it loads (a sweep's run)
+SCENE_DEFAULTS = "scene defaults"
+
+
+def check(
+    scene: str | Scene,
+    values: dict,
+    *,
+    changes_from: dict | str | None = None,
+    model: Callable | None = None,
+) -> Checked:
+    """One pass from values to what builds a simulator, each step on what the one before checked:
+
+    1. the scene (a name, a path or a loaded :class:`~cloth_sim.scene.Scene`);
+    2. every value by the schema, over the scene's defaults (an unknown name is refused);
+    3. with ``changes_from`` (the values they change: the node's running ones, or
+       :data:`SCENE_DEFAULTS`), a parameter this scene's cloth does not have;
+    4. the model they build (``model(cfg, scene)`` when given: the node's cache, or its running
+       model);
+    5. the combination on that model: the thickness self-collision needs, the camera, the method's
+       stable step.
+
+    A single value is refused with :class:`~cloth_sim.parameters.ParameterError`, a set with
+    :class:`Refusal`; both name the parameter."""
     if not isinstance(scene, Scene):
-        scene = load_scene(values.get("scene", scene))
+        scene = load_scene(scene)
     cfg = defaults(scene)
     for name, value in values.items():
         if name not in SCHEMA:
@@ -281,13 +323,35 @@ def configure(scene: str | Scene, values: dict) -> tuple[dict, Scene, Simulator,
                 "a parameter of the node",
                 f"{name} is not a parameter; the parameters are {', '.join(sorted(SCHEMA))}",
             )
-        if name != "scene":
-            cfg[name] = SCHEMA[name].check(value)
-    reason = not_applicable(scene, cfg, defaults(scene))
+        cfg[name] = SCHEMA[name].check(value)
+    if changes_from is not None:
+        before = defaults(scene) if changes_from == SCENE_DEFAULTS else changes_from
+        reason = not_applicable(scene, cfg, before)
+        if reason:
+            names = GRID_ONLY if scene.mesh is not None else MESH_ONLY
+            raise Refusal(reason, [n for n in names if cfg[n] != before[n]], "applicable")
+    try:
+        built = model(cfg, scene) if model is not None else build_model(cfg, scene)
+    except ValueError as e:
+        raise Refusal(str(e), (), "model") from None
+    reason, named, limit = refusal(cfg, built)
     if reason:
-        raise ValueError(reason)
-    model = build_model(cfg, scene)
-    reason, _, limit = refusal(cfg, model)
-    if reason:
-        raise ValueError(reason)
-    return cfg, scene, build_simulator(cfg, model, scene), limit
+        raise Refusal(reason, named)
+    return Checked(cfg, scene, built, limit)
+
+
+def build(checked: Checked) -> Simulator:
+    """The simulator of values :func:`check` accepted."""
+    return build_simulator(checked.cfg, checked.model, checked.scene)
+
+
+def configure(scene: str | Scene, values: dict) -> tuple[dict, Scene, Simulator, float]:
+    """``(cfg, scene, simulator, stable_dt)`` for ``scene`` (a name, a path or a loaded scene) with
+    ``values`` (parameter name → value) set on it, checked as the node checks a parameter change
+    (:func:`check`), then built. A refusal raises ``ValueError``
+    (:class:`~cloth_sim.parameters.ParameterError` for a single value) naming the parameter."""
+    if not isinstance(scene, Scene):
+        scene = load_scene(values.get("scene", scene))
+    values = {name: value for name, value in values.items() if name != "scene"}  # loaded above
+    checked = check(scene, values, changes_from=SCENE_DEFAULTS)
+    return checked.cfg, checked.scene, build(checked), checked.stable_dt

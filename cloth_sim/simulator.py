@@ -62,8 +62,8 @@ class SimulationDiverged(RuntimeError):
 @numba.njit(cache=True)
 def _state_ok(x, v, vmax2, xmax):
     """Whether every speed is at most ``√vmax2`` and every coordinate at most ``xmax`` in size (NaN
-    fails both). No early exit: over flat arrays the comparisons run in SIMD, 2.2× faster than a
-    particle loop that returns at the first failure (6.4 → 2.9 µs at 64×64) — the check runs
+    fails both). No early exit: over flat arrays the comparisons run in SIMD, faster than a
+    particle loop that returns at the first failure (docs/BENCHMARKS.md §7) — the check runs
     after every step, and a failing state is the rare case."""
     xf = x.ravel()
     vf = v.ravel()
@@ -807,8 +807,8 @@ def compile_kernels() -> float:
     models, wind, drag, the strain limit (both methods), contacts with each collider shape,
     self-collision and the energy and strain reports; returns the seconds it took. The kernels are
     compiled on first use and kept in numba's on-disk cache; a real-time loop calls this before it
-    starts, so that no step compiles inside a tick (a fresh install's first ``kang`` step compiled
-    for 6 s there). About 0.3 s when the cache is warm."""
+    starts, so that no step compiles inside a tick (what a first step compiling costs, and this
+    call with the cache warm: docs/BENCHMARKS.md §7)."""
     import time
 
     from .integrators.explicit import combine_parallel

@@ -49,7 +49,7 @@ from . import strain_projection
 #: Passes per step unless the simulator is told otherwise.
 DEFAULT_STRAIN_LIMIT_PASSES = 20
 #: From this many particles on, the attachments run on every core (below, waking the second core
-#: costs more than it saves: 64×64, 1.7 → 1.4 ms a step; 32×32, 4 % slower)
+#: costs more than it saves: docs/BENCHMARKS.md §7)
 PARALLEL_MIN_PARTICLES = 2048
 #: Strain above ``τc`` that a pass tolerates (so passes stop once nothing is meaningfully too
 #: long).
@@ -59,7 +59,7 @@ STRAIN_LIMIT_TOLERANCE = 1e-4
 #: ``l² ≤ this·bound²`` proves ``√l² ≤ bound`` after both roundings (their relative errors are
 #: ~1e-16), so the passes take a square root only for a length near or over its bound and decide
 #: exactly as with ``l = √l²`` for every one: the same bits. Most springs are within their bound;
-#: a square root per spring visit (20 passes over 16,000 springs at 64×64) was 8–13 % of the step.
+#: a square root per spring visit was a tenth of the step (docs/BENCHMARKS.md §7).
 _SURELY_WITHIN = 1.0 - 1e-12
 
 
@@ -231,8 +231,8 @@ class StrainLimit(Stage):
                 model = self.model
                 sel = np.flatnonzero(model.strain_limited)
                 sel = sel[_outward_order(model, model.springs[sel])]
-                # 32-bit unsigned ends: a pass took 50 → 39 µs at 64×64 (numba wraps negative
-                # indices of a signed type around, at each use)
+                # 32-bit unsigned ends: numba wraps negative indices of a signed type around, at
+                # each use (docs/BENCHMARKS.md §7)
                 self._springs = model.springs[sel].astype(np.uint32)
                 self._rest = np.ascontiguousarray(model.rest_lengths[sel])
                 self._pinned = np.ascontiguousarray(model.pinned)

@@ -20,12 +20,10 @@ Each solve moves the set's particles, which stretches the ring of springs around
 itself the set grows by about a ring an iteration (128×128 at the bottom of the swing: 14,000
 springs, and 20 iterations were not enough). So the first iteration's set also takes the last
 step's springs still within :data:`WARM_START` of their bound — held at their length if within it —
-which is most of the ring-by-ring growth at once (hanging cloth, side by side: 64×64 6.7 → 4.6
-iterations a step, 128×128 11.4 → 5.3, its worst strain 0.118 → 0.1001; the mean strain over 3 s
-the same to four digits, 0.01292, since no spring is pulled out). Tried and dropped: letting a
-spring within its bound whose ``λ`` came out negative (pushed out) leave the set and solving again
-— with the loose solves below ``λ``'s sign near 0 is noise, and the set cycled (64×64: 24 % of
-steps at the iteration limit, worst 0.105).
+which is most of the ring-by-ring growth at once. Tried and dropped: letting a spring within its
+bound whose ``λ`` came out negative (pushed out) leave the set and solving again — with the loose
+solves below ``λ``'s sign near 0 is noise, and the set cycled. (Both measured: docs/BENCHMARKS.md
+§7.)
 
 The system is solved by conjugate gradients preconditioned by its diagonal, matrix-free, over the
 active springs and their particles only (a compact numbering, so a step with a few hundred active
@@ -36,14 +34,9 @@ and two diagonals of a quad lying flat ask six things of its four points' five i
 with ε = 1e-6 a crumpled cloth with every spring over its bound diverged. Each iteration leaves
 ``ε/(w_i + w_j + ε)`` of a lone spring's excess.
 
-What it costs (hanging 10.24 kg cloth, τ = 0.1, ``tools/strain_methods.py` (at 87a25b3``,
-docs/BENCHMARKS.md §3): at 64×64 4.6 iterations and 97 CG iterations a step over ~300 active
-springs, 0.68 ms a step against the passes' 0.95 ms, for a worst strain of 0.1001 where the passes
-leave 0.119 (32×32: 0.12 against 0.32 ms, 0.1001 against 0.1057). At 128×128 the active set reaches
-14,000 springs at the bottom of the swing: 5.3 iterations a step, 0.1001 at 1.5× the passes' cost.
-Tried: symmetric Gauss–Seidel as the preconditioner — 2.8× fewer CG iterations, each 3× the cost:
-10 % faster, not kept. The worst case is a crumpled cloth with every spring over: all active and
-redundant, 3e-4 above the bound after 20 iterations.
+What it costs, against Provot's passes, and the preconditioner tried (symmetric Gauss–Seidel,
+not kept): docs/BENCHMARKS.md §3 and §7. The worst case is a crumpled cloth with every spring
+over: all active and redundant.
 
 Each iteration moves the particles by ``−W Jᵀ λ``, so the mass-weighted sum of the moves is zero
 where no pin takes part: the centre of mass (and the linear momentum, the velocities following the
@@ -60,8 +53,7 @@ REGULARISATION = 1e-3
 #: most conjugate-gradient iterations per solve
 MAX_CG_ITERATIONS = 400
 #: a solve stops once its residual is this fraction of the first (loose: the next iteration
-#: linearises again anyway). Hanging 64×64, side by side: 1e-4 2.8, 0.1 0.97, 0.3 0.81 ms a step,
-#: the same worst 0.1001 (128×128: 0.1 11.9, 0.3 8.7 ms)
+#: linearises again anyway; the same worst strain at a third of the cost: docs/BENCHMARKS.md §7)
 CG_TOLERANCE = 0.3
 #: a spring joins the active set when its strain exceeds ``τ`` by more than this (rounding aside)
 _JOIN = 1e-9
@@ -149,7 +141,7 @@ class Scratch:
     def __init__(self, springs: np.ndarray, n: int):
         m = len(springs)
         # each particle's springs (CSR): after a solve, only the moved particles' springs can have
-        # changed length, so only those are measured again (a full scan was 0.2 of 1.0 ms a step)
+        # changed length, so only those are measured again (docs/BENCHMARKS.md §7)
         ends = np.concatenate([springs[:, 0], springs[:, 1]]).astype(np.int64)
         order = np.argsort(ends, kind="stable")
         self.inc_ptr = np.zeros(n + 1, np.int64)

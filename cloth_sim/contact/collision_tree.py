@@ -38,9 +38,8 @@ from .geometry import closest_on_segments, point_triangle_distance
 #: of items between two subtrees (:func:`_tasks`: ~200 tasks at 64×64, fewer on a small cloth)
 TASKS = 64
 
-#: items (triangles, lone particles) a leaf holds at most; measured on recorded states of the
-#: swinging 64×64 cloth (7,938 triangles), ms a search in two runs: 1 → 3.9–4.2, 2 → 3.4–3.8,
-#: 4 → 3.5–3.9, 8 → 3.1–3.2, 16 → 3.4–3.9
+#: items (triangles, lone particles) a leaf holds at most (the fastest search measured:
+#: docs/BENCHMARKS.md §7)
 LEAF = 8
 
 

@@ -10,16 +10,13 @@ triangle not containing the particle. Each step:
    thickness beyond its own motion over the step, ``h/2 + |Δx|``; a triangle or an edge reaches as
    far as its farthest corner. A pair is a candidate when its distance at the start is below its
    two reaches: farther apart, it can neither come within ``h`` nor cross over the step. (A search
-   radius of ``h + 2·max|Δx|`` for every pair, the cloth's fastest particle widening everyone's
-   search, found 9,800 edge pairs and 3,400 particle–triangle pairs a step on the swinging 64×64
-   cloth; the reach of each pair's own motions keeps 800 and 260 of them. A spatial hash of the
-   particles and of the edges did the search before, 9 ms a step there, 6 ms with the reaches: it
-   visited about 90 hash entries per edge for those 800 pairs; the tree, 2.5 ms. Figures in
-   docs/BENCHMARKS.md §3c.) A particle is paired with every triangle it is not a corner of (Bridson
-   et al.): excluding the triangles of its neighbours too was tried and lets the ``fold`` scene
-   cross itself where a crease is one triangle wide. Neighbours in a flat or compressed cloth are
-   never pushed out of its plane (step 2), and the no-crossing bound (step 3) slows them only when
-   they move by most of an edge.
+   radius of ``h + 2·max|Δx|`` for every pair lets the cloth's fastest particle widen everyone's
+   search; a spatial hash did the search before. What each cost: docs/BENCHMARKS.md §3c, §7.) A
+   particle is paired with every triangle it is not a corner of (Bridson et al.): excluding the
+   triangles of its neighbours too was tried and lets the ``fold`` scene cross itself where a
+   crease is one triangle wide. Neighbours in a flat or compressed cloth are never pushed out of
+   its plane (step 2), and the no-crossing bound (step 3) slows them only when they move by most of
+   an edge.
 2. **Proximity** (Bridson, Fedkiw & Anderson 2002): a pair closer than ``thickness`` at the end of
    the step is pushed apart, shared by inverse mass between its two sides (each moved as a whole,
    held particles staying), and an approaching normal velocity between them is removed alike (an

@@ -170,7 +170,7 @@ def _system_product(particles, ptr, adj, other, blocks, D, x, out, partial):
     particle summing its springs in incidence order, and ``partial[c, 0]`` the sum of ``x·out``
     over slice ``c`` of the particles; the slices on every core (the same bits at any thread
     count). Reads 6 numbers per spring and particle where the assembled CSR matrix streamed 9 per
-    coupling and index (5.6 MB at 64×64, 0.22 ms a product)."""
+    coupling and index (docs/BENCHMARKS.md §7)."""
     nf = particles.shape[0]
     for c in numba.prange(_SLICES):
         acc = 0.0
@@ -431,12 +431,9 @@ class ImplicitEuler(_LinearisedImplicitEuler):
       ``cg_tolerance`` (relative residual); when it has not converged after ``cg_max_iterations``
       (1000) the step is solved directly instead, and so are the next 16 (the counter
       ``direct_fallbacks``): a stiff or heavily damped material makes the system ill-conditioned.
-      The cap is well below what a direct solve costs: at 64×64 an iteration takes ~0.1 ms and a
-      direct solve 220 ms, at 81×81 ~0.15 and 460 ms; the hanging scene at dt = 1/60 with its mass
-      spread over the finer grid needs 150–190 iterations there (200, the cap until the solve was
-      compiled, sent it to the direct solve at 0.2–0.5 s a step); ``"direct"``: a direct solve
-      every step, sparse Cholesky (``cholespy``) of the symmetric positive definite matrix, or
-      SuperLU's LU when ``clamp_compression`` is off and the matrix may be indefinite.
+      The cap is well below what a direct solve costs (docs/BENCHMARKS.md §7); ``"direct"``: a
+      direct solve every step, sparse Cholesky (``cholespy``) of the symmetric positive definite
+      matrix, or SuperLU's LU when ``clamp_compression`` is off and the matrix may be indefinite.
     * ``clamp_compression`` (default on) — drop the compressive, indefinite part of each spring's
       stiffness block (``E''`` and ``E'/l`` below zero), which keeps the matrix symmetric positive
       definite so CG applies at any step. It changes the Jacobian, not the force: the step stays
@@ -558,8 +555,7 @@ class ImplicitEuler(_LinearisedImplicitEuler):
     def _direct(self, A, b):
         """A direct solve: sparse Cholesky (``cholespy``) when the matrix is symmetric positive
         definite (``clamp_compression``; no pivoting, so its cost does not depend on the values:
-        19 ms at 24×24 where SuperLU's pivoting took 140 ms on a heavily damped cloth), SuperLU
-        otherwise."""
+        docs/BENCHMARKS.md §7), SuperLU otherwise."""
         A = A.tocsc()
         if self.clamp_compression:
             dv = np.zeros_like(b)

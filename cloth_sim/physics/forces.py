@@ -143,8 +143,8 @@ def axial(l, L, k, kind, tab):
 def _spring_force(dx, dy, dz, l, wx, wy, wz, rest, k, c, kind, tab, with_damping):
     """The force on a spring's first end, from ``x_j − x_i`` = (dx, dy, dz) of length ``l > 0`` and
     ``v_j − v_i`` = (wx, wy, wz) (read only ``with_damping``): :func:`axial`'s ``dE/dl`` plus the
-    damping along the spring, times the unit vector. (Inlined: the serial loop is as fast as with
-    these lines written out, 46 µs at 32×32.)"""
+    damping along the spring, times the unit vector. (Inlined: measured as fast as the lines
+    written out, docs/BENCHMARKS.md §7.)"""
     inv = 1.0 / l
     ux, uy, uz = dx * inv, dy * inv, dz * inv
     _, de, _ = axial(l, rest, k, kind, tab)
@@ -313,12 +313,8 @@ def spring_forces_gather(
     The arrays are :func:`gather_arrays`' (32-bit indices, ``fs`` by coordinate, (3, springs)).
 
     The springs go in blocks of :data:`GATHER_BLOCK` in :func:`spring_layout`'s order: their ends'
-    differences gathered into a small array, then :func:`_block_forces` in SIMD. Whole symplectic
-    Euler steps on Warp's scene beside the gather of commit 3b1c24a (a per-spring loop, 64-bit
-    indices, the springs in the model's order), 2 cores, one process: 0.140 → 0.104 ms at 64×64,
-    0.52 → 0.40 ms at 128×128, the same bits. Of that, the 32-bit indices alone: 0.125 → 0.113 ms
-    a gather at 64×64; the blocks in SIMD: 0.112 → 0.107 (64×64), 0.43 → 0.35 (128×128); the
-    layout: 0.117 → 0.096 (64×64).
+    differences gathered into a small array, then :func:`_block_forces` in SIMD. What each of these
+    choices bought is in docs/BENCHMARKS.md §7.
 
     ``mode`` says what each particle does with its summed force ``f`` in the same pass:
     :data:`GATHER_FORCE` keeps it; :data:`GATHER_ACCELERATION` turns it into ``f·m⁻¹`` (the product
@@ -331,7 +327,7 @@ def spring_forces_gather(
     update, and ``xo``, ``vo`` are then :data:`_NO_STATE`; ``inv_mass``: (n, 1), 0 on pins), the
     operations of :func:`kick_drift` in its order. No particle's position is read after the first
     loop, and each core updates the particles whose forces it summed, while they are in its cache
-    (a separate serial pass cost a 128×128 step 0.06 ms and most of what the second core saved)."""
+    (a separate serial pass cost most of what the second core saved: docs/BENCHMARKS.md §7)."""
     m = springs.shape[0]
     for b in numba.prange((m + GATHER_BLOCK - 1) // GATHER_BLOCK):
         lo = b * GATHER_BLOCK
@@ -538,13 +534,9 @@ def wind_forces(x, tris, wind, normals, f):
 
 
 # --------------------------------------------------------------------------- terms
-#: From this many springs (a 19×19 grid) the spring forces run on every core. With the OpenMP
-#: workers spinning briefly between regions (see ``cloth_sim/__init__.py``), whole symplectic Euler
-#: steps on Warp's scene, the gather on 2 cores against the serial loop (one process, 2026-11-25,
-#: after the gather's blocks in SIMD): 0.81× at 12×12 (746 springs), 0.91× at 16×16, 1.10× at 20×20
-#: (2,202 springs), 1.27× at 24×24, 1.52× at 32×32. Below this the regions' fork and join cost more
-#: than they save. (Before the SIMD blocks the crossing was at ~46×46: 0.99× at 32×32.) Both give
-#: the same bits at any thread count.
+#: From this many springs (a 19×19 grid) the spring forces run on every core: below it the
+#: parallel regions' fork and join cost more than they save (the crossing measured: docs/
+#: BENCHMARKS.md §7). Both give the same bits at any thread count.
 PARALLEL_MIN_SPRINGS = 2000
 # the gather's inverse masses and state outputs when it does not update the state
 _NO_MASS = np.zeros((1, 1))
@@ -560,12 +552,11 @@ def spring_layout(springs: np.ndarray, n: int) -> tuple:
     ``order``: the springs sorted by their lower end, then their higher one, so that the springs
     one core computes are mostly the springs of the particles it then sums (a model lists its
     springs by family: in that order each core computed half of every particle's springs and the
-    other core read them back across the cache; by the lower end, Warp's 64×64 scene took 0.117 →
-    0.096 ms a gather, side by side). ``ends``: the springs in that order (their own orientation,
-    32-bit). ``ptr``, ``adj``, ``sign``: :func:`incidence` of the springs as given — each particle
-    still sums its springs in their given order, the serial loop's, so the bits do not change —
-    with ``adj`` pointing at where each spring's force sits in ``order`` (32-bit indices: the
-    64-bit ones' loads were 10–12 % of the gather's time)."""
+    other core read them back across the cache; docs/BENCHMARKS.md §7). ``ends``: the springs in
+    that order (their own orientation, 32-bit). ``ptr``, ``adj``, ``sign``: :func:`incidence` of
+    the springs as given — each particle still sums its springs in their given order, the serial
+    loop's, so the bits do not change — with ``adj`` pointing at where each spring's force sits in
+    ``order`` (32-bit indices: the 64-bit ones' loads cost the gather, docs/BENCHMARKS.md §7)."""
     if n >= 2**32 or len(springs) >= 2**32:
         raise ValueError(
             f"the spring gather indexes with 32 bits: {n} particles, {len(springs)} springs"
@@ -1028,7 +1019,7 @@ def spring_jacobian_blocks(
         cv[s] = 0.0
         if l < 1e-300:
             continue
-        # tuples, not arrays: an array per spring was a heap allocation (68 ns a spring)
+        # tuples, not arrays: an array per spring was a heap allocation (docs/BENCHMARKS.md §7)
         u = (ddx / l, ddy / l, ddz / l)
         a, t = _stiffness_coefficients(l, rest[s], k[s], kind[s], tab, clamp)
         r = (v[j, 0] - v[i, 0], v[j, 1] - v[i, 1], v[j, 2] - v[i, 2])

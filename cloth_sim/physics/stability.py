@@ -5,7 +5,7 @@ results.
 shape.
 * :func:`fastest_mode` — ``(ω_max, ζ)``: the highest natural frequency of ``M⁻¹K`` over the free
   particles and that mode's damping ratio. On a regular grid it is the von Neumann analysis of the
-  infinite grid (an upper bound of the finite cloth's, 1 % above it at 16×16, ~2 ms at any size);
+  infinite grid (an upper bound of the finite cloth's; docs/BENCHMARKS.md §7);
   on any other spring network, Lanczos.
 * :func:`damping_rate` — the fastest decay, ``λ_max(M⁻¹(C + drag))`` over every shape the cloth can
   take (the springs' scalar graph Laplacian).
@@ -16,8 +16,8 @@ shape.
 no
   scalar mode model (its matrix ignores the springs' directions and lags the neighbours' ``Δv``),
   so its step is analysed as a whole: a von Neumann (Fourier) analysis of the infinite grid for a
-  regular grid with uniform families (20–90 ms), the spectral radius of the whole linearised step
-  matrix otherwise (ARPACK: seconds at 16×16, minutes at 32×32).
+  regular grid with uniform families, the spectral radius of the whole linearised step matrix
+  otherwise (ARPACK; their costs: docs/BENCHMARKS.md §7).
 * :class:`Analysis` — one material's results, computed at most once: :func:`analysis_for` returns
   the same object for the same model, stiffness, damping and drag, so the node's parameter checks
   and the simulator share them, and nothing here runs inside a step or an error path.
@@ -216,9 +216,8 @@ def fastest_mode(model: ClothModel, k: np.ndarray, c: np.ndarray, drag: float = 
     On a regular grid whose families are uniform (:func:`grid_stencil`: every scene) it is the von
     Neumann analysis of the infinite grid: ``ω_max² = sup_θ λ_max(K̂(θ))/m``, an upper bound of the
     finite grid's (its quadratic form is the infinite grid's restricted to the cloth, with fewer
-    springs), 1 % above it at 16×16, 0.3 % at 32×32, and the same cost at any size (about 3 ms).
-    Elsewhere it is ``λ_max(M^-½ K M^-½)`` by Lanczos (tight, but its cost grows with the grid and
-    jumps on materials whose stiffnesses differ by orders of magnitude: 2 s at 24×32)."""
+    springs), at the same cost at any size. Elsewhere it is ``λ_max(M^-½ K M^-½)`` by Lanczos
+    (tight, but its cost grows with the grid; the figures: docs/BENCHMARKS.md §7)."""
     if not (~model.pinned).any() or model.n_springs == 0:
         return Mode(0.0, 0.0)
     if not np.any(effective_stiffness(model, k) > 0):  # no stiffness at all: no oscillation

@@ -39,11 +39,11 @@ def settle_garbage() -> None:
     """Collect once and move every object alive now to the collector's permanent generation.
 
     Python's full (generation-2) collection walks every tracked object: after start-up (rclpy,
-    numba, scipy, the model) that is ~140,000 objects and 30–75 ms, which, whenever the collector
-    chose to run it, stalled a tick by 2–4 periods at 60 Hz. Frozen objects are not walked, so a
-    later full collection only sees what was made since. Called at start-up and after a rebuild
-    (the objects a new simulation keeps); garbage is collected first, so nothing collectable is
-    frozen."""
+    numba, scipy, the model) that is ~140,000 objects, which, whenever the collector chose to run
+    it, stalled a tick by several periods (docs/BENCHMARKS.md §7). Frozen objects are not walked,
+    so a later full collection only sees what was made since. Called at start-up and after a
+    rebuild (the objects a new simulation keeps); garbage is collected first, so nothing
+    collectable is frozen."""
     gc.collect()
     gc.freeze()
 
@@ -84,32 +84,27 @@ class ParameterGate:
             scene = load_scene(scene_name)
         except SceneError as e:
             raise StartupError(f"scene: {e}") from None
+        values = {name: overrides[name] for name in SCHEMA if name in overrides}
+        try:  # the values checked whole, on the model they build (settings.check: one pass)
+            checked = settings.check(scene, values, model=self._model)
+        except ValueError as e:
+            raise StartupError(str(e)) from None
         defaults = P.defaults(scene)
-        cfg = {}
-        for name in SCHEMA:
-            value = _startup_value(name, overrides.get(name, defaults[name]))
+        for name in SCHEMA:  # declared once the values are known to be good
             try:
                 node.declare_parameter(
                     name,
                     defaults[name] if name != "scene" else scene_name,
                     P.descriptor(SCHEMA[name]),
                 )
-            except (
-                ParameterException
-            ):  # e.g. an integer given for a double: rclpy's types are strict
+            except ParameterException:  # e.g. an integer for a double: rclpy's types are strict
                 raise StartupError(
                     f"{name} = {overrides.get(name)!r} is not accepted: expected "
-                    f"{SCHEMA[name].range_text()}, as a ROS "
-                    f"{P.type_name(SCHEMA[name])} (write 1.0, not 1, for a "
-                    f"double)"
+                    f"{SCHEMA[name].range_text()}, as a ROS {P.type_name(SCHEMA[name])} (write "
+                    f"1.0, not 1, for a double)"
                 ) from None
-            cfg[name] = value
-        model = self._model(cfg, scene)
-        # the combination checks a parameter change passes (thickness, camera, stable step)
-        reason, _, stable_dt = settings.refusal(cfg, model)
-        if reason:
-            raise StartupError(reason)
-        self.session = Session(scene, cfg, settings.build_simulator(cfg, model, scene), stable_dt)
+        cfg = checked.cfg
+        self.session = Session(scene, cfg, settings.build(checked), checked.stable_dt)
         self._rates_run = {cfg["publish_rate"]}  # rates the node has run with: never refused
         self._fit_solver(cfg)
 
@@ -228,24 +223,32 @@ class ParameterGate:
         try:
             if cand["scene"] != self.session.cfg["scene"]:
                 scene = load_scene(cand["scene"])
-            reason = P.not_applicable(scene, cand, self.session.cfg)
-            if reason:
-                return SetParametersResult(successful=False, reason=reason)
-            rebuild = scene is not self.session.scene or any(
-                cand[k] != self.session.cfg[k] for k in MODEL_KEYS
-            )
-            model = self._model(cand, scene) if rebuild else self.session.sim.model
         except (SceneError, ValueError) as e:  # e.g. a scene whose file changed since
             return SetParametersResult(successful=False, reason=f"scene: {e}")
+        rebuild = scene is not self.session.scene or any(
+            cand[k] != self.session.cfg[k] for k in MODEL_KEYS
+        )
         if cand["publish_rate"] not in self._rates_run:
             reason = self._check_rate(cand)
             if reason:
                 return SetParametersResult(successful=False, reason=reason)
-        reason, named, limit = settings.refusal(cand, model)
-        if reason:  # the refusal names what changed as well as what it is about
-            return SetParametersResult(
-                successful=False, reason=self._blame(parameters, cand, reason, named)
+        running = self.session.sim.model
+        try:  # the batch whole, on the model it builds (settings.check: one pass)
+            checked = settings.check(
+                scene,
+                cand,
+                changes_from=self.session.cfg,
+                model=self._model if rebuild else (lambda cfg, scene: running),
             )
+        except settings.Refusal as e:
+            reason = {
+                "applicable": str(e),
+                "model": f"scene: {e}",  # a scene whose mesh changed since, say
+                # a combination: its reason names what changed as well as what it is about
+                "combination": self._blame(parameters, cand, str(e), e.named),
+            }[e.stage]
+            return SetParametersResult(successful=False, reason=reason)
+        model, limit = checked.model, checked.stable_dt
         self._validated = (cand, scene if rebuild else None, model if rebuild else None, limit)
         return SetParametersResult(successful=True)
 

@@ -57,8 +57,7 @@ def mesh_bytes(positions: np.ndarray, triangles: np.ndarray, frame_id: str, stam
     """:func:`mesh` serialised (CDR, what rclpy publishes), built without a Python object per
     point: a one-point marker is serialised by rclpy as the template and the point data is spliced
     in (``geometry_msgs/Point`` is three little-endian float64, 24 bytes, so every later field
-    keeps its alignment). 0.3 ms at 32×32 where building and serialising the Point list took 70
-    ms."""
+    keeps its alignment; docs/BENCHMARKS.md §7)."""
     from rclpy.serialization import serialize_message
 
     template = serialize_message(mesh(_PROBE, np.zeros((1, 1), dtype=np.int64), frame_id, stamp))

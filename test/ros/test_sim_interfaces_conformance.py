@@ -686,9 +686,10 @@ def test_isaac_reset_simulation_service(ros):
     assert spawn(ros, "SpawnedForReset", BOX, at=pose(0, 0, -1)).result.result == Result.RESULT_OK
     ros.spin_for(0.3)  # playing: the cloth falls
     assert not np.array_equal(node.sim.positions, node.sim.model.positions)
+    # paused first: a reset keeps the simulation playing, and a tick after it moves the cloth again
+    set_state(ros, S.STATE_PAUSED)
     r = call(ros, srv.ResetSimulation, "reset_simulation", scope=R.SCOPE_DEFAULT).result
     assert r.result == Result.RESULT_OK
-    set_state(ros, S.STATE_PAUSED)
     names = call(ros, srv.GetEntities, "get_entities").entities
     assert "collider/SpawnedForReset" not in names
     assert "cloth" in names and "collider/ball" in names and "collider/floor" in names

@@ -1,0 +1,128 @@
+"""The house rules the layout keeps (README "Layout"), read from the source with ``ast``: no import
+circles among cloth_sim's modules (lazy imports inside functions included), no module taking
+another's private name, and the core importing no ROS."""
+
+import ast
+import sys
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parents[2] / "cloth_sim"
+#: the adapters, the command line and the measurement code: outside the core
+EDGE = (
+    "cloth_sim.ros",
+    "cloth_sim.bag",
+    "cloth_sim.sweep",
+    "cloth_sim.envs",
+    "cloth_sim.bench",
+    "cloth_sim.cli",  # the command line: a front end over the core and the adapters
+)
+ROS = ("rclpy", "rcl_interfaces", "std_msgs", "sensor_msgs", "geometry_msgs", "rosgraph_msgs")
+
+
+def modules() -> dict[str, Path]:
+    out = {}
+    for path in PACKAGE.rglob("*.py"):
+        parts = list(path.relative_to(PACKAGE.parent).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join(parts)] = path
+    return out
+
+
+def imports(name: str, is_package: bool, source: str, known) -> list[tuple[str, str | None]]:
+    """``(module imported, name taken from it or None)`` for every import in module ``name``'s
+    ``source`` (``known``: the package's module names)."""
+    package = name if is_package else name.rpartition(".")[0]
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            found += [(a.name, None) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            for a in node.names:
+                sub = f"{target}.{a.name}"
+                found.append((sub, None) if sub in known else (target, a.name))
+    return found
+
+
+def graph() -> tuple[dict, list]:
+    known = modules()
+    edges, private = {m: set() for m in known}, []
+    for name, path in known.items():
+        for target, taken in imports(name, path.name == "__init__.py", path.read_text(), known):
+            while target and target not in known:
+                target = target.rpartition(".")[0]
+            if target and target != name:
+                edges[name].add(target)
+                if taken and taken.startswith("_") and not taken.startswith("__"):
+                    private.append(f"{name} takes {target}.{taken}")
+    return edges, private
+
+
+def circles(edges: dict) -> list[list[str]]:
+    """Strongly connected components of more than one module (Tarjan)."""
+    index, low, stack, on, out = {}, {}, [], set(), []
+    sys.setrecursionlimit(10_000)
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in edges[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            part = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                part.append(w)
+                if w == v:
+                    break
+            if len(part) > 1:
+                out.append(sorted(part))
+
+    for v in edges:
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_no_import_circles():
+    assert circles(graph()[0]) == []
+
+
+def test_no_module_takes_another_modules_private_name():
+    assert graph()[1] == []
+
+
+def test_the_core_imports_no_ros():
+    known = modules()
+    core = {n: p for n, p in known.items() if not n.startswith(EDGE)}
+    found = [
+        f"{name} imports {target}"
+        for name, path in core.items()
+        for target, _ in imports(name, path.name == "__init__.py", path.read_text(), known)
+        if target.split(".")[0] in ROS or target.startswith(EDGE)
+    ]
+    assert found == []
+
+
+def test_the_checks_see_a_circle_a_private_name_and_ros():
+    """The checks above can fail: a made-up graph with a circle; made-up imports."""
+    assert circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": set()}) == [["a", "b", "c"]]
+    known = {"cloth_sim.x", "cloth_sim.y", "cloth_sim.sub"}
+    assert imports("cloth_sim.x", False, "from .y import _hidden\n", known) == [
+        ("cloth_sim.y", "_hidden")
+    ]
+    assert imports("cloth_sim.sub", True, "from .. import y\nimport rclpy\n", known) == [
+        ("cloth_sim.y", None),
+        ("rclpy", None),
+    ]
