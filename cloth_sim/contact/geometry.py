@@ -102,10 +102,9 @@ def closest_on_triangle(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):
 
 
 @numba.njit(cache=True, inline="always")
-def point_triangle_distance(x, p, a, b, c):
-    """``(distance, wa, wb, wc)``: particle ``p``'s distance to triangle ``abc`` of ``x`` and the
-    barycentric weights of the closest point."""
-    wa, wb, wc = closest_on_triangle(
+def triangle_weights(x, p, a, b, c):
+    """:func:`closest_on_triangle` of particle ``p`` and triangle ``abc`` of ``x``."""
+    return closest_on_triangle(
         x[p, 0],
         x[p, 1],
         x[p, 2],
@@ -119,6 +118,32 @@ def point_triangle_distance(x, p, a, b, c):
         x[c, 1],
         x[c, 2],
     )
+
+
+@numba.njit(cache=True, inline="always")
+def segment_parameters(x, a, b, c, d):
+    """:func:`closest_on_segment_pair` of the segments ``ab`` and ``cd`` of ``x``."""
+    return closest_on_segment_pair(
+        x[a, 0],
+        x[a, 1],
+        x[a, 2],
+        x[b, 0],
+        x[b, 1],
+        x[b, 2],
+        x[c, 0],
+        x[c, 1],
+        x[c, 2],
+        x[d, 0],
+        x[d, 1],
+        x[d, 2],
+    )
+
+
+@numba.njit(cache=True, inline="always")
+def point_triangle_distance(x, p, a, b, c):
+    """``(distance, wa, wb, wc)``: particle ``p``'s distance to triangle ``abc`` of ``x`` and the
+    barycentric weights of the closest point."""
+    wa, wb, wc = triangle_weights(x, p, a, b, c)
     dx = x[p, 0] - (wa * x[a, 0] + wb * x[b, 0] + wc * x[c, 0])
     dy = x[p, 1] - (wa * x[a, 1] + wb * x[b, 1] + wc * x[c, 1])
     dz = x[p, 2] - (wa * x[a, 2] + wb * x[b, 2] + wc * x[c, 2])
@@ -154,20 +179,7 @@ def closest_on_segment_pair(ax, ay, az, bx, by, bz, cx, cy, cz, dx, dy, dz):
 def closest_on_segments(x, a, b, c, d):
     """``(s, t, distance)``: the nearest points ``a + s(b − a)`` and ``c + t(d − c)`` of two
     segments (:func:`closest_on_segment_pair` of the particles ``a``, ``b``, ``c``, ``d``)."""
-    sv, tv = closest_on_segment_pair(
-        x[a, 0],
-        x[a, 1],
-        x[a, 2],
-        x[b, 0],
-        x[b, 1],
-        x[b, 2],
-        x[c, 0],
-        x[c, 1],
-        x[c, 2],
-        x[d, 0],
-        x[d, 1],
-        x[d, 2],
-    )
+    sv, tv = segment_parameters(x, a, b, c, d)
     d1x, d1y, d1z = x[b, 0] - x[a, 0], x[b, 1] - x[a, 1], x[b, 2] - x[a, 2]
     d2x, d2y, d2z = x[d, 0] - x[c, 0], x[d, 1] - x[c, 1], x[d, 2] - x[c, 2]
     rx, ry, rz = x[a, 0] - x[c, 0], x[a, 1] - x[c, 1], x[a, 2] - x[c, 2]

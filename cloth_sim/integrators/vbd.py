@@ -63,7 +63,7 @@ import numba
 import numpy as np
 
 from ..contact.colliders import carried, sdf
-from ..contact.geometry import closest_on_segment_pair, closest_on_triangle
+from ..contact.geometry import segment_parameters, triangle_weights
 from ..kinds import LINEAR
 from ..physics.forces import BUCKLE_TABLE, axial, incidence
 from .base import Integrator, Stability
@@ -439,20 +439,7 @@ def contact_pairs(x, vt, ee, tris, edges, tri_edge, edge_owner, vertex_owner):
         if q < nv:
             p, t = vt[q, 0], vt[q, 1]
             a, b, c = tris[t, 0], tris[t, 1], tris[t, 2]
-            wa, wb, wc = closest_on_triangle(
-                x[p, 0],
-                x[p, 1],
-                x[p, 2],
-                x[a, 0],
-                x[a, 1],
-                x[a, 2],
-                x[b, 0],
-                x[b, 1],
-                x[b, 2],
-                x[c, 0],
-                x[c, 1],
-                x[c, 2],
-            )
+            wa, wb, wc = triangle_weights(x, p, a, b, c)
             if wa > 0.0 and wb > 0.0 and wc > 0.0:
                 energy[q] = True
             elif wa >= 1.0 or wb >= 1.0 or wc >= 1.0:  # nearest a corner: from its owner only
@@ -472,20 +459,7 @@ def contact_pairs(x, vt, ee, tris, edges, tri_edge, edge_owner, vertex_owner):
             e = q - nv
             a, b = edges[ee[e, 0], 0], edges[ee[e, 0], 1]
             c, d_ = edges[ee[e, 1], 0], edges[ee[e, 1], 1]
-            sv, tv = closest_on_segment_pair(
-                x[a, 0],
-                x[a, 1],
-                x[a, 2],
-                x[b, 0],
-                x[b, 1],
-                x[b, 2],
-                x[c, 0],
-                x[c, 1],
-                x[c, 2],
-                x[d_, 0],
-                x[d_, 1],
-                x[d_, 2],
-            )
+            sv, tv = segment_parameters(x, a, b, c, d_)
             energy[q] = 0.0 < sv < 1.0 and 0.0 < tv < 1.0
             dx = (x[a, 0] + sv * (x[b, 0] - x[a, 0])) - (x[c, 0] + tv * (x[d_, 0] - x[c, 0]))
             dy = (x[a, 1] + sv * (x[b, 1] - x[a, 1])) - (x[c, 1] + tv * (x[d_, 1] - x[c, 1]))
