@@ -104,39 +104,27 @@ def closest_on_triangle(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):
 @numba.njit(cache=True, inline="always")
 def triangle_weights(x, p, a, b, c):
     """:func:`closest_on_triangle` of particle ``p`` and triangle ``abc`` of ``x``."""
+    # fmt: off
     return closest_on_triangle(
-        x[p, 0],
-        x[p, 1],
-        x[p, 2],
-        x[a, 0],
-        x[a, 1],
-        x[a, 2],
-        x[b, 0],
-        x[b, 1],
-        x[b, 2],
-        x[c, 0],
-        x[c, 1],
-        x[c, 2],
+        x[p, 0], x[p, 1], x[p, 2],
+        x[a, 0], x[a, 1], x[a, 2],
+        x[b, 0], x[b, 1], x[b, 2],
+        x[c, 0], x[c, 1], x[c, 2],
     )
+    # fmt: on
 
 
 @numba.njit(cache=True, inline="always")
 def segment_parameters(x, a, b, c, d):
     """:func:`closest_on_segment_pair` of the segments ``ab`` and ``cd`` of ``x``."""
+    # fmt: off
     return closest_on_segment_pair(
-        x[a, 0],
-        x[a, 1],
-        x[a, 2],
-        x[b, 0],
-        x[b, 1],
-        x[b, 2],
-        x[c, 0],
-        x[c, 1],
-        x[c, 2],
-        x[d, 0],
-        x[d, 1],
-        x[d, 2],
+        x[a, 0], x[a, 1], x[a, 2],
+        x[b, 0], x[b, 1], x[b, 2],
+        x[c, 0], x[c, 1], x[c, 2],
+        x[d, 0], x[d, 1], x[d, 2],
     )
+    # fmt: on
 
 
 @numba.njit(cache=True, inline="always")
