@@ -2,23 +2,31 @@
 
 A scene is a YAML mapping (see ``config/scenes/*.yaml``)::
 
-    grid: {rows: 24, cols: 24, spacing: 0.04, orientation: horizontal} model: provot
-    # or choi_ko particle_mass: 0.01 stiffness: {structural: 1000, shear: 1000, bend: 100} damping:
-    {structural: 0.05, shear: 0.05, bend: 0.01} pinned: [[0, 0], [0, -1]]      # (row, col) pairs,
-    negative counts from the end pinned_edges: []               # any of first_row, last_row,
-    first_col, last_col gravity: [0, 0, -9.81] wind: {direction: [0, 1, 0], strength: 0} drag: 0.0
-    strain_limit: 0.1              # or null integrator: symplectic_euler dt: 0.001 thickness:
-    0.005               # kept from colliders (and from itself with self_collision) self_collision:
-    false grippers:                      # holding the cloth from the start (moved by
-    ~/grippers/<name>/pose)
+    grid: {rows: 24, cols: 24, spacing: 0.04, orientation: horizontal}
+    model: provot                  # or choi_ko
+    particle_mass: 0.01
+    stiffness: {structural: 1000, shear: 1000, bend: 100}
+    damping: {structural: 0.05, shear: 0.05, bend: 0.01}
+    pinned: [[0, 0], [0, -1]]      # (row, col) pairs, negative counts from the end
+    pinned_edges: []               # any of first_row, last_row, first_col, last_col
+    gravity: [0, 0, -9.81]
+    wind: {direction: [0, 1, 0], strength: 0}
+    drag: 0.0
+    strain_limit: 0.1              # or null
+    integrator: symplectic_euler
+    dt: 0.001
+    thickness: 0.005               # kept from colliders (and from itself with self_collision)
+    self_collision: false
+    grippers:                      # holding the cloth from the start
+                                   # (moved by ~/grippers/<name>/pose)
       - {name: left, point: [0, 0, 0], radius: 0.02}         # the particles within radius of point
       - {name: edge, box: {min: [x, y, z], max: [x, y, z]}}  # or every particle inside a box
-    colliders:                     # each with an optional name and friction (Coulomb's μ, default
-    0)
+    colliders:                     # each with an optional name and friction
+                                   # (Coulomb's μ, default 0)
       - {type: plane, normal: [0, 0, 1], offset: 0.0, friction: 0.5}
       - {type: sphere, center: [0.5, 0.5, -0.3], radius: 0.2}
-      - {type: box, center: [0, 0, -0.5], half_extents: [0.5, 0.4, 0.02], orientation: [1, 0, 0,
-      0]}
+      - {type: box, center: [0, 0, -0.5], half_extents: [0.5, 0.4, 0.02],
+         orientation: [1, 0, 0, 0]}
       - {type: capsule, a: [0, 0, 0], b: [0, 0.2, 0], radius: 0.01}
 
 ``grid`` may also give ``origin: [x, y, z]``, where particle (0, 0) starts.

@@ -4,16 +4,13 @@
 * the **state** (:class:`~cloth_sim.state.State`) is what changes: positions, velocities, time and
   the integrator's history;
 * the **forces** (:class:`~cloth_sim.physics.forces.Forces`) are a list of terms compiled from the
-current
-  material and rebuilt when a parameter changes;
+  current material and rebuilt when a parameter changes;
 * the **integrator** (:mod:`cloth_sim.integrators`) advances the state with ``step(state, forces,
   dt)`` and imports nothing from here;
 * the **stages** (:mod:`cloth_sim.constraints.strain_limit`) correct the state after each step;
-inactive ones
-  are skipped;
+  inactive ones are skipped;
 * the **stability analysis** (:mod:`cloth_sim.physics.stability`) is computed when asked, once per
-material,
-  never inside a step or an error path.
+  material, never inside a step or an error path.
 
 Every value a user sets is checked against :data:`cloth_sim.parameters.SCHEMA`.
 """

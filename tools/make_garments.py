@@ -7,17 +7,16 @@ triangle larger than an equilateral one of side ``EDGE``, and no point added on 
 (``Y``), so two panels cut from one outline share their seam vertices exactly.
 
 * **T-shirt**: a front and a back panel from one outline, joined along the side, sleeve and
-shoulder
-  seams (their vertices are shared), open at the neck, the two cuffs and the waist. The panels
-  bulge apart by up to ``DEPTH`` away from the seams (a garment modelled around a body), so the
-  shirt rests as made, with a few centimetres between its layers. The back panel's triangles are
-  wound the other way, so every normal points out of the shirt.
+  shoulder seams (their vertices are shared), open at the neck, the two cuffs and the waist. The
+  panels bulge apart by up to ``DEPTH`` away from the seams (a garment modelled around a body), so
+  the shirt rests as made, with a few centimetres between its layers. The back panel's triangles
+  are wound the other way, so every normal points out of the shirt.
 * **Towel**: a 0.5 m × 0.8 m rectangle, hung from its two top corners by the ``towel`` scene.
 * **Twist sheet**: the cloth of Newton's ``example_cloth_twist`` (its asset ``square_cloth.usd``
-scaled
-  by 0.01): a 1.5 m × 1.0 m sheet of 50 × 50 vertices on a regular grid, each cell cut along the
-  diagonal that alternates like a checkerboard (as that asset's; the vertices in the same order, x
-  fastest). Not a quality mesh: the same triangles as the peer's, so the two solvers run one cloth.
+  scaled by 0.01): a 1.5 m × 1.0 m sheet of 50 × 50 vertices on a regular grid, each cell cut along
+  the diagonal that alternates like a checkerboard (as that asset's; the vertices in the same
+  order, x fastest). Not a quality mesh: the same triangles as the peer's, so the two solvers run
+  one cloth.
 
 Run ``.venv/bin/python tools/make_garments.py``; the output is the same bytes every time.
 """

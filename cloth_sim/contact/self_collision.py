@@ -25,14 +25,12 @@ triangle not containing the particle. Each step:
    * inside the face: along the triangle's normal, on the side the particle was at the start (so
      neighbours in a flat or compressed cloth are never pushed out of its plane);
    * on an edge (**point–edge**) or at a corner (**point–point**): along the line from that point
-   to
-     the particle, each edge and corner handled once (from the first triangle that has it), and
+     to the particle, each edge and corner handled once (from the first triangle that has it), and
      only when the particle shares no triangle with it. Without these, the hems and openings of a
      garment — where the nearest point is an edge — kept no distance: the edge particles of a
      U-folded cloth came within 1.5–1.9 mm of the other layer at a thickness of 5 mm;
    * and **edge–edge**: two edges sharing no particle whose nearest points both lie inside them
-   (two
-     hems crossing), found by the same traversal (each edge from its first triangle), pushed
+     (two hems crossing), found by the same traversal (each edge from its first triangle), pushed
      apart along the line between those points. In a flat cloth two edges are nearest at an end of
      one of them, so this never acts between neighbours lying flat.
 3. **No crossing**, guaranteed: the distance from a moving point to a moving triangle, with every

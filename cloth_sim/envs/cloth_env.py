@@ -11,11 +11,10 @@ What SoftGym's ``ClothEnv``/``FlexEnv`` do (Lin et al. 2020), on cloth_sim's phy
   ``"pickerpickplace"``: ``[x, y, z, pick]`` per picker, a target the pickers go to at 0.01 m per
   frame (at most 300 frames) holding or not.
 * **Observations.** ``"key_point"``: the cloth's four corners and the pickers, world frame
-(SoftGym's
-  reduced state). ``"point_cloud"``: what the depth camera sees of the cloth, in the camera's
-  optical frame, ``max_points`` points (a seeded random subset when more are visible, zeros after
-  the last when fewer; ``info["points"]`` is the count), then the pickers in the same frame.
-  ``"depth"``: the depth image (metres, 0 where nothing is seen).
+  (SoftGym's reduced state). ``"point_cloud"``: what the depth camera sees of the cloth, in the
+  camera's optical frame, ``max_points`` points (a seeded random subset when more are visible,
+  zeros after the last when fewer; ``info["points"]`` is the count), then the pickers in the same
+  frame. ``"depth"``: the depth image (metres, 0 where nothing is seen).
 * **Initial states** come from :mod:`.initial_states`: variation ``i`` of ``num_variations`` is
   generated from the seed ``[task, i]`` the first time it is needed and cached on disk, so
   ``reset(seed=s)`` is the same episode wherever and whenever it runs.

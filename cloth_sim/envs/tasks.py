@@ -1,9 +1,8 @@
 """SoftGym's three cloth tasks (Lin et al. 2020: ``softgym/envs/cloth_{flatten,fold,drop}.py``).
 
 * :class:`ClothFlattenEnv` — a crumpled cloth on the floor; spread it out. Variation: the flat
-cloth
-  grasped at a random particle, lifted 0.5–1 m, held until still (at most 5 s), dropped and left
-  until still (at most 5 s), centred. Performance: the covered area; normalized: the coverage
+  cloth grasped at a random particle, lifted 0.5–1 m, held until still (at most 5 s), dropped and
+  left until still (at most 5 s), centred. Performance: the covered area; normalized: the coverage
   improvement from the start to the flat cloth's area.
 * :class:`ClothFoldEnv` — a flat cloth turned by a random angle in ±45°; fold it in half, left onto
   right. Performance: ``−(mean |x_a − x_b| + 1.2 · mean |x_b − x_b(0)|)`` over the mirrored halves;

@@ -2,7 +2,7 @@
 results.
 
 * :func:`rest_matrices` — stiffness and damping matrices ``K``, ``C`` linearised about the rest
-shape.
+  shape.
 * :func:`fastest_mode` — ``(ω_max, ζ)``: the highest natural frequency of ``M⁻¹K`` over the free
   particles and that mode's damping ratio. On a regular grid it is the von Neumann analysis of the
   infinite grid (an upper bound of the finite cloth's; docs/BENCHMARKS.md §7);
@@ -13,11 +13,10 @@ shape.
   have (``ω ≤ ω_max``, ``α·ω² ≤ c ≤ rate``), from its amplification matrix (spectral radius ≤ 1),
   evaluated on a batch of modes at once.
 * :func:`kang_step_matrix`, :func:`kang_stable_dt` — Kang et al.'s approximated implicit step has
-no
-  scalar mode model (its matrix ignores the springs' directions and lags the neighbours' ``Δv``),
-  so its step is analysed as a whole: a von Neumann (Fourier) analysis of the infinite grid for a
-  regular grid with uniform families, the spectral radius of the whole linearised step matrix
-  otherwise (ARPACK; their costs: docs/BENCHMARKS.md §7).
+  no scalar mode model (its matrix ignores the springs' directions and lags the neighbours'
+  ``Δv``), so its step is analysed as a whole: a von Neumann (Fourier) analysis of the infinite
+  grid for a regular grid with uniform families, the spectral radius of the whole linearised step
+  matrix otherwise (ARPACK; their costs: docs/BENCHMARKS.md §7).
 * :class:`Analysis` — one material's results, computed at most once: :func:`analysis_for` returns
   the same object for the same model, stiffness, damping and drag, so the node's parameter checks
   and the simulator share them, and nothing here runs inside a step or an error path.

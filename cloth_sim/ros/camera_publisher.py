@@ -9,8 +9,7 @@ frame ``<frame_id>/camera_optical`` (on ``/tf`` via :mod:`cloth_sim.ros.frames`)
 * ``~/camera/points`` — an organised ``PointCloud2`` (height × width, float32 x y z, NaN where the
   image is): what ``depth_image_proc/point_cloud_xyz`` makes of the image;
 * ``~/camera/labels`` — ``16SC1``: −1 nothing, 0 the cloth, 1 + i collider i (the ground truth),
-and
-  ``~/camera/triangles`` — ``32SC1``: the cloth triangle each pixel sees, −1 elsewhere.
+  and ``~/camera/triangles`` — ``32SC1``: the cloth triangle each pixel sees, −1 elsewhere.
 """
 
 from __future__ import annotations

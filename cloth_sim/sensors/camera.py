@@ -15,8 +15,7 @@ in ``[near, far]``:
   ray–triangle intersection (Möller & Trumbore 1997), so the depth of a planar triangle is exact
   (perspective-correct), and a triangle crossing the near plane is clipped exactly;
 * every collider by its analytic ray intersection (plane, sphere, box by slabs, capsule), exact,
-not a
-  tessellation.
+  not a tessellation.
 
 It returns a :class:`Frame`: ``depth`` (float32 metres, NaN where nothing is in range), ``object``
 (int16: −1 nothing, 0 the cloth, ``1 + i`` collider ``i`` of ``sim.colliders``) and ``triangle``

@@ -1,11 +1,13 @@
 """A sweep's spec: a base scene, a grid and random draws over the node's parameters, fixed values,
 and a script of grasps and moves; checked whole before anything runs, expanded into runs lazily.
 
-```yaml scene: hanging            # a scene name or file: the base of every run duration: 1.0
-# simulated seconds per run frames: 30                # frames per simulated second written to each
-run's bag; 0 writes no bag seed: 1                   # the random draws' seed set: {allow_unstable:
-true}          # values every run takes (optional) grid:                     # the cartesian
-product; keys are the node's parameter names
+```yaml
+scene: hanging            # a scene name or file: the base of every run
+duration: 1.0             # simulated seconds per run
+frames: 30                # frames per simulated second written to each run's bag (0: no bag)
+seed: 1                   # the random draws' seed
+set: {allow_unstable: true}          # values every run takes (optional)
+grid:                     # the cartesian product; keys are the node's parameter names
   integrator: [symplectic_euler, rk4]
   stiffness.structural: [1.0e+3, 1.0e+4]
 random:                   # `samples` draws for each grid point
@@ -21,12 +23,12 @@ script:                   # optional, in simulated time
 ```
 
 Every value and range is checked by the schema the node uses
-(:data:`~cloth_sim.parameters.SCHEMA`):
-a grid value, both ends of a uniform or loguniform range and every choice. Keys of ``grid`` and
-``random`` that are not parameters are script variables and must be used by the script. A bad spec
-raises :class:`SpecError` naming the key (``grid.dt[2]``, ``random.dt.loguniform``,
-``script[1].move.to``) and what is accepted. Combinations (a dt above the method's stable step, a
-thickness too large for the cloth) are checked per run, where they make the run ``refused``.
+(:data:`~cloth_sim.parameters.SCHEMA`): a grid value, both ends of a uniform or loguniform range
+and every choice. Keys of ``grid`` and ``random`` that are not parameters are script variables and
+must be used by the script. A bad spec raises :class:`SpecError` naming the key (``grid.dt[2]``,
+``random.dt.loguniform``, ``script[1].move.to``) and what is accepted. Combinations (a dt above the
+method's stable step, a thickness too large for the cloth) are checked per run, where they make the
+run ``refused``.
 
 A run's values are its grid point's values, its draws and, with ``random``, its ``sample`` index;
 its id :func:`run_id` is a hash of those alone, and its draws come from a generator seeded by
