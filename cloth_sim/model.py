@@ -316,7 +316,8 @@ class ClothModel:
         welding). ``scale`` is metres per file unit; the scaled mesh is then rotated by
         ``orientation`` (a unit quaternion ``(w, x, y, z)``) and moved by ``position``.
         ``stiffness``/``damping``: dicts keyed by ``structural`` and ``bend``, or one number for
-        both.
+        both. A file's named vertices (:func:`cloth_sim.physics.mesh.read_landmarks`) are in
+        ``meta["landmarks"]``, name → particle index.
 
         A mesh that cannot be cloth raises ``ValueError`` naming the source and the element (see
         :func:`cloth_sim.physics.mesh.check_mesh`); nothing is built."""
@@ -337,6 +338,7 @@ class ClothModel:
         except ValueError as e:
             raise ValueError(f"from_mesh: {e}") from None
         M.check_indices(vertices, faces, name)  # before welding: indices and coordinates as given
+        landmarks = M.read_landmarks(source, len(vertices))
         x, tris, index = M.weld(vertices, faces)
         M.check_mesh(x, tris, name)  # the rest after: welding can make a triangle degenerate or an
         # edge shared, and leaves no unused duplicate of a vertex
@@ -371,7 +373,13 @@ class ClothModel:
             pinned=pin_mask,
             triangles=tris,
             model=model,
-            meta={"source": name, "vertex_index": index, "density": density},
+            meta={
+                "source": name,
+                "vertex_index": index,
+                "density": density,
+                # named vertices (a garment's collar, sleeve ends, …), as particle indices
+                "landmarks": {k: int(index[i]) for k, i in landmarks.items()},
+            },
         )
 
     # ------------------------------------------------------------------ queries

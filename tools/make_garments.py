@@ -81,7 +81,27 @@ def _tshirt_outline() -> tuple[np.ndarray, list[tuple[int, int]]]:
     return corners, seams
 
 
-def tshirt() -> tuple[np.ndarray, np.ndarray]:
+#: the T-shirt's named points on its outline (metres, the waist's middle at the origin): what a
+#: garment task's key points and fold metric name (GarmentLab's collar, shoulders, sleeves, hem)
+TSHIRT_LANDMARKS = {
+    "hem_left": (-0.25, 0.0),
+    "hem_right": (0.25, 0.0),
+    "hem_middle": (0.0, 0.0),
+    "armpit_left": (-0.25, 0.45),
+    "armpit_right": (0.25, 0.45),
+    "sleeve_left_bottom": (-0.48, 0.42),
+    "sleeve_left_top": (-0.41, 0.56),
+    "sleeve_right_bottom": (0.48, 0.42),
+    "sleeve_right_top": (0.41, 0.56),
+    "shoulder_left": (-0.20, 0.65),
+    "shoulder_right": (0.20, 0.65),
+    "collar_left": (-0.09, 0.69),
+    "collar_right": (0.09, 0.69),
+    "collar_middle": (0.0, 0.62),
+}
+
+
+def tshirt() -> tuple[np.ndarray, np.ndarray, dict]:
     corners, seams = _tshirt_outline()
     # cut the outline, remembering which points lie on a seam side
     points, on_seam = [], []
@@ -119,7 +139,16 @@ def tshirt() -> tuple[np.ndarray, np.ndarray]:
     back = np.column_stack([xy[~shared], -z[~shared]])
     vertices = np.vstack([front, back])
     faces = np.vstack([tris, back_index[tris][:, ::-1]])
-    return vertices, faces
+    # the named points: outline corners (a seam's are one vertex of both panels); the middle of the
+    # neck and of the hem, once on the front panel and once on the back
+    landmarks = {}
+    for name, (x, y) in TSHIRT_LANDMARKS.items():
+        i = int(np.flatnonzero(np.all(np.abs(outline - (x, y)) < 1e-9, axis=1))[0])
+        if shared[i]:
+            landmarks[name] = i
+        else:
+            landmarks[f"{name}_front"], landmarks[f"{name}_back"] = i, int(back_index[i])
+    return vertices, faces, landmarks
 
 
 def towel() -> tuple[np.ndarray, np.ndarray]:
@@ -158,19 +187,31 @@ def write_obj(
     path.write_text("\n".join(lines) + "\n")
 
 
+def write_landmarks(path: Path, landmarks: dict, mesh: str) -> None:
+    """``<stem>.landmarks.yaml``: the named vertices (0-based indices of the OBJ's vertices), read
+    by :func:`cloth_sim.physics.mesh.read_landmarks`."""
+    lines = [
+        f"# named vertices of {mesh} (0-based, the file's vertex order); made by "
+        "tools/make_garments.py"
+    ]
+    lines += [f"{name}: {index}" for name, index in landmarks.items()]
+    path.write_text("\n".join(lines) + "\n")
+
+
 def main() -> None:
     OUT.mkdir(parents=True, exist_ok=True)
-    for name, make, title in (
-        (
-            "tshirt",
-            tshirt,
-            "A T-shirt: front and back panels joined at the shoulders, sleeves and sides",
-        ),
-        ("towel", towel, "A 0.5 m x 0.8 m towel"),
-    ):
-        v, f = make()
-        write_obj(OUT / f"{name}.obj", v, f, title)
-        print(f"{name}: {len(v)} vertices, {len(f)} triangles -> {OUT / (name + '.obj')}")
+    v, f, landmarks = tshirt()
+    write_obj(
+        OUT / "tshirt.obj",
+        v,
+        f,
+        "A T-shirt: front and back panels joined at the shoulders, sleeves and sides",
+    )
+    write_landmarks(OUT / "tshirt.landmarks.yaml", landmarks, "tshirt.obj")
+    print(f"tshirt: {len(v)} vertices, {len(f)} triangles, {len(landmarks)} landmarks -> {OUT}")
+    v, f = towel()
+    write_obj(OUT / "towel.obj", v, f, "A 0.5 m x 0.8 m towel")
+    print(f"towel: {len(v)} vertices, {len(f)} triangles -> {OUT / 'towel.obj'}")
     v, f = twist_sheet()
     write_obj(
         OUT / "twist_sheet.obj",

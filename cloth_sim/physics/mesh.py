@@ -134,6 +134,45 @@ def _read_file(path: Path) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(vertices), np.asarray(faces)
 
 
+#: a mesh file's named vertices live beside it, in ``<stem>.landmarks.yaml`` (``name: index``)
+LANDMARKS_SUFFIX = ".landmarks.yaml"
+
+
+def read_landmarks(source, n_vertices: int) -> dict[str, int]:
+    """The named vertices of mesh file ``source`` (collar, shoulders, sleeve ends, hem corners of a
+    garment: what a task's key points and metrics name), read from ``<stem>.landmarks.yaml``
+    beside it: a mapping of names (letters, digits and ``_``) to vertex indices of the file,
+    0-based. ``{}`` for a file without one, or for arrays. A malformed one raises ``ValueError``
+    naming the file and the entry."""
+    if not isinstance(source, (str, os.PathLike)):
+        return {}
+    path = Path(source)
+    side = path.with_name(path.stem + LANDMARKS_SUFFIX)
+    if not side.is_file():
+        return {}
+    import yaml
+
+    try:
+        data = yaml.safe_load(side.read_text())
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as e:
+        raise ValueError(f"{side}: cannot be read as YAML ({str(e).splitlines()[0]})") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{side}: expected a mapping of landmark names to vertex indices")
+    out = {}
+    for name, index in data.items():
+        if not (isinstance(name, str) and name.isidentifier() and name.isascii()):
+            raise ValueError(
+                f"{side}: landmark name {name!r} is not accepted: expected letters, digits and _"
+            )
+        if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < n_vertices:
+            raise ValueError(
+                f"{side}: landmark {name} = {index!r} is not accepted: expected a vertex index "
+                f"of {path.name}, an integer in [0, {n_vertices - 1}]"
+            )
+        out[name] = index
+    return out
+
+
 def weld(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(vertices, faces, index)``: vertices with bit-equal coordinates merged into the first of
     them, kept in the order of first appearance (so a mesh without duplicates is unchanged);

@@ -511,5 +511,55 @@ def test_the_shipped_garments_are_what_the_script_makes(tmp_path, monkeypatch):
 
     monkeypatch.setattr(make_garments, "OUT", tmp_path)
     make_garments.main()
-    for name in ("tshirt.obj", "towel.obj", "twist_sheet.obj"):
+    for name in ("tshirt.obj", "tshirt.landmarks.yaml", "towel.obj", "twist_sheet.obj"):
         assert (tmp_path / name).read_bytes() == (MESHES / name).read_bytes(), name
+
+
+def test_the_tshirts_landmarks_name_the_places_they_say():
+    """The garment's named vertices are where their names put them: the hem's corners at the
+    bottom of the side seams, the sleeves' ends the widest points, the shoulders and the collar on
+    the shoulder seams, and the middles of the neck and hem once on each panel (the front bulges
+    toward +z, the back toward −z)."""
+    model = ClothModel.from_mesh(MESHES / "tshirt.obj", density=0.2, stiffness=100.0)
+    marks = model.meta["landmarks"]
+    x = model.positions
+    assert len(marks) == 16 and len(set(marks.values())) == 16
+    at = {name: x[i] for name, i in marks.items()}
+    assert at["hem_left"][1] == at["hem_right"][1] == x[:, 1].min() == 0.0
+    assert at["hem_left"][0] == -0.25 and at["hem_right"][0] == 0.25
+    assert (
+        at["sleeve_left_bottom"][0] == x[:, 0].min()
+        and at["sleeve_right_bottom"][0] == x[:, 0].max()
+    )
+    for side, sign in (("left", -1), ("right", 1)):
+        assert sign * at[f"sleeve_{side}_top"][0] > sign * at[f"shoulder_{side}"][0] > 0.0
+        assert at[f"shoulder_{side}"][1] < at[f"collar_{side}"][1]
+        for name in ("hem", "armpit", "sleeve", "shoulder", "collar"):
+            for key in (k for k in marks if k.startswith(f"{name}_{side}")):
+                assert at[key][2] == 0.0, key  # on a seam: one vertex of both panels
+    for middle in ("hem_middle", "collar_middle"):
+        front, back = at[f"{middle}_front"], at[f"{middle}_back"]
+        assert np.array_equal(front[:2], back[:2]) and front[2] > 0.0 > back[2]
+    scene = load_scene("tshirt").build_model()  # placed by its scene: the same particles
+    assert scene.meta["landmarks"] == marks
+
+
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        ("collar: 99999\n", "landmark collar = 99999 is not accepted: expected a vertex index"),
+        ("collar: 1.5\n", "landmark collar = 1.5 is not accepted"),
+        ("'not a name': 1\n", "landmark name 'not a name' is not accepted"),
+        ("[1, 2]\n", "expected a mapping of landmark names to vertex indices"),
+        ("collar: [\n", "cannot be read as YAML"),
+    ],
+)
+def test_a_bad_landmarks_file_is_refused_naming_the_file_and_the_entry(tmp_path, text, words):
+    mesh = tmp_path / "sheet.obj"
+    mesh.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    (tmp_path / "sheet.landmarks.yaml").write_text(text)
+    with pytest.raises(ValueError) as e:
+        ClothModel.from_mesh(mesh, density=0.2, stiffness=1.0)
+    assert str(tmp_path / "sheet.landmarks.yaml") in str(e.value) and words in str(e.value)
+    (tmp_path / "sheet.landmarks.yaml").unlink()  # without one: no landmarks
+    assert ClothModel.from_mesh(mesh, density=0.2, stiffness=1.0).meta["landmarks"] == {}
