@@ -314,7 +314,8 @@ def check(
     :class:`Refusal`; both name the parameter."""
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
-    cfg = defaults(scene)
+    base = defaults(scene)
+    cfg = dict(base)
     for name, value in values.items():
         if name not in SCHEMA:
             raise ParameterError(
@@ -325,7 +326,7 @@ def check(
             )
         cfg[name] = SCHEMA[name].check(value)
     if changes_from is not None:
-        before = defaults(scene) if changes_from == SCENE_DEFAULTS else changes_from
+        before = base if changes_from == SCENE_DEFAULTS else changes_from
         reason = not_applicable(scene, cfg, before)
         if reason:
             names = GRID_ONLY if scene.mesh is not None else MESH_ONLY
