@@ -10,6 +10,7 @@ points):
 ``cloth_sim/ClothDrop-v0``         pickers, horizon 30, action repeat 16
 ``cloth_sim/ClothFlattenPPP-v0``   pick-and-place, horizon 20, action repeat 1
 ``cloth_sim/ClothFoldPPP-v0``      pick-and-place, horizon 20, action repeat 1
+``cloth_sim/TshirtFlatten-v0``     the T-shirt (:mod:`.garments`), pickers, horizon 100, repeat 8
 =================================  =========================================================
 
 Every keyword of :class:`~cloth_sim.envs.cloth_env.ClothEnv` can be passed to ``gymnasium.make``.
@@ -20,9 +21,19 @@ from __future__ import annotations
 import gymnasium
 
 from .cloth_env import ClothEnv
+from .garments import GarmentEnv, TshirtFlattenEnv
 from .tasks import ClothDropEnv, ClothFlattenEnv, ClothFoldEnv
 
-__all__ = ["ClothEnv", "ClothFlattenEnv", "ClothFoldEnv", "ClothDropEnv", "ENV_IDS", "register"]
+__all__ = [
+    "ClothEnv",
+    "ClothFlattenEnv",
+    "ClothFoldEnv",
+    "ClothDropEnv",
+    "GarmentEnv",
+    "TshirtFlattenEnv",
+    "ENV_IDS",
+    "register",
+]
 
 _ENVS = {
     "cloth_sim/ClothFlatten-v0": ("ClothFlattenEnv", {}),
@@ -33,6 +44,7 @@ _ENVS = {
         dict(action_mode="pickerpickplace", horizon=20),
     ),
     "cloth_sim/ClothFoldPPP-v0": ("ClothFoldEnv", dict(action_mode="pickerpickplace", horizon=20)),
+    "cloth_sim/TshirtFlatten-v0": ("garments:TshirtFlattenEnv", {}),
 }
 ENV_IDS = tuple(_ENVS)
 
@@ -41,7 +53,9 @@ def register() -> None:
     """Register the environments with Gymnasium (done on import; again is a no-op)."""
     for env_id, (cls, kwargs) in _ENVS.items():
         if env_id not in gymnasium.registry:
-            gymnasium.register(id=env_id, entry_point=f"cloth_sim.envs.tasks:{cls}", kwargs=kwargs)
+            module, _, name = cls.rpartition(":")
+            entry = f"cloth_sim.envs.{module or 'tasks'}:{name}"
+            gymnasium.register(id=env_id, entry_point=entry, kwargs=kwargs)
 
 
 register()

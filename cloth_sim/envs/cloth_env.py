@@ -155,15 +155,7 @@ class ClothEnv(gym.Env):
         self._check_task()
 
         self.model = self._model()
-        self.sim = Simulator(
-            self.model,
-            "symplectic_euler",
-            dt=FRAME / SUBSTEPS,
-            strain_limit=0.1,
-            colliders=[colliders.Plane(normal=(0, 0, 1), offset=0.0, friction=0.5, name="floor")],
-            thickness=self.thickness,
-            self_collision=self.self_collision,
-        )
+        self.sim = self._simulator()
         if not self.sim.step_is_stable():
             raise ValueError(
                 f"the cloth's springs need a step below {self.sim.stable_dt():.3g} s, "
@@ -186,9 +178,7 @@ class ClothEnv(gym.Env):
             0.01,
             *self.picker_bounds,
         )
-        self.corners = np.array(
-            [0, self.cols * (self.rows - 1), self.cols - 1, self.rows * self.cols - 1]
-        )
+        self.corners = self._key_points()
         self.states = initial_states.Cache(self.task, self._cache_key(), self._generate, cache_dir)
 
         p = self.num_picker
@@ -261,6 +251,25 @@ class ClothEnv(gym.Env):
             damping={"structural": 2 * m, "shear": 2 * m, "bend": 0.5 * m},
         )
 
+    #: simulation steps a frame (each ``FRAME / substeps``)
+    substeps = SUBSTEPS
+
+    def _simulator(self) -> Simulator:
+        """Symplectic Euler, ``substeps`` steps a frame, Provot's strain limit, a floor."""
+        return Simulator(
+            self.model,
+            "symplectic_euler",
+            dt=FRAME / self.substeps,
+            strain_limit=0.1,
+            colliders=[colliders.Plane(normal=(0, 0, 1), offset=0.0, friction=0.5, name="floor")],
+            thickness=self.thickness,
+            self_collision=self.self_collision,
+        )
+
+    def _key_points(self) -> np.ndarray:
+        """The particles ``"key_point"`` observes: the grid's four corners."""
+        return np.array([0, self.cols * (self.rows - 1), self.cols - 1, self.rows * self.cols - 1])
+
     def _cache_key(self) -> dict:
         return dict(
             task=self.task,
@@ -270,7 +279,7 @@ class ClothEnv(gym.Env):
             num_picker=self.num_picker,
             self_collision=self.self_collision,
             frame=FRAME,
-            substeps=SUBSTEPS,
+            substeps=self.substeps,
             thickness=self.thickness,
         )
 
@@ -291,7 +300,7 @@ class ClothEnv(gym.Env):
     def frames(self, n: int, until=None) -> int:
         """Step ``n`` frames with nothing held moving, or fewer: until ``until()`` holds."""
         for i in range(n):
-            self.sim.step(SUBSTEPS)
+            self.sim.step(self.substeps)
             if until is not None and until():
                 return i + 1
         return n
@@ -330,7 +339,7 @@ class ClothEnv(gym.Env):
         a = self._check_action(action)
         if self.action_mode == "picker":
             for _ in range(self.action_repeat):
-                self.pickers.frame(self.sim, a[:, :3], a[:, 3] > 0.5, SUBSTEPS)
+                self.pickers.frame(self.sim, a[:, :3], a[:, 3] > 0.5, self.substeps)
         else:
             self._pick_place(a)
         self.steps += 1
@@ -346,9 +355,9 @@ class ClothEnv(gym.Env):
         pick = a[:, 3] > 0.5
         for i in range(min(n, PICK_PLACE_FRAMES)):
             delta = (end - self.pickers.positions) / (n - i)
-            self.pickers.frame(self.sim, delta, pick, SUBSTEPS)
+            self.pickers.frame(self.sim, delta, pick, self.substeps)
         if n == 0:  # no move: the flags still act, over one frame
-            self.pickers.frame(self.sim, np.zeros((self.num_picker, 3)), pick, SUBSTEPS)
+            self.pickers.frame(self.sim, np.zeros((self.num_picker, 3)), pick, self.substeps)
 
     def _check_action(self, action) -> np.ndarray:
         shape = self.action_space.shape

@@ -35,15 +35,65 @@ def _action(env, delta, pick: bool) -> np.ndarray:
 
 def flatten(env):
     """Pick the two corners of an edge (the pair farthest apart of the cloth's four corners that
-    share an edge), lift them until the cloth hangs free, pull them apart to the edge's length,
-    then drag them across the floor away from where the cloth hangs while lowering, and let go: the
-    cloth is laid down flat behind them."""
+    share an edge), then :func:`_lay_down`."""
     x = env.sim.positions
     c = env.corners
     # the four edges: their corners, their rest length and the other side's
     w, h = env.spacing * (env.cols - 1), env.spacing * (env.rows - 1)
     edges = [(c[0], c[2], w, h), (c[1], c[3], w, h), (c[0], c[1], h, w), (c[2], c[3], h, w)]
-    a, b, edge, length = max(edges, key=lambda e: np.linalg.norm(x[e[0], :2] - x[e[1], :2]))
+    yield from _lay_down(env, *max(edges, key=lambda e: np.linalg.norm(x[e[0], :2] - x[e[1], :2])))
+
+
+def flatten_garment(
+    env,
+    a: str = "hem_left",
+    b: str = "hem_right",
+    then=(("sleeve_left_bottom", "sleeve_right_bottom"), ("shoulder_left", "shoulder_right")),
+):
+    """A garment by two of its landmarks (the hem's corners: one vertex of both panels each),
+    :func:`_lay_down` (spread to their distance laid flat, the garment trailing its length from
+    them); then each pair of ``then`` picked and placed where the garment laid flat has it, seen
+    from where the first two now lie (the sleeves, then the shoulders)."""
+    marks = env.model.meta["landmarks"]
+    flat = env.flat_positions()
+    i, j = marks[a], marks[b]
+    edge = float(np.linalg.norm(flat[i, :2] - flat[j, :2]))
+    d = (flat[j, :2] - flat[i, :2]) / edge
+    across = flat[:, :2] @ np.array([-d[1], d[0]])  # how far the garment reaches from the line ab
+    length = float(np.abs(across - across[i]).max())
+    yield from _lay_down(env, i, j, edge, length)
+    for pair in then:
+        x = env.sim.positions
+        # the flat layout placed on the line a–b as it lies now, the rest of it on the side away
+        # from where the garment lies
+        now = x[j, :2] - x[i, :2]
+        now /= max(np.linalg.norm(now), 1e-9)
+        rot = np.array([[now[0], -now[1]], [now[1], now[0]]]) @ np.array(
+            [[d[0], d[1]], [-d[1], d[0]]]
+        )
+        centre = x[:, :2].mean(axis=0)
+        side = np.sign((centre - x[i, :2]) @ np.array([-now[1], now[0]])) or 1.0
+        flip = np.sign((flat[:, :2].mean(axis=0) - flat[i, :2]) @ np.array([-d[1], d[0]])) or 1.0
+        if side != flip:  # mirrored across the line a–b
+            rot = rot @ (np.eye(2) - 2 * np.outer([-d[1], d[0]], [-d[1], d[0]]))
+        ks = [marks[n] for n in pair]
+        goal = [(rot @ (flat[k, :2] - flat[i, :2])) + x[i, :2] for k in ks]
+        low = env.pickers.low[2] + 0.02
+        yield from _go(env, x[ks], pick=False)
+        yield from _go(env, x[ks], pick=True, settle=1)
+        up = env.pickers.positions.copy()
+        up[:, 2] = low + 0.1
+        yield from _go(env, up, pick=True)
+        yield from _go(env, [[*g, low + 0.1] for g in goal], pick=True)
+        yield from _go(env, [[*g, low] for g in goal], pick=True, settle=1)
+        yield from _go(env, env.pickers.positions, pick=False, settle=2)
+
+
+def _lay_down(env, a: int, b: int, edge: float, length: float):
+    """Pick particles ``a`` and ``b``, lift them until the cloth hangs, pull them apart to
+    ``edge``, then drag them across the floor away from where the cloth hangs while lowering,
+    about ``length``, and let go: the cloth is laid down flat behind them."""
+    x = env.sim.positions
     yield from _go(env, [x[a], x[b]], pick=False)
     yield from _go(env, [x[a], x[b]], pick=True, settle=1)
     top = env.pickers.high[2]
