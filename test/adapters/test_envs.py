@@ -14,11 +14,6 @@ from cloth_sim.envs import metrics, policies  # noqa: E402
 TASKS = ("ClothFlatten", "ClothFold", "ClothDrop")
 
 
-@pytest.fixture(scope="module")
-def cache(tmp_path_factory):
-    return str(tmp_path_factory.mktemp("initial_states"))
-
-
 def make(task, cache, **kw):
     kw.setdefault("num_variations", 2)
     return gym.make(f"cloth_sim/{task}-v0", cache_dir=cache, **kw)

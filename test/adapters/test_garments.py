@@ -11,11 +11,6 @@ import cloth_sim.envs  # noqa: E402,F401  (registers the ids)
 from cloth_sim.envs import policies  # noqa: E402
 
 
-@pytest.fixture(scope="module")
-def cache(tmp_path_factory):
-    return str(tmp_path_factory.mktemp("garment_states"))
-
-
 def make(task, cache, **kw):
     kw.setdefault("num_variations", 1)
     return gym.make(f"cloth_sim/{task}-v0", cache_dir=cache, **kw)
