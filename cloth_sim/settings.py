@@ -111,11 +111,17 @@ def defaults(scene: Scene) -> dict:
     return values
 
 
+def inapplicable_changes(scene: Scene, cand: dict, current: dict) -> list[str]:
+    """The parameters ``scene``'s cloth does not have (a grid's size on a mesh, a mesh's density
+    on a grid) that ``cand`` changes from ``current``."""
+    names = GRID_ONLY if scene.mesh is not None else MESH_ONLY
+    return [n for n in names if cand[n] != current[n]]
+
+
 def not_applicable(scene: Scene, cand: dict, current: dict) -> str | None:
     """The reason to refuse a change of a parameter ``scene``'s cloth does not have (a grid's size
     on a mesh, a mesh's density on a grid), ``None`` when there is none."""
-    names = GRID_ONLY if scene.mesh is not None else MESH_ONLY
-    changed = [n for n in names if cand[n] != current[n]]
+    changed = inapplicable_changes(scene, cand, current)
     if not changed:
         return None
     if scene.mesh is not None:
@@ -329,8 +335,7 @@ def check(
         before = base if changes_from == SCENE_DEFAULTS else changes_from
         reason = not_applicable(scene, cfg, before)
         if reason:
-            names = GRID_ONLY if scene.mesh is not None else MESH_ONLY
-            raise Refusal(reason, [n for n in names if cfg[n] != before[n]], "applicable")
+            raise Refusal(reason, inapplicable_changes(scene, cfg, before), "applicable")
     try:
         built = model(cfg, scene) if model is not None else build_model(cfg, scene)
     except ValueError as e:

@@ -241,12 +241,11 @@ class ParameterGate:
                 model=self._model if rebuild else (lambda cfg, scene: running),
             )
         except settings.Refusal as e:
-            reason = {
-                "applicable": str(e),
-                "model": f"scene: {e}",  # a scene whose mesh changed since, say
-                # a combination: its reason names what changed as well as what it is about
-                "combination": self._blame(parameters, cand, str(e), e.named),
-            }[e.stage]
+            reason = str(e)
+            if e.stage == "model":  # a scene whose mesh changed since, say
+                reason = f"scene: {e}"
+            elif e.stage == "combination":  # named with what else the request changed
+                reason = self._blame(parameters, cand, reason, e.named)
             return SetParametersResult(successful=False, reason=reason)
         model, limit = checked.model, checked.stable_dt
         self._validated = (cand, scene if rebuild else None, model if rebuild else None, limit)

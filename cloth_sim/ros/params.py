@@ -60,23 +60,6 @@ def check_value(name: str, value):
 
 
 # the plain-value parts live in the core (the sweeps use them too)
-from ..settings import (  # noqa: E402
-    GRID_ONLY,
-    MESH_ONLY,
-    UNUSED_VALUES,
-    defaults,
-    not_applicable,
-    scene_values,
-)
+from ..settings import defaults, scene_values  # noqa: E402
 
-__all__ = [
-    "GRID_ONLY",
-    "MESH_ONLY",
-    "UNUSED_VALUES",
-    "check_value",
-    "defaults",
-    "descriptor",
-    "not_applicable",
-    "scene_values",
-    "type_name",
-]
+__all__ = ["check_value", "defaults", "descriptor", "scene_values", "type_name"]
