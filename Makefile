@@ -21,7 +21,7 @@ SCENE    ?= hanging
 # install here; the interfaces' cmake steps leave a core idle)
 MAKEFLAGS += --jobs=2
 
-.PHONY: install run test lint fuzz bench bench-peers clean
+.PHONY: install run test lint fuzz bench bench-peers bench-learning clean
 install: $(STAMP) $(KERNELS) $(MSGS)
 
 $(STAMP): requirements.txt setup.py pyproject.toml
@@ -75,6 +75,18 @@ bench-peers: install
 	$(VENV)/bin/cloth-sim bench vbd-peers
 	$(VENV)/bin/cloth-sim bench flex-peer
 
+# a LeRobot dataset of ClothFold's scripted policy (100 episodes, about 2 minutes), then LeRobot's ACT
+# trained on it on the CPU and played against the scripted and a random policy (about 5 minutes),
+# in .venv-learning: LeRobot and torch (requirements-learning.txt, ~8 GB, its own venv: see there)
+LVENV ?= .venv-learning
+bench-learning: install
+	$(VENV)/bin/cloth-sim dataset ClothFold -o build/datasets/ClothFold --episodes 100 --no-progress
+	@test -x $(LVENV)/bin/python || $(PYTHON) -m venv $(LVENV)
+	$(LVENV)/bin/python -m pip install --disable-pip-version-check -q -r requirements-learning.txt
+	$(LVENV)/bin/python -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation \
+		--config-settings editable_mode=compat -e .
+	HF_HUB_OFFLINE=1 $(LVENV)/bin/python examples/learning/train_act.py --dataset build/datasets/ClothFold
+
 clean:
-	rm -rf $(VENV) .ros_log build install log *.egg-info
+	rm -rf $(VENV) $(LVENV) .ros_log build install log *.egg-info
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +

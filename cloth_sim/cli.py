@@ -233,8 +233,55 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="OUT",
         help="print counts by status and the slowest runs of the sweep in OUT, and run nothing",
     )
+    sw.add_argument(
+        "--format",
+        choices=("bags", "lerobot"),
+        default="bags",
+        help="lerobot: also OUT/lerobot, a LeRobot dataset (v3.0) of the runs, an episode a run, "
+        "the script's grippers its actions (the spec needs a script)",
+    )
+    sw.add_argument(
+        "--overwrite", action="store_true", help="replace another dataset in OUT/lerobot"
+    )
     sw.add_argument("--no-progress", action="store_true", help="no progress bar")
     sw.set_defaults(func=_sweep)
+    ds = sub.add_parser(
+        "dataset",
+        help="episodes of a task under a policy, on Ray, written as a LeRobot dataset (v3.0) "
+        "in DIR; again to resume",
+        description="Write a LeRobotDataset v3.0 of a cloth_sim task (see the README's "
+        "'Datasets'): observation.state (key points and pickers), action, the camera's colour "
+        "and depth video, next.reward, next.done. The same command again resumes.",
+    )
+    ds.add_argument(
+        "task", metavar="TASK", help="a task: TshirtFold, ClothFold, … or its id cloth_sim/…-v0"
+    )
+    ds.add_argument("-o", "--output", metavar="DIR", required=True, help="the dataset's root")
+    ds.add_argument("--policy", default="scripted", help="scripted (default) or random")
+    ds.add_argument("--episodes", type=int, default=50, metavar="N", help="default 50")
+    ds.add_argument(
+        "--observation",
+        default="key_point",
+        help="key_point (default), point_cloud or depth: the env's observation, kept lossless "
+        "beside the key points and the videos",
+    )
+    ds.add_argument("--seed", type=int, default=0, metavar="S", help="default 0")
+    ds.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        metavar="N",
+        help="episodes at a time (default: every CPU of this machine or the cluster)",
+    )
+    ds.add_argument(
+        "--address", default=None, metavar="ADDRESS", help="join this Ray cluster instead"
+    )
+    ds.add_argument(
+        "--overwrite", action="store_true", help="replace a dataset DIR holds (of another command)"
+    )
+    ds.add_argument("--image-size", type=int, default=128, metavar="PX", help="default 128")
+    ds.add_argument("--no-progress", action="store_true", help="no progress bar")
+    ds.set_defaults(func=_dataset)
     ri = sub.add_parser(
         "reindex", help="make a bag whose recorder died whole again (MCAP summary, metadata.yaml)"
     )
@@ -251,6 +298,11 @@ def _sweep(args) -> int:
         return 0
     if not args.spec or not args.output:
         raise ValueError("sweep needs SPEC.yaml and -o OUT (or --summary OUT)")
+    if args.format == "lerobot":
+        from .dataset import sweep_export
+        from .sweep.spec import load_spec
+
+        sweep_export.check(load_spec(args.spec))
     t = time.perf_counter()
     counts = engine.sweep(
         args.spec,
@@ -268,6 +320,47 @@ def _sweep(args) -> int:
             if counts[s] or s == "ok"
         )
         + f"; {time.perf_counter() - t:.1f} s; {Path(args.output) / 'runs.parquet'}"
+    )
+    if args.format == "lerobot":
+        from .dataset import sweep_export
+        from .sweep.spec import load_spec
+
+        writer = sweep_export.export(
+            load_spec(args.spec),
+            args.output,
+            workers=args.workers,
+            address=args.address,
+            overwrite=args.overwrite,
+            progress=not args.no_progress,
+        )
+        print(
+            f"dataset {writer.root}: {writer.episodes} episodes (the runs that ended ok), "
+            f"{writer.info['total_frames']} frames at {writer.info['fps']:g} fps"
+        )
+    return 0
+
+
+def _dataset(args) -> int:
+    from .dataset import engine
+
+    t = time.perf_counter()
+    writer = engine.generate(
+        args.task,
+        args.output,
+        policy=args.policy,
+        episodes=args.episodes,
+        observation=args.observation,
+        seed=args.seed,
+        workers=args.workers,
+        address=args.address,
+        overwrite=args.overwrite,
+        image_size=args.image_size,
+        progress=not args.no_progress,
+    )
+    info = writer.info
+    print(
+        f"dataset {args.output}: {info['total_episodes']} episodes, {info['total_frames']} "
+        f"frames at {info['fps']:g} fps; {time.perf_counter() - t:.1f} s"
     )
     return 0
 

@@ -1,8 +1,9 @@
-"""The garment tasks' scores and speed: ``cloth_sim/TshirtFlatten-v0`` over ``--seeds`` variations,
-the scripted policy (:func:`cloth_sim.envs.policies.flatten_garment`) against seeded random actions
-for as many env steps, and env steps per second of each (self-contact on, ``vbd`` a frame a step).
+"""The garment tasks' scores and speed: ``cloth_sim/TshirtFlatten-v0`` and ``TshirtFold-v0`` over
+``--seeds`` variations, the scripted policy (:data:`cloth_sim.envs.policies.SCRIPTED`) against
+seeded random actions for as many env steps, and env steps per second of each (self-contact on,
+``vbd`` a frame a step).
 
-    .venv/bin/python -m cloth_sim.bench.garments [--seeds 20] [--cache DIR]
+    .venv/bin/python -m cloth_sim.bench.garments [--seeds 20] [--task TshirtFold] [--cache DIR]
 
 The initial states are generated into ``--cache`` first (about 11 s a variation here), so
 generation is not timed. Prints a Markdown table and the means.
@@ -19,23 +20,33 @@ import numpy as np
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--seeds", type=int, default=20)
+    p.add_argument("--task", nargs="+", default=["TshirtFlatten", "TshirtFold"])
     p.add_argument("--cache", default=None, help="initial-state cache (default: the user cache)")
     args = p.parse_args(argv)
-    from cloth_sim.envs import policies
-    from cloth_sim.envs.garments import TshirtFlattenEnv
+    for task in args.task:
+        run(task, args.seeds, args.cache)
 
-    env = TshirtFlattenEnv(num_variations=args.seeds, cache_dir=args.cache)
+
+def run(task: str, seeds: int, cache) -> None:
+    from cloth_sim.envs import garments, policies
+
+    env = getattr(garments, f"{task}Env")(num_variations=seeds, cache_dir=cache)
+    start_column = (
+        "start coverage / flat" if task == "TshirtFlatten" else "start shape distance (m)"
+    )
     print(
-        "| variation | start coverage / flat | scripted | env steps | random | steps/s scripted | "
-        "steps/s random |"
+        f"\n### {task}\n\n| variation | {start_column} | scripted | env steps | random | "
+        "steps/s scripted | steps/s random |"
     )
     print("|---|---|---|---|---|---|---|")
     rows = []
-    for v in range(args.seeds):
+    for v in range(seeds):
         env.reset(seed=v, options={"variation": v})  # generates (untimed) on first use
-        start = env.area_start / env.area_flat
+        start = (
+            env.area_start / env.area_flat if task == "TshirtFlatten" else -env.performance_start
+        )
         t, n = time.perf_counter(), 0
-        for action in policies.flatten_garment(env):
+        for action in policies.SCRIPTED[task](env):
             *_, info = env.step(action)
             n += 1
         scripted, rate = info["normalized_performance"], n / (time.perf_counter() - t)
@@ -53,8 +64,9 @@ def main(argv=None) -> None:
         )
     s, r, a, b = np.array(rows).T
     print(
-        f"\nscripted {s.mean():.3f} ± {s.std():.3f} (min {s.min():.3f}), random {r.mean():.3f} "
-        f"± {r.std():.3f}; env steps/s {a.mean():.1f} scripted, {b.mean():.1f} random"
+        f"\n{task}: scripted {s.mean():.3f} ± {s.std():.3f} (min {s.min():.3f}), random "
+        f"{r.mean():.3f} ± {r.std():.3f}; env steps/s {a.mean():.1f} scripted, {b.mean():.1f} "
+        "random"
     )
 
 

@@ -11,6 +11,7 @@ points):
 ``cloth_sim/ClothFlattenPPP-v0``   pick-and-place, horizon 20, action repeat 1
 ``cloth_sim/ClothFoldPPP-v0``      pick-and-place, horizon 20, action repeat 1
 ``cloth_sim/TshirtFlatten-v0``     the T-shirt (:mod:`.garments`), pickers, horizon 100, repeat 8
+``cloth_sim/TshirtFold-v0``        the T-shirt, pickers, horizon 100, repeat 8
 =================================  =========================================================
 
 Every keyword of :class:`~cloth_sim.envs.cloth_env.ClothEnv` can be passed to ``gymnasium.make``.
@@ -21,7 +22,7 @@ from __future__ import annotations
 import gymnasium
 
 from .cloth_env import ClothEnv
-from .garments import GarmentEnv, TshirtFlattenEnv
+from .garments import GarmentEnv, TshirtFlattenEnv, TshirtFoldEnv
 from .tasks import ClothDropEnv, ClothFlattenEnv, ClothFoldEnv
 
 __all__ = [
@@ -31,6 +32,7 @@ __all__ = [
     "ClothDropEnv",
     "GarmentEnv",
     "TshirtFlattenEnv",
+    "TshirtFoldEnv",
     "ENV_IDS",
     "register",
 ]
@@ -45,6 +47,7 @@ _ENVS = {
     ),
     "cloth_sim/ClothFoldPPP-v0": ("ClothFoldEnv", dict(action_mode="pickerpickplace", horizon=20)),
     "cloth_sim/TshirtFlatten-v0": ("garments:TshirtFlattenEnv", {}),
+    "cloth_sim/TshirtFold-v0": ("garments:TshirtFoldEnv", {}),
 }
 ENV_IDS = tuple(_ENVS)
 

@@ -93,6 +93,8 @@ class ClothEnv(gym.Env):
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": 15}
     #: the task's name (the cache's key and the seed's first word)
     task = "Cloth"
+    #: what the task asks, in words (a dataset's task string)
+    instruction = ""
     defaults = dict(horizon=100, action_repeat=8)
     #: bounds of the pickers' centres, (x, y, z) low and high before centring, z up: SoftGym's
     #: ``(-0.4, 0, -0.4)``–``(1.0, 0.5, 0.4)`` (y up) less the picker's radius, but down to the
@@ -394,9 +396,7 @@ class ClothEnv(gym.Env):
         )
         mode = self.observation_mode
         if mode == "key_point":
-            obs = np.concatenate(
-                [self.sim.positions[self.corners].ravel(), self.pickers.positions.ravel()]
-            ).astype(np.float32)
+            obs = self.key_point_state()
         else:
             frame = self.cam.render(self.sim)
             if mode == "depth":
@@ -412,6 +412,13 @@ class ClothEnv(gym.Env):
                 pick = (self.pickers.positions - self.cam.position) @ self.cam.rotation
                 obs = np.concatenate([cloud.ravel(), pick.ravel().astype(np.float32)])
         return obs, info
+
+    def key_point_state(self) -> np.ndarray:
+        """The ``"key_point"`` observation (whatever the mode): the key points, then the pickers,
+        ``x, y, z`` each, float32."""
+        return np.concatenate(
+            [self.sim.positions[self.corners].ravel(), self.pickers.positions.ravel()]
+        ).astype(np.float32)
 
     def render(self):
         if self.render_mode is None:

@@ -7,6 +7,9 @@
 * :func:`fold_distance` — ClothFold's performance: minus the mean distance between each particle of
   one half and its mirror image in the other, minus 1.2 × the mean distance the other half moved.
 * :func:`mean_distance` — ClothDrop's: minus the mean distance to the target (flat) positions.
+* :func:`shape_distance` — TshirtFold's: how far the distances between a garment's landmarks, pair
+  by pair, are from those of the garment folded as asked (blind to where it lies and which way it
+  faces).
 * :func:`normalized` — ``(p − p₀) / (p_best − p₀)``: 0 at the start, 1 at the best possible.
 """
 
@@ -59,6 +62,16 @@ def fold_distance(positions, initial, group_a, group_b) -> tuple[float, float, f
 def mean_distance(positions, target) -> float:
     """Mean distance of the particles from their ``target`` positions (m)."""
     return float(np.mean(np.linalg.norm(np.asarray(positions, float) - target, axis=1)))
+
+
+def shape_distance(positions, target) -> float:
+    """Mean over the pairs ``(i, j)`` of points of ``| |x_i − x_j| − |t_i − t_j| |`` (m): 0 when
+    ``positions`` are ``target`` moved rigidly (or mirrored), whatever the frame."""
+    x, t = np.asarray(positions, float), np.asarray(target, float)
+    i, j = np.triu_indices(len(t), 1)
+    return float(
+        np.mean(np.abs(np.linalg.norm(x[i] - x[j], axis=1) - np.linalg.norm(t[i] - t[j], axis=1)))
+    )
 
 
 def normalized(performance: float, initial: float, best: float) -> float:

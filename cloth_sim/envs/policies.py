@@ -129,11 +129,42 @@ def fold(env):
     let go there."""
     x = env.sim.positions
     c = env.corners
-    src, dst = x[[c[0], c[1]]], x[[c[2], c[3]]]
+    yield from _carry_over(env, x[[c[0], c[1]]], x[[c[2], c[3]]])
+
+
+def fold_garment(env):
+    """The garment's fold (:meth:`~cloth_sim.envs.garments.TshirtFoldEnv.folds`), fold by fold:
+    the fold's two landmarks picked and carried over its line to their mirror images, where the
+    garment lies now (the flat layout fitted to its landmarks)."""
+    marks = env.model.meta["landmarks"]
+    for (a, b), point, normal in env.folds():
+        ks = [marks[a], marks[b]]
+        x = env.sim.positions
+        rot, shift = rigid_fit(
+            env.flat_positions()[list(marks.values()), :2], x[list(marks.values()), :2]
+        )
+        p, n = rot @ point + shift, rot @ normal
+        src = x[ks]
+        dst = src.copy()
+        dst[:, :2] -= 2 * np.outer((src[:, :2] - p) @ n, n)
+        yield from _carry_over(env, src, dst)
+
+
+def rigid_fit(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rotation and shift taking the 2-D points ``a`` nearest ``b`` (least squares: Kabsch)."""
+    ca, cb = a.mean(axis=0), b.mean(axis=0)
+    u, _, vt = np.linalg.svd((a - ca).T @ (b - cb))
+    d = np.sign(np.linalg.det(u @ vt)) or 1.0
+    rot = (u @ np.diag([1.0, d]) @ vt).T
+    return rot, cb - rot @ ca
+
+
+def _carry_over(env, src, dst):
+    """Pick the particles at ``src`` (one row per picker), carry them over in a half circle about
+    the crease midway to ``dst`` (the held edge's path when the cloth folds without stretching or
+    sliding), to 3 cm above ``dst``, and let go there."""
     yield from _go(env, src, pick=False)
     yield from _go(env, src, pick=True, settle=1)
-    # along a half circle about the crease, the held edge's path when the cloth folds without
-    # stretching or sliding
     crease = (src + dst) / 2
     for angle in np.linspace(np.pi / 6, np.pi, 6):
         yield from _go(
@@ -145,3 +176,12 @@ def fold(env):
         )
     yield from _go(env, dst + (0.0, 0.0, 0.03), pick=True, settle=1)
     yield from _go(env, env.pickers.positions, pick=False, settle=3)
+
+
+#: each task's scripted policy (the picker action mode's), by the task's name (``env.task``)
+SCRIPTED = {
+    "ClothFlatten": flatten,
+    "ClothFold": fold,
+    "TshirtFlatten": flatten_garment,
+    "TshirtFold": fold_garment,
+}

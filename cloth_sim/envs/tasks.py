@@ -28,6 +28,7 @@ MAX_WAIT = 300  # frames (5 s), SoftGym's max_wait_step
 
 class ClothFlattenEnv(ClothEnv):
     task = "ClothFlatten"  # SoftGym's horizon 100 and action repeat 8: ClothEnv's defaults
+    instruction = "Spread the crumpled cloth out flat on the floor."
 
     def _generate(self, rng):
         x = self.lay_flat()
@@ -73,6 +74,7 @@ class ClothFlattenEnv(ClothEnv):
 
 class ClothFoldEnv(ClothEnv):
     task = "ClothFold"
+    instruction = "Fold the cloth in half, its left half onto its right."
 
     def _generate(self, rng):
         self.lay_flat()
@@ -106,6 +108,7 @@ class ClothFoldEnv(ClothEnv):
 
 class ClothDropEnv(ClothEnv):
     task = "ClothDrop"
+    instruction = "Lay the hanging cloth flat on the floor at its target."
     defaults = dict(horizon=30, action_repeat=16)
     picker_bounds = ((-0.28, -0.48, 0.52), (0.48, 0.48, 1.98))
     camera = dict(position=(1.3, -1.1, 1.1), look_at=(0.15, 0.0, 0.3), fov=45.0)

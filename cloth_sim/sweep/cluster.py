@@ -13,6 +13,8 @@ authentication accepts such a driver too. ``RAY_AUTH_MODE`` set by the user is l
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import os
 import sys
 from pathlib import Path
@@ -71,3 +73,46 @@ def join_error(address: str, error: BaseException) -> str | None:
         f"~/.ray/auth_token (`ray get-auth-token` on the head prints it) to ~/.ray/auth_token, "
         f"or set RAY_AUTH_TOKEN to it, or RAY_AUTH_TOKEN_PATH to a file holding it, {then}"
     )
+
+
+#: each Ray worker's threads: one task a CPU, one thread a task
+WORKER_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1"}
+
+
+@contextlib.contextmanager
+def session(workers: int | None, address: str | None, error=ValueError):
+    """Ray for a driver: this process's connection if it has one, else a cluster joined at
+    ``address`` (with token authentication as above; a refusal raised as ``error`` saying what to
+    set), else Ray started here with ``workers`` CPUs (default all). Yields the number of tasks to
+    keep running (``workers``, or the cluster's CPUs); shuts down what it started."""
+    running = "ray" in sys.modules and sys.modules["ray"].is_initialized()
+    source = prepare_join(address) if not running else None
+    import ray
+
+    started = not ray.is_initialized()
+    if started:
+        kw = dict(
+            include_dashboard=False,
+            logging_level=logging.WARNING,
+            runtime_env={"env_vars": WORKER_ENV},
+        )
+        if address:
+            if source:
+                print(
+                    f"joining {address} with token authentication (the token from {source})",
+                    file=sys.stderr,
+                )
+            try:
+                ray.init(address=address, **kw)
+            except Exception as e:  # Ray raises ConnectionError, the AuthenticationError its cause
+                message = join_error(address, e)
+                if message is None:
+                    raise
+                raise error(message) from None
+        else:
+            ray.init(address="local", num_cpus=workers or os.cpu_count(), **kw)
+    try:
+        yield workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
+    finally:
+        if started:
+            ray.shutdown()

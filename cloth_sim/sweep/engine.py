@@ -19,7 +19,6 @@
 from __future__ import annotations
 
 import json
-import logging
 import os
 import shutil
 import sys
@@ -125,36 +124,10 @@ def sweep(
 
 
 def _run_on_ray(spec, out, pending, total, counts, workers, address, progress) -> None:
-    source = cluster.prepare_join(address) if not _ray_running() else None
     import ray
     from tqdm import tqdm
 
-    env = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1"}
-    started = not ray.is_initialized()
-    if started:
-        kw = dict(
-            include_dashboard=False, logging_level=logging.WARNING, runtime_env={"env_vars": env}
-        )
-        if address:
-            if source:
-                print(
-                    f"joining {address} with token authentication (the token from {source})",
-                    file=sys.stderr,
-                )
-            try:
-                ray.init(address=address, **kw)
-            except (
-                Exception
-            ) as e:  # Ray raises ConnectionError, with the AuthenticationError as cause
-                message = cluster.join_error(address, e)
-                if message is None:
-                    raise
-                raise SpecError(message) from None
-        else:
-            ray.init(address="local", num_cpus=workers or os.cpu_count(), **kw)
-    try:
-        if workers is None:
-            workers = max(1, int(ray.cluster_resources().get("CPU", 1)))
+    with cluster.session(workers, address, SpecError) as workers:
         task = ray.remote(num_cpus=1, max_retries=3)(_remote_execute)
         spec_ref = ray.put(spec)
         out_s = str(out.resolve())
@@ -186,15 +159,6 @@ def _run_on_ray(spec, out, pending, total, counts, workers, address, progress) -
                 bar.update(1)
                 bar.set_postfix(_postfix(counts), refresh=False)
         bar.close()
-    finally:
-        if started:
-            ray.shutdown()
-
-
-def _ray_running() -> bool:
-    """Whether this process is already connected to Ray (then the sweep uses that connection)."""
-    ray = sys.modules.get("ray")
-    return ray is not None and ray.is_initialized()
 
 
 def _postfix(counts: Counter) -> dict:

@@ -68,7 +68,7 @@ def execute(spec: Spec, run: dict, out) -> dict:
     tmp = out / ".partial" / uuid.uuid4().hex / rid
     tmp.parent.mkdir(parents=True)
     try:
-        row = _simulate(spec, run, rid, tmp)  # (the bag makes the directory)
+        row = simulate(spec, run, rid, tmp)  # (the bag makes the directory)
         tmp.mkdir(exist_ok=True)
         kept = {k: v for k, v in row.items() if k not in TIMINGS}
         (tmp / "row.json").write_text(json.dumps(kept, sort_keys=True, allow_nan=True))
@@ -87,7 +87,9 @@ def execute(spec: Spec, run: dict, out) -> dict:
         shutil.rmtree(tmp.parent, ignore_errors=True)
 
 
-def _simulate(spec: Spec, run: dict, rid: str, tmp: Path) -> dict:
+def simulate(spec: Spec, run: dict, rid: str, tmp: Path | None, recorder=None) -> dict:
+    """The run, its frames to the bag in ``tmp`` (none when the spec has ``frames: 0``), or to
+    ``recorder(sim, cfg)``'s ``frame(sim)`` (and ``close()``) instead; returns its row."""
     t0 = time.perf_counter()
     params, variables = spec.values_for(run)
     row = {
@@ -114,7 +116,10 @@ def _simulate(spec: Spec, run: dict, rid: str, tmp: Path) -> dict:
         return row
     row["stable_dt"] = float(stable_dt)
     script = Script([resolve(e, variables) for e in spec.script])
-    bag = _Bag(tmp, sim, cfg, stable_dt) if spec.frames > 0 else None
+    if recorder is not None:
+        bag = recorder(sim, cfg)
+    else:
+        bag = _Bag(tmp, sim, cfg, stable_dt) if spec.frames > 0 else None
     n_steps = max(0, math.ceil(spec.duration / sim.dt - 1e-9))
     # frame k at the first step at or after k/frames
     frame_times = (

@@ -13,6 +13,7 @@ EDGE = (
     "cloth_sim.bag",
     "cloth_sim.sweep",
     "cloth_sim.envs",
+    "cloth_sim.dataset",
     "cloth_sim.bench",
     "cloth_sim.cli",  # the command line: a front end over the core and the adapters
 )
