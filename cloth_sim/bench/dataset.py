@@ -31,7 +31,8 @@ def main(argv=None) -> None:
     from cloth_sim.dataset import engine, rollout
 
     print(
-        "| task | episodes | frames | workers | s | episodes/s | frames/s | MB/episode | same bytes |"
+        "| task | episodes | frames | workers | s | episodes/s | frames/s | MB/episode "
+        "| same bytes |"
     )
     print("|---|---|---|---|---|---|---|---|---|")
     for task, n in zip(args.task, args.episodes):

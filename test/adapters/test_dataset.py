@@ -206,6 +206,47 @@ def test_a_full_disk_mid_episode_leaves_the_committed_ones_and_the_same_command_
     assert got == files(clean)
 
 
+def test_a_run_killed_mid_way_keeps_what_it_committed_and_the_same_command_finishes(tmp_path):
+    """SIGKILL to the command (and its Ray) once it has committed two episodes: what info.json
+    records is whole (LeRobot's layout, every file of every committed episode); the same command
+    again finishes to the bytes of a run never killed."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    root = tmp_path / "ds"
+    argv = [str(Path(sys.executable).parent / "cloth-sim"), "dataset", TASK, "-o", str(root)]
+    argv += ["--episodes", "6", "--workers", "1", "--image-size", "64", "--no-progress"]
+    env = dict(os.environ, RAY_AUTH_MODE="disabled")
+    proc = subprocess.Popen(argv, env=env, start_new_session=True, stderr=subprocess.PIPE)
+    info = root / "meta/info.json"
+    try:
+        deadline = time.monotonic() + 180
+        while time.monotonic() < deadline and proc.poll() is None:
+            if info.exists() and json.loads(info.read_text())["total_episodes"] >= 2:
+                break
+            time.sleep(0.05)
+        assert proc.poll() is None, "finished before it could be killed"
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+    committed = json.loads(info.read_text())["total_episodes"]
+    assert 2 <= committed < 6
+    for e in range(committed):
+        assert (root / f"data/chunk-000/file-{e:03d}.parquet").exists()
+        assert (root / f"videos/observation.images.depth/chunk-000/file-{e:03d}.mp4").exists()
+        assert pq.read_table(root / f"data/chunk-000/file-{e:03d}.parquet").num_rows > 0
+    assert Writer.open(root).episodes == committed
+    subprocess.run(argv, env=env, check=True, timeout=300, capture_output=True)
+    clean = tmp_path / "clean"
+    write(clean, 6)
+    got = files(root)
+    got.pop(engine.MARKER)
+    assert got == files(clean)
+
+
 def test_a_killed_commit_leaves_files_that_reopening_drops(dataset, tmp_path):
     """A writer killed after an episode's data file but before its info.json: reopened, the
     dataset is its committed episodes, the orphan and any .tmp removed."""
