@@ -242,7 +242,19 @@ class Writer:
             for feature, s in per.items():
                 w.stats.setdefault(feature, []).append(s)
         w._drop_after(n)
+        w.tasks = w.tasks[: info["total_tasks"]]
+        if n:  # a commit that died after these and before info.json: back to the committed ones
+            w._summaries(w.tasks, w.stats)
         return w
+
+    def _summaries(self, tasks: list[str], stats: dict, rewrite_tasks: bool = True) -> None:
+        """``meta/tasks.parquet`` and ``meta/stats.json`` for these tasks and episodes' stats."""
+        if rewrite_tasks:
+            _replace(self.root / "meta" / "tasks.parquet", _parquet(_tasks_table(tasks)))
+        summary = {
+            k: {s: v.tolist() for s, v in aggregate(lst).items()} for k, lst in stats.items()
+        }
+        _replace(self.root / "meta" / "stats.json", json.dumps(summary, indent=4).encode())
 
     def _drop_after(self, n: int) -> None:
         """Remove the files of episodes ``>= n`` (and ``*.tmp`` files) a killed commit left."""
@@ -332,19 +344,8 @@ class Writer:
                 _replace(path, videos[key][0])
             _replace(written[-1], _parquet(pa.Table.from_pylist([row])))
             tasks = self.tasks + [task] if new_task else self.tasks
-            if new_task:
-                _replace(self.root / "meta" / "tasks.parquet", _parquet(_tasks_table(tasks)))
             all_stats = {k: self.stats.get(k, []) + [s] for k, s in stats.items()}
-            _replace(
-                self.root / "meta" / "stats.json",
-                json.dumps(
-                    {
-                        k: {s: v.tolist() for s, v in aggregate(lst).items()}
-                        for k, lst in all_stats.items()
-                    },
-                    indent=4,
-                ).encode(),
-            )
+            self._summaries(tasks, all_stats, rewrite_tasks=new_task)
             info = dict(
                 self.info,
                 total_episodes=e + 1,

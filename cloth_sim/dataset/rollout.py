@@ -84,7 +84,9 @@ def fps(env) -> float:
 
 def features(env, observation: str) -> dict:
     """The dataset's features for ``env`` (``info.json``'s, without LeRobot's default ones)."""
-    names = list(getattr(env, "key_point_names", None) or [f"corner_{i}" for i in env.corners])
+    names = list(
+        getattr(env, "key_point_names", None) or [f"corner_{k}" for k in range(len(env.corners))]
+    )
     names += [f"picker_{i}" for i in range(env.num_picker)]
     parts = ("dx", "dy", "dz", "pick") if env.action_mode == "picker" else ("x", "y", "z", "pick")
     action_names = [f"picker_{i}.{c}" for i in range(env.num_picker) for c in parts]
