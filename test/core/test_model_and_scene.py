@@ -156,11 +156,12 @@ def _imports(path):
 
 def test_core_imports_no_ros():
     # the physics core: everything but the ROS adapter, the bag tools, the sweeps, the Gymnasium
-    # tasks and the benchmarks' front ends
+    # tasks, the datasets and the benchmarks' front ends
     core = [
         p
         for p in (ROOT / "cloth_sim").rglob("*.py")
-        if p.relative_to(ROOT).parts[1] not in ("ros", "bag", "bench", "sweep", "envs", "cli.py")
+        if p.relative_to(ROOT).parts[1]
+        not in ("ros", "bag", "bench", "sweep", "envs", "dataset", "cli.py")
     ]
     allowed = {
         "numpy",
@@ -190,6 +191,15 @@ def test_core_imports_no_ros():
         for top in _imports(path):
             assert top in allowed | {"gymnasium"} or top in sys.stdlib_module_names, (
                 f"envs/{path.name} imports {top}"
+            )
+    # the datasets: the tasks, the sweeps, pyarrow, PyAV, Ray and a progress bar, no ROS
+    dataset = list((ROOT / "cloth_sim" / "dataset").glob("*.py"))
+    assert len(dataset) >= 4
+    for path in dataset:
+        for top in _imports(path):
+            ok = allowed | {"gymnasium", "pyarrow", "av", "ray", "tqdm"}
+            assert top in ok or top in sys.stdlib_module_names, (
+                f"dataset/{path.name} imports {top}"
             )
     for path in (ROOT / "cloth_sim" / "bag" / "cdr.py", ROOT / "cloth_sim" / "settings.py"):
         for top in _imports(path):
