@@ -21,7 +21,7 @@ SCENE    ?= hanging
 # install here; the interfaces' cmake steps leave a core idle)
 MAKEFLAGS += --jobs=2
 
-.PHONY: install run test lint fuzz bench bench-peers bench-learning clean
+.PHONY: install run test lint docs fuzz bench bench-peers bench-learning clean
 install: $(STAMP) $(KERNELS) $(MSGS)
 
 $(STAMP): requirements.txt setup.py pyproject.toml
@@ -57,6 +57,12 @@ test: install
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
+
+# the site (docs/conf.py: Sphinx, MyST pages, autodoc, tables generated from the code) into
+# build/docs/html; warnings are errors. rosdoc2 builds the same pages (rosdoc2.yaml).
+docs: $(STAMP) $(MSGS)
+	$(PY) -m sphinx -W --keep-going -q -b html docs build/docs/html
+	@echo "the site: build/docs/html/index.html"
 
 # a long seeded fuzz of the live node through its parameter services; prints its figures (~8 min)
 FUZZ_SETS ?= 5000

@@ -107,13 +107,12 @@ class Simulator:
             produces NaN or inf, is undone and raises :class:`SimulationDiverged`.
         integrator_options: keyword options of the integrator (e.g. ``{"solver": "direct"}`` for
             ``implicit_euler``, ``{"sweeps": 3}`` for ``kang``).
-        colliders: shapes from :mod:`cloth_sim.contact.colliders` (plane, sphere, box, capsule) the
-        cloth
-            cannot enter; :attr:`colliders` keeps them in this order.
+        colliders: shapes from :mod:`cloth_sim.contact.colliders` (plane, sphere, box,
+            capsule) the cloth cannot enter; :attr:`colliders` keeps them in this order.
         thickness: distance (m) the cloth keeps from every collider and, with ``self_collision``,
             from its own non-adjacent triangles.
         self_collision: keep the cloth from passing through itself
-        (:mod:`cloth_sim.contact.self_collision`).
+            (:mod:`cloth_sim.contact.self_collision`).
     """
 
     def __init__(

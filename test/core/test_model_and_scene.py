@@ -226,13 +226,17 @@ def test_package_xml_declares_every_runtime_dependency():
     pip_keys = {
         e.text
         for e in root
-        if e.tag in ("depend", "exec_depend", "test_depend") and e.text.endswith("-pip")
+        if e.tag in ("depend", "exec_depend", "test_depend", "doc_depend")
+        and e.text.endswith("-pip")
     }
     assert {"python3-numba", "python3-cholespy-pip"} | pip_keys <= set(rules)
     assert "python3-pytest" in {e.text for e in root.findall("test_depend")}
     # ament_cmake: the package generates msg/Stats.msg; its Python code is installed by
     # CMakeLists.txt
     assert root.find("export/build_type").text == "ament_cmake"
+    # rosdoc2 builds the site from docs/ (rosdoc2.yaml)
+    assert root.findtext("export/rosdoc2") == "rosdoc2.yaml"
+    assert (ROOT / "rosdoc2.yaml").exists() and (ROOT / "docs" / "conf.py").exists()
     assert root.findtext("member_of_group") == "rosidl_interface_packages"
     assert {"ament_cmake", "ament_cmake_python", "rosidl_default_generators"} <= {
         e.text for e in root.findall("buildtool_depend")

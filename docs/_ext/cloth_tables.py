@@ -1,0 +1,125 @@
+"""Tables the site generates from the code, so they cannot drift from it.
+
+* ``{cloth-parameters}`` — every parameter of :data:`cloth_sim.parameters.SCHEMA`: name, accepted
+  values, unit, how a change applies, the scene-file key, the description.
+* ``{cloth-integrators}`` — every registered integrator, in :data:`cloth_sim.kinds.INTEGRATORS`'
+  order: order of accuracy, stability class, implicit or not, what it handles itself, the first
+  line of its docstring.
+* ``{cloth-scenes}`` — every scene in ``config/scenes/``: its first comment line, the cloth, the
+  integrator and step.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from docutils import nodes
+from docutils.statemachine import StringList
+from sphinx.util.docutils import SphinxDirective
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _cell(text) -> str:
+    return str(text).replace("|", "\\|").replace("\n", " ")
+
+
+def _list_table(header: list[str], rows: list[list[str]], widths: str = "auto") -> list[str]:
+    lines = [".. list-table::", "   :header-rows: 1", f"   :widths: {widths}", ""]
+    for row in [header, *rows]:
+        lines.append(f"   * - {row[0]}")
+        lines += [f"     - {c}" for c in row[1:]]
+    return lines
+
+
+class _Table(SphinxDirective):
+    has_content = False
+
+    def rows(self) -> tuple[list[str], list[list[str]]]:
+        raise NotImplementedError
+
+    def run(self):
+        header, rows = self.rows()
+        node = nodes.container()
+        self.state.nested_parse(StringList(_list_table(header, rows)), self.content_offset, node)
+        return node.children
+
+
+class Parameters(_Table):
+    def rows(self):
+        from cloth_sim.parameters import SCHEMA
+
+        out = []
+        for name, p in SCHEMA.items():
+            out.append(
+                [
+                    f"``{name}``",
+                    _cell(p.range_text()),
+                    _cell(p.unit or "—"),
+                    p.apply,
+                    f"``{p.scene_key}``" if p.scene_key else "—",
+                    _cell(p.description),
+                ]
+            )
+        return ["parameter", "accepted", "unit", "a change", "scene key", "what"], out
+
+
+class Integrators(_Table):
+    def rows(self):
+        from cloth_sim import integrators
+
+        out = []
+        for name in integrators.available():
+            cls = integrators.get(name)
+            doc = (cls.__doc__ or "").strip().split("\n\n")[0].replace("\n", " ")
+            handles = ", ".join(sorted(getattr(cls, "handles", ()) or ())) or "—"
+            out.append(
+                [
+                    f"``{name}``",
+                    str(cls.order),
+                    cls.stability.name.lower().replace("_", " "),
+                    "implicit" if cls.implicit else "explicit",
+                    handles,
+                    _cell(doc),
+                ]
+            )
+        return ["name", "order", "stability", "kind", "handles itself", "what"], out
+
+
+class Scenes(_Table):
+    def rows(self):
+        import yaml
+
+        out = []
+        for path in sorted((ROOT / "config" / "scenes").glob("*.yaml")):
+            text = path.read_text()
+            head = []
+            for line in text.splitlines():
+                if not line.startswith("#"):
+                    break
+                head.append(line[1:].strip())
+            first = " ".join(head)
+            data = yaml.safe_load(text)
+            if "grid" in data:
+                g = data["grid"]
+                cloth = f"{g['rows']} × {g['cols']} grid"
+            else:
+                cloth = f"mesh ``{Path(data['mesh']['file']).name}``"
+            step = data.get("integrator", "symplectic_euler")
+            dt = data.get("dt")
+            out.append(
+                [
+                    f"``{path.stem}``",
+                    cloth,
+                    f"``{step}``" + (f" at {dt:g} s" if dt else ""),
+                    _cell(first),
+                ]
+            )
+        return ["scene", "cloth", "integrator", "what"], out
+
+
+def setup(app):
+    app.add_directive("cloth-parameters", Parameters)
+    app.add_directive("cloth-integrators", Integrators)
+    app.add_directive("cloth-scenes", Scenes)
+    return {"parallel_read_safe": True, "parallel_write_safe": True}
