@@ -23,7 +23,7 @@ from ..sensors.camera import camera_from_settings
 from ..settings import CAMERA_SETTINGS as SETTINGS  # noqa: E402
 from ..settings import camera_reason as check  # noqa: E402
 from ..settings import camera_settings as settings  # noqa: E402
-from . import messages
+from . import interface, messages
 
 __all__ = ["SETTINGS", "CameraPublisher", "check", "settings"]
 
@@ -33,11 +33,11 @@ class CameraPublisher:
 
     def __init__(self, node, session, stamp):
         self.node, self.session, self.stamp = node, session, stamp
-        self.image_pub = node.create_publisher(Image, "~/camera/depth/image", 5)
-        self.info_pub = node.create_publisher(CameraInfo, "~/camera/depth/camera_info", 5)
-        self.points_pub = node.create_publisher(PointCloud2, "~/camera/points", 5)
-        self.labels_pub = node.create_publisher(Image, "~/camera/labels", 5)
-        self.triangles_pub = node.create_publisher(Image, "~/camera/triangles", 5)
+        self.image_pub = interface.publisher(node, "camera_image", Image)
+        self.info_pub = interface.publisher(node, "camera_info", CameraInfo)
+        self.points_pub = interface.publisher(node, "camera_points", PointCloud2)
+        self.labels_pub = interface.publisher(node, "camera_labels", Image)
+        self.triangles_pub = interface.publisher(node, "camera_triangles", Image)
         self.camera = None
         self.timer = None
         self.frames = 0

@@ -11,6 +11,7 @@ import time
 from std_srvs.srv import SetBool, Trigger
 
 from ..simulator import SimulationDiverged
+from . import interface
 
 #: the most steps one ~/step request may ask for (the node answers nothing else meanwhile)
 MAX_STEP_REQUEST = 100_000
@@ -34,9 +35,9 @@ class SimulationControl:
     def __init__(self, node, session, stepper, publishing, manipulation):
         self.node, self.session = node, session
         self.stepper, self.publishing, self.manipulation = stepper, publishing, manipulation
-        node.create_service(Trigger, "~/reset", self._on_reset)
-        node.create_service(SetBool, "~/pause", self._on_pause)
-        node.create_service(_srv_types(), "~/step", self._on_step)
+        interface.service(node, "reset", Trigger, self._on_reset)
+        interface.service(node, "pause", SetBool, self._on_pause)
+        interface.service(node, "step", _srv_types(), self._on_step)
 
     def reset_simulation(self, keep_paused: bool = False, spawned: dict | None = None) -> set[str]:
         """The scene as it starts: the cloth's initial shape at rest, time 0, its own grippers

@@ -16,7 +16,7 @@ from __future__ import annotations
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from tf2_msgs.msg import TFMessage
 
-from . import messages
+from . import interface, messages
 
 #: tf2's static broadcaster's profile: late joiners get the last message
 STATIC_QOS = QoSProfile(
@@ -29,8 +29,8 @@ class Frames:
 
     def __init__(self, node):
         self.node = node
-        self.static_pub = node.create_publisher(TFMessage, "/tf_static", STATIC_QOS)
-        self.pub = node.create_publisher(TFMessage, "/tf", 100)
+        self.static_pub = interface.publisher(node, "tf_static", TFMessage, STATIC_QOS)
+        self.pub = interface.publisher(node, "tf", TFMessage)
         self._static = None
 
     def publish_static(self, world: str, frame: str) -> None:

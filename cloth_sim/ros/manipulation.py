@@ -11,7 +11,7 @@ import numpy as np
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 
 from ..scene import GRIPPER_NAME
-from . import messages
+from . import interface, messages
 
 
 def _srv_types():
@@ -30,8 +30,8 @@ class Manipulation:
         self.grippers = {}  # name -> (its pose subscription, its wrench publisher)
         self._pose_subs = []
         Grasp, Release = _srv_types()
-        node.create_service(Grasp, "~/grasp", self._on_grasp)
-        node.create_service(Release, "~/release", self._on_release)
+        interface.service(node, "grasp", Grasp, self._on_grasp)
+        interface.service(node, "release", Release, self._on_release)
         self.subscribe_colliders()
         self.adopt_grippers()
 
@@ -101,15 +101,15 @@ class Manipulation:
         return response
 
     def _gripper_topics(self, name: str) -> None:
-        pose_sub = self.node.create_subscription(
+        topic = interface.TOPICS["gripper_pose"].name.format(name=name)
+        pose_sub = interface.subscription(
+            self.node,
+            "gripper_pose",
             PoseStamped,
-            f"~/grippers/{name}/pose",
-            lambda msg, name=name: self._on_pose(
-                ("gripper", name), f"~/grippers/{name}/pose", msg
-            ),
-            10,
+            lambda msg, name=name: self._on_pose(("gripper", name), topic, msg),
+            name=name,
         )
-        wrench_pub = self.node.create_publisher(WrenchStamped, f"~/grippers/{name}/wrench", 10)
+        wrench_pub = interface.publisher(self.node, "gripper_wrench", WrenchStamped, name=name)
         self.grippers[name] = (pose_sub, wrench_pub)
 
     def adopt_grippers(self) -> None:
@@ -156,13 +156,14 @@ class Manipulation:
             k: v for k, v in self.session.pose_targets.items() if k[0] != "collider"
         }
         for i, c in enumerate(self.session.sim.colliders):
-            topic = f"~/colliders/{c.name}/pose"
+            topic = interface.TOPICS["collider_pose"].name.format(name=c.name)
             self._pose_subs.append(
-                self.node.create_subscription(
+                interface.subscription(
+                    self.node,
+                    "collider_pose",
                     PoseStamped,
-                    topic,
                     lambda msg, i=i, topic=topic: self._on_pose(("collider", i), topic, msg),
-                    10,
+                    name=c.name,
                 )
             )
 

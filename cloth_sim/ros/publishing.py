@@ -14,7 +14,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import PointCloud2
 from visualization_msgs.msg import Marker, MarkerArray
 
-from . import messages
+from . import interface, messages
 from .camera_publisher import CameraPublisher
 from .frames import Frames
 
@@ -40,11 +40,11 @@ class Publishing:
     def __init__(self, node, session, manipulation):
         self.node, self.session, self.manipulation = node, session, manipulation
         self.Stats = _stats_type()
-        self.points_pub = node.create_publisher(PointCloud2, "~/points", 10)
-        self.mesh_pub = node.create_publisher(Marker, "~/mesh", 10)
-        self.stats_pub = node.create_publisher(self.Stats, "~/stats", 10)
-        self.diag_pub = node.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.colliders_pub = node.create_publisher(MarkerArray, "~/colliders", 10)
+        self.points_pub = interface.publisher(node, "points", PointCloud2)
+        self.mesh_pub = interface.publisher(node, "mesh", Marker)
+        self.stats_pub = interface.publisher(node, "stats", self.Stats)
+        self.diag_pub = interface.publisher(node, "diagnostics", DiagnosticArray)
+        self.colliders_pub = interface.publisher(node, "colliders", MarkerArray)
         self.clock_pub = None  # /clock, made when publish_clock is first on
         self._last_status = time.monotonic()
         self.frames = Frames(node)  # TF
@@ -74,7 +74,7 @@ class Publishing:
         frame = self.session.cfg["frame_id"]
         if self.session.cfg["publish_clock"]:
             if self.clock_pub is None:
-                self.clock_pub = self.node.create_publisher(Clock, "/clock", 10)
+                self.clock_pub = interface.publisher(self.node, "clock", Clock)
             self.clock_pub.publish(Clock(clock=stamp))
         if self.points_pub.get_subscription_count() > 0:
             self.points_pub.publish(self.point_cloud(stamp))

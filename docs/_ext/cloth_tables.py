@@ -7,6 +7,8 @@
   line of its docstring.
 * ``{cloth-scenes}`` — every scene in ``config/scenes/``: its first comment line, the cloth, the
   integrator and step.
+* ``{cloth-topics}``, ``{cloth-services}`` — the node's topics and services from
+  :mod:`cloth_sim.ros.interface`, the declaration the node creates them from.
 """
 
 from __future__ import annotations
@@ -118,8 +120,44 @@ class Scenes(_Table):
         return ["scene", "cloth", "integrator", "what"], out
 
 
+def _md(text: str) -> str:
+    """The declaration's Markdown-ish backticks as reStructuredText literals."""
+    return _cell(text).replace("`", "``")
+
+
+class Topics(_Table):
+    def rows(self):
+        from cloth_sim.ros.interface import TOPICS
+
+        out = []
+        for t in TOPICS.values():
+            qos = f"keep last {t.depth}" + (
+                f", {t.durability}" if t.durability != "volatile" else ""
+            )
+            out.append(
+                [
+                    f"``{t.name.replace('{name}', '<name>')}``",
+                    f"``{t.type}``",
+                    "publishes" if t.direction == "out" else "subscribes",
+                    qos,
+                    _md(t.what),
+                ]
+            )
+        return ["topic", "type", "the node", "QoS", "what"], out
+
+
+class Services(_Table):
+    def rows(self):
+        from cloth_sim.ros.interface import SERVICES
+
+        out = [[f"``{s.name}``", f"``{s.type}``", _md(s.what)] for s in SERVICES.values()]
+        return ["service", "type", "what"], out
+
+
 def setup(app):
     app.add_directive("cloth-parameters", Parameters)
     app.add_directive("cloth-integrators", Integrators)
     app.add_directive("cloth-scenes", Scenes)
+    app.add_directive("cloth-topics", Topics)
+    app.add_directive("cloth-services", Services)
     return {"parallel_read_safe": True, "parallel_write_safe": True}
