@@ -63,3 +63,12 @@ def test_no_page_carries_python_that_no_test_runs():
     for page in DOCS.glob("*.md"):
         included |= set(re.findall(r"literalinclude\}\s+\.\./(examples/\S+)", page.read_text()))
     assert included and all((ROOT / f).exists() for f in included)
+
+
+def test_the_sweep_specs_the_docs_show_are_valid():
+    from cloth_sim.sweep import load_spec
+
+    specs = sorted((DOCS / "sweeps").glob("*.yaml"))
+    assert len(specs) >= 3
+    for path in specs:
+        assert len(load_spec(path)) > 0, path
