@@ -45,5 +45,3 @@ autodoc_inherit_docstrings = False  # Gymnasium's own docstrings are not ours to
 
 html_theme = "furo"
 html_title = f"cloth_sim {release}"
-html_static_path = ["_static"]
-html_logo = None
