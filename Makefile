@@ -45,16 +45,17 @@ run: install
 	$(VENV)/bin/cloth_sim_node --ros-args --params-file config/cloth_sim.yaml -p scene:=$(SCENE)
 
 # the core's tests in a run of their own (test/core/conftest.py fails a test after which rclpy is
-# imported), then the adapters' (Ray's workers among them), then the node's in a run of their own
-# (their real-time checks never share the cores with a Ray sweep or dataset); PYTEST_WORKERS test
-# processes (pytest-xdist, a file to a worker; each worker's DDS domains its own:
-# test/ros/ros_helpers.py), 0 for one process
+# imported), then the adapters' and the node's, then the tests that start Ray (sweeps, datasets,
+# the examples) in a run of their own, so the node's real-time checks never share the cores with
+# Ray's workers; PYTEST_WORKERS test processes (pytest-xdist, a file to a worker; each worker's DDS
+# domains its own: test/ros/ros_helpers.py), 0 for one process
 PYTEST_WORKERS ?= 2
 PYTEST_N := $(if $(filter 0,$(PYTEST_WORKERS)),,-n $(PYTEST_WORKERS) --dist loadfile)
+RAY_TESTS := test/adapters/test_dataset.py test/adapters/test_sweep.py test/adapters/test_examples.py
 test: install
 	$(PY) -m pytest $(PYTEST_N) test/core $(PYTEST_ARGS)
-	$(PY) -m pytest $(PYTEST_N) test/adapters $(PYTEST_ARGS)
-	$(PY) -m pytest $(PYTEST_N) test/ros $(PYTEST_ARGS)
+	$(PY) -m pytest $(PYTEST_N) test/adapters test/ros $(addprefix --ignore=,$(RAY_TESTS)) $(PYTEST_ARGS)
+	$(PY) -m pytest $(PYTEST_N) $(RAY_TESTS) $(PYTEST_ARGS)
 
 # ruff (pinned in requirements.txt, configured in pyproject.toml): the linter and the formatter's check
 lint: $(STAMP)
