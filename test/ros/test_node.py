@@ -445,6 +445,10 @@ def test_loading_a_parameter_file_keeps_the_stats_flowing(ros):
     3–10 s. Now a set that changes nothing costs nothing, and a material change one analysis (tens
     of ms at 32×32, kept per material)."""
     rate = 30.0
+    # the bound: 6 ticks (0.2 s). The stall this guards against was 3–10 s; a loaded 2-core CI
+    # machine (the other test process stepping a garment on both cores) delays a healthy tick by
+    # up to ~0.05 s (gaps of 0.115 and 0.124 s seen against the 3 ticks this once allowed)
+    bound = 6
     node = ros.start(rows=16, cols=16, spacing=1 / 15, publish_rate=rate)
     stats = ros.collect(Stats, "/cloth_sim/stats")
     assert ros.spin_until(lambda: len(stats) >= 10)
@@ -466,7 +470,7 @@ def test_loading_a_parameter_file_keeps_the_stats_flowing(ros):
 
     period = 1.0 / rate
     gap = _stats_gaps(ros, stats, lambda: load(dump) == [] or pytest.fail("dump refused"))
-    assert gap <= 3 * period, f"~/stats stopped for {gap:.3f} s"
+    assert gap <= bound * period, f"~/stats stopped for {gap:.3f} s"
     changed = [
         Parameter(
             p.name,
@@ -476,7 +480,7 @@ def test_loading_a_parameter_file_keeps_the_stats_flowing(ros):
     ]
     changed += [Parameter("drag", value=0.001), Parameter("gravity", value=[0.0, 0.5, -9.81])]
     gap = _stats_gaps(ros, stats, lambda: load(changed) == [] or pytest.fail("file refused"))
-    assert gap <= 3 * period, f"~/stats stopped for {gap:.3f} s"
+    assert gap <= bound * period, f"~/stats stopped for {gap:.3f} s"
     assert node.sim.stiffness("bend")[0] == pytest.approx(110.0) and node.sim.drag == 0.001
 
 
