@@ -298,11 +298,12 @@ def _sweep(args) -> int:
         return 0
     if not args.spec or not args.output:
         raise ValueError("sweep needs SPEC.yaml and -o OUT (or --summary OUT)")
-    if args.format == "lerobot":
+    if args.format == "lerobot":  # refused before anything runs
         from .dataset import sweep_export
         from .sweep.spec import load_spec
 
-        sweep_export.check(load_spec(args.spec))
+        spec = load_spec(args.spec)
+        sweep_export.check(spec)
     t = time.perf_counter()
     counts = engine.sweep(
         args.spec,
@@ -322,11 +323,8 @@ def _sweep(args) -> int:
         + f"; {time.perf_counter() - t:.1f} s; {Path(args.output) / 'runs.parquet'}"
     )
     if args.format == "lerobot":
-        from .dataset import sweep_export
-        from .sweep.spec import load_spec
-
         writer = sweep_export.export(
-            load_spec(args.spec),
+            spec,
             args.output,
             workers=args.workers,
             address=args.address,

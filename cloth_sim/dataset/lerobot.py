@@ -310,9 +310,7 @@ class Writer:
                 arrays[key] = pa.array(values.astype(ft["dtype"]))
             else:
                 arrays[key] = _fixed_list(values.astype(ft["dtype"]))
-            stats[key] = feature_stats(
-                values.astype(np.float64) if values.dtype.kind == "b" else values
-            )
+            stats[key] = feature_stats(values)  # (as float64: booleans too)
         where = _locate(e)
         row = {
             "episode_index": e,

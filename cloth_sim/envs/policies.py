@@ -137,12 +137,12 @@ def fold_garment(env):
     the fold's two landmarks picked and carried over its line to their mirror images, where the
     garment lies now (the flat layout fitted to its landmarks)."""
     marks = env.model.meta["landmarks"]
+    every = list(marks.values())
+    flat = env.flat_positions()[every, :2]
     for (a, b), point, normal in env.folds():
         ks = [marks[a], marks[b]]
         x = env.sim.positions
-        rot, shift = rigid_fit(
-            env.flat_positions()[list(marks.values()), :2], x[list(marks.values()), :2]
-        )
+        rot, shift = rigid_fit(flat, x[every, :2])
         p, n = rot @ point + shift, rot @ normal
         src = x[ks]
         dst = src.copy()

@@ -206,18 +206,21 @@ def _declared(cls, entry) -> None:
         raise TypeError(f"{entry.name}: declared {entry.type}, created with {type_name(cls)}")
 
 
+def topic_name(key: str, **names) -> str:
+    """:data:`TOPICS` ``[key]``'s name as created, ``names`` filling its ``{name}``."""
+    return TOPICS[key].name.format(**names)
+
+
 def publisher(node, key: str, cls, qos=None, **names):
     """The publisher of :data:`TOPICS` ``[key]`` (``qos``: a profile instead of its depth)."""
-    t = TOPICS[key]
-    _declared(cls, t)
-    return node.create_publisher(cls, t.name.format(**names), qos or t.depth)
+    _declared(cls, TOPICS[key])
+    return node.create_publisher(cls, topic_name(key, **names), qos or TOPICS[key].depth)
 
 
 def subscription(node, key: str, cls, callback, **names):
     """The subscription of :data:`TOPICS` ``[key]``; ``names`` fill its ``{name}``."""
-    t = TOPICS[key]
-    _declared(cls, t)
-    return node.create_subscription(cls, t.name.format(**names), callback, t.depth)
+    _declared(cls, TOPICS[key])
+    return node.create_subscription(cls, topic_name(key, **names), callback, TOPICS[key].depth)
 
 
 def service(node, key: str, cls, callback):

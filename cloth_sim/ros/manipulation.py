@@ -101,7 +101,7 @@ class Manipulation:
         return response
 
     def _gripper_topics(self, name: str) -> None:
-        topic = interface.TOPICS["gripper_pose"].name.format(name=name)
+        topic = interface.topic_name("gripper_pose", name=name)
         pose_sub = interface.subscription(
             self.node,
             "gripper_pose",
@@ -156,7 +156,7 @@ class Manipulation:
             k: v for k, v in self.session.pose_targets.items() if k[0] != "collider"
         }
         for i, c in enumerate(self.session.sim.colliders):
-            topic = interface.TOPICS["collider_pose"].name.format(name=c.name)
+            topic = interface.topic_name("collider_pose", name=c.name)
             self._pose_subs.append(
                 interface.subscription(
                     self.node,
