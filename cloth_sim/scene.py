@@ -63,6 +63,7 @@ import yaml
 from .contact.colliders import KINDS
 from .contact.self_collision import MAX_THICKNESS_FRACTION
 from .model import GRID_FAMILIES, MESH_FAMILIES, ORIENTATIONS, ClothModel
+from .motion import Motion, motion_from_dict
 from .parameters import SCHEMA, ParameterError
 from .physics.mesh import MESH_FORMATS
 from .simulator import Simulator
@@ -127,6 +128,14 @@ class Scene:
     camera: dict = field(default_factory=lambda: dict(CAMERA_DEFAULTS))
     #: a mesh scene's pins by place: ``(lo, hi)`` corners of a box in world coordinates, or None
     pinned_box: tuple | None = None
+    #: the scene's robot: ``{urdf (Path), robot (the loaded Robot: it keeps no configuration,
+    #: so every simulator of the scene shares it), name, position, orientation, joints,
+    #: friction}``, or None (:mod:`cloth_sim.robot`)
+    robot: dict | None = None
+    #: grippers bound to the robot's links: ``{gripper name: link}``
+    gripper_links: dict = field(default_factory=dict)
+    #: the scripted motion (:class:`cloth_sim.motion.Motion`), or None
+    motion: Motion | None = None
 
     @property
     def families(self) -> tuple[str, ...]:
@@ -139,6 +148,10 @@ class Scene:
         for name, point, radius, box in self.grippers:
             if box is not None:
                 sim.grasp_box(name, *box)
+                continue
+            link = self.gripper_links.get(name)
+            if link is not None:
+                sim.grasp(name, point, radius, link=(self.robot["name"], link))
                 continue
             try:
                 sim.grasp(name, point, radius)
@@ -279,8 +292,27 @@ class Scene:
         if sim_kw["integrator"] == "vbd" and "integrator_options" not in sim_kw:
             sim_kw["integrator_options"] = {"iterations": self.vbd_iterations}
         sim = Simulator(self.build_model(**override), **sim_kw)
+        if self.robot is not None:
+            self.add_robot(sim)
         self.apply_grippers(sim)
+        sim.motion = self.motion
         return sim
+
+    def add_robot(self, sim) -> None:
+        """Put the scene's robot into ``sim`` at its pose and joint positions (the script's
+        first keyframe where it has one)."""
+        r = self.robot
+        joints = dict(r["joints"])
+        if self.motion is not None:
+            joints.update(self.motion.joints_at(0.0))
+        sim.add_robot(
+            r["robot"],
+            name=r["name"],
+            position=r["position"],
+            orientation=r["orientation"],
+            joints=joints,
+            friction=r["friction"],
+        )
 
 
 # --------------------------------------------------------------------------- loading
@@ -440,6 +472,8 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
         "colliders",
         "grippers",
         "camera",
+        "robot",
+        "motion",
     }
     v.known("", data, known)
     if "mesh" in data:
@@ -516,7 +550,7 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
         where = f"grippers[{i}]"
         if not isinstance(g, dict):
             v.fail(where, "a mapping with name, and point and radius or box", g)
-        v.known(f"{where}.", g, {"name", "point", "radius", "box"})
+        v.known(f"{where}.", g, {"name", "point", "radius", "box", "link"})
         name = g.get("name")
         if not (isinstance(name, str) and GRIPPER_NAME.fullmatch(name)):
             v.fail(
@@ -544,7 +578,75 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
         if radius <= 0:
             v.fail(f"{where}.radius", "a finite number > 0", radius)
         s.grippers.append((name, point, radius, None))
+        if "link" in g:
+            s.gripper_links[name] = g["link"]
+    s.robot = _robot(v, data.get("robot"), source) if "robot" in data else None
+    for name, link in s.gripper_links.items():
+        if s.robot is None or link not in s.robot["links"]:
+            v.fail(
+                f"grippers.{name}.link",
+                "a link of the scene's robot"
+                + (f" ({', '.join(s.robot['links'])})" if s.robot else " (the scene has none)"),
+                link,
+            )
+    if "motion" in data:
+        s.motion = motion_from_dict(
+            v,
+            data["motion"],
+            s.robot["name"] if s.robot else None,
+            [n for n, *_ in s.grippers],
+        )
+        if s.robot is not None:
+            for name in {j for _, js in s.motion.joints for j in js}:
+                if name not in s.robot["joints_all"]:
+                    v.fail(
+                        "motion.robot",
+                        f"joints of the robot ({', '.join(s.robot['joints_all'])})",
+                        name,
+                    )
     return s
+
+
+def _robot(v: "SceneValidator", r, source: str) -> dict:
+    """A scene's ``robot`` mapping: ``urdf`` (a file relative to the scene file), ``name``,
+    ``position``, ``orientation``, ``joints``, ``friction``; the URDF is loaded here, so that a
+    bad one is refused with the scene."""
+    from .robot import Robot
+
+    if not isinstance(r, dict):
+        v.fail("robot", "a mapping with urdf and optional name, position, orientation, joints", r)
+    v.known("robot.", r, {"urdf", "name", "position", "orientation", "joints", "friction"})
+    file = r.get("urdf")
+    if not isinstance(file, str) or not file:
+        v.fail("robot.urdf", "a URDF file path, relative to the scene file", file)
+    path = Path(file)
+    if not path.is_absolute():
+        path = (Path(source).parent if source != "<dict>" else Path.cwd()) / path
+    try:
+        robot = Robot.from_urdf(Path(os.path.normpath(path)))
+    except ValueError as e:
+        raise SceneError(f"{source}: field 'robot.urdf': {e}") from None
+    name = r.get("name", robot.name)
+    if not (isinstance(name, str) and GRIPPER_NAME.fullmatch(name)):
+        v.fail("robot.name", "a name of ASCII letters, digits and _", name)
+    joints = r.get("joints", {}) or {}
+    if not isinstance(joints, dict):
+        v.fail("robot.joints", "a mapping of joint names to positions", joints)
+    try:
+        joints = robot.check_joints(joints)
+    except ValueError as e:
+        raise SceneError(f"{source}: field 'robot.joints': {e}") from None
+    return {
+        "urdf": path,
+        "robot": robot,
+        "name": name,
+        "position": v.vector("robot.position", r.get("position", [0.0, 0.0, 0.0]), 3),
+        "orientation": v.vector("robot.orientation", r.get("orientation", [1, 0, 0, 0]), 4),
+        "joints": joints,
+        "friction": v.number("robot.friction", r.get("friction", 0.5), lo=0.0),
+        "links": robot.all_links,
+        "joints_all": robot.joint_names,
+    }
 
 
 def _grid_scene(v: "SceneValidator", data: dict, source: str, name: str) -> Scene:
@@ -702,12 +804,17 @@ _COLLIDER_FIELDS = {
     "sphere": {"center": 3, "radius": 1},
     "box": {"center": 3, "half_extents": 3, "orientation": 4},
     "capsule": {"a": 3, "b": 3, "radius": 1},
+    "cylinder": {"center": 3, "radius": 1, "length": 1, "orientation": 4},
+    # (file: a path relative to the scene file, as mesh.file)
+    "mesh": {"file": 0, "position": 3, "orientation": 4, "scale": 1},
 }
 _COLLIDER_REQUIRED = {
     "plane": ("normal",),
     "sphere": ("center", "radius"),
     "box": ("center", "half_extents"),
     "capsule": ("a", "b", "radius"),
+    "cylinder": ("center", "radius", "length"),
+    "mesh": ("file",),
 }
 
 
@@ -758,7 +865,9 @@ class SceneValidator:
         """One collider mapping, as ``(type, keyword arguments)`` for :data:`KINDS`."""
         where = f"colliders[{i}]"
         if not isinstance(c, dict):
-            self.fail(where, "a mapping with type (plane, sphere, box, capsule) and its fields", c)
+            self.fail(
+                where, f"a mapping with type ({', '.join(_COLLIDER_FIELDS)}) and its fields", c
+            )
         kind = c.get("type")
         if kind not in _COLLIDER_FIELDS:
             self.fail(f"{where}.type", f"one of {', '.join(_COLLIDER_FIELDS)}", kind)
@@ -772,7 +881,17 @@ class SceneValidator:
                     f"{', '.join(_COLLIDER_REQUIRED[kind])}"
                 )
         for name, n in fields.items():
-            if name in c:
+            if name in c and n == 0:  # a file, relative to the scene file
+                if not isinstance(c[name], str) or not c[name]:
+                    self.fail(
+                        f"{where}.{name}", "a mesh file path, relative to the scene", c[name]
+                    )
+                path = Path(c[name])
+                if not path.is_absolute():
+                    base = Path(self.source).parent if self.source != "<dict>" else Path.cwd()
+                    path = base / path
+                kw["source"] = str(Path(os.path.normpath(path)))
+            elif name in c:
                 kw[name] = (
                     self.vector(f"{where}.{name}", c[name], n)
                     if n > 1
@@ -797,6 +916,8 @@ class SceneValidator:
         try:
             KINDS[kind](**kw)  # the shape's own checks (a positive radius, a nonzero normal, …)
         except ValueError as e:  # "radius must be …": name the field in full
+            if kind == "mesh":  # (the file's errors name the file and the element)
+                raise SceneError(f"{self.source}: field '{where}.file': {e}") from None
             name, _, rest = str(e).partition(" ")
             raise SceneError(f"{self.source}: field '{where}.{name}' {rest}") from None
         return kind, kw

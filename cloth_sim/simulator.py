@@ -49,6 +49,7 @@ from .physics.forces import (
     spring_forces_gather,
     spring_strains,
 )
+from .robot.placement import Robots
 from .state import State
 
 
@@ -162,6 +163,13 @@ class Simulator:
             np.ascontiguousarray(model.rest_lengths[sel]),
         )
         self._contacts = Contacts(model, colliders or (), thickness)
+        self._robots = Robots(
+            self.add_collider,
+            self.set_collider_pose,
+            self.remove_collider,
+            lambda: self._contacts.colliders,
+            self.set_gripper_pose,
+        )
         self._integrator = None  # (made below: the stages are built first)
         self._build_stages(model, None, self_collision)
         self.strain_limit = strain_limit
@@ -238,6 +246,7 @@ class Simulator:
         gripper is released."""
         if self._grippers:
             self._grippers.clear()
+            self._robots.bound.clear()
             self._set_held()
         self.state.x[:] = self.model.positions
         self.state.v[:] = 0.0
@@ -413,6 +422,54 @@ class Simulator:
         self._refresh_stages()
         return c
 
+    #: a :class:`cloth_sim.motion.Motion` played as the simulator steps (a scene's scripted
+    #: robot joints and gripper poses), or None
+    motion = None
+
+    # ------------------------------------------------------------------ robots
+    @property
+    def robots(self) -> dict:
+        """``{name: Robot}``: the robots in the scene (:mod:`cloth_sim.robot`)."""
+        return {name: p.robot for name, p in self._robots.placed.items()}
+
+    def add_robot(
+        self,
+        robot,
+        name: str | None = None,
+        position=(0.0, 0.0, 0.0),
+        orientation=(1.0, 0.0, 0.0, 0.0),
+        joints: dict | None = None,
+        friction: float = 0.5,
+    ) -> str:
+        """Put ``robot`` (a :class:`cloth_sim.robot.Robot`) in the scene as ``name`` (its URDF's
+        name unless given), its root link at ``position``, ``orientation``: every ``<collision>``
+        of its links becomes a collider ``name/link`` (``name/link/k`` where a link has several)
+        with Coulomb ``friction``, at the joint positions ``joints`` (0 for those not named).
+        Returns the name. A name in use, a bad pose or joint raises ``ValueError`` and adds
+        nothing."""
+        return self._robots.add(robot, name, position, orientation, joints, friction)
+
+    def remove_robot(self, name: str):
+        """Take robot ``name`` and its colliders out of the scene (grippers bound to its links stay
+        where they are); returns the Robot."""
+        return self._robots.remove(name)
+
+    def set_joint_positions(self, name: str, positions: dict, teleport: bool = False) -> None:
+        """Robot ``name``'s joints to ``positions`` (joint name to rad or m; joints not named keep
+        their value): forward kinematics places every link, which sweeps there over the next step
+        (with ``teleport``, is there now, at rest), and grippers bound to its links follow. An
+        unknown robot or joint, or a non-finite value, raises ``ValueError`` and moves nothing."""
+        self._robots.set_joints(name, positions, teleport)
+
+    def joint_positions(self, name: str) -> dict:
+        """Robot ``name``'s joint positions now (every movable joint)."""
+        return self._robots.joints(name)
+
+    def link_pose(self, name: str, link: str) -> tuple[np.ndarray, np.ndarray]:
+        """``(position, orientation (w, x, y, z))`` of link ``link`` of robot ``name`` in the
+        world, at its current joint positions."""
+        return self._robots.link_pose(name, link)
+
     @property
     def thickness(self) -> float:
         """Distance (m) the cloth keeps from colliders and (with self-collision) from itself."""
@@ -469,6 +526,9 @@ class Simulator:
         # the wrench reads the step's own end only for methods that evaluate forces past its start
         keep_end = bool(grippers) and integ.force_point > 0
         for _ in range(int(n)):
+            if self.motion is not None:  # the script's joints and grippers at the step's end
+                self.motion.drive(self, self.time + dt)
+                keep_end = bool(grippers) and integ.force_point > 0
             state.copy_to(checkpoint)
             if grippers:
                 self._grippers_before_step()
@@ -558,13 +618,22 @@ class Simulator:
         :mod:`cloth_sim.constraints.grippers`)."""
         return {name: g.indices.copy() for name, g in self._grippers.items()}
 
-    def grasp(self, name: str, point, radius: float) -> np.ndarray:
+    def grasp(self, name: str, point, radius: float, link=None) -> np.ndarray:
         """Hold every free particle within ``radius`` of ``point`` with a gripper called ``name``,
-        placed at ``point`` with the identity orientation; returns their indices. A name in use,
-        a bad point or radius, or no particle in reach raises ``ValueError`` and changes
+        placed at ``point`` with the identity orientation; returns their indices. With ``link``,
+        a ``(robot, link)`` pair, the gripper is that link: placed at its pose, the held particles
+        keep their offsets in its frame and follow it as the robot's joints move. A name in use,
+        a bad point, radius or link, or no particle in reach raises ``ValueError`` and changes
         nothing."""
         name = self._new_gripper(name)
         point, radius = check_grasp(point, radius)
+        frame = None
+        if link is not None:
+            try:
+                robot, link_name = link
+            except (TypeError, ValueError):
+                raise ValueError(f"link must be a (robot, link) pair, got {link!r}") from None
+            frame = self._robots.link_pose(robot, link_name)
         held = self.model.pinned
         d = np.linalg.norm(self.state.x - point, axis=1)
         idx = np.flatnonzero((d <= radius) & ~held)
@@ -574,7 +643,11 @@ class Simulator:
                 f"grasp {name!r}: no free particle within radius {radius:g} m of point "
                 f"{point.tolist()} (the nearest is {near:.4g} m away)"
             )
-        return self._hold(name, idx, point)
+        if frame is None:
+            return self._hold(name, idx, point)
+        held = self._hold(name, idx, frame[0], frame[1])
+        self._robots.bound[name] = (robot, link_name)
+        return held
 
     def grasp_box(self, name: str, lo, hi) -> np.ndarray:
         """Hold every free particle inside the axis-aligned box ``[lo, hi]`` (a whole edge of a
@@ -600,8 +673,12 @@ class Simulator:
             )
         return name
 
-    def _hold(self, name: str, idx: np.ndarray, point: np.ndarray) -> np.ndarray:
-        self._grippers[name] = Gripper(name, idx, self.state.x[idx] - point, point)
+    def _hold(self, name: str, idx: np.ndarray, point: np.ndarray, orientation=None) -> np.ndarray:
+        g = Gripper(name, idx, self.state.x[idx] - point, point)
+        if orientation is not None:  # offsets in the gripper's own frame
+            g.position, g.orientation, g.rotation = check_pose(point, orientation)
+            g.offsets = g.offsets @ g.rotation
+        self._grippers[name] = g
         self._prestage = self.state.copy()
         self._wrench_ready = False
         self.state.v[idx] = 0.0  # the gripper is at rest until it is moved
@@ -663,6 +740,7 @@ class Simulator:
         gripper gave them over the last step. Returns their indices."""
         g = self._gripper(name)
         del self._grippers[name]
+        self._robots.bound.pop(name, None)
         self._set_held()
         return g.indices.copy()
 
@@ -836,6 +914,11 @@ def compile_kernels() -> float:
                 col.Sphere(radius=0.1, friction=0.1),
                 col.Box(half_extents=(0.1, 0.1, 0.1)),
                 col.Capsule(radius=0.05),
+                col.Cylinder(radius=0.05, length=0.1),
+                col.Mesh(
+                    ([[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0], [0, 0, 0.1]], [[0, 2, 1], [0, 1, 3]]),
+                    position=(0.1, 0.1, -0.05),
+                ),
             ],
         )
         sim.set_collider_pose(1, (0.0, 0.0, -0.5))

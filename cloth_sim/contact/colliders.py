@@ -1,4 +1,5 @@
-"""Rigid colliders the cloth rests on, drapes over and is dragged by: plane, sphere, box, capsule.
+"""Rigid colliders the cloth rests on, drapes over and is dragged by: plane, sphere, box, capsule,
+cylinder and triangle mesh.
 
 A collider is a shape with a pose and Coulomb friction ``μ`` (static = kinetic). The cloth keeps at
 least the simulator's ``thickness`` from every collider surface. Colliders are kinematic: the
@@ -10,7 +11,9 @@ Poses. ``orientation`` is a unit quaternion ``(w, x, y, z)``. A Box's ``orientat
 (its half extents are along its own axes); a Plane's and a Capsule's orientation is relative to the
 normal and segment they were built with, so ``set_collider_pose(i, position)`` with the default
 orientation moves them without turning them. The pose's ``position`` is a Sphere's or Box's centre,
-a Capsule's midpoint, and for a Plane a point on it (it starts at ``offset·normal``).
+a Capsule's midpoint, and for a Plane a point on it (it starts at ``offset·normal``). A Cylinder's
+and a Mesh's pose are absolute, as a Box's (the cylinder's axis is its own z, as URDF's; a mesh's
+vertices are in its own frame).
 
 Contact response: :class:`Contacts`, a post-step stage (see
 :mod:`cloth_sim.constraints.strain_limit`).
@@ -23,9 +26,11 @@ import math
 import numba
 import numpy as np
 
+from . import triangle_meshes
 from .geometry import positive, quaternion_matrix, unit_quaternion, vector
+from .triangle_meshes import TriangleMesh, mesh_distance
 
-PLANE, SPHERE, BOX, CAPSULE = 0, 1, 2, 3
+PLANE, SPHERE, BOX, CAPSULE, CYLINDER, MESH = 0, 1, 2, 3, 4, 5
 #: the fraction of ``thickness`` within which a particle counts as touching (its velocity is
 #: filtered) though not inside (its position is not moved)
 CONTACT_TOLERANCE = 0.02
@@ -53,6 +58,8 @@ class Collider:
     shape's local parameters ``geometry`` (4 numbers)."""
 
     kind = -1
+    #: the triangle mesh of a Mesh collider (``None`` for the analytic shapes)
+    mesh = None
 
     def __init__(self, position, geometry, friction, name, orientation=(1.0, 0.0, 0.0, 0.0)):
         self.set_pose(position, orientation)
@@ -71,12 +78,10 @@ class Collider:
     def signed_distance(self, points) -> np.ndarray:
         """Signed distance of ``(k, 3)`` points from the surface (negative inside)."""
         pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
-        out = np.empty(len(pts))
-        for i, p in enumerate(pts):
-            out[i] = sdf(self.kind, self.position, self.rotation, self.geometry, p[0], p[1], p[2])[
-                0
-            ]
-        return out
+        bank = triangle_meshes.pack([self.mesh] if self.mesh is not None else [])
+        geo = self.geometry.copy()
+        geo[0] = 0.0 if self.mesh is not None else geo[0]
+        return _distances(self.kind, self.position, self.rotation, geo, pts, bank)
 
     def __repr__(self):
         return f"{type(self).__name__}(name={self.name!r}, position={self.position.tolist()})"
@@ -195,14 +200,107 @@ class Capsule(Collider):
         return float(self.geometry[3])
 
 
-KINDS = {"plane": Plane, "sphere": Sphere, "box": Box, "capsule": Capsule}
+class Cylinder(Collider):
+    """A solid cylinder: ``radius``, ``length`` along its own z axis (as URDF's ``<cylinder>``),
+    centred at ``center``, turned by ``orientation``."""
+
+    kind = CYLINDER
+
+    def __init__(
+        self,
+        center=(0.0, 0.0, 0.0),
+        radius: float = 0.05,
+        length: float = 0.2,
+        orientation=(1.0, 0.0, 0.0, 0.0),
+        friction: float = 0.0,
+        name=None,
+    ):
+        r, h = positive("radius", radius), positive("length", length)
+        super().__init__(vector("center", center), [r, 0.5 * h, 0, 0], friction, name, orientation)
+
+    @property
+    def center(self) -> np.ndarray:
+        return self.position.copy()
+
+    @property
+    def radius(self) -> float:
+        return float(self.geometry[0])
+
+    @property
+    def length(self) -> float:
+        return float(2.0 * self.geometry[1])
+
+
+class Mesh(Collider):
+    """A rigid triangle mesh, two-sided (:mod:`.triangle_meshes`): ``source`` a mesh file (the
+    formats :meth:`cloth_sim.model.ClothModel.from_mesh` reads: OBJ, PLY, STL, glTF/GLB, OFF) or a
+    ``(vertices (n, 3), faces (t, 3))`` pair, in its own frame times ``scale`` (metres per unit, a
+    number or one per axis, as URDF's ``<mesh scale>``); placed at ``position``, turned by
+    ``orientation``."""
+
+    kind = MESH
+
+    def __init__(
+        self,
+        source,
+        position=(0.0, 0.0, 0.0),
+        orientation=(1.0, 0.0, 0.0, 0.0),
+        scale=1.0,
+        friction: float = 0.0,
+        name=None,
+    ):
+        from ..physics.mesh import check_indices, read_mesh
+
+        factors = np.atleast_1d(np.asarray(scale, dtype=np.float64)) if _numbers(scale) else None
+        if (
+            factors is None
+            or factors.shape not in ((1,), (3,))
+            or not np.all(np.isfinite(factors) & (factors > 0))
+        ):
+            raise ValueError(
+                f"Mesh: scale must be a finite number > 0 or 3 of them (metres per unit along "
+                f"x, y, z), got {scale!r}"
+            )
+        vertices, faces, where = read_mesh(source)
+        check_indices(vertices, faces, where)
+        self.source = where
+        self.mesh = TriangleMesh(vertices * factors, faces, where)
+        super().__init__(vector("position", position), [0, 0, 0, 0], friction, name, orientation)
+
+    @property
+    def vertices(self) -> np.ndarray:
+        """The mesh's vertices in the world, at its current pose."""
+        return self.mesh.vertices @ self.rotation.T + self.position
+
+    @property
+    def triangles(self) -> np.ndarray:
+        return self.mesh.triangles
+
+
+def _numbers(value) -> bool:
+    try:
+        np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        return False
+    return not isinstance(value, (bool, str))
+
+
+KINDS = {
+    "plane": Plane,
+    "sphere": Sphere,
+    "box": Box,
+    "capsule": Capsule,
+    "cylinder": Cylinder,
+    "mesh": Mesh,
+}
 
 
 # ---------------------------------------------------------------------------- kernels
 @numba.njit(cache=True, inline="always")
-def sdf(kind, p, R, g, x, y, z):
+def sdf(kind, p, R, g, x, y, z, bank):
     """Signed distance of the point ``(x, y, z)`` from a collider and the outward unit normal
-    there (the distance's gradient)."""
+    there (the distance's gradient). A Mesh's (``g[0]`` its index in ``bank``, the packed meshes
+    of :func:`.triangle_meshes.pack`) is unsigned, and a lower bound outside its box."""
     dx, dy, dz = x - p[0], y - p[1], z - p[2]
     if kind == PLANE:
         nx = R[0, 0] * g[0] + R[0, 1] * g[1] + R[0, 2] * g[2]
@@ -235,10 +333,46 @@ def sdf(kind, p, R, g, x, y, z):
                 return -g[3], 0.0, 0.0, 1.0
             return -g[3], ux / u, uy / u, uz / u
         return r - g[3], ex / r, ey / r, ez / r
-    # BOX: the point in the box's frame
+    # BOX, CYLINDER, MESH: the point in the shape's frame
     qx = R[0, 0] * dx + R[1, 0] * dy + R[2, 0] * dz
     qy = R[0, 1] * dx + R[1, 1] * dy + R[2, 1] * dz
     qz = R[0, 2] * dx + R[1, 2] * dy + R[2, 2] * dz
+    if kind == MESH:
+        d, lx, ly, lz = mesh_distance(bank, int(g[0]), qx, qy, qz)
+    elif kind == CYLINDER:
+        d, lx, ly, lz = _cylinder(g[0], g[1], qx, qy, qz)
+    else:
+        d, lx, ly, lz = _box(g, qx, qy, qz)
+    return (
+        d,
+        R[0, 0] * lx + R[0, 1] * ly + R[0, 2] * lz,
+        R[1, 0] * lx + R[1, 1] * ly + R[1, 2] * lz,
+        R[2, 0] * lx + R[2, 1] * ly + R[2, 2] * lz,
+    )
+
+
+@numba.njit(cache=True, inline="always")
+def _cylinder(radius, half, qx, qy, qz):
+    """A cylinder's signed distance and normal in its own frame (axis z)."""
+    r = math.sqrt(qx * qx + qy * qy)
+    if r > 1e-300:
+        ux, uy = qx / r, qy / r
+    else:
+        ux, uy = 1.0, 0.0
+    a, b = r - radius, abs(qz) - half
+    sz = math.copysign(1.0, qz)
+    if a > 0.0 or b > 0.0:
+        oa, ob = max(a, 0.0), max(b, 0.0)
+        d = math.sqrt(oa * oa + ob * ob)
+        return d, ux * oa / d, uy * oa / d, sz * ob / d
+    if a >= b:  # inside: out through the nearer of the side and the caps
+        return a, ux, uy, 0.0
+    return b, 0.0, 0.0, sz
+
+
+@numba.njit(cache=True, inline="always")
+def _box(g, qx, qy, qz):
+    """A box's signed distance and normal in its own frame."""
     ax, ay, az = abs(qx) - g[0], abs(qy) - g[1], abs(qz) - g[2]
     if ax > 0.0 or ay > 0.0 or az > 0.0:
         ox, oy, oz = max(ax, 0.0), max(ay, 0.0), max(az, 0.0)
@@ -257,12 +391,15 @@ def sdf(kind, p, R, g, x, y, z):
         else:
             d = az
             lz = math.copysign(1.0, qz)
-    return (
-        d,
-        R[0, 0] * lx + R[0, 1] * ly + R[0, 2] * lz,
-        R[1, 0] * lx + R[1, 1] * ly + R[1, 2] * lz,
-        R[2, 0] * lx + R[2, 1] * ly + R[2, 2] * lz,
-    )
+    return d, lx, ly, lz
+
+
+@numba.njit(cache=True)
+def _distances(kind, p, R, g, pts, bank):
+    out = np.empty(pts.shape[0])
+    for i in range(pts.shape[0]):
+        out[i] = sdf(kind, p, R, g, pts[i, 0], pts[i, 1], pts[i, 2], bank)[0]
+    return out
 
 
 @numba.njit(cache=True, inline="always")
@@ -285,7 +422,7 @@ _MARCH_STEPS = 64
 
 @numba.njit(cache=True)
 def resolve_contacts(
-    x, v, x0, pinned, kinds, pos, rot, pos0, rot0, geo, mu, h, dt, touching, clearance
+    x, v, x0, pinned, kinds, pos, rot, pos0, rot0, geo, mu, bank, h, dt, touching, clearance
 ):
     """The contact stage's kernel, per particle in index order (each particle is independent).
 
@@ -316,23 +453,27 @@ def resolve_contacts(
             cx, cy, cz = carried(pos0[c], rot0[c], pos[c], rot[c], x[p, 0], x[p, 1], x[p, 2])
             ux, uy, uz = x[p, 0] - cx, x[p, 1] - cy, x[p, 2] - cz
             # (1) continuous detection from a start outside the skin
-            d0, mx, my, mz = sdf(k, pos[c], rot[c], geo[c], sx, sy, sz)
+            d0, mx, my, mz = sdf(k, pos[c], rot[c], geo[c], sx, sy, sz, bank)
             d0 -= h
             ex, ey, ez = x[p, 0] - sx, x[p, 1] - sy, x[p, 2] - sz
             length = math.sqrt(ex * ex + ey * ey + ez * ez)
+            held = False  # the step's motion undone: it moved with the collider
             if d0 <= CONTACT_TOLERANCE * h:
                 # a start touching the surface: the end is projected below, unless the path went
                 # past the middle of the solid or through it (the normal at the end points the
                 # other way: a straight path between opposite sides crosses the solid): stay
-                de, fx, fy, fz = sdf(k, pos[c], rot[c], geo[c], x[p, 0], x[p, 1], x[p, 2])
+                de, fx, fy, fz = sdf(k, pos[c], rot[c], geo[c], x[p, 0], x[p, 1], x[p, 2], bank)
                 if fx * mx + fy * my + fz * mz < 0.0:
                     x[p, 0], x[p, 1], x[p, 2] = sx, sy, sz
+                    held = True
             elif length > d0:
                 t = 0.0
                 hit = False
                 for _ in range(_MARCH_STEPS):
                     d = (
-                        sdf(k, pos[c], rot[c], geo[c], sx + t * ex, sy + t * ey, sz + t * ez)[0]
+                        sdf(
+                            k, pos[c], rot[c], geo[c], sx + t * ex, sy + t * ey, sz + t * ez, bank
+                        )[0]
                         - h
                     )
                     if d <= 1e-3 * h:
@@ -346,11 +487,12 @@ def resolve_contacts(
                 if hit:
                     x[p, 0], x[p, 1], x[p, 2] = sx + t * ex, sy + t * ey, sz + t * ez
             # (2) projection with friction on the motion relative to the collider
-            d, nx, ny, nz = sdf(k, pos[c], rot[c], geo[c], x[p, 0], x[p, 1], x[p, 2])
+            d, nx, ny, nz = sdf(k, pos[c], rot[c], geo[c], x[p, 0], x[p, 1], x[p, 2], bank)
             clearance[p] = min(clearance[p], max(d - h, 0.0))  # (0 once projected onto the skin)
             if d >= h * (1.0 + CONTACT_TOLERANCE):
                 continue
             touching[p] = True
+            stuck = held
             if d < h:
                 depth = h - d
                 x[p, 0] += depth * nx
@@ -361,27 +503,58 @@ def resolve_contacts(
                 tx, ty, tz = rx - rn * nx, ry - rn * ny, rz - rn * nz
                 tl = math.sqrt(tx * tx + ty * ty + tz * tz)
                 budget = mu[c] * depth
+                stuck = stuck or tl <= budget
                 if tl > 0.0:
-                    f = 1.0 if tl <= budget else budget / tl
+                    f = 1.0 if stuck else budget / tl
                     x[p, 0] -= f * tx
                     x[p, 1] -= f * ty
                     x[p, 2] -= f * tz
-            # (3) velocity filter relative to the collider's velocity at the point
+            # (3) velocity filter relative to the collider's velocity at the point: an approaching
+            # normal velocity removed, the tangential one shrunk by μ times what was removed; held
+            # by static friction in (2), no tangential velocity either (a particle the projection
+            # keeps in place whose velocity slid on would gather the springs' pull step after
+            # step: a cloth caught under a moving link reached 900 m/s)
             wx, wy, wz = ux / dt, uy / dt, uz / dt
             rx, ry, rz = v[p, 0] - wx, v[p, 1] - wy, v[p, 2] - wz
             vn = rx * nx + ry * ny + rz * nz
-            if vn < 0.0:
+            if vn < 0.0 or stuck:
                 tx, ty, tz = rx - vn * nx, ry - vn * ny, rz - vn * nz
                 tl = math.sqrt(tx * tx + ty * ty + tz * tz)
                 keep = 0.0
-                if tl > 0.0:
+                if tl > 0.0 and not stuck:
                     keep = max(0.0, 1.0 - mu[c] * (-vn) / tl)
-                v[p, 0] = wx + keep * tx
-                v[p, 1] = wy + keep * ty
-                v[p, 2] = wz + keep * tz
+                vn = max(vn, 0.0)  # (separating: kept)
+                v[p, 0] = wx + vn * nx + keep * tx
+                v[p, 1] = wy + vn * ny + keep * ty
+                v[p, 2] = wz + vn * nz + keep * tz
+        if touching[p] and kinds.shape[0] > 1:
+            _crease(x, p, kinds, pos, rot, geo, bank, h)
         if touching[p]:
             count += 1
     return count
+
+
+#: passes of :func:`_crease` at most
+_CREASE_PASSES = 8
+
+
+@numba.njit(cache=True, inline="always")
+def _crease(x, p, kinds, pos, rot, geo, bank, h):
+    """Particle ``p`` after the colliders' projections, one after the other: where two colliders
+    meet (a robot's links at a joint), pushing it out of the later one may have pushed it into an
+    earlier one. The projections are repeated, normal only, until it is within none (at most
+    ``_CREASE_PASSES`` passes: they alternate towards the crease, where both are ``h`` away)."""
+    for _ in range(_CREASE_PASSES):
+        moved = False
+        for c in range(kinds.shape[0]):
+            d, nx, ny, nz = sdf(kinds[c], pos[c], rot[c], geo[c], x[p, 0], x[p, 1], x[p, 2], bank)
+            if d < h * (1.0 - 1e-6):
+                x[p, 0] += (h - d) * nx
+                x[p, 1] += (h - d) * ny
+                x[p, 2] += (h - d) * nz
+                moved = True
+        if not moved:
+            return
 
 
 class Contacts:
@@ -405,7 +578,7 @@ class Contacts:
             if not isinstance(c, Collider):
                 raise ValueError(
                     f"colliders[{i}] must be a cloth_sim.contact.colliders shape (Plane, Sphere, "
-                    f"Box, Capsule), got {type(c).__name__}"
+                    f"Box, Capsule, Cylinder, Mesh), got {type(c).__name__}"
                 )
         self.thickness = positive("thickness", thickness)
         self.touching = np.zeros(model.n_particles, dtype=np.bool_)
@@ -425,6 +598,10 @@ class Contacts:
         self._rot = np.array([c.rotation for c in cs], dtype=np.float64).reshape(-1, 3, 3)
         self._geo = np.array([c.geometry for c in cs], dtype=np.float64).reshape(-1, 4)
         self._mu = np.array([c.friction for c in cs], dtype=np.float64)
+        # the meshes packed for the kernels, each Mesh's row naming its index in the bank
+        meshes = [c.mesh for c in cs if c.mesh is not None]
+        self._bank = triangle_meshes.pack(meshes) if meshes else triangle_meshes.EMPTY
+        self._geo[self._kinds == MESH, 0] = np.arange(len(meshes))
 
     @property
     def active(self) -> bool:
@@ -439,7 +616,7 @@ class Contacts:
         if not isinstance(collider, Collider):
             raise ValueError(
                 f"a collider must be a cloth_sim.contact.colliders shape (Plane, Sphere, Box, "
-                f"Capsule), got {type(collider).__name__}"
+                f"Capsule, Cylinder, Mesh), got {type(collider).__name__}"
             )
         if any(c.name == collider.name for c in self.colliders):
             raise ValueError(
@@ -502,6 +679,7 @@ class Contacts:
             self._rot0,
             self._geo,
             self._mu,
+            self._bank,
             self.thickness,
             dt,
             self.touching,
@@ -516,6 +694,17 @@ class Contacts:
 
     def packed(self) -> tuple:
         """``(kinds, positions, rotations, positions at the step's start, rotations there,
-        geometry, friction)``: the colliders as the contact kernels read them (an integrator that
-        resolves contacts inside its step reads them here)."""
-        return self._kinds, self._pos, self._rot, self._pos0, self._rot0, self._geo, self._mu
+        geometry, friction, *meshes)``: the colliders as the contact kernels read them (an
+        integrator that resolves contacts inside its step reads them here); ``packed()[7:]`` is
+        the bank of :func:`.triangle_meshes.pack` (flat: numba's parallel loops take a tuple of
+        arrays, not a tuple holding one)."""
+        return (
+            self._kinds,
+            self._pos,
+            self._rot,
+            self._pos0,
+            self._rot0,
+            self._geo,
+            self._mu,
+            *self._bank,
+        )

@@ -44,7 +44,7 @@ LEAF = 8
 
 
 @numba.njit(cache=True)
-def _build(centres, leaf):
+def build_hierarchy(centres, leaf):
     """The tree over ``m`` item centres, at most ``leaf`` items a leaf: ``(left, right, first, end,
     size, order)``, per node its children (−1 for a leaf), its items ``order[first:end]`` and how
     many; the root is 0 and every child is numbered after its parent."""
@@ -443,7 +443,7 @@ class TriangleTree:
             return
         self.own_v = _owned(self.tris, vertex_owner)
         self.own_e = _owned(tri_edge, edge_owner)
-        (self.left, self.right, self.first, self.end, self.size, self.order) = _build(
+        (self.left, self.right, self.first, self.end, self.size, self.order) = build_hierarchy(
             np.ascontiguousarray(centres), int(leaf)
         )
         self.tasks = _tasks(self.left, self.right, self.size, TASKS)

@@ -62,6 +62,7 @@ import time
 import numba
 import numpy as np
 
+from ..contact import triangle_meshes
 from ..contact.colliders import carried, sdf
 from ..contact.geometry import segment_parameters, triangle_weights
 from ..kinds import LINEAR
@@ -290,6 +291,7 @@ def _colliders_at(
     crot0,
     cgeo,
     cmu,
+    cbank,
     tau,
     kc,
     eps,
@@ -307,7 +309,7 @@ def _colliders_at(
     the step relative to the collider's point under it; and whether it touches one."""
     touched = False
     for c in range(ckind.shape[0]):
-        d, nx, ny, nz = sdf(ckind[c], cpos[c], crot[c], cgeo[c], x[i, 0], x[i, 1], x[i, 2])
+        d, nx, ny, nz = sdf(ckind[c], cpos[c], crot[c], cgeo[c], x[i, 0], x[i, 1], x[i, 2], cbank)
         p = tau - d
         if p <= 0.0:
             continue
@@ -544,7 +546,9 @@ def _truncate(i, px, py, pz, x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, 
 
 
 @numba.njit(cache=True, inline="always")
-def _onset(i, sx, sy, sz, x, rec_ptr, rec, rec_d, pcoef, pnrm, tau, ckind, cpos, crot, cgeo):
+def _onset(
+    i, sx, sy, sz, x, rec_ptr, rec, rec_d, pcoef, pnrm, tau, ckind, cpos, crot, cgeo, cbank
+):
     """Vertex ``i``'s step ``s`` with the part that would press a contact not yet pressed
     (distance at least ``τ``: not in the step's Hessian) taken off along that contact's normal, so
     that it stops at its onset (the next iteration sees it); the motion along the surface stays.
@@ -563,7 +567,7 @@ def _onset(i, sx, sy, sz, x, rec_ptr, rec, rec_d, pcoef, pnrm, tau, ckind, cpos,
             f = over / (nx * nx + ny * ny + nz * nz)
             sx, sy, sz = sx + f * nx, sy + f * ny, sz + f * nz
     for c in range(ckind.shape[0]):
-        d, nx, ny, nz = sdf(ckind[c], cpos[c], crot[c], cgeo[c], x[i, 0], x[i, 1], x[i, 2])
+        d, nx, ny, nz = sdf(ckind[c], cpos[c], crot[c], cgeo[c], x[i, 0], x[i, 1], x[i, 2], cbank)
         if d < tau:
             continue
         over = (tau - d) - (nx * sx + ny * sy + nz * sz)
@@ -620,7 +624,8 @@ def _sweep(
     unpacked per vertex, or passed one by one to a function per vertex, their reference counting
     cost more than the vertex's work.)"""
     inc_ptr, nbr, rest, k, c, kind, tab, nonsmooth = sp
-    ckind, cpos, crot, cpos0, crot0, cgeo, cmu = co
+    ckind, cpos, crot, cpos0, crot0, cgeo, cmu = co[:7]
+    cbank = co[7:]
     rec_ptr, rec, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d, colour = sc
     for q in range(lo, hi):
         i = verts[q]
@@ -664,6 +669,7 @@ def _sweep(
                 crot0,
                 cgeo,
                 cmu,
+                cbank,
                 tau,
                 kc,
                 eps,
@@ -728,6 +734,7 @@ def _sweep(
                 cpos,
                 crot,
                 cgeo,
+                cbank,
             )
         if rough or nonsmooth:
             # Choi–Ko's energies are not smooth at the rest length (a buckling pair's force jumps
@@ -886,7 +893,7 @@ def _chebyshev(x, x_prev2, omega, free, x_cd, allow, gamma, sc, cut, touch):
 
 
 @numba.njit(cache=True)
-def _allowances(x, allowance, ckind, cpos, crot, cgeo, cdepth, tau, allow, near):
+def _allowances(x, allowance, ckind, cpos, crot, cgeo, cbank, cdepth, tau, allow, near):
     """How far each vertex may move from ``x`` before the next search whatever the pairs found
     (its ``allowance``, and short of the far side of any collider near it), and whether it can come
     within the thickness of a collider meanwhile (``near``: the iterations look at the colliders
@@ -895,7 +902,7 @@ def _allowances(x, allowance, ckind, cpos, crot, cgeo, cdepth, tau, allow, near)
         b = allowance[i]
         nearest = math.inf
         for c in range(ckind.shape[0]):
-            d = sdf(ckind[c], cpos[c], crot[c], cgeo[c], x[i, 0], x[i, 1], x[i, 2])[0]
+            d = sdf(ckind[c], cpos[c], crot[c], cgeo[c], x[i, 0], x[i, 1], x[i, 2], cbank)[0]
             nearest = min(nearest, d)
             if cdepth[c] < math.inf:
                 b = min(b, max(d, 0.0) + 0.9 * cdepth[c])
@@ -1025,6 +1032,7 @@ class VBD(Integrator):
             np.zeros((0, 3, 3)),
             np.zeros((0, 4)),
             np.zeros(0),
+            *triangle_meshes.EMPTY,
         )
 
     # ------------------------------------------------------------------ protocol
@@ -1247,6 +1255,7 @@ class VBD(Integrator):
             colliders[1],
             colliders[2],
             colliders[5],
+            colliders[7:],
             self._depths(colliders),
             tau,
             self._allow,
@@ -1313,8 +1322,9 @@ class VBD(Integrator):
     @staticmethod
     def _depths(colliders):
         """Per collider, how far in its far side is (half its thinnest dimension; ``inf`` for a
-        plane, a half-space)."""
-        from ..contact.colliders import BOX, CAPSULE, SPHERE
+        plane, a half-space; 0 for a mesh, two-sided: a vertex may not reach its surface between
+        two searches, so a moving link cannot pass through the cloth)."""
+        from ..contact.colliders import BOX, CAPSULE, CYLINDER, MESH, SPHERE
 
         kinds, geo = colliders[0], colliders[5]
         depth = np.full(len(kinds), np.inf)
@@ -1325,4 +1335,8 @@ class VBD(Integrator):
                 depth[c] = geo[c, 3]
             elif kind == BOX:
                 depth[c] = float(np.min(geo[c, :3]))
+            elif kind == CYLINDER:
+                depth[c] = float(min(geo[c, 0], geo[c, 1]))
+            elif kind == MESH:
+                depth[c] = 0.0
         return depth

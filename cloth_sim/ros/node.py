@@ -79,6 +79,14 @@ class ClothSimNode(Node):
             f"Hz, terms: {', '.join(session.sim.active_terms)}; kernels ready in {kernels:.2f} s"
         )
 
+    def destroy_node(self):
+        """Destroy the node with everything it created. rclpy's own leaves the action server,
+        which keeps the node (and its context's DDS participant) alive in the graph with the
+        action's topics until the process ends: a later node of this name on the same domain met
+        it there."""
+        self.interfaces.destroy()
+        super().destroy_node()
+
     # the session's main pieces, for a program that embeds the node (tests, the fuzz)
     @property
     def sim(self):

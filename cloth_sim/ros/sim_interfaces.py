@@ -164,6 +164,11 @@ class SimulationInterfaces:
             cancel_callback=lambda handle: CancelResponse.ACCEPT,
         )
 
+    def destroy(self) -> None:
+        """Destroy the action server (:meth:`rclpy.node.Node.destroy_node` does not: a node left
+        with one stays in the graph, holding its action's topics, until the process ends)."""
+        self.action.destroy()
+
     def restarted(self) -> None:
         """The simulation is at its scene's start (a new scene, ``~/reset``): nothing spawned,
         nothing set by set_entity_info."""

@@ -46,8 +46,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from ..contact.colliders import BOX, CAPSULE, PLANE, SPHERE
-from ..contact.geometry import quaternion_matrix, unit_quaternion, vector
+from ..contact.colliders import BOX, CAPSULE, CYLINDER, MESH, PLANE, SPHERE
+from ..contact.geometry import matrix_quaternion, quaternion_matrix, unit_quaternion, vector
 
 NOISE_MODELS = (None, "kinect")
 #: the largest image side accepted
@@ -186,8 +186,12 @@ class DepthCamera:
         # the cloth in the optical frame: x_c = Rᵀ (x − p)
         xc = np.ascontiguousarray((sim.positions - p) @ R)
         intr = np.array([self.fx, self.fy, self.cx, self.cy, self.near, self.far])
-        render_triangles(xc, np.ascontiguousarray(sim.model.triangles), intr, depth, obj, tri)
+        render_triangles(xc, np.ascontiguousarray(sim.model.triangles), intr, depth, obj, tri, 0)
         cs = sim.colliders
+        for i, c in enumerate(cs):
+            if c.kind == MESH:  # a mesh's triangles, labelled as the collider
+                xm = np.ascontiguousarray((c.vertices - p) @ R)
+                render_triangles(xm, c.triangles, intr, depth, obj, tri, 1 + i)
         if cs:
             kinds = np.array([c.kind for c in cs], np.int64)
             # each collider's pose in the optical frame
@@ -241,10 +245,12 @@ def _finite(x) -> bool:
 
 
 @numba.njit(cache=True)
-def render_triangles(xc, tris, intr, depth, obj, tri):
+def render_triangles(xc, tris, intr, depth, obj, tri, label=0):
     """The cloth's triangles (optical-frame vertices ``xc``) into the depth buffer: each pixel of a
     triangle's projected box (its part in front of the near plane, clipped) tested by an exact
-    ray–triangle intersection, both sides; the nearest ``z`` in ``[near, far]`` wins."""
+    ray–triangle intersection, both sides; the nearest ``z`` in ``[near, far]`` wins. A pixel won
+    is labelled ``label`` in ``obj`` and, for the cloth (label 0), its triangle in ``tri`` (−1 for
+    a mesh collider's)."""
     fx, fy, cx, cy, near, far = intr[0], intr[1], intr[2], intr[3], intr[4], intr[5]
     h, w = depth.shape
     for t in range(tris.shape[0]):
@@ -307,8 +313,8 @@ def render_triangles(xc, tris, intr, depth, obj, tri):
                 z = tnum / det
                 if near <= z <= far and z < depth[v, u]:
                     depth[v, u] = z
-                    obj[v, u] = 0
-                    tri[v, u] = t
+                    obj[v, u] = label
+                    tri[v, u] = t if label == 0 else -1
 
 
 @numba.njit(cache=True, inline="always")
@@ -349,6 +355,24 @@ def _ray_collider(kind, P, Rm, g, dx, dy, dz):
         if tmax < 0.0:
             return np.inf
         return tmin if tmin >= 0.0 else np.inf  # from inside a box the camera sees nothing of it
+    if kind == CYLINDER:  # the side x² + y² = r² within |z| ≤ h, and the caps z = ±h
+        r, half = g[0], g[1]
+        best = np.inf
+        A = ex * ex + ey * ey
+        B = 2.0 * (ox * ex + oy * ey)
+        C = ox * ox + oy * oy - r * r
+        disc = B * B - 4 * A * C
+        if A > 0.0 and disc >= 0.0:
+            t = (-B - math.sqrt(disc)) / (2 * A)
+            if t >= 0.0 and abs(oz + t * ez) <= half:
+                best = t
+        if ez != 0.0:
+            for sgn in (-1.0, 1.0):
+                t = (sgn * half - oz) / ez
+                px, py = ox + t * ex, oy + t * ey
+                if t >= 0.0 and px * px + py * py <= r * r:
+                    best = min(best, t)
+        return best
     # capsule: the segment from −g[:3] to +g[:3], radius g[3]: the nearest of the infinite
     # cylinder's hit within the segment and the two end spheres
     r = g[3]
@@ -456,11 +480,14 @@ def render_colliders(kinds, pos, rot, geo, intr, depth, obj, tri):
                     corners[m, 1] = ey + (r if k & 2 else -r)
                     corners[m, 2] = ez + (r if k & 4 else -r)
                     m += 1
-        else:  # a box: its own corners
+        elif kind == MESH:  # rasterised with the cloth's triangles (render)
+            continue
+        else:  # a box or a cylinder: its own corners
+            bx, by, bz = (g[0], g[1], g[2]) if kind == BOX else (g[0], g[0], g[1])
             for k in range(8):
-                hx = g[0] if k & 1 else -g[0]
-                hy = g[1] if k & 2 else -g[1]
-                hz = g[2] if k & 4 else -g[2]
+                hx = bx if k & 1 else -bx
+                hy = by if k & 2 else -by
+                hz = bz if k & 4 else -bz
                 corners[m, 0] = P[0] + Rm[0, 0] * hx + Rm[0, 1] * hy + Rm[0, 2] * hz
                 corners[m, 1] = P[1] + Rm[1, 0] * hx + Rm[1, 1] * hy + Rm[1, 2] * hz
                 corners[m, 2] = P[2] + Rm[2, 0] * hx + Rm[2, 1] * hy + Rm[2, 2] * hz
@@ -496,25 +523,6 @@ def look_at_orientation(position, target) -> np.ndarray:
     y /= np.linalg.norm(y)
     x = np.cross(y, z)
     return matrix_quaternion(np.stack([x, y, z], axis=1))
-
-
-def matrix_quaternion(R: np.ndarray) -> np.ndarray:
-    """The unit quaternion ``(w, x, y, z)`` of a rotation matrix (Shepperd's method), ``w ≥ 0``."""
-    tr = R[0, 0] + R[1, 1] + R[2, 2]
-    if tr > 0:
-        s = 2.0 * math.sqrt(1.0 + tr)
-        q = [0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s]
-    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
-        q = [(R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s]
-    elif R[1, 1] > R[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
-        q = [(R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s]
-    else:
-        s = 2.0 * math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
-        q = [(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s]
-    q = np.array(q)
-    return q / np.linalg.norm(q) * (1.0 if q[0] >= 0 else -1.0)
 
 
 def camera_from_settings(settings: dict, seed: int = 0) -> DepthCamera:

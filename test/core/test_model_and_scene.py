@@ -170,8 +170,10 @@ def test_core_imports_no_ros():
         "yaml",
         "cholespy",
         "trimesh",
+        "yourdfpy",
+        "lxml",
         "cloth_sim",
-    }  # + the mesh reader
+    }  # + the mesh reader; the URDF library and its XML parser (cloth_sim.robot)
     assert len(core) > 8
     for path in core:
         for top in _imports(path):

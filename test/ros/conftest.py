@@ -86,6 +86,10 @@ def ros():
     for n in r.nodes:
         ex.remove_node(n)
         n.destroy_node()
+    # a test's action clients: destroy_node leaves them, and they keep the node in the graph
+    for w in list(client.waitables):
+        if hasattr(w, "destroy"):
+            w.destroy()
     client.destroy_node()
     ex.shutdown()
     rclpy.shutdown(context=ctx)

@@ -43,6 +43,9 @@ def test_a_running_nodes_topics_and_services_are_the_declared_ones():
             expected_topics[resolve(t.name, **names)] = (t.type, t.direction)
         expected_services = {resolve(s.name): s.type for s in SERVICES.values()}
         deadline = time.monotonic() + 30
+        # one node of that name in the domain: the graph queries below read the first they find
+        # (a node an earlier test left alive on a reused domain once answered for this one)
+        assert [n for n in probe.get_node_names() if n == "cloth_sim"] == ["cloth_sim"]
         while True:
             pubs = dict(probe.get_publisher_names_and_types_by_node("cloth_sim", "/"))
             subs = dict(probe.get_subscriber_names_and_types_by_node("cloth_sim", "/"))
@@ -84,3 +87,40 @@ def test_a_running_nodes_topics_and_services_are_the_declared_ones():
         rclpy.shutdown(context=ctx)
         proc.terminate()
         proc.communicate(timeout=30)
+
+
+def test_a_destroyed_node_leaves_the_graph():
+    """An in-process node destroyed and its context shut down is gone from the graph, action
+    server included (rclpy's destroy_node leaves action servers: such a node lingered with its
+    action's topics, and a later test on the same domain met it)."""
+    from rclpy.parameter import Parameter
+
+    from cloth_sim.ros.node import ClothSimNode
+
+    domain = next_domain()
+    ctx, probe_ctx = rclpy.Context(), rclpy.Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    rclpy.init(context=probe_ctx, domain_id=domain)
+    probe = rclpy.create_node("leave_probe", context=probe_ctx)
+    try:
+        node = ClothSimNode(
+            context=ctx,
+            parameter_overrides=[Parameter("rows", value=4), Parameter("cols", value=4)],
+        )
+
+        def seen():
+            return "cloth_sim" in probe.get_node_names()
+
+        end = time.monotonic() + 30
+        while not seen() and time.monotonic() < end:
+            time.sleep(0.1)
+        assert seen()  # the probe sees the node while it lives
+        node.destroy_node()
+        rclpy.shutdown(context=ctx)
+        end = time.monotonic() + 30
+        while seen() and time.monotonic() < end:
+            time.sleep(0.1)
+        assert not seen()
+    finally:
+        probe.destroy_node()
+        rclpy.shutdown(context=probe_ctx)

@@ -1,0 +1,131 @@
+"""Robots placed in a simulation: each link's shapes as colliders that follow the joint positions,
+and grippers bound to links.
+
+The simulator owns one :class:`Robots` and hands it what it needs (composition): a way to add,
+move and remove colliders and to move a gripper. Links move kinematically: a new configuration
+becomes each link collider's pose at the end of the next step, so the step sweeps it there (its
+velocity is its pose change over the step, and friction drags the cloth it touches) and a gripper
+bound to a link carries its particles along the same way.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..contact.geometry import matrix_quaternion, quaternion_matrix, unit_quaternion, vector
+from .robot import Robot
+
+
+class Placed:
+    """A robot in the scene: its base pose (4×4), joint positions and colliders (with their links'
+    shapes)."""
+
+    def __init__(self, robot: Robot, name: str, base: np.ndarray, joints: dict):
+        self.robot, self.name, self.base, self.joints = robot, name, base, joints
+        self.colliders = []  # (collider, shape)
+
+    def link_poses(self) -> dict[str, np.ndarray]:
+        """Every link's pose (4×4) in the world at the current joint positions."""
+        return {k: self.base @ t for k, t in self.robot.link_transforms(self.joints).items()}
+
+
+def _pose(T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return T[:3, 3].copy(), matrix_quaternion(T[:3, :3])
+
+
+class Robots:
+    """The robots of one simulation (``add_collider(c) -> i``, ``set_collider_pose(i, p, q,
+    teleport)``, ``remove_collider(i)``, ``colliders()`` and ``set_gripper_pose(name, p, q)`` are
+    the simulator's)."""
+
+    def __init__(
+        self, add_collider, set_collider_pose, remove_collider, colliders, set_gripper_pose
+    ):
+        self._add, self._move, self._remove = add_collider, set_collider_pose, remove_collider
+        self._colliders, self._move_gripper = colliders, set_gripper_pose
+        self.placed: dict[str, Placed] = {}
+        #: gripper name -> (robot name, link)
+        self.bound: dict[str, tuple[str, str]] = {}
+
+    def add(
+        self,
+        robot: Robot,
+        name=None,
+        position=(0.0, 0.0, 0.0),
+        orientation=(1.0, 0.0, 0.0, 0.0),
+        joints=None,
+        friction: float = 0.5,
+    ) -> str:
+        if not isinstance(robot, Robot):
+            raise ValueError(
+                f"add_robot: robot must be a cloth_sim.robot.Robot, got {type(robot).__name__}"
+            )
+        name = robot.name if name is None else name
+        if not isinstance(name, str) or not name or "/" in name:
+            raise ValueError(f"robot name must be a non-empty string without '/', got {name!r}")
+        if name in self.placed:
+            raise ValueError(f"a robot named {name!r} is in the scene already")
+        base = np.eye(4)
+        base[:3, :3] = quaternion_matrix(unit_quaternion(orientation))
+        base[:3, 3] = vector("position", position)
+        values = robot.check_joints(joints or {})
+        placed = Placed(robot, name, base, values)
+        taken = {c.name for c in self._colliders()}
+        made = []
+        for k, shape in enumerate(robot.shapes):
+            cname = f"{name}/{shape.link}"
+            if sum(s.link == shape.link for s in robot.shapes) > 1:
+                cname += f"/{k}"
+            if cname in taken:
+                raise ValueError(f"a collider named {cname!r} exists already")
+            made.append((shape.make(cname, friction), shape))
+        poses = placed.link_poses()
+        for collider, shape in made:  # (all made before any is added: a failure adds nothing)
+            self._add(collider)
+            self._move(self._index(collider), *_pose(poses[shape.link] @ shape.origin), True)
+            placed.colliders.append((collider, shape))
+        self.placed[name] = placed
+        return name
+
+    def remove(self, name: str) -> Robot:
+        placed = self._placed(name)
+        for collider, _ in placed.colliders:
+            self._remove(self._index(collider))
+        for g in [g for g, (r, _) in self.bound.items() if r == name]:
+            del self.bound[g]
+        del self.placed[name]
+        return placed.robot
+
+    def set_joints(self, name: str, values, teleport: bool = False) -> None:
+        placed = self._placed(name)
+        placed.joints = {**placed.joints, **placed.robot.check_joints(values)}
+        poses = placed.link_poses()
+        for collider, shape in placed.colliders:
+            self._move(self._index(collider), *_pose(poses[shape.link] @ shape.origin), teleport)
+        for gripper, (robot, link) in self.bound.items():
+            if robot == name:
+                self._move_gripper(gripper, *_pose(poses[link]), teleport)
+
+    def joints(self, name: str) -> dict:
+        placed = self._placed(name)
+        return {j: float(placed.joints.get(j, 0.0)) for j in placed.robot.joint_names}
+
+    def link_pose(self, name: str, link: str) -> tuple[np.ndarray, np.ndarray]:
+        placed = self._placed(name)
+        if link not in placed.robot.all_links:
+            raise ValueError(
+                f"robot {name!r} has no link {link!r}; its links: "
+                f"{', '.join(placed.robot.all_links)}"
+            )
+        return _pose(placed.base @ placed.robot.link_transforms(placed.joints)[link])
+
+    def _placed(self, name) -> Placed:
+        if name not in self.placed:
+            raise ValueError(f"unknown robot {name!r}; robots: {', '.join(self.placed) or 'none'}")
+        return self.placed[name]
+
+    def _index(self, collider) -> int:
+        for i, c in enumerate(self._colliders()):
+            if c is collider:
+                return i
+        raise LookupError(f"collider {collider.name!r} is no longer in the simulation")

@@ -1,0 +1,194 @@
+"""Triangle-mesh colliders and the cylinder: distances against closed forms (a box as 12
+triangles against the analytic box, which it is), Coulomb's law on an inclined mesh, no tunnelling
+through a zero-thickness mesh plate at any speed, a cloth on a mesh at the contact distance as on
+the primitive, and what the depth camera sees."""
+
+import math
+
+import numpy as np
+import pytest
+
+from cloth_sim import ClothModel, Simulator, colliders, integrators
+from cloth_sim.camera import DepthCamera
+
+G = 9.81
+H = 0.005
+
+
+def box_mesh(half):
+    """A box's 8 corners and 12 triangles (an independent construction, not trimesh's)."""
+    hx, hy, hz = half
+    v = np.array(
+        [[sx * hx, sy * hy, sz * hz] for sz in (-1, 1) for sy in (-1, 1) for sx in (-1, 1)]
+    )
+    f = [
+        [0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
+        [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5],
+    ]  # fmt: skip
+    return v, np.array(f)
+
+
+def quad(size):
+    """A square plate of zero thickness in its own xy plane (2 triangles)."""
+    s = size / 2
+    return np.array([[-s, -s, 0], [s, -s, 0], [s, s, 0], [-s, s, 0]]), np.array(
+        [[0, 1, 2], [0, 2, 3]]
+    )
+
+
+def test_a_box_mesh_is_as_far_as_the_box_from_every_point():
+    """The mesh is two-sided: its distance is the box's signed distance's magnitude, outside and
+    inside, at any pose."""
+    half = (0.2, 0.15, 0.1)
+    q = np.array([0.9, 0.1, -0.3, 0.2])
+    q /= np.linalg.norm(q)
+    mesh = colliders.Mesh(box_mesh(half), position=(0.1, 0.2, 0.3), orientation=q)
+    box = colliders.Box(center=(0.1, 0.2, 0.3), half_extents=half, orientation=q)
+    pts = np.random.default_rng(0).uniform(-0.4, 0.7, (3000, 3))
+    db, dm = box.signed_distance(pts), mesh.signed_distance(pts)
+    assert (db < 0).sum() > 50 and (db > 0).sum() > 50
+    # (outside its bounding box a mesh answers that box's distance: for a box, the same)
+    np.testing.assert_allclose(dm, np.abs(db), atol=1e-12)
+
+
+def test_a_cylinder_is_as_far_as_its_closed_form():
+    cyl = colliders.Cylinder(center=(0, 0, 0), radius=0.1, length=0.4)
+    pts = [[0.3, 0, 0], [0, 0, 0.5], [0.2, 0, 0.3], [0.05, 0, 0], [0, 0.02, 0.19], [0, 0, 0]]
+    expected = [0.2, 0.3, math.hypot(0.1, 0.1), -0.05, -0.01, -0.1]
+    np.testing.assert_allclose(cyl.signed_distance(pts), expected, atol=1e-15)
+    # its axis is its own z: turned a quarter about x, it lies along y
+    turned = colliders.Cylinder(
+        radius=0.1, length=0.4, orientation=(math.cos(math.pi / 4), math.sin(math.pi / 4), 0, 0)
+    )
+    np.testing.assert_allclose(turned.signed_distance([[0, 0.5, 0], [0, 0, 0.3]]), [0.3, 0.2])
+
+
+def _particle_on_mesh(theta, mu, integrator):
+    n = np.array([-math.sin(theta), 0.0, math.cos(theta)])
+    q = (math.cos(-theta / 2), 0.0, math.sin(-theta / 2), 0.0)  # the plate turned to normal n
+    model = ClothModel.from_springs(
+        [H * n, [50.0, 50.0, 50.0]], [1.0, 1.0], [[0, 1]], [0.0], [0.0]
+    )
+    plate = colliders.Mesh(quad(4.0), orientation=q, friction=mu)
+    sim = Simulator(model, integrator=integrator, dt=1e-3, thickness=H, colliders=[plate])
+    return sim, n
+
+
+@pytest.mark.parametrize("integrator", ["symplectic_euler", "rk4", "implicit_euler", "vbd"])
+@pytest.mark.parametrize("theta,mu", [(0.5, 0.3), (0.3, 0.5)])
+def test_a_particle_on_an_inclined_mesh_obeys_coulomb(integrator, theta, mu):
+    sim, n = _particle_on_mesh(theta, mu, integrator)
+    downhill = np.array([-math.cos(theta), 0.0, -math.sin(theta)])
+    x0 = sim.positions[0].copy()
+    T = 1.0
+    sim.advance(T)
+    s = float((sim.positions[0] - x0) @ downhill)
+    assert float(n @ sim.positions[0]) == pytest.approx(H, rel=0.02)
+    if math.tan(theta) < mu:
+        # (vbd's lagged, smoothed friction creeps a few µm in the second; sliding would be
+        # tenths of a metre)
+        assert abs(s) < 1e-5
+    else:
+        a = G * (math.sin(theta) - mu * math.cos(theta))
+        assert s == pytest.approx(0.5 * a * T * T, rel=2e-2)
+
+
+@pytest.mark.parametrize("integrator", ["symplectic_euler", "rk4", "implicit_euler"])
+@pytest.mark.parametrize("speed", [3.0, 30.0, 300.0])
+def test_a_fast_plate_of_zero_thickness_never_passes_a_particle(integrator, speed):
+    """The plate sweeps up through a particle at rest; continuous detection carries it along on
+    the side it started (the plate's motion over a step is many thicknesses at speed)."""
+    model = ClothModel.from_springs(
+        [[0.0, 0.0, 0.1], [50.0, 50.0, 50.0]], [1.0, 1.0], [[0, 1]], [0.0], [0.0]
+    )
+    plate = colliders.Mesh(quad(1.0), position=(0, 0, -0.2), friction=0.2)
+    sim = Simulator(
+        model, integrator=integrator, dt=1e-3, thickness=H, colliders=[plate], gravity=(0, 0, 0)
+    )
+    for k in range(60):
+        sim.set_collider_pose(0, (0.0, 0.0, -0.2 + speed * 1e-3 * (k + 1)))
+        sim.step()
+        assert sim.positions[0, 2] - sim.colliders[0].position[2] >= H * (1 - 0.02)
+
+
+@pytest.mark.parametrize("integrator", ["symplectic_euler", "vbd"])
+def test_a_cloth_on_a_box_mesh_rests_as_on_the_box(integrator):
+    """A cloth dropped on a box as 12 triangles settles where it settles on the Box primitive."""
+
+    def run(collider):
+        model = ClothModel.grid(
+            10, 10, 0.05, 0.01,
+            stiffness={"structural": 500, "shear": 500, "bend": 50},
+            damping={"structural": 0.05, "shear": 0.05, "bend": 0.01},
+            origin=(-0.225, -0.225, 0.12),
+        )  # fmt: skip
+        dt = 1 / 60 if integrator == "vbd" else 1e-3
+        sim = Simulator(
+            model, integrator=integrator, dt=dt, thickness=H, colliders=[collider], drag=0.05
+        )
+        sim.advance(1.5)
+        return sim
+
+    half = (0.15, 0.15, 0.1)
+    a = run(colliders.Box(half_extents=half, friction=0.5))
+    b = run(colliders.Mesh(box_mesh(half), friction=0.5))
+    d = b.colliders[0].signed_distance(b.positions)
+    assert d.min() >= H * (1 - 0.1)
+    assert (d < H * 1.1).sum() >= 4  # it rests on the top
+    assert np.abs(a.positions - b.positions).max() < 0.01
+
+
+def test_the_camera_sees_mesh_and_cylinder_colliders_and_labels_them():
+    model = ClothModel.grid(2, 2, 0.01, 0.01, stiffness=1.0, origin=(5, 5, 5))
+    mesh = colliders.Mesh(box_mesh((0.1, 0.1, 0.1)), position=(-0.2, 0, 0))
+    cyl = colliders.Cylinder(center=(0.2, 0, 0), radius=0.05, length=0.2)
+    sim = Simulator(model, colliders=[mesh, cyl])
+    cam = DepthCamera(width=64, height=48, fx=60, fy=60, cx=31.5, cy=23.5, position=(0, 0, 1))
+    cam.set_pose((0, 0, 1.0), (0, 1, 0, 0))  # straight down
+    f = cam.render(sim)
+    assert set(np.unique(f.object)) == {-1, 1, 2}
+    assert np.all(f.triangle[f.object >= 1] == -1)
+    # every pixel seen lies on its collider's surface
+    world = f.points().reshape(-1, 3).astype(np.float64) @ cam.rotation.T + cam.position
+    for label, c in ((1, mesh), (2, cyl)):
+        on = (f.object == label).ravel()
+        assert on.sum() > 20
+        assert np.abs(c.signed_distance(world[on])).max() < 1e-5
+    # the mesh box renders as the Box primitive does, pixel for pixel
+    boxed = Simulator(
+        model, colliders=[colliders.Box(center=(-0.2, 0, 0), half_extents=(0.1,) * 3), cyl]
+    )
+    g = cam.render(boxed)
+    np.testing.assert_array_equal(g.object, f.object)
+    np.testing.assert_allclose(g.depth, f.depth, atol=1e-6)
+
+
+def test_bad_mesh_colliders_are_refused_by_name(tmp_path):
+    with pytest.raises(ValueError, match="no triangles"):
+        colliders.Mesh((np.zeros((3, 3)), np.zeros((0, 3), int)))
+    with pytest.raises(ValueError, match="no such mesh file"):
+        colliders.Mesh(str(tmp_path / "missing.stl"))
+    with pytest.raises(ValueError, match="scale"):
+        colliders.Mesh(quad(1.0), scale=(1, -1, 1))
+    with pytest.raises(ValueError, match="out of range"):
+        colliders.Mesh((np.zeros((3, 3)), [[0, 1, 5]]))
+    with pytest.raises(ValueError, match="nonzero area"):
+        colliders.Mesh((np.zeros((3, 3)), [[0, 1, 2]]))
+    with pytest.raises(ValueError, match="length"):
+        colliders.Cylinder(radius=0.1, length=0.0)
+
+
+@pytest.mark.parametrize("integrator", integrators.available())
+def test_every_integrator_keeps_a_cloth_off_a_mesh(integrator):
+    model = ClothModel.grid(
+        6, 6, 0.05, 0.01, stiffness=300.0, damping=0.05, origin=(-0.125, -0.125, 0.03)
+    )
+    probe = Simulator(model, integrator=integrator, dt=1e-3)
+    limit = probe.stable_dt()
+    dt = 1.0 / 60.0 if math.isinf(limit) else min(1e-3, 0.5 * limit)
+    sim = Simulator(
+        model, integrator=integrator, dt=dt, thickness=H,
+        colliders=[colliders.Mesh(quad(1.0), friction=0.5)],
+    )  # fmt: skip
+    sim.advance(0.5)
+    assert np.all(sim.positions[:, 2] >= H * (1 - 0.1))
