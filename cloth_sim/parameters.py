@@ -500,6 +500,39 @@ def _schema() -> dict[str, Param]:
             scene_key="camera.noise",
         ),
         P(
+            "robot.enable",
+            bool,
+            "",
+            "Take a robot as ROS publishes it: its URDF from robot.description_topic, its joints "
+            "from robot.joint_states_topic; its links become colliders.",
+            apply="node",
+        ),
+        P(
+            "robot.description_topic",
+            str,
+            "",
+            "The robot's URDF (std_msgs/String, transient local, as robot_state_publisher "
+            "publishes it).",
+            nonempty=True,
+            apply="node",
+        ),
+        P(
+            "robot.joint_states_topic",
+            str,
+            "",
+            "The robot's joint positions (sensor_msgs/JointState).",
+            nonempty=True,
+            apply="node",
+        ),
+        P(
+            "robot.source",
+            str,
+            "",
+            "What moves the links: joint_states (forward kinematics of the URDF).",
+            choices=("joint_states",),
+            apply="node",
+        ),
+        P(
             "thickness",
             float,
             "m",

@@ -105,6 +105,10 @@ def defaults(scene: Scene) -> dict:
         "real_time_factor": 1.0,
         "strain_limit_passes": DEFAULT_STRAIN_LIMIT_PASSES,
         "vbd.fit_tick": False,
+        "robot.enable": False,
+        "robot.description_topic": "/robot_description",
+        "robot.joint_states_topic": "/joint_states",
+        "robot.source": "joint_states",
     }
     values.update(UNUSED_VALUES)
     values.update(scene_values(scene))
@@ -208,7 +212,10 @@ def build_simulator(cfg: dict, model, scene: Scene) -> Simulator:
         thickness=cfg["thickness"],
         self_collision=cfg["self_collision"],
     )
+    if scene.robot is not None:
+        scene.add_robot(sim)
     scene.apply_grippers(sim)
+    sim.motion = scene.motion
     k, c = material(model, cfg)
     if not (np.array_equal(model.stiffness, k) and np.array_equal(model.damping, c)):
         for f in model.family_names:  # a kept model built with other values: set them

@@ -6,7 +6,10 @@ and bounds, and the filters of ``get_entities``.
   (it moves only when a pose is set or streamed), unless ``set_entity_info`` gives it another
   category — ``CATEGORY_DYNAMIC_OBJECT`` for a kinematic obstacle that moves at a twist it is given
   (the standard refuses a twist for a static object);
-* ``gripper/<name>`` — each gripper holding the cloth, ``CATEGORY_ROBOT``.
+* ``gripper/<name>`` — each gripper holding the cloth, ``CATEGORY_ROBOT``;
+* ``robot/<name>`` — each robot (a URDF's links as colliders, :mod:`cloth_sim.robot`), its pose its
+  root link's, and ``robot/<name>/<link>`` each of its links with a collision, its pose the
+  link's: ``CATEGORY_ROBOT`` (their colliders are not listed apart: the joints move them).
 
 A full name is what ``get_entities`` lists and ``spawn_entity`` answers; a client may also use the
 name it gave (``ball`` for ``collider/ball``, as Gazebo's and Isaac Sim's clients do) wherever that
@@ -26,7 +29,7 @@ import re
 import numpy as np
 from simulation_interfaces.msg import Bounds, EntityCategory, Result, TagsFilter
 
-from ..contact.colliders import Box, Capsule, Plane, Sphere
+from ..contact.colliders import Box, Capsule, Cylinder, Mesh, Plane, Sphere
 
 CLOTH = "cloth"
 #: the categories each kind of entity reports unless set otherwise
@@ -34,6 +37,7 @@ DEFAULT_CATEGORY = {
     "cloth": EntityCategory.CATEGORY_OBJECT,
     "collider": EntityCategory.CATEGORY_STATIC_OBJECT,
     "gripper": EntityCategory.CATEGORY_ROBOT,
+    "robot": EntityCategory.CATEGORY_ROBOT,
 }
 CATEGORY_NAMES = {
     getattr(EntityCategory, n): n for n in dir(EntityCategory) if n.startswith("CATEGORY_")
@@ -52,9 +56,14 @@ class Entities:
     def names(self) -> list[str]:
         """Every entity's full name: the cloth, the colliders in order, the grippers."""
         sim = self.session.sim
+        robots = []
+        for name, robot in sim.robots.items():
+            robots += [f"robot/{name}", *(f"robot/{name}/{link}" for link in robot.link_names)]
         names = [
             CLOTH,
-            *(f"collider/{c.name}" for c in sim.colliders),
+            # (a robot's link colliders, named robot/link, are its entities)
+            *(f"collider/{c.name}" for c in sim.colliders if "/" not in c.name),
+            *robots,
             *(f"gripper/{g}" for g in sim.grippers),
         ]
         for gone in set(self._set) - set(names):  # what set_entity_info set goes with its entity
@@ -106,6 +115,15 @@ class Entities:
             )
         if kind == "gripper":
             return f"a gripper holding {len(sim.grippers[key])} particles"
+        if kind == "robot":
+            robot_name, _, link = key.partition("/")
+            robot = sim.robots[robot_name]
+            if link:
+                return f"link {link} of robot {robot_name} (moved by its joints)"
+            return (
+                f"a robot from the URDF {robot.name!r}: {len(robot.joint_names)} joints, "
+                f"{len(robot.link_names)} links with collisions"
+            )
         c = self.collider(key)
         return f"a {type(c).__name__.lower()} collider (kinematic: moved by its pose or a twist)"
 
@@ -206,6 +224,11 @@ class Entities:
             centre, radius = pts[0], pts[1, 0]
             if entity == "collider":
                 return float(self.collider(key).signed_distance(centre[None])[0]) <= radius
+            if entity == "robot":
+                return any(
+                    float(c.signed_distance(centre[None])[0]) <= radius
+                    for c in self.robot_colliders(key)
+                )
             x = sim.positions if entity == "cloth" else sim.positions[sim.grippers[key]]
             return bool((np.linalg.norm(x - centre, axis=1) <= radius).any())
         lo, hi = np.minimum(pts[0], pts[1]), np.maximum(pts[0], pts[1])
@@ -223,6 +246,16 @@ class Entities:
     def collider(self, name: str):
         return next(c for c in self.session.sim.colliders if c.name == name)
 
+    def robot_colliders(self, key: str) -> list:
+        """The colliders of robot ``key`` (``name``), or of one of its links (``name/link``)."""
+        robot, _, link = key.partition("/")
+        prefix = f"{robot}/{link}" if link else f"{robot}/"
+        return [
+            c
+            for c in self.session.sim.colliders
+            if c.name == prefix or c.name.startswith(prefix if not link else prefix + "/")
+        ]
+
     def box(self, name: str) -> tuple[np.ndarray, np.ndarray] | None:
         """``(min, max)`` corners of the entity's axis-aligned bounding box; ``None`` for a
         plane."""
@@ -232,6 +265,8 @@ class Entities:
             pts = sim.positions
         elif entity == "gripper":
             pts = sim.positions[sim.grippers[key]]
+        elif entity == "robot":
+            pts = np.concatenate([collider_extent(c) for c in self.robot_colliders(key)])
         else:
             pts = collider_extent(self.collider(key))
             if pts is None:
@@ -249,4 +284,10 @@ def collider_extent(c) -> np.ndarray | None:
     if isinstance(c, Capsule):
         ends = np.stack([c.a, c.b])
         return np.concatenate([ends - c.radius, ends + c.radius])
+    if isinstance(c, Cylinder):
+        corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+        half = np.array([c.radius, c.radius, 0.5 * c.length])
+        return (corners * half) @ c.rotation.T + c.center
+    if isinstance(c, Mesh):
+        return c.vertices
     return None

@@ -108,9 +108,10 @@ class ParameterGate:
         self._rates_run = {cfg["publish_rate"]}  # rates the node has run with: never refused
         self._fit_solver(cfg)
 
-    def open(self, manipulation, publishing, ticker) -> None:
+    def open(self, manipulation, publishing, ticker, robot_state) -> None:
         """Take changes from now on."""
         self.manipulation, self.publishing, self.ticker = manipulation, publishing, ticker
+        self.robot_state = robot_state
         self.node.add_pre_set_parameters_callback(self.pre_set)
         self.node.add_on_set_parameters_callback(self.on_set)
         self.node.add_post_set_parameters_callback(self.post_set)
@@ -299,6 +300,7 @@ class ParameterGate:
         self.session.cfg = cand
         self.session.stable_dt = limit
         self.publishing.configure(cand)
+        self.robot_state.configure(cand)
         if rate_changed:
             self.ticker.set_rate(cand["publish_rate"])
 

@@ -162,6 +162,25 @@ TOPICS = {
         "every tick: the force and torque (about the gripper's position) the cloth exerts on "
         "gripper `<name>`, world frame",
     ),
+    "robot_description": Topic(
+        "/robot_description",
+        "std_msgs/msg/String",
+        "in",
+        1,
+        "with `robot.enable`: the robot's URDF (`robot.description_topic`); each message puts "
+        "that robot in the scene, its links colliders, in place of the last; one that does not "
+        "load is logged and the scene is kept",
+        durability="transient local",
+    ),
+    "joint_states": Topic(
+        "/joint_states",
+        "sensor_msgs/msg/JointState",
+        "in",
+        10,
+        "with `robot.enable` (`robot.joint_states_topic`): joint positions, reached over the next "
+        "tick's steps; an unknown joint or a non-finite value is logged and the message ignored; "
+        "none for 1 s WARNs on /diagnostics",
+    ),
 }
 
 SERVICES = {
@@ -217,10 +236,12 @@ def publisher(node, key: str, cls, qos=None, **names):
     return node.create_publisher(cls, topic_name(key, **names), qos or TOPICS[key].depth)
 
 
-def subscription(node, key: str, cls, callback, **names):
-    """The subscription of :data:`TOPICS` ``[key]``; ``names`` fill its ``{name}``."""
+def subscription(node, key: str, cls, callback, qos=None, topic=None, **names):
+    """The subscription of :data:`TOPICS` ``[key]``; ``names`` fill its ``{name}``; ``qos`` a
+    profile instead of its depth, ``topic`` another name for it (one a parameter gives)."""
     _declared(cls, TOPICS[key])
-    return node.create_subscription(cls, topic_name(key, **names), callback, TOPICS[key].depth)
+    name = topic or topic_name(key, **names)
+    return node.create_subscription(cls, name, callback, qos or TOPICS[key].depth)
 
 
 def service(node, key: str, cls, callback):

@@ -156,6 +156,8 @@ class Manipulation:
             k: v for k, v in self.session.pose_targets.items() if k[0] != "collider"
         }
         for i, c in enumerate(self.session.sim.colliders):
+            if "/" in c.name:  # a robot's link (robot/link): its joints move it
+                continue
             topic = interface.topic_name("collider_pose", name=c.name)
             self._pose_subs.append(
                 interface.subscription(

@@ -139,11 +139,13 @@ def diagnostic_status(
     warn_margin: float,
     values: dict,
     energy: str | None = None,
+    others: list | None = None,
 ) -> DiagnosticStatus:
     """``cloth_sim: simulation``: ERROR after a blow-up, WARN when the real-time factor is below
     ``rtf_warn`` (while running; 0 when the node runs as fast as it can), dt is above
-    ``warn_margin`` of stable_dt, or ``energy`` says the energy balance found energy no source put
-    in (:mod:`cloth_sim.physics.energy_balance`), OK otherwise."""
+    ``warn_margin`` of stable_dt, ``energy`` says the energy balance found energy no source put
+    in (:mod:`cloth_sim.physics.energy_balance`), or ``others`` has problems of the node's parts
+    (a robot's stale joint states), OK otherwise."""
     level, message = DiagnosticStatus.OK, "running"
     if error:
         level, message = DiagnosticStatus.ERROR, f"simulation diverged and is paused: {error}"
@@ -157,6 +159,7 @@ def diagnostic_status(
             )
         if energy:
             problems.append(energy)
+        problems.extend(others or ())
         if problems:
             level, message = DiagnosticStatus.WARN, "; ".join(problems)
         elif paused:

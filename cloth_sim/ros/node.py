@@ -14,7 +14,9 @@ what the parts share about it):
 * :mod:`~cloth_sim.ros.publishing` — what a tick publishes, ``/diagnostics``, TF
   (:mod:`~cloth_sim.ros.frames`) and the depth camera (:mod:`~cloth_sim.ros.camera_publisher`); the
   messages are built by the pure functions of :mod:`~cloth_sim.ros.messages`;
-* :mod:`~cloth_sim.ros.sim_interfaces` — the ROS simulation standard's services and action.
+* :mod:`~cloth_sim.ros.sim_interfaces` — the ROS simulation standard's services and action;
+* :mod:`~cloth_sim.ros.robot_state` — a robot from ``robot_description``, moved by
+  ``/joint_states``.
 
 The process (:func:`cloth_sim.ros.main`, then :func:`run`) handles SIGINT/SIGTERM itself (rclpy's
 handlers are off): a signal at any moment, or two (``ros2 launch`` forwards Ctrl-C), only asks the
@@ -36,6 +38,7 @@ from .control import SimulationControl
 from .gate import ParameterGate, StartupError, as_declared, settle_garbage
 from .manipulation import Manipulation
 from .publishing import Publishing
+from .robot_state import RobotState
 from .sim_interfaces import SimulationInterfaces
 from .ticker import Stepper, Ticker
 
@@ -59,7 +62,8 @@ class ClothSimNode(Node):
         kernels = compile_kernels()
         self.manipulation = Manipulation(self, session)
         self.publishing = Publishing(self, session, self.manipulation)
-        self.stepper = Stepper(session, self.manipulation)
+        self.robot_state = RobotState(self, session)
+        self.stepper = Stepper(session, self.manipulation, self.robot_state)
         self.control = SimulationControl(
             self, session, self.stepper, self.publishing, self.manipulation
         )
@@ -67,10 +71,13 @@ class ClothSimNode(Node):
             self, session, self.control, self.manipulation, self.publishing.stamp
         )
         session.restart_listeners.append(self.interfaces.restarted)
+        session.restart_listeners.append(self.robot_state.restarted)
+        session.problem_sources.append(self.robot_state.problem)
+        self.robot_state.configure(session.cfg)
         self.ticker = Ticker(
             self, session, self.stepper, self.control, self.publishing, self.interfaces
         )
-        self.gate.open(self.manipulation, self.publishing, self.ticker)
+        self.gate.open(self.manipulation, self.publishing, self.ticker, self.robot_state)
         self.diag_timer = self.create_timer(1.0, self.publishing.publish_diagnostics)
         settle_garbage()
         self.get_logger().info(

@@ -191,6 +191,7 @@ class Publishing:
             warn_margin=WARN_MARGIN,
             values=values,
             energy=self.session.balance.message() if self.session.balance.unstable else None,
+            others=[p for p in (source() for source in self.session.problem_sources) if p],
         )
 
     def publish_diagnostics(self) -> None:

@@ -46,6 +46,9 @@ class Session:
         self.twists: dict = {}
         #: called when the simulation is back at its scene's start (a new scene, a reset)
         self.restart_listeners: list = []
+        #: callables that say what is wrong besides the simulation (a string), or None: each
+        #: WARNs on /diagnostics (the robot's stale joint states)
+        self.problem_sources: list = []
 
     def replace(self, sim, scene) -> None:
         """A rebuilt simulation (a new scene, or a rebuild value changed): its own energy balance,

@@ -48,6 +48,7 @@ from simulation_interfaces.msg import (
     SimulatorFeatures,
 )
 
+from . import robot_spawn
 from .entities import CLOTH, Entities
 from .messages import checked_pose
 
@@ -400,6 +401,9 @@ class SimulationInterfaces:
         if kind == "collider":
             c = self.entities.collider(key)
             p, q = c.position, c.orientation
+        elif kind == "robot":  # a link's pose, or the robot's root link's
+            robot, _, link = key.partition("/")
+            p, q = sim.link_pose(robot, link or sim.robots[robot].root)
         else:
             p, q = sim.gripper_pose(key)
         v, w = self.manipulation.twist(kind, key)
@@ -433,6 +437,13 @@ class SimulationInterfaces:
                 Result.RESULT_OPERATION_FAILED,
                 "the cloth's state is its particles': move it with its grippers "
                 "(gripper/<name>) or grasp it (~/grasp)",
+            )
+            return response
+        if name.startswith("robot/"):
+            response.result = result(
+                Result.RESULT_OPERATION_FAILED,
+                f"{name} is moved by its joints: publish them on the robot's joint states "
+                f"topic (robot.joint_states_topic)",
             )
             return response
         position, orientation, problem = checked_pose(
@@ -510,8 +521,12 @@ class SimulationInterfaces:
 
     def _spawn(self, request, resource=None) -> tuple[Result, str]:
         """``(result, entity name)`` of spawning what ``request`` describes (its ``uri`` and
-        ``resource_string``, or those of ``resource``)."""
-        code, message, collider = self._collider_from(request, resource or request)
+        ``resource_string``, or those of ``resource``): a URDF robot (:func:`.robot_spawn.spawn`)
+        or a collider."""
+        resource = resource or request
+        if robot_spawn.is_urdf(resource):
+            return robot_spawn.spawn(self, request, resource)
+        code, message, collider = self._collider_from(request, resource)
         if collider is None:
             return result(code, message), ""
         self.session.sim.add_collider(collider)
@@ -623,6 +638,17 @@ class SimulationInterfaces:
         elif name.startswith("gripper/"):
             self.manipulation.release_gripper(name.partition("/")[2])
             response.result = result(Result.RESULT_OK, f"{name} released the cloth")
+        elif name.startswith("robot/"):
+            robot, _, link = name.partition("/")[2].partition("/")
+            if link:
+                response.result = result(
+                    Result.RESULT_OPERATION_FAILED,
+                    f"{name} is a link of robot/{robot}: delete the robot",
+                )
+            else:
+                self.session.sim.remove_robot(robot)
+                self.manipulation.colliders_changed()
+                response.result = result()
         else:
             self._remove_collider(name.partition("/")[2])
             response.result = result()

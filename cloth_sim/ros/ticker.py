@@ -30,8 +30,8 @@ MAX_STEPS_PER_TICK = 1_000_000
 class Stepper:
     """Steps the session's simulation; the poses and twists of ``manipulation`` are followed."""
 
-    def __init__(self, session, manipulation):
-        self.session, self.manipulation = session, manipulation
+    def __init__(self, session, manipulation, robot_state):
+        self.session, self.manipulation, self.robot_state = session, manipulation, robot_state
 
     def advance(self, n: int, t0: float, budget: float) -> tuple[int, float, float]:
         """Up to ``n`` steps, stopping once ``budget`` s have passed since ``t0``; poses received
@@ -40,6 +40,10 @@ class Stepper:
         session, manip = self.session, self.manipulation
         sim = session.sim
         moves = manip.pose_moves() if session.pose_targets and n else None
+        joints = self.robot_state.joint_move() if n else None  # (robot, from, to)
+        # joints are reached over the steps this tick is expected to take (a late tick takes
+        # fewer than n: a message is then still reached within it)
+        jspan = max(1, min(n, int(budget / max(self.step_cost(), 1e-6)))) if joints else 1
         steps, step_wall, step_max = 0, 0.0, 0.0
         span = n if n < MAX_STEPS_PER_TICK else max(1, int(budget / max(self.step_cost(), 1e-6)))
         for k in range(n):
@@ -54,6 +58,12 @@ class Stepper:
                         sim.set_gripper_pose(key, (1 - f) * p0 + f * p1, q)
                 if f >= 1.0:
                     moves = None
+            if joints:  # joint states received since the last tick: reached over its steps
+                f = min(1.0, (k + 1) / jspan)
+                name, q0, q1 = joints
+                sim.set_joint_positions(name, {j: (1 - f) * q0[j] + f * q1[j] for j in q1})
+                if f >= 1.0:
+                    joints = None
             if session.twists:  # colliders and grippers moving at a set velocity
                 manip.apply_twists(sim.dt)
             s0 = time.perf_counter()
@@ -69,6 +79,9 @@ class Stepper:
         if moves:  # the tick ended before the poses were reached: the rest next tick
             for (kind, key), (_, _, p1, q1) in moves.items():
                 session.pose_targets.setdefault((kind, key), (p1, q1))
+        if joints:  # the tick ended early (overloaded): the rest in the next step, so the
+            # links stand at the joint state the tick took (within one tick, whatever its steps)
+            sim.set_joint_positions(joints[0], joints[2])
         return steps, step_wall, step_max
 
     def step_cost(self) -> float:

@@ -1,7 +1,7 @@
 """Every example under examples/ runs (each in its short form, --quick) and prints what it says it
 does; the docs show these files, so a code sample that stops working fails here. The node's
-example runs against a live node in test/ros/test_example_grasp.py; examples/learning/ needs
-the optional LeRobot extra (make bench-learning)."""
+examples run against a live node in test/ros/test_example_grasp.py and test_example_robot.py;
+examples/learning/ needs the optional LeRobot extra (make bench-learning)."""
 
 import os
 import subprocess
@@ -20,12 +20,17 @@ EXPECTED = {
     "depth_camera.py": ["depth (60, 80)", "triangles in view", "the centre pixel sees"],
     "sweep.py": ["runs by status: {'ok': 4}", "(complete)"],
     "contacts.py": ["closest to the ball's surface: 0.00", "after moving the ball"],
+    "robot.py": [
+        "7 links with collisions",
+        "closest the cloth came to a link: 1.00",
+        "the hand holds",
+    ],
 }
 
 
 def test_every_example_is_run_here_or_by_the_node_tests():
     here = {p.name for p in EXAMPLES.glob("*.py")}
-    assert here == set(EXPECTED) | {"grasp_node.py"}
+    assert here == set(EXPECTED) | {"grasp_node.py", "robot_node.py"}
 
 
 @pytest.mark.parametrize("name", sorted(EXPECTED))

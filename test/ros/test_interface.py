@@ -25,6 +25,7 @@ def test_a_running_nodes_topics_and_services_are_the_declared_ones():
     proc = start_node(
         domain,
         *("-p", "scene:=table", "-p", "camera.enable:=true", "-p", "publish_clock:=true"),
+        *("-p", "robot.enable:=true"),
     )
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=domain)
