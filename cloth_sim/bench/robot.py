@@ -1,7 +1,7 @@
-"""Robots in the scene, measured: forward kinematics (ours against yourdfpy's), what a mesh collider
-costs against the same shape as a primitive, and the robot_sweep scene (an arm through a hanging
-32×32 cloth): the deepest any vertex came into any link, self-crossings by the independent check,
-and the real-time factor headless. Each comparison runs side by side in one process.
+"""Robots in the scene, measured: forward kinematics (ours against yourdfpy's), what a mesh
+collider costs against the same shape as a primitive, and the robot_sweep scene (an arm through a
+hanging 32×32 cloth): the deepest any vertex came into any link, self-crossings by the independent
+check, and the real-time factor headless. Each comparison runs side by side in one process.
 
     .venv/bin/python -m cloth_sim.bench.robot [--seconds S]
 """
@@ -60,9 +60,10 @@ def mesh_against_primitive(steps: int = 400) -> None:
             )
             sim = Simulator(model, integrator=integrator, dt=dt, colliders=[shape], drag=0.01)
             sim.step(20)
+            n = steps if integrator != "vbd" else steps // 8
             t = time.perf_counter()
-            sim.step(steps if integrator != "vbd" else steps // 8)
-            walls[kind] = (time.perf_counter() - t) / (steps if integrator != "vbd" else steps // 8)
+            sim.step(n)
+            walls[kind] = (time.perf_counter() - t) / n
         rows.append((integrator, walls["box"], walls["mesh"]))
     print("a cloth on a box: the Box primitive against the same box as a 12-triangle mesh")
     print("| integrator | Box ms/step | Mesh ms/step | ratio |\n|---|---|---|---|")
