@@ -407,6 +407,12 @@ class Simulator:
         nothing."""
         self._contacts.set_pose(i, position, orientation, teleport=teleport)
 
+    def collider_wrench(self, i: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(force, torque)`` the cloth exerted on collider ``i`` over the last step: N and N·m,
+        world frame, torque about its position (see
+        :meth:`cloth_sim.contact.colliders.Contacts.wrench`)."""
+        return self._contacts.wrench(i)
+
     def add_collider(self, collider) -> int:
         """Add a collider (a shape of :mod:`cloth_sim.contact.colliders`, its name not in use) from
         the next step on; returns its index in :attr:`colliders`. A bad shape or a name in use
@@ -464,6 +470,12 @@ class Simulator:
     def joint_positions(self, name: str) -> dict:
         """Robot ``name``'s joint positions now (every movable joint)."""
         return self._robots.joints(name)
+
+    def link_wrench(self, name: str, link: str) -> tuple[np.ndarray, np.ndarray]:
+        """``(force, torque)`` the cloth exerted on link ``link`` of robot ``name`` over the last
+        step (its colliders' :meth:`collider_wrench` summed; torque about the link's origin):
+        what a finger feels when it holds the cloth by friction."""
+        return self._robots.link_wrench(name, link, self.collider_wrench)
 
     def link_pose(self, name: str, link: str) -> tuple[np.ndarray, np.ndarray]:
         """``(position, orientation (w, x, y, z))`` of link ``link`` of robot ``name`` in the

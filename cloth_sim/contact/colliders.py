@@ -422,7 +422,25 @@ _MARCH_STEPS = 64
 
 @numba.njit(cache=True)
 def resolve_contacts(
-    x, v, x0, pinned, kinds, pos, rot, pos0, rot0, geo, mu, bank, h, dt, touching, clearance
+    x,
+    v,
+    x0,
+    pinned,
+    kinds,
+    pos,
+    rot,
+    pos0,
+    rot0,
+    geo,
+    mu,
+    bank,
+    h,
+    dt,
+    touching,
+    clearance,
+    masses,
+    push,
+    turn,
 ):
     """The contact stage's kernel, per particle in index order (each particle is independent).
 
@@ -436,7 +454,9 @@ def resolve_contacts(
     is removed and the tangential one shrinks by ``μ`` times what was removed (Coulomb's cone on
     the impulse). Returns the number of particles touching; ``touching[p]`` says which, and
     ``clearance[p]`` how far above the nearest collider's skin the particle ends (``inf``:
-    none)."""
+    none). ``push[c]`` and ``turn[c]`` gather the impulse the particles gave collider ``c`` in
+    (3) (``m·Δv``, N·s, in index order: the same sum every run) and its moment about the
+    collider's position."""
     n = x.shape[0]
     count = 0
     for p in range(n):
@@ -524,9 +544,23 @@ def resolve_contacts(
                 if tl > 0.0 and not stuck:
                     keep = max(0.0, 1.0 - mu[c] * (-vn) / tl)
                 vn = max(vn, 0.0)  # (separating: kept)
+                jx, jy, jz = v[p, 0], v[p, 1], v[p, 2]
                 v[p, 0] = wx + vn * nx + keep * tx
                 v[p, 1] = wy + vn * ny + keep * ty
                 v[p, 2] = wz + vn * nz + keep * tz
+                # the impulse the particle gave the collider
+                jx, jy, jz = (
+                    masses[p] * (jx - v[p, 0]),
+                    masses[p] * (jy - v[p, 1]),
+                    masses[p] * (jz - v[p, 2]),
+                )
+                push[c, 0] += jx
+                push[c, 1] += jy
+                push[c, 2] += jz
+                ax, ay, az = x[p, 0] - pos[c, 0], x[p, 1] - pos[c, 1], x[p, 2] - pos[c, 2]
+                turn[c, 0] += ay * jz - az * jy
+                turn[c, 1] += az * jx - ax * jz
+                turn[c, 2] += ax * jy - ay * jx
         if touching[p] and kinds.shape[0] > 1:
             _crease(x, p, kinds, pos, rot, geo, bank, h)
         if touching[p]:
@@ -587,6 +621,9 @@ class Contacts:
         self.clearance = np.full(model.n_particles, np.inf)
         self.last_touching = 0
         self._pinned = np.ascontiguousarray(model.pinned)
+        self._masses = np.ascontiguousarray(model.masses, dtype=np.float64)
+        self._push = np.zeros((0, 3))  # the impulses of the last step, per collider
+        self._turn = np.zeros((0, 3))
         self._pack()
         self._pos0, self._rot0 = self._pos.copy(), self._rot.copy()
 
@@ -666,7 +703,26 @@ class Contacts:
             self._pos0[i] = self._pos[i]
             self._rot0[i] = self._rot[i]
 
+    def wrench(self, i: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(force, torque)`` the cloth exerted on collider ``i`` over the last step (N, N·m,
+        world frame, torque about its position): the impulses the contact stage's velocity filter
+        took from the particles touching it, over ``dt``. (Where a method resolves the contacts
+        inside its own step, ``vbd``, the stage only finishes them and this misses their
+        force.)"""
+        self._index(i, "read")
+        if i >= len(self._push):  # added since the last step
+            return np.zeros(3), np.zeros(3)
+        return self._push[i] / self._dt, self._turn[i] / self._dt
+
+    _dt = 1.0
+
     def apply(self, state, start, dt, velocity_follow):
+        if self._push.shape[0] != len(self.colliders):
+            self._push = np.zeros((len(self.colliders), 3))
+            self._turn = np.zeros((len(self.colliders), 3))
+        self._push[:] = 0.0
+        self._turn[:] = 0.0
+        self._dt = dt
         self.last_touching = resolve_contacts(
             state.x,
             state.v,
@@ -684,6 +740,9 @@ class Contacts:
             dt,
             self.touching,
             self.clearance,
+            self._masses,
+            self._push,
+            self._turn,
         )
         self.end_step()
 

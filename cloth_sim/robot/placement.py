@@ -119,6 +119,18 @@ class Robots:
             )
         return _pose(placed.base @ placed.robot.link_transforms(placed.joints)[link])
 
+    def link_wrench(self, name: str, link: str, collider_wrench):
+        """The wrench on a link: ``collider_wrench(i)`` of its colliders, the torques moved to
+        the link's origin."""
+        origin, _ = self.link_pose(name, link)
+        force, torque = np.zeros(3), np.zeros(3)
+        for collider, shape in self._placed(name).colliders:
+            if shape.link == link:
+                f, t = collider_wrench(self._index(collider))
+                force += f
+                torque += t + np.cross(collider.position - origin, f)
+        return force, torque
+
     def _placed(self, name) -> Placed:
         if name not in self.placed:
             raise ValueError(f"unknown robot {name!r}; robots: {', '.join(self.placed) or 'none'}")

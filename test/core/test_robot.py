@@ -259,3 +259,30 @@ def test_bad_robot_input_is_refused_by_name_and_changes_nothing(tmp_path):
     assert len(sim.colliders) == 3
     sim.remove_robot("arm")
     assert sim.colliders == [] and sim.robots == {}
+
+
+def test_a_parallel_gripper_lifts_a_cloth_by_friction_alone_and_feels_its_weight():
+    """robot_pick: two pads pinch a hanging flap's corner (no gripper attaches anything) and lift
+    the cloth 0.55 m off the shelf; over a 5 s hold the pinched cloth slips at most 1 cm against
+    the pads, and the pads' vertical force is the cloth's weight within 5 % (Coulomb friction on
+    the squeeze carries it all: the shelf feels nothing)."""
+    from cloth_sim.scene import load_scene
+
+    sim = load_scene("robot_pick").build_simulator()
+    assert sim.grippers == {}
+    sim.advance(7.8)  # settled, pinched, lifted
+    pads = [c for c in sim.colliders if c.name.startswith("gripper/finger")]
+    near = np.min([c.signed_distance(sim.positions) for c in pads], axis=0)
+    held = np.flatnonzero(near < 1.5 * sim.thickness)
+    assert len(held) >= 1
+    assert sim.positions[:, 2].min() > 0.41 + sim.thickness  # all of it off the shelf
+    pad = lambda: sim.link_pose("gripper", "finger_left")[0]  # noqa: E731
+    before = sim.positions[held] - pad()
+    sim.advance(12.8)
+    slip = np.abs(sim.positions[held] - pad() - before).max()
+    assert slip <= 0.01
+    force = sum(sim.link_wrench("gripper", f)[0] for f in ("finger_left", "finger_right"))
+    weight = sim.model.masses.sum() * 9.81
+    assert -force[2] == pytest.approx(weight, rel=0.05)
+    assert np.linalg.norm(force[:2]) < 0.05 * weight
+    np.testing.assert_array_equal(sim.collider_wrench(0)[0], 0.0)  # the shelf holds nothing
