@@ -165,7 +165,7 @@ class Simulator:
         self._contacts = Contacts(model, colliders or (), thickness)
         self._robots = Robots(
             self.add_collider,
-            self.set_collider_pose,
+            self._contacts.place,
             self.remove_collider,
             lambda: self._contacts.colliders,
             self.set_gripper_pose,

@@ -3,7 +3,10 @@ collider costs against the same shape as a primitive, and the robot_sweep scene 
 hanging 32×32 cloth): the deepest any vertex came into any link, self-crossings by the independent
 check, and the real-time factor headless. Each comparison runs side by side in one process.
 
-    .venv/bin/python -m cloth_sim.bench.robot [--seconds S]
+    .venv/bin/python -m cloth_sim.bench.robot [--seconds S] [--published]
+
+``--published`` adds a Franka Panda and a UR5 from their published descriptions with their
+collision meshes (example-robot-data: ``make bench-robots`` installs it and runs this).
 """
 
 from __future__ import annotations
@@ -98,14 +101,85 @@ def sweep(seconds: float) -> None:
     )
 
 
+#: robots users have, from example-robot-data (make bench-robots installs it): the URDF, where
+#: the base stands in front of the robot_sweep cloth, the joints it sweeps with, the joint that
+#: swings and between which angles
+PUBLISHED = {
+    "panda": (
+        "panda_description/urdf/panda.urdf",
+        (0.0, -0.45, 0.35),
+        {"panda_joint2": 0.9, "panda_joint4": -1.2, "panda_joint6": 1.6},
+        "panda_joint1",
+        (0.4, 2.7),
+    ),
+    "ur5": (
+        "ur_description/urdf/ur5_robot.urdf",
+        (0.0, -0.45, 0.45),
+        {"shoulder_lift_joint": -0.2, "elbow_joint": 0.3},
+        "shoulder_pan_joint",
+        (0.4, 2.7),
+    ),
+}
+
+
+def robot_data_share():
+    """example-robot-data's share folder (its package:// root), or None where it is not
+    installed."""
+    import sysconfig
+    from pathlib import Path
+
+    share = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix" / "share"
+    return share if (share / "example-robot-data").is_dir() else None
+
+
+def sweep_published(name: str, share, seconds: float = 2.0, speed: float = 1.5) -> None:
+    """A published robot swung through the robot_sweep cloth (the scene's own arm taken out)."""
+    urdf, base, joints, swing, (a, b) = PUBLISHED[name]
+    t = time.perf_counter()
+    robot = Robot.from_urdf(share / "example-robot-data" / "robots" / urdf, package_paths=[share])
+    load = time.perf_counter() - t
+    sim = load_scene("robot_sweep").build_simulator()
+    sim.motion = None
+    sim.remove_robot("arm")
+    sim.add_robot(robot, name=name, position=base, joints={**joints, swing: a})
+    links = list(sim.colliders)
+    h, worst, wall, steps = sim.thickness, np.inf, 0.0, 0
+    while sim.time < seconds:
+        angle = min(b, a + speed * (sim.time + sim.dt))
+        t = time.perf_counter()
+        sim.set_joint_positions(name, {swing: angle})
+        sim.step()
+        wall += time.perf_counter() - t
+        steps += 1
+        worst = min(worst, min(float(c.signed_distance(sim.positions).min()) for c in links))
+    tris = sum(s.triangles for s in robot.shapes)
+    print(
+        f"{name} ({len(robot.joint_names)} joints, {len(robot.link_names)} links, {tris} mesh "
+        f"triangles, loaded in {load:.2f} s) swung at {speed:g} rad/s through the robot_sweep "
+        f"cloth ({sim.integrator}, self-contact {'on' if sim.self_collision else 'off'}): "
+        f"deepest into the thickness {max(0.0, h - worst) / h:.1%} of it, pushed "
+        f"{sim.positions[:, 1].max():.3f} m behind its plane, {wall / steps * 1e3:.2f} ms a step, "
+        f"headless real-time factor {sim.time / wall:.2f}"
+    )
+
+
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--seconds", type=float, default=4.6, help="robot_sweep's simulated time")
+    p.add_argument(
+        "--published", action="store_true", help="also Panda and UR5 from example-robot-data"
+    )
     args = p.parse_args(argv)
     compile_kernels()
     forward_kinematics()
     mesh_against_primitive()
     sweep(args.seconds)
+    if args.published:
+        share = robot_data_share()
+        if share is None:
+            raise SystemExit("example-robot-data is not installed: make bench-robots installs it")
+        for name in PUBLISHED:
+            sweep_published(name, share)
 
 
 if __name__ == "__main__":

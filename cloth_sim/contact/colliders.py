@@ -27,7 +27,7 @@ import numba
 import numpy as np
 
 from . import triangle_meshes
-from .geometry import positive, quaternion_matrix, unit_quaternion, vector
+from .geometry import matrix_quaternion, positive, quaternion_matrix, unit_quaternion, vector
 from .triangle_meshes import TriangleMesh, mesh_distance
 
 PLANE, SPHERE, BOX, CAPSULE, CYLINDER, MESH = 0, 1, 2, 3, 4, 5
@@ -74,6 +74,29 @@ class Collider:
         q = unit_quaternion(orientation)
         #: the pose: ``position``, the unit quaternion ``orientation`` (w, x, y, z) and its matrix
         self.position, self.orientation, self.rotation = p, q, quaternion_matrix(q)
+
+    def place(self, transform: np.ndarray) -> None:
+        """Place the collider at a rigid ``transform`` (4×4) computed by the package itself (a
+        robot link's forward kinematics): :meth:`set_pose` without its checks."""
+        self.position = np.ascontiguousarray(transform[:3, 3], dtype=np.float64)
+        self.rotation = np.ascontiguousarray(transform[:3, :3], dtype=np.float64)
+        self.orientation = matrix_quaternion(self.rotation)
+
+    @property
+    def reach(self) -> float:
+        """How far from its position any point of the shape is (``inf``: unbounded)."""
+        g = self.geometry
+        if self.kind == SPHERE:
+            return float(g[0])
+        if self.kind == BOX:
+            return float(np.linalg.norm(g[:3]))
+        if self.kind == CAPSULE:
+            return float(np.linalg.norm(g[:3]) + g[3])
+        if self.kind == CYLINDER:
+            return float(math.hypot(g[0], g[1]))
+        if self.kind == MESH:
+            return self.mesh.extent
+        return math.inf
 
     def signed_distance(self, points) -> np.ndarray:
         """Signed distance of ``(k, 3)`` points from the surface (negative inside)."""
@@ -433,6 +456,7 @@ def resolve_contacts(
     rot0,
     geo,
     mu,
+    reach,
     bank,
     h,
     dt,
@@ -456,9 +480,12 @@ def resolve_contacts(
     ``clearance[p]`` how far above the nearest collider's skin the particle ends (``inf``:
     none). ``push[c]`` and ``turn[c]`` gather the impulse the particles gave collider ``c`` in
     (3) (``m·Δv``, N·s, in index order: the same sum every run) and its moment about the
-    collider's position."""
+    collider's position. A collider whose ``reach`` (every point of it within that of its
+    position) keeps the particle's whole path beyond ``h·(1 + CONTACT_TOLERANCE)`` is passed over:
+    it could do nothing (only its clearance is left unmeasured, far above any skin)."""
     n = x.shape[0]
     count = 0
+    edge = h * (1.0 + CONTACT_TOLERANCE) * (1.0 + 1e-9)
     for p in range(n):
         touching[p] = False
         clearance[p] = np.inf
@@ -468,6 +495,18 @@ def resolve_contacts(
             k = kinds[c]
             # the start, carried with the collider to its new pose (equal to x0 for a static one)
             sx, sy, sz = carried(pos[c], rot[c], pos0[c], rot0[c], x0[p, 0], x0[p, 1], x0[p, 2])
+            if reach[c] < np.inf:  # every point q of the path s→x: |q − pos| ≥ (a + b − L)/2
+                a = math.sqrt(
+                    (x[p, 0] - pos[c, 0]) ** 2
+                    + (x[p, 1] - pos[c, 1]) ** 2
+                    + (x[p, 2] - pos[c, 2]) ** 2
+                )
+                b = math.sqrt(
+                    (sx - pos[c, 0]) ** 2 + (sy - pos[c, 1]) ** 2 + (sz - pos[c, 2]) ** 2
+                )
+                L = math.sqrt((x[p, 0] - sx) ** 2 + (x[p, 1] - sy) ** 2 + (x[p, 2] - sz) ** 2)
+                if 0.5 * (a + b - L) - reach[c] > edge:
+                    continue
             # where the collider's point under x[p] was at the start: its displacement over the
             # step
             cx, cy, cz = carried(pos0[c], rot0[c], pos[c], rot[c], x[p, 0], x[p, 1], x[p, 2])
@@ -635,6 +674,7 @@ class Contacts:
         self._rot = np.array([c.rotation for c in cs], dtype=np.float64).reshape(-1, 3, 3)
         self._geo = np.array([c.geometry for c in cs], dtype=np.float64).reshape(-1, 4)
         self._mu = np.array([c.friction for c in cs], dtype=np.float64)
+        self._reach = np.array([c.reach for c in cs], dtype=np.float64)
         # the meshes packed for the kernels, each Mesh's row naming its index in the bank
         meshes = [c.mesh for c in cs if c.mesh is not None]
         self._bank = triangle_meshes.pack(meshes) if meshes else triangle_meshes.EMPTY
@@ -690,6 +730,19 @@ class Contacts:
                 else f"there are no colliders to {doing}"
             )
 
+    def place(self, placements, teleport: bool = False) -> None:
+        """Several colliders at once, ``[(collider, 4×4 transform)]``, from the package's own
+        kinematics (no checks: :meth:`Collider.place`); as :meth:`set_pose` otherwise."""
+        index = {id(c): i for i, c in enumerate(self.colliders)}
+        for collider, transform in placements:
+            i = index[id(collider)]
+            collider.place(transform)
+            self._pos[i] = collider.position
+            self._rot[i] = collider.rotation
+            if teleport:
+                self._pos0[i] = self._pos[i]
+                self._rot0[i] = self._rot[i]
+
     def set_pose(
         self, i: int, position, orientation=(1.0, 0.0, 0.0, 0.0), teleport: bool = False
     ) -> None:
@@ -735,6 +788,7 @@ class Contacts:
             self._rot0,
             self._geo,
             self._mu,
+            self._reach,
             self._bank,
             self.thickness,
             dt,
@@ -753,10 +807,11 @@ class Contacts:
 
     def packed(self) -> tuple:
         """``(kinds, positions, rotations, positions at the step's start, rotations there,
-        geometry, friction, *meshes)``: the colliders as the contact kernels read them (an
-        integrator that resolves contacts inside its step reads them here); ``packed()[7:]`` is
-        the bank of :func:`.triangle_meshes.pack` (flat: numba's parallel loops take a tuple of
-        arrays, not a tuple holding one)."""
+        geometry, friction, reach, *meshes)``: the colliders as the contact kernels read them (an
+        integrator that resolves contacts inside its step reads them here); ``reach`` bounds each
+        shape from its position (``inf`` for a plane); ``packed()[8:]`` is the bank of
+        :func:`.triangle_meshes.pack` (flat: numba's parallel loops take a tuple of arrays, not a
+        tuple holding one)."""
         return (
             self._kinds,
             self._pos,
@@ -765,5 +820,6 @@ class Contacts:
             self._rot0,
             self._geo,
             self._mu,
+            self._reach,
             *self._bank,
         )

@@ -625,7 +625,7 @@ def _sweep(
     cost more than the vertex's work.)"""
     inc_ptr, nbr, rest, k, c, kind, tab, nonsmooth = sp
     ckind, cpos, crot, cpos0, crot0, cgeo, cmu = co[:7]
-    cbank = co[7:]
+    cbank = co[8:]
     rec_ptr, rec, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d, colour = sc
     for q in range(lo, hi):
         i = verts[q]
@@ -893,7 +893,7 @@ def _chebyshev(x, x_prev2, omega, free, x_cd, allow, gamma, sc, cut, touch):
 
 
 @numba.njit(cache=True)
-def _allowances(x, allowance, ckind, cpos, crot, cgeo, cbank, cdepth, tau, allow, near):
+def _allowances(x, allowance, ckind, cpos, crot, cgeo, creach, cbank, cdepth, tau, allow, near):
     """How far each vertex may move from ``x`` before the next search whatever the pairs found
     (its ``allowance``, and short of the far side of any collider near it), and whether it can come
     within the thickness of a collider meanwhile (``near``: the iterations look at the colliders
@@ -902,6 +902,13 @@ def _allowances(x, allowance, ckind, cpos, crot, cgeo, cbank, cdepth, tau, allow
         b = allowance[i]
         nearest = math.inf
         for c in range(ckind.shape[0]):
+            if creach[c] < math.inf and allowance[i] < math.inf:
+                # beyond its reach: d ≥ |x − pos| − reach ≥ allowance + 1.01 τ, so it neither
+                # bounds the vertex below its allowance nor makes it near (the same as measured)
+                far = (x[i, 0] - cpos[c, 0]) ** 2 + (x[i, 1] - cpos[c, 1]) ** 2
+                far = math.sqrt(far + (x[i, 2] - cpos[c, 2]) ** 2) - creach[c]
+                if far >= (allowance[i] + tau * 1.01) * (1.0 + 1e-9):
+                    continue
             d = sdf(ckind[c], cpos[c], crot[c], cgeo[c], x[i, 0], x[i, 1], x[i, 2], cbank)[0]
             nearest = min(nearest, d)
             if cdepth[c] < math.inf:
@@ -1031,6 +1038,7 @@ class VBD(Integrator):
             np.zeros((0, 3)),
             np.zeros((0, 3, 3)),
             np.zeros((0, 4)),
+            np.zeros(0),
             np.zeros(0),
             *triangle_meshes.EMPTY,
         )
@@ -1255,7 +1263,8 @@ class VBD(Integrator):
             colliders[1],
             colliders[2],
             colliders[5],
-            colliders[7:],
+            colliders[7],
+            colliders[8:],
             self._depths(colliders),
             tau,
             self._allow,

@@ -34,14 +34,12 @@ def _pose(T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 class Robots:
-    """The robots of one simulation (``add_collider(c) -> i``, ``set_collider_pose(i, p, q,
-    teleport)``, ``remove_collider(i)``, ``colliders()`` and ``set_gripper_pose(name, p, q)`` are
-    the simulator's)."""
+    """The robots of one simulation (``add_collider(c) -> i``, ``remove_collider(i)``,
+    ``colliders()`` and ``set_gripper_pose(name, p, q)`` are the simulator's; ``place([(collider,
+    4×4)], teleport)`` its contact stage's :meth:`~cloth_sim.contact.colliders.Contacts.place`)."""
 
-    def __init__(
-        self, add_collider, set_collider_pose, remove_collider, colliders, set_gripper_pose
-    ):
-        self._add, self._move, self._remove = add_collider, set_collider_pose, remove_collider
+    def __init__(self, add_collider, place, remove_collider, colliders, set_gripper_pose):
+        self._add, self._place, self._remove = add_collider, place, remove_collider
         self._colliders, self._move_gripper = colliders, set_gripper_pose
         self.placed: dict[str, Placed] = {}
         #: gripper name -> (robot name, link)
@@ -81,8 +79,8 @@ class Robots:
             made.append((shape.make(cname, friction), shape))
         poses = placed.link_poses()
         for collider, shape in made:  # (all made before any is added: a failure adds nothing)
+            collider.place(poses[shape.link] @ shape.origin)
             self._add(collider)
-            self._move(self._index(collider), *_pose(poses[shape.link] @ shape.origin), True)
             placed.colliders.append((collider, shape))
         self.placed[name] = placed
         return name
@@ -100,8 +98,7 @@ class Robots:
         placed = self._placed(name)
         placed.joints = {**placed.joints, **placed.robot.check_joints(values)}
         poses = placed.link_poses()
-        for collider, shape in placed.colliders:
-            self._move(self._index(collider), *_pose(poses[shape.link] @ shape.origin), teleport)
+        self._place([(c, poses[s.link] @ s.origin) for c, s in placed.colliders], teleport)
         for gripper, (robot, link) in self.bound.items():
             if robot == name:
                 self._move_gripper(gripper, *_pose(poses[link]), teleport)
