@@ -841,6 +841,7 @@ class Simulator:
         handled = integ.handles if integ is not None else frozenset()
         self._active_stages = [s for s in self.stages if s.active and s.name not in handled]
         self._contacts_inside = "contacts" in handled and self._contacts.active
+        self._contacts.continuous = integ is None or not integ.keeps_paths_off_colliders
         if integ is not None:
             integ.attach(self._contacts, self._self_collision)
 

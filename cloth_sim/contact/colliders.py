@@ -465,6 +465,7 @@ def resolve_contacts(
     masses,
     push,
     turn,
+    continuous,
 ):
     """The contact stage's kernel, per particle in index order (each particle is independent).
 
@@ -517,7 +518,9 @@ def resolve_contacts(
             ex, ey, ez = x[p, 0] - sx, x[p, 1] - sy, x[p, 2] - sz
             length = math.sqrt(ex * ex + ey * ey + ez * ez)
             held = False  # the step's motion undone: it moved with the collider
-            if d0 <= CONTACT_TOLERANCE * h:
+            if not continuous:
+                pass  # (the integrator kept the path out of the colliders itself)
+            elif d0 <= CONTACT_TOLERANCE * h:
                 # a start touching the surface: the end is projected below, unless the path went
                 # past the middle of the solid or through it (the normal at the end points the
                 # other way: a straight path between opposite sides crosses the solid): stay
@@ -643,6 +646,11 @@ class Contacts:
     """
 
     name = "contacts"
+    #: whether the paths over the step are checked (1): off where the integrator kept them out
+    #: of the colliders inside its own step (``vbd``, whose conservative bound does: checked
+    #: again here from the carried start, against the swept links, the stage's stops pushed the
+    #: cloth through its own other layers, 188 crossings in robot_sweep's 4.6 s against vbd's 3)
+    continuous = True
 
     def __init__(self, model, colliders=(), thickness: float = 0.005):
         self.model = model
@@ -797,6 +805,7 @@ class Contacts:
             self._masses,
             self._push,
             self._turn,
+            self.continuous,
         )
         self.end_step()
 

@@ -79,6 +79,9 @@ class Integrator:
     #: Names of the post-step stages (``contacts``, ``self_collision``) the method resolves inside
     #: its own step: the simulator does not run them after it, and gives them to :meth:`attach`.
     handles: frozenset = frozenset()
+    #: whether its step keeps every particle's path out of the colliders (vbd's conservative
+    #: bound): the contact stage then only projects and filters, without checking the paths again
+    keeps_paths_off_colliders: bool = False
 
     def __init__(self, model):
         self.model = model

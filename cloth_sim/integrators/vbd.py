@@ -960,6 +960,7 @@ class VBD(Integrator):
     #: smoothing distance a step, where the stage's projection and Coulomb velocity filter hold the
     #: distance and static friction to rounding (a few microseconds a step)
     handles = frozenset({"self_collision"})
+    keeps_paths_off_colliders = True
 
     def __init__(
         self,
