@@ -21,7 +21,7 @@ SCENE    ?= hanging
 # install here; the interfaces' cmake steps leave a core idle)
 MAKEFLAGS += --jobs=2
 
-.PHONY: install run test lint docs fuzz bench bench-peers bench-learning clean
+.PHONY: install run test lint docs fuzz bench bench-peers bench-robots bench-learning clean
 install: $(STAMP) $(KERNELS) $(MSGS)
 
 $(STAMP): requirements.txt setup.py pyproject.toml
@@ -84,6 +84,13 @@ bench-peers: install
 	$(VENV)/bin/cloth-sim bench peers
 	$(VENV)/bin/cloth-sim bench vbd-peers
 	$(VENV)/bin/cloth-sim bench flex-peer
+
+# robots in the scene: forward kinematics, mesh colliders against primitives, the robot_sweep
+# scene, and a Panda and a UR5 from example-robot-data (requirements-robots.txt, ~431 MB, never in
+# make test) swung through its cloth (about 2 minutes)
+bench-robots: install
+	$(PY) -m pip install --disable-pip-version-check -q -r requirements-robots.txt
+	$(PY) -m cloth_sim.bench.robot --published
 
 # a LeRobot dataset of ClothFold's scripted policy (100 episodes, about 2 minutes), then LeRobot's ACT
 # trained on it on the CPU and played against the scripted and a random policy (about 5 minutes),

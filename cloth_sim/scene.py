@@ -128,9 +128,9 @@ class Scene:
     camera: dict = field(default_factory=lambda: dict(CAMERA_DEFAULTS))
     #: a mesh scene's pins by place: ``(lo, hi)`` corners of a box in world coordinates, or None
     pinned_box: tuple | None = None
-    #: the scene's robot: ``{urdf (Path), robot (the loaded Robot: it keeps no configuration,
-    #: so every simulator of the scene shares it), name, position, orientation, joints,
-    #: friction}``, or None (:mod:`cloth_sim.robot`)
+    #: the scene's robot, or None (:mod:`cloth_sim.robot`): a dict of ``urdf`` (its path),
+    #: ``robot`` (the loaded Robot: it keeps no configuration, so every simulator of the scene
+    #: shares it), ``name``, ``position``, ``orientation``, ``joints`` and ``friction``
     robot: dict | None = None
     #: grippers bound to the robot's links: ``{gripper name: link}``
     gripper_links: dict = field(default_factory=dict)
