@@ -9,8 +9,9 @@ of a simulation packed into one *bank* (:func:`pack`), each mesh addressed by it
 The hierarchy is :func:`cloth_sim.contact.collision_tree.build_hierarchy`'s median split over the
 triangles' centres (the self-collision tree's), built once in the mesh's frame; a node's box holds
 its triangles and never changes (the collider moves, its mesh does not deform). A query walks it
-nearest box first and prunes every box farther than the best triangle found (Ericson, *Real-Time
-Collision Detection*, 6.1); the answer is exact everywhere. (An earlier version answered the root
+in depth-first order without a stack (the nodes renumbered in preorder, each with the node after
+its subtree: nothing is allocated a query) and prunes every box farther than the best triangle
+found (Ericson, *Real-Time Collision Detection*, 6.1); the answer is exact everywhere. (An earlier version answered the root
 box's distance outside it, a lower bound: next to a body's box but far from the body that put
 phantom contacts on the box's faces. The kernels skip far colliders by their reach instead.)
 """
@@ -46,9 +47,30 @@ class TriangleMesh:
         self.name = name
         self.vertices, self.triangles = v, t
         centres = v[t].mean(axis=1)
-        self.left, self.right, self.first, self.end, _, self.order = build_hierarchy(
+        left, right, first, end, _, self.order = build_hierarchy(
             np.ascontiguousarray(centres), LEAF
         )
+        # the nodes renumbered in depth-first preorder, so that a node's first child is the next
+        # node and ``skip`` the one after its subtree: the query walks it without a stack
+        pre, size = [], np.ones(len(left), np.int64)
+        todo = [0]
+        while todo:
+            n = todo.pop()
+            pre.append(n)
+            if left[n] >= 0:
+                todo += [right[n], left[n]]
+        for n in reversed(pre):
+            if left[n] >= 0:
+                size[n] += size[left[n]] + size[right[n]]
+        pre = np.array(pre)
+        at = np.empty(len(pre), np.int64)
+        at[pre] = np.arange(len(pre))
+        #: ``-1`` for a leaf, else its first child (the next node in preorder)
+        self.left = np.where(left[pre] >= 0, np.arange(len(pre)) + 1, -1)
+        #: the node after a node's subtree in preorder (``-1``: none)
+        self.right = np.arange(len(pre)) + size[pre]
+        self.right[self.right >= len(pre)] = -1
+        self.first, self.end = first[pre].copy(), end[pre].copy()
         self.lo, self.hi = _boxes(v, t, self.order, self.first, self.end)
 
     @property
@@ -75,7 +97,8 @@ def _boxes(v, t, order, first, end):
 def pack(meshes) -> tuple:
     """The bank the kernels read: ``(vertices, triangles, lo, hi, left, right, first, end, order,
     root)`` with every mesh's arrays one after the other (its nodes, triangles and vertices
-    renumbered), ``root[m]`` mesh ``m``'s root node. An empty list gives empty arrays of the same
+    renumbered), ``root[m]`` mesh ``m``'s root node; ``left`` a node's first child (−1: a leaf),
+    ``right`` the node after its subtree (−1: the mesh's last). An empty list gives empty arrays of the same
     types."""
     vs, ts, los, his, ls, rs, fs, es, os_, roots = [], [], [], [], [], [], [], [], [], []
     nv = nt = nn = 0
@@ -132,13 +155,10 @@ def mesh_distance(bank, m, x, y, z):
     best = np.inf
     px = py = pz = 0.0
     btri = -1
-    stack = np.empty(64, np.int64)
-    stack[0] = r
-    top = 0
-    while top >= 0:
-        node = stack[top]
-        top -= 1
+    node = r  # preorder: a node's first child is the next one, right[node] the one after it
+    while node >= 0:
         if _box_distance2(lo, hi, node, x, y, z) >= best:
+            node = right[node]
             continue
         if left[node] < 0:
             for q in range(first[node], end[node]):
@@ -154,20 +174,9 @@ def mesh_distance(bank, m, x, y, z):
                 d2 = (x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2
                 if d2 < best:
                     best, px, py, pz, btri = d2, cx, cy, cz, k
+            node = right[node]
             continue
-        # nearer child on top of the stack
-        lt, rt = left[node], right[node]
-        dl = _box_distance2(lo, hi, lt, x, y, z)
-        dr = _box_distance2(lo, hi, rt, x, y, z)
-        if top + 2 >= stack.shape[0]:
-            grown = np.empty(2 * stack.shape[0], np.int64)
-            grown[: top + 1] = stack[: top + 1]
-            stack = grown
-        if dl <= dr:
-            stack[top + 1], stack[top + 2] = rt, lt
-        else:
-            stack[top + 1], stack[top + 2] = lt, rt
-        top += 2
+        node = left[node]
     d = math.sqrt(best)
     if d > 1e-12:
         return d, (x - px) / d, (y - py) / d, (z - pz) / d
