@@ -11,9 +11,10 @@ triangles' centres (the self-collision tree's), built once in the mesh's frame; 
 its triangles and never changes (the collider moves, its mesh does not deform). A query walks it
 in depth-first order without a stack (the nodes renumbered in preorder, each with the node after
 its subtree: nothing is allocated a query) and prunes every box farther than the best triangle
-found (Ericson, *Real-Time Collision Detection*, 6.1); the answer is exact everywhere. (An earlier version answered the root
-box's distance outside it, a lower bound: next to a body's box but far from the body that put
-phantom contacts on the box's faces. The kernels skip far colliders by their reach instead.)
+found (Ericson, *Real-Time Collision Detection*, 6.1); the answer is exact everywhere. (An
+earlier version answered the root box's distance outside it, a lower bound: next to a body's box
+but far from the body that put phantom contacts on the box's faces. The kernels skip far colliders
+by their reach instead.)
 """
 
 from __future__ import annotations
@@ -98,8 +99,8 @@ def pack(meshes) -> tuple:
     """The bank the kernels read: ``(vertices, triangles, lo, hi, left, right, first, end, order,
     root)`` with every mesh's arrays one after the other (its nodes, triangles and vertices
     renumbered), ``root[m]`` mesh ``m``'s root node; ``left`` a node's first child (−1: a leaf),
-    ``right`` the node after its subtree (−1: the mesh's last). An empty list gives empty arrays of the same
-    types."""
+    ``right`` the node after its subtree (−1: the mesh's last). An empty list gives empty arrays
+    of the same types."""
     vs, ts, los, his, ls, rs, fs, es, os_, roots = [], [], [], [], [], [], [], [], [], []
     nv = nt = nn = 0
     for m in meshes:
