@@ -528,8 +528,18 @@ def _schema() -> dict[str, Param]:
             "robot.source",
             str,
             "",
-            "What moves the links: joint_states (forward kinematics of the URDF).",
-            choices=("joint_states",),
+            "What moves the links: joint_states (forward kinematics of the URDF from "
+            "robot.joint_states_topic) or tf (each link's pose from /tf and /tf_static, "
+            "relative to robot.base_frame).",
+            choices=("joint_states", "tf"),
+            apply="node",
+        ),
+        P(
+            "robot.base_frame",
+            str,
+            "",
+            "With robot.source tf: the TF frame placed at the robot's root, the cloth's frame "
+            "origin (the links' poses are taken relative to it); empty: the URDF's root link.",
             apply="node",
         ),
         P(

@@ -109,6 +109,7 @@ def defaults(scene: Scene) -> dict:
         "robot.description_topic": "/robot_description",
         "robot.joint_states_topic": "/joint_states",
         "robot.source": "joint_states",
+        "robot.base_frame": "",
     }
     values.update(UNUSED_VALUES)
     values.update(scene_values(scene))

@@ -467,6 +467,14 @@ class Simulator:
         unknown robot or joint, or a non-finite value, raises ``ValueError`` and moves nothing."""
         self._robots.set_joints(name, positions, teleport)
 
+    def set_link_transforms(self, name: str, transforms: dict, teleport: bool = False) -> None:
+        """Place links of robot ``name`` directly: ``{link: 4×4 transform in the robot's root
+        frame}`` (where something else computes the poses, as TF does for the node's
+        ``robot.source: tf``); they sweep there over the next step, and override the links'
+        forward kinematics from then on. An unknown robot or link, or a non-finite transform,
+        raises ``ValueError``."""
+        self._robots.set_link_transforms(name, transforms, teleport)
+
     def joint_positions(self, name: str) -> dict:
         """Robot ``name``'s joint positions now (every movable joint)."""
         return self._robots.joints(name)

@@ -23,10 +23,14 @@ class Placed:
     def __init__(self, robot: Robot, name: str, base: np.ndarray, joints: dict):
         self.robot, self.name, self.base, self.joints = robot, name, base, joints
         self.colliders = []  # (collider, shape)
+        #: links placed directly (from TF), 4×4 in the robot's root frame, over their FK poses
+        self.placed_links: dict[str, np.ndarray] = {}
 
     def link_poses(self) -> dict[str, np.ndarray]:
-        """Every link's pose (4×4) in the world at the current joint positions."""
-        return {k: self.base @ t for k, t in self.robot.link_transforms(self.joints).items()}
+        """Every link's pose (4×4) in the world: its forward kinematics at the current joint
+        positions, or where it was placed directly."""
+        poses = {**self.robot.link_transforms(self.joints), **self.placed_links}
+        return {k: self.base @ t for k, t in poses.items()}
 
 
 def _pose(T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -103,6 +107,26 @@ class Robots:
             if robot == name:
                 self._move_gripper(gripper, *_pose(poses[link]), teleport)
 
+    def set_link_transforms(self, name: str, transforms: dict, teleport: bool = False) -> None:
+        """Links of robot ``name`` placed directly, ``{link: 4×4 in the robot's root frame}`` (a
+        robot whose links come from TF): they sweep there over the next step, as by joints."""
+        placed = self._placed(name)
+        for link, T in transforms.items():
+            if link not in placed.robot.all_links:
+                raise ValueError(f"robot {name!r} has no link {link!r}")
+            T = np.asarray(T, dtype=np.float64)
+            if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+                raise ValueError(f"link {link!r}: a transform must be a finite 4×4 matrix")
+        placed.placed_links.update({k: np.asarray(v, float) for k, v in transforms.items()})
+        poses = placed.link_poses()
+        moved = [
+            (c, poses[s.link] @ s.origin) for c, s in placed.colliders if s.link in transforms
+        ]
+        self._place(moved, teleport)
+        for gripper, (robot, link) in self.bound.items():
+            if robot == name and link in transforms:
+                self._move_gripper(gripper, *_pose(poses[link]), teleport)
+
     def joints(self, name: str) -> dict:
         placed = self._placed(name)
         return {j: float(placed.joints.get(j, 0.0)) for j in placed.robot.joint_names}
@@ -114,7 +138,7 @@ class Robots:
                 f"robot {name!r} has no link {link!r}; its links: "
                 f"{', '.join(placed.robot.all_links)}"
             )
-        return _pose(placed.base @ placed.robot.link_transforms(placed.joints)[link])
+        return _pose(placed.link_poses()[link])
 
     def link_wrench(self, name: str, link: str, collider_wrench):
         """The wrench on a link: ``collider_wrench(i)`` of its colliders, the torques moved to

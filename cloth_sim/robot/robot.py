@@ -177,6 +177,12 @@ class Robot:
             out[j.child] = out[j.parent] @ j.origin @ _motion(j.type, j.axis, q)
         return out
 
+    @property
+    def tree(self) -> list[tuple[str, str]]:
+        """``(parent link, child link)`` of every joint, parents before children (the frames a
+        ``robot_state_publisher`` broadcasts)."""
+        return [(j.parent, j.child) for j in self._chain]
+
     def link_transforms_yourdfpy(self, joints: dict) -> dict[str, np.ndarray]:
         """The same poses through yourdfpy's ``update_cfg`` and ``get_transform`` (the reference
         :meth:`link_transforms` is tested and timed against)."""

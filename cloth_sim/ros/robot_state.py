@@ -1,5 +1,5 @@
 """The robot as ROS publishes it: ``robot_description`` puts it in the scene, ``/joint_states``
-moves its links.
+(or ``/tf``) moves its links.
 
 With ``robot.enable``, the node subscribes to ``robot.description_topic`` (``std_msgs/String``,
 transient local, as ``robot_state_publisher`` publishes it) and ``robot.joint_states_topic``
@@ -12,6 +12,13 @@ different lengths: logged, the message ignored) and kept as the target the next 
 reach, in equal parts (so the links sweep there and friction drags the cloth); a joint state that
 arrives before its robot waits for it. No joint state for :data:`STALE` s while a robot is in the
 scene WARNs on ``/diagnostics``.
+
+With ``robot.source: tf`` the links' poses come from ``/tf`` and ``/tf_static`` instead (what
+``robot_state_publisher`` broadcasts, or a real robot's driver): each link's transform from
+``robot.base_frame`` (empty: the URDF's root link), chained through the frames received, places
+it, the base frame at the cloth's frame origin; the links sweep there over the first step of the
+next tick. A link whose chain to the base frame is not (yet) complete keeps its pose; no transform
+for :data:`STALE` s WARNs.
 """
 
 from __future__ import annotations
@@ -19,10 +26,13 @@ from __future__ import annotations
 import math
 import time
 
+import numpy as np
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
+from tf2_msgs.msg import TFMessage
 
+from ..contact.geometry import quaternion_matrix
 from ..robot import Robot
 from . import interface
 
@@ -32,6 +42,11 @@ STALE = 1.0
 DESCRIPTION_QOS = QoSProfile(
     depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE
 )
+TF_STATIC_QOS = QoSProfile(
+    depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE
+)
+#: frames a link's chain to the base frame may pass through at most
+MAX_CHAIN = 64
 
 
 class RobotState:
@@ -50,12 +65,21 @@ class RobotState:
         self.since: float | None = None  # wall time the robot came
         self.rejected = 0  # joint states ignored (logged)
         self.error: str | None = None  # why the last description was refused
+        #: TF frames received: child -> (parent, 4×4), and whether a new one came since the tick
+        self._tf: dict[str, tuple[str, np.ndarray]] = {}
+        self._tf_new = False
+        self._source, self._base_frame = "joint_states", ""
 
     # ------------------------------------------------------------------ parameters
     def configure(self, cfg: dict) -> None:
         """Subscribe (or not) as ``cfg``'s ``robot.*`` values say."""
         topics = (
-            (cfg["robot.description_topic"], cfg["robot.joint_states_topic"])
+            (
+                cfg["robot.description_topic"],
+                cfg["robot.joint_states_topic"],
+                cfg["robot.source"],
+                cfg["robot.base_frame"],
+            )
             if cfg["robot.enable"]
             else None
         )
@@ -63,10 +87,11 @@ class RobotState:
             return
         for sub in self._subs:
             self.node.destroy_subscription(sub)
-        self._subs, self._topics = [], topics
+        self._subs, self._topics, self._tf = [], topics, {}
         if topics is None:
             self._remove()
             return
+        self._source, self._base_frame = topics[2], topics[3]
         self._subs = [
             interface.subscription(
                 self.node,
@@ -75,11 +100,19 @@ class RobotState:
                 self._on_description,
                 qos=DESCRIPTION_QOS,
                 topic=topics[0],
-            ),
-            interface.subscription(
-                self.node, "joint_states", JointState, self._on_joint_states, topic=topics[1]
-            ),
+            )
         ]
+        if self._source == "tf":  # (the standard /tf topics, the node's own output beside)
+            self._subs += [
+                self.node.create_subscription(TFMessage, "/tf", self._on_tf, 100),
+                self.node.create_subscription(TFMessage, "/tf_static", self._on_tf, TF_STATIC_QOS),
+            ]
+        else:
+            self._subs.append(
+                interface.subscription(
+                    self.node, "joint_states", JointState, self._on_joint_states, topic=topics[1]
+                )
+            )
 
     def restarted(self) -> None:
         """The simulation is back at its scene's start: in a new simulator (a new scene or size)
@@ -151,7 +184,56 @@ class RobotState:
         self.target = {**(self.target or {}), **values}
         self.last_joint_state = time.monotonic()
 
+    def _on_tf(self, msg) -> None:
+        for t in msg.transforms:
+            tr, q = t.transform.translation, t.transform.rotation
+            p = np.array([tr.x, tr.y, tr.z])
+            quat = np.array([q.w, q.x, q.y, q.z])
+            if not (np.all(np.isfinite(p)) and np.all(np.isfinite(quat))) or not any(quat):
+                self.rejected += 1
+                self.node.get_logger().warning(
+                    f"/tf: {t.header.frame_id} -> {t.child_frame_id} ignored: not a finite "
+                    f"pose with a nonzero quaternion",
+                    throttle_duration_sec=1.0,
+                )
+                continue
+            T = np.eye(4)
+            T[:3, :3], T[:3, 3] = quaternion_matrix(quat), p
+            self._tf[t.child_frame_id] = (t.header.frame_id, T)
+            self._tf_new = True
+            if self._robot is not None and t.child_frame_id in self._robot.all_links:
+                self.last_joint_state = time.monotonic()  # (the node's own frames do not count)
+
+    def link_transforms(self) -> dict:
+        """Each of the robot's links whose chain of TF frames reaches the base frame: its 4×4
+        transform from it."""
+        robot = self._robot
+        base = self._base_frame or robot.root
+        out = {}
+        for link in robot.all_links:
+            T, frame = np.eye(4), link
+            for _ in range(MAX_CHAIN):
+                if frame == base:
+                    out[link] = T
+                    break
+                if frame not in self._tf:
+                    break
+                parent, step = self._tf[frame]
+                T, frame = step @ T, parent
+        return out
+
     # ------------------------------------------------------------------ the ticker's side
+    def tf_move(self):
+        """``(name, {link: 4×4})``: the links' poses from TF received since the last tick, or
+        None."""
+        if self._source != "tf" or not self._tf_new or self.name is None:
+            return None
+        if self.name not in self.session.sim.robots:
+            return None
+        self._tf_new = False
+        links = self.link_transforms()
+        return (self.name, links) if links else None
+
     def joint_move(self):
         """``(name, q0, q1)``: from the robot's joints now to the target received, or None."""
         if self.name is None or self.target is None or self.name not in self.session.sim.robots:
@@ -170,5 +252,7 @@ class RobotState:
         last = self.last_joint_state if self.last_joint_state is not None else self.since
         age = time.monotonic() - last
         if age > STALE:
+            if self._source == "tf":
+                return f"no transforms on /tf for {age:.1f} s"
             return f"no joint states on {self._topics[1]} for {age:.1f} s"
         return None

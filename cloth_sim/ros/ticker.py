@@ -41,6 +41,9 @@ class Stepper:
         sim = session.sim
         moves = manip.pose_moves() if session.pose_targets and n else None
         joints = self.robot_state.joint_move() if n else None  # (robot, from, to)
+        links = self.robot_state.tf_move() if n else None  # (robot, {link: transform})
+        if links:  # the links' poses from TF: swept there over the first step
+            sim.set_link_transforms(*links)
         # joints are reached over the steps this tick is expected to take (a late tick takes
         # fewer than n: a message is then still reached within it)
         jspan = max(1, min(n, int(budget / max(self.step_cost(), 1e-6)))) if joints else 1

@@ -147,3 +147,46 @@ def test_spawn_entity_takes_a_urdf_and_the_robot_and_its_links_are_entities(ros)
     )
     assert r.result.result == Result.RESULT_OK and node.sim.robots == {}
     assert node.sim.colliders == []
+
+
+def test_with_robot_source_tf_the_links_follow_the_transforms(ros):
+    """robot.source tf: the links' poses come from /tf and /tf_static, chained to
+    robot.base_frame; a joint move published as TF moves them as the same joints would."""
+    from geometry_msgs.msg import TransformStamped
+    from tf2_msgs.msg import TFMessage
+
+    from cloth_sim.contact.geometry import matrix_quaternion
+
+    node = ros.start(
+        **{"robot.enable": True, "robot.source": "tf", "robot.base_frame": "base_link"},
+        scene="hanging",
+    )
+    desc = ros.node.create_publisher(String, "/robot_description", LATCHED)
+    desc.publish(String(data=description()))
+    assert ros.spin_until(lambda: "demo_arm" in node.sim.robots, 15)
+    tf = ros.node.create_publisher(TFMessage, "/tf", 100)
+    q = {"shoulder_yaw": -0.6, "elbow": 0.5, "finger_left_joint": 0.01}
+    robot = Robot.from_urdf(ARM)
+    fk = robot.link_transforms(q)
+    msg = TFMessage()
+    for parent, child in robot.tree:  # every joint's frames, as robot_state_publisher sends
+        rel = np.linalg.inv(fk[parent]) @ fk[child]
+        t = TransformStamped()
+        t.header.frame_id, t.child_frame_id = parent, child
+        t.transform.translation.x, t.transform.translation.y, t.transform.translation.z = rel[
+            :3, 3
+        ]
+        w, x, y, z = matrix_quaternion(rel[:3, :3])
+        t.transform.rotation.w, t.transform.rotation.x = w, x
+        t.transform.rotation.y, t.transform.rotation.z = y, z
+        msg.transforms.append(t)
+    assert ros.spin_until(lambda: tf.get_subscription_count() > 0, 10)
+
+    def there():
+        tf.publish(msg)
+        return np.allclose(node.sim.link_pose("demo_arm", "hand")[0], fk["hand"][:3, 3])
+
+    assert ros.spin_until(there, 10)
+    np.testing.assert_allclose(
+        node.sim.link_pose("demo_arm", "finger_right")[0], fk["finger_right"][:3, 3], atol=1e-9
+    )
