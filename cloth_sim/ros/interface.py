@@ -162,6 +162,15 @@ TOPICS = {
         "every tick: the force and torque (about the gripper's position) the cloth exerts on "
         "gripper `<name>`, world frame",
     ),
+    "link_wrench": Topic(
+        "~/robots/{name}/wrench",
+        "geometry_msgs/msg/WrenchStamped",
+        "out",
+        10,
+        "every tick, for each link with a collision of each robot in the scene (`<name>` = "
+        "`<robot>/<link>`): the force and torque (about the link's origin) the cloth exerts on "
+        "it, world frame: what a finger holding the cloth by friction feels",
+    ),
     "robot_description": Topic(
         "/robot_description",
         "std_msgs/msg/String",

@@ -17,6 +17,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from . import interface, messages
 from .camera_publisher import CameraPublisher
 from .frames import Frames
+from .link_wrenches import LinkWrenches
 
 STATUS_PERIOD = 5.0  # s of wall time between status log lines
 WARN_MARGIN = 0.8  # WARN when dt is above this fraction of stable_dt
@@ -35,7 +36,8 @@ def _stats_type():
 class Publishing:
     """What the node publishes about its :class:`~cloth_sim.ros.session.Session`: the tick's topics
     (:meth:`publish`), ``/diagnostics`` (:meth:`publish_diagnostics`), TF (:attr:`frames`) and the
-    depth camera (:attr:`camera`); the grippers' wrenches through ``manipulation``'s topics."""
+    depth camera (:attr:`camera`); the grippers' wrenches through ``manipulation``'s topics, the
+    robots' links' through :attr:`link_wrenches`."""
 
     def __init__(self, node, session, manipulation):
         self.node, self.session, self.manipulation = node, session, manipulation
@@ -50,6 +52,7 @@ class Publishing:
         self.frames = Frames(node)  # TF
         self.frames.publish_static(session.cfg["world_frame_id"], session.cfg["frame_id"])
         self.camera = CameraPublisher(node, session, self.stamp)  # the depth camera's topics
+        self.link_wrenches = LinkWrenches(node, session)  # the robots' links' wrenches
 
     def configure(self, cfg: dict) -> None:
         """The frames and the camera for the values ``cfg`` (accepted, now the session's)."""
@@ -92,6 +95,7 @@ class Publishing:
         for name, (_, pub) in self.manipulation.grippers.items():
             force, torque = sim.gripper_wrench(name)
             pub.publish(messages.wrench(force, torque, frame, stamp))
+        self.link_wrenches.publish(frame, stamp)
         self.frames.publish(sim, frame, stamp, self.camera)
         wall_now = time.monotonic()
         self.session.history.append((wall_now, sim.time))

@@ -1,7 +1,8 @@
 """The node's graph is its declaration (cloth_sim/ros/interface.py, from which the site's topic and
-service tables are generated): a running node with its camera, a collider, a gripper and /clock
-on has every declared topic and service with the declared type, and no other topic or service of
-its own (the simulation standard's, parameters' and ROS's own aside)."""
+service tables are generated): a running node with its camera, a collider, a robot, a gripper,
+/clock and the robot's ROS inputs on has every declared topic and service with the declared type,
+and no other topic or service of its own (the simulation standard's, parameters' and ROS's own
+aside)."""
 
 import re
 import time
@@ -24,7 +25,8 @@ def test_a_running_nodes_topics_and_services_are_the_declared_ones():
     domain = next_domain()
     proc = start_node(
         domain,
-        *("-p", "scene:=table", "-p", "camera.enable:=true", "-p", "publish_clock:=true"),
+        # robot_pick: a collider (the shelf) and a robot (the pinch gripper) in the scene
+        *("-p", "scene:=robot_pick", "-p", "camera.enable:=true", "-p", "publish_clock:=true"),
         *("-p", "robot.enable:=true"),
     )
     ctx = rclpy.Context()
@@ -39,8 +41,9 @@ def test_a_running_nodes_topics_and_services_are_the_declared_ones():
         executor.spin_until_future_complete(future, timeout_sec=30)
         assert future.result().success, future.result().message
         expected_topics = {}
+        example = {"grippers": "hand", "colliders": "shelf", "robots": "gripper/finger_left"}
         for t in TOPICS.values():
-            names = {"name": "hand"} if "gripper" in t.name else {"name": "table"}
+            names = {"name": next((v for k, v in example.items() if f"/{k}/" in t.name), "")}
             expected_topics[resolve(t.name, **names)] = (t.type, t.direction)
         expected_services = {resolve(s.name): s.type for s in SERVICES.values()}
         deadline = time.monotonic() + 30
@@ -70,8 +73,13 @@ def test_a_running_nodes_topics_and_services_are_the_declared_ones():
             "/tf_static",
             "/diagnostics",
         } & set(seen)
-        patterns = [
-            re.compile(re.escape(resolve(t.name, name="NAME")).replace("NAME", r"\w+") + "$")
+        patterns = [  # (a robot's link topics are named robot/link)
+            re.compile(
+                re.escape(resolve(t.name, name="NAME")).replace(
+                    "NAME", r"\w+/\w+" if "/robots/" in t.name else r"\w+"
+                )
+                + "$"
+            )
             for t in TOPICS.values()
         ]
         undeclared = {n for n in ours if not any(p.match(n) for p in patterns)}

@@ -190,3 +190,21 @@ def test_with_robot_source_tf_the_links_follow_the_transforms(ros):
     np.testing.assert_allclose(
         node.sim.link_pose("demo_arm", "finger_right")[0], fk["finger_right"][:3, 3], atol=1e-9
     )
+
+
+def test_each_robot_link_reports_the_wrench_the_cloth_exerts_on_it(ros):
+    from geometry_msgs.msg import WrenchStamped
+    from std_srvs.srv import SetBool
+
+    node = ros.start(scene="robot_pick")
+    got = ros.collect(WrenchStamped, "/cloth_sim/robots/gripper/finger_left/wrench")
+    assert ros.spin_until(lambda: len(got) >= 3, 15)
+    assert ros.call(SetBool, "/cloth_sim/pause", SetBool.Request(data=True)).success
+    ros.spin_for(0.3)
+    n = len(got)
+    assert ros.spin_until(lambda: len(got) > n, 5)  # (published while paused too)
+    force, torque = node.sim.link_wrench("gripper", "finger_left")
+    w = got[-1].wrench
+    assert got[-1].header.frame_id == node.cfg["frame_id"]
+    assert [w.force.x, w.force.y, w.force.z] == force.tolist()
+    assert [w.torque.x, w.torque.y, w.torque.z] == torque.tolist()
