@@ -548,7 +548,6 @@ class Simulator:
         for _ in range(int(n)):
             if self.motion is not None:  # the script's joints and grippers at the step's end
                 self.motion.drive(self, self.time + dt)
-                keep_end = bool(grippers) and integ.force_point > 0
             state.copy_to(checkpoint)
             if grippers:
                 self._grippers_before_step()

@@ -101,10 +101,10 @@ class Collider:
     def signed_distance(self, points) -> np.ndarray:
         """Signed distance of ``(k, 3)`` points from the surface (negative inside)."""
         pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
-        bank = triangle_meshes.pack([self.mesh] if self.mesh is not None else [])
-        geo = self.geometry.copy()
-        geo[0] = 0.0 if self.mesh is not None else geo[0]
-        return _distances(self.kind, self.position, self.rotation, geo, pts, bank)
+        return _distances(self.kind, self.position, self.rotation, self.geometry, pts, self._bank)
+
+    #: the bank :meth:`signed_distance` reads (a Mesh's own mesh at index 0)
+    _bank = triangle_meshes.EMPTY
 
     def __repr__(self):
         return f"{type(self).__name__}(name={self.name!r}, position={self.position.tolist()})"
@@ -288,6 +288,7 @@ class Mesh(Collider):
         check_indices(vertices, faces, where)
         self.source = where
         self.mesh = TriangleMesh(vertices * factors, faces, where)
+        self._bank = triangle_meshes.pack([self.mesh])  # (geometry[0] = 0: its index there)
         super().__init__(vector("position", position), [0, 0, 0, 0], friction, name, orientation)
 
     @property

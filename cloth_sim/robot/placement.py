@@ -101,11 +101,7 @@ class Robots:
     def set_joints(self, name: str, values, teleport: bool = False) -> None:
         placed = self._placed(name)
         placed.joints = {**placed.joints, **placed.robot.check_joints(values)}
-        poses = placed.link_poses()
-        self._place([(c, poses[s.link] @ s.origin) for c, s in placed.colliders], teleport)
-        for gripper, (robot, link) in self.bound.items():
-            if robot == name:
-                self._move_gripper(gripper, *_pose(poses[link]), teleport)
+        self._follow(placed, None, teleport)
 
     def set_link_transforms(self, name: str, transforms: dict, teleport: bool = False) -> None:
         """Links of robot ``name`` placed directly, ``{link: 4×4 in the robot's root frame}`` (a
@@ -118,13 +114,22 @@ class Robots:
             if T.shape != (4, 4) or not np.all(np.isfinite(T)):
                 raise ValueError(f"link {link!r}: a transform must be a finite 4×4 matrix")
         placed.placed_links.update({k: np.asarray(v, float) for k, v in transforms.items()})
+        self._follow(placed, set(transforms), teleport)
+
+    def _follow(self, placed: Placed, links, teleport: bool) -> None:
+        """The colliders of ``placed``'s links (all, or those in ``links``) and the grippers bound
+        to them to the links' poses now: reached over the next step, or there at once."""
         poses = placed.link_poses()
-        moved = [
-            (c, poses[s.link] @ s.origin) for c, s in placed.colliders if s.link in transforms
-        ]
-        self._place(moved, teleport)
+        self._place(
+            [
+                (c, poses[s.link] @ s.origin)
+                for c, s in placed.colliders
+                if links is None or s.link in links
+            ],
+            teleport,
+        )
         for gripper, (robot, link) in self.bound.items():
-            if robot == name and link in transforms:
+            if robot == placed.name and (links is None or link in links):
                 self._move_gripper(gripper, *_pose(poses[link]), teleport)
 
     def joints(self, name: str) -> dict:

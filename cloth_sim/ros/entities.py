@@ -70,6 +70,12 @@ class Entities:
             del self._set[gone]
         return names
 
+    def taken(self) -> set[str]:
+        """Every entity's full name and own name (``collider/ball`` and ``ball``): what a spawned
+        entity may not be called."""
+        names = self.names()
+        return set(names) | {n.partition("/")[2] for n in names}
+
     def resolve(self, name: str) -> str | None:
         """The full name ``name`` stands for: itself, or the one entity whose own name it is
         (``ball`` for ``collider/ball``); ``None`` when it names none, or more than one."""

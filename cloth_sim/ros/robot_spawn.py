@@ -70,8 +70,7 @@ def spawn(interfaces, request, resource) -> tuple[Result, str]:
                 f"digit, at most 64)"
             ),
         ), ""
-    names = interfaces.entities.names()
-    taken = set(names) | {n.partition("/")[2] for n in names} | set(interfaces.session.sim.robots)
+    taken = interfaces.entities.taken() | set(interfaces.session.sim.robots)
     if name in taken:
         if not request.allow_renaming:
             return Result(

@@ -609,7 +609,7 @@ class SimulationInterfaces:
                 "one",
                 None,
             )
-        taken = set(self.entities.names()) | {n.partition("/")[2] for n in self.entities.names()}
+        taken = self.entities.taken()
         if name in taken and not request.allow_renaming:
             return (
                 R.NAME_NOT_UNIQUE,
