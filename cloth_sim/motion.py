@@ -6,7 +6,8 @@ gripper's position linearly and its orientation by spherical interpolation (so a
 between two keyframes turns at a constant rate). Before each step the simulator asks it for the
 values at the step's end (:meth:`drive`) and the robot's links and the grippers sweep there over
 the step, as if a controller had sent them; before the first keyframe the first holds, after the
-last the last (or, with ``repeat``, the script starts over).
+last the script lets go and they stay there until something else moves them (a node's joint states
+or pose topics); with ``repeat`` it starts over.
 
 In a scene file (``motion:``)::
 
@@ -91,10 +92,14 @@ class Motion:
         (_, p0, q0), (_, p1, q1) = frames[i], frames[j]
         return (1 - s) * p0 + s * p1, slerp(q0, q1, s)
 
-    def drive(self, sim, t: float) -> None:
-        """Set ``sim``'s robot joints and gripper targets to their values at time ``t`` (the end
-        of the step about to be taken). A gripper of the script that holds nothing at the moment
-        is skipped."""
+    def drive(self, sim, start: float, t: float) -> None:
+        """Set ``sim``'s robot joints and gripper targets to their values at time ``t``, the end
+        of the step about to be taken from ``start``. A gripper of the script that holds nothing
+        at the moment is skipped. Once a script that does not repeat has ended (the step starts at
+        or after its last keyframe, which the step before reached), it sets nothing: the joints
+        and grippers stay there until something else moves them (joint states, pose topics)."""
+        if not self.repeat and start >= self.duration and start > 0.0:
+            return
         if self.robot is not None and self.joints and self.robot in sim.robots:
             sim.set_joint_positions(self.robot, self.joints_at(t))
         held = sim.grippers

@@ -34,7 +34,7 @@ from .constraints.strain_limit import (
 )
 from .contact.colliders import Contacts
 from .contact.geometry import positive
-from .contact.self_collision import SelfCollision, check_thickness
+from .contact.self_collision import SelfCollision, Uncrossed, check_thickness
 from .model import ClothModel
 from .parameters import SCHEMA, ParameterError
 from .physics import stability as stab
@@ -547,7 +547,7 @@ class Simulator:
         keep_end = bool(grippers) and integ.force_point > 0
         for _ in range(int(n)):
             if self.motion is not None:  # the script's joints and grippers at the step's end
-                self.motion.drive(self, self.time + dt)
+                self.motion.drive(self, self.time, self.time + dt)
             state.copy_to(checkpoint)
             if grippers:
                 self._grippers_before_step()
@@ -636,6 +636,11 @@ class Simulator:
         """``{name: indices}`` of the particles each gripper holds (see
         :mod:`cloth_sim.constraints.grippers`)."""
         return {name: g.indices.copy() for name, g in self._grippers.items()}
+
+    def gripper_link(self, name: str):
+        """The ``(robot, link)`` gripper ``name`` is bound to (it follows that link), or None
+        for a gripper moved by its pose."""
+        return self._robots.bound.get(name)
 
     def grasp(self, name: str, point, radius: float, link=None) -> np.ndarray:
         """Hold every free particle within ``radius`` of ``point`` with a gripper called ``name``,
@@ -847,6 +852,13 @@ class Simulator:
         integ = self._integrator
         handled = integ.handles if integ is not None else frozenset()
         self._active_stages = [s for s in self.stages if s.active and s.name not in handled]
+        if "self_collision" in handled and self._self_collision.active:
+            # the contact stage's finish after a method that kept the cloth uncrossed must not
+            # push a vertex through the layer beside it
+            self._active_stages = [
+                Uncrossed(s, self._self_collision) if s is self._contacts else s
+                for s in self._active_stages
+            ]
         self._contacts_inside = "contacts" in handled and self._contacts.active
         self._contacts.continuous = integ is None or not integ.keeps_paths_off_colliders
         if integ is not None:
@@ -922,27 +934,8 @@ def compile_kernels() -> float:
         # the strain limit's projection method
         Simulator(model, dt=1e-4, strain_limit=0.1, strain_limit_method="projection").step(2)
         # contacts with every collider shape, and self-collision
-        from .contact import colliders as col
-
-        sim = Simulator(
-            model,
-            dt=1e-4,
-            self_collision=True,
-            thickness=0.01,
-            colliders=[
-                col.Plane(friction=0.5),
-                col.Sphere(radius=0.1, friction=0.1),
-                col.Box(half_extents=(0.1, 0.1, 0.1)),
-                col.Capsule(radius=0.05),
-                col.Cylinder(radius=0.05, length=0.1),
-                col.Mesh(
-                    ([[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0], [0, 0, 0.1]], [[0, 2, 1], [0, 1, 3]]),
-                    position=(0.1, 0.1, -0.05),
-                ),
-            ],
-        )
-        sim.set_collider_pose(1, (0.0, 0.0, -0.5))
-        sim.step(2)
+        for name in ("symplectic_euler", "vbd"):  # the contact stage; vbd's own, moving too
+            sim = _compile_contacts(model, name)
         # the parallel gather, which only cloths above forces.PARALLEL_MIN_SPRINGS use: with the
         # state's own (writable) arrays, updating them or not, and with read-only views (reports)
         term = sim.forces.spring_term
@@ -1001,3 +994,31 @@ def compile_kernels() -> float:
             noise="kinect",
         ).render(sim)
     return time.perf_counter() - t0
+
+
+def _compile_contacts(model, integrator: str) -> "Simulator":
+    """Contacts with every collider shape, one of them moving, and self-collision; returns the
+    simulator."""
+    from .contact import colliders as col
+
+    sim = Simulator(
+        model,
+        integrator=integrator,
+        dt=1e-4,
+        self_collision=True,
+        thickness=0.01,
+        colliders=[
+            col.Plane(friction=0.5),
+            col.Sphere(radius=0.1, friction=0.1),
+            col.Box(half_extents=(0.1, 0.1, 0.1)),
+            col.Capsule(radius=0.05),
+            col.Cylinder(radius=0.05, length=0.1),
+            col.Mesh(
+                ([[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0], [0, 0, 0.1]], [[0, 2, 1], [0, 1, 3]]),
+                position=(0.1, 0.1, -0.05),
+            ),
+        ],
+    )
+    sim.set_collider_pose(1, (0.0, 0.0, -0.5))
+    sim.step(2)
+    return sim

@@ -94,8 +94,9 @@ def sweep(seconds: float) -> None:
     print(
         f"robot_sweep ({sim.model.n_particles} particles, {sim.integrator}, dt {sim.dt:.4g} s, "
         f"{sum(s.triangles for s in sim.robots['arm'].shapes)} mesh triangles, "
-        f"self-collision {'on' if sim.self_collision else 'off'}), {seconds:g} s: deepest into "
-        f"the thickness {depth / h:.1%} of it (closest {worst / h:.3f} h), self-crossings "
+        f"self-collision {'on' if sim.self_collision else 'off'}), {seconds:g} s: deepest "
+        f"inside a link {max(0.0, -worst) / h:.1%} of the thickness h, into the skin "
+        f"{depth / h:.1%} of it (closest {worst / h:.3f} h), self-crossings "
         f"{crossed}, pushed {sim.positions[:, 1].max():.3f} m behind its plane, "
         f"headless real-time factor {sim.time / wall:.2f}"
     )
@@ -144,6 +145,7 @@ def sweep_published(name: str, share, seconds: float = 2.0, speed: float = 1.5) 
     sim.add_robot(robot, name=name, position=base, joints={**joints, swing: a})
     links = list(sim.colliders)
     h, worst, wall, steps, behind = sim.thickness, np.inf, 0.0, 0, 0.0
+    tris, crossed, prev = sim.model.triangles, 0, sim.positions.copy()
     while sim.time < seconds:
         angle = min(b, a + speed * (sim.time + sim.dt))
         t = time.perf_counter()
@@ -153,12 +155,15 @@ def sweep_published(name: str, share, seconds: float = 2.0, speed: float = 1.5) 
         steps += 1
         worst = min(worst, min(float(c.signed_distance(sim.positions).min()) for c in links))
         behind = max(behind, float(sim.positions[:, 1].max()))
+        crossed += len(crossings(prev, sim.positions, tris))
+        prev = sim.positions.copy()
     tris = sum(s.triangles for s in robot.shapes)
     print(
         f"{name} ({len(robot.joint_names)} joints, {len(robot.link_names)} links, {tris} mesh "
         f"triangles, loaded in {load:.2f} s) swung at {speed:g} rad/s through the robot_sweep "
         f"cloth ({sim.integrator}, self-contact {'on' if sim.self_collision else 'off'}): "
-        f"deepest into the thickness {max(0.0, h - worst) / h:.1%} of it, pushed up to "
+        f"deepest inside a link {max(0.0, -worst) / h:.1%} of the thickness h, into the skin "
+        f"{max(0.0, h - worst) / h:.1%} of it, self-crossings {crossed}, pushed up to "
         f"{behind:.3f} m behind its plane, {wall / steps * 1e3:.2f} ms a step, "
         f"headless real-time factor {sim.time / wall:.2f}"
     )

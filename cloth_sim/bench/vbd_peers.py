@@ -312,6 +312,7 @@ def twist_sim(rate: float = TWIST_RATE):
     """The shipped ``twist`` scene, and a function that sets its grippers' poses for time ``t``
     (each short edge turned about the long axis at ``rate`` rad/s, in opposite senses)."""
     sim = load_scene("twist").build_simulator()
+    sim.motion = None  # turned here, past the scene script's 6 s too
     centres = {name: sim.positions[idx].mean(axis=0) for name, idx in sim.grippers.items()}
 
     def turn(t):

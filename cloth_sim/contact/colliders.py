@@ -321,10 +321,12 @@ KINDS = {
 
 # ---------------------------------------------------------------------------- kernels
 @numba.njit(cache=True, inline="always")
-def sdf(kind, p, R, g, x, y, z, bank):
+def sdf(kind, p, R, g, x, y, z, bank, cutoff=math.inf):
     """Signed distance of the point ``(x, y, z)`` from a collider and the outward unit normal
     there (the distance's gradient). A Mesh's (``g[0]`` its index in ``bank``, the packed meshes
-    of :func:`.triangle_meshes.pack`) is unsigned, and a lower bound outside its box."""
+    of :func:`.triangle_meshes.pack`) is unsigned, and a lower bound outside its box; a point at
+    least ``cutoff`` from a Mesh is answered ``(cutoff, 0, 0, 0)`` (a query that only asks
+    whether the point is within the cutoff walks less of the tree)."""
     dx, dy, dz = x - p[0], y - p[1], z - p[2]
     if kind == PLANE:
         nx = R[0, 0] * g[0] + R[0, 1] * g[1] + R[0, 2] * g[2]
@@ -362,7 +364,7 @@ def sdf(kind, p, R, g, x, y, z, bank):
     qy = R[0, 1] * dx + R[1, 1] * dy + R[2, 1] * dz
     qz = R[0, 2] * dx + R[1, 2] * dy + R[2, 2] * dz
     if kind == MESH:
-        d, lx, ly, lz = mesh_distance(bank, int(g[0]), qx, qy, qz)
+        d, lx, ly, lz = mesh_distance(bank, int(g[0]), qx, qy, qz, cutoff)
     elif kind == CYLINDER:
         d, lx, ly, lz = _cylinder(g[0], g[1], qx, qy, qz)
     else:

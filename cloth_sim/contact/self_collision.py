@@ -434,6 +434,11 @@ class SelfCollision:
         return self._features
 
     @property
+    def triangles(self) -> np.ndarray:
+        """``(t, 3)``: the cloth's triangles (int64)."""
+        return self._tris
+
+    @property
     def edges(self) -> np.ndarray:
         """``(e, 2)``: the cloth's unique edges (the edge–edge pairs' indices)."""
         return self._features[0]
@@ -566,3 +571,41 @@ def _features(tris: np.ndarray, n: int):
         np.cumsum(adj_ptr),
         np.ascontiguousarray(other[order]),
     )
+
+
+class Uncrossed:
+    """A post-step stage (``stage``) kept from making the cloth cross itself: whatever it moves is
+    scaled back by step 3's no-crossing factors over that stage's own displacement (the pairs
+    closer, where the stage started, than their two displacements; module docstring). For an
+    integrator that resolves self-contact inside its step (``vbd``) and leaves the contact stage
+    after it an exact finish against the colliders: pushed out of a link that pinches a fold, a
+    vertex would otherwise pass through the layer beside it. A vertex so held stays where the
+    stage's push would cross (inside the collider by what is left of its depth): the cloth never
+    crossing itself comes first. Velocities are the stage's."""
+
+    def __init__(self, stage, self_collision: SelfCollision):
+        self.stage = stage
+        self.name = stage.name
+        self._self = self_collision
+        n = self_collision.model.n_particles
+        self._before = np.zeros((n, 3))
+        self._moved = np.zeros(n)
+        self._factor = np.ones(n)
+        #: particles the last step's guard held back from a crossing
+        self.last_slowed = 0
+
+    @property
+    def active(self) -> bool:
+        return self.stage.active
+
+    def apply(self, state, start, dt, velocity_follow):
+        np.copyto(self._before, state.x)
+        self.stage.apply(state, start, dt, velocity_follow)
+        moved = displacements(state.x, self._before, self._moved)
+        self.last_slowed = 0
+        if not moved.any() or not np.isfinite(moved).all():
+            return  # nothing moved, or a diverged step (the simulator restores it)
+        pairs, dist, e_pairs, e_dist = self._self.candidates(self._before, moved)
+        displacement_factors(moved, self._self.triangles, pairs, dist, self._factor)
+        edge_displacement_factors(moved, self._self.edges, e_pairs, e_dist, self._factor)
+        self.last_slowed = scale_displacements(state.x, self._before, self._factor)

@@ -148,12 +148,14 @@ def _box_distance2(lo, hi, node, x, y, z):
 
 
 @numba.njit(cache=True)
-def mesh_distance(bank, m, x, y, z):
+def mesh_distance(bank, m, x, y, z, cutoff=np.inf):
     """Unsigned distance of the point ``(x, y, z)`` (in the mesh's frame) from mesh ``m`` of the
-    bank and the unit direction from the surface to the point (the distance's gradient)."""
+    bank and the unit direction from the surface to the point (the distance's gradient). With a
+    ``cutoff``, a point at least that far is answered ``(cutoff, 0, 0, 0)`` without the walk
+    below boxes farther than it."""
     v, t, lo, hi, left, right, first, end, order, root = bank
     r = root[m]
-    best = np.inf
+    best = cutoff * cutoff
     px = py = pz = 0.0
     btri = -1
     node = r  # preorder: a node's first child is the next one, right[node] the one after it
@@ -178,6 +180,8 @@ def mesh_distance(bank, m, x, y, z):
             node = right[node]
             continue
         node = left[node]
+    if btri < 0:
+        return cutoff, 0.0, 0.0, 0.0
     d = math.sqrt(best)
     if d > 1e-12:
         return d, (x - px) / d, (y - py) / d, (z - pz) / d

@@ -917,6 +917,41 @@ def _allowances(x, allowance, ckind, cpos, crot, cgeo, creach, cbank, cdepth, ta
         near[i] = nearest - b < tau * 1.01
 
 
+@numba.njit(cache=True)
+def _overtaken(x, free, ckind, cpos, crot, cpos0, crot0, cgeo, creach, cbank, tau):
+    """The initial guess of each free vertex that a moving collider overtook over the step
+    (closer than ``τ`` to its new pose) put on its skin, ``τ`` out along its normal; returns how
+    many. Without it a vertex in front of a link sweeping many thicknesses a step starts the
+    iterations inside the link, where its bounds let it out by a fraction of ``τ`` a search."""
+    moved = 0
+    for c in range(ckind.shape[0]):
+        still = True
+        for a in range(3):
+            if cpos[c, a] != cpos0[c, a]:
+                still = False
+            for b in range(3):
+                if crot[c, a, b] != crot0[c, a, b]:
+                    still = False
+        if still:
+            continue
+        for i in range(x.shape[0]):
+            if not free[i]:
+                continue
+            if creach[c] < math.inf:
+                far = (x[i, 0] - cpos[c, 0]) ** 2 + (x[i, 1] - cpos[c, 1]) ** 2
+                if math.sqrt(far + (x[i, 2] - cpos[c, 2]) ** 2) - creach[c] >= tau:
+                    continue
+            d, nx, ny, nz = sdf(
+                ckind[c], cpos[c], crot[c], cgeo[c], x[i, 0], x[i, 1], x[i, 2], cbank, tau
+            )
+            if d < tau:
+                x[i, 0] += (tau - d) * nx
+                x[i, 1] += (tau - d) * ny
+                x[i, 2] += (tau - d) * nz
+                moved += 1
+    return moved
+
+
 @register
 class VBD(Integrator):
     """Vertex Block Descent (Chen et al. 2024): backward Euler by per-vertex 3×3 Newton steps over
@@ -1131,6 +1166,8 @@ class VBD(Integrator):
             tau = sc.thickness
         x_cd = self._buffer("_x_cd", x)
         allow = self._allow
+        if len(colliders[0]):  # what a moving collider overtook starts on its skin
+            _overtaken(x, free, *colliders[:6], colliders[7], colliders[8:], tau)
         if self_contact or len(colliders[0]):
             # the initial guess, not the inertia: a layer resting on another or on a collider
             # is not going where gravity alone would take it

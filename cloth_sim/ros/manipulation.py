@@ -90,25 +90,39 @@ class Manipulation:
                 f"(not starting with a digit, at most 64); it names its topics"
             )
             return response
+        link = None
+        if request.link:
+            robot, _, link_name = request.link.partition("/")
+            if not robot or not link_name:
+                response.message = (
+                    f"link = {request.link!r}: expected <robot>/<link>, a robot in the scene "
+                    f"({', '.join(self.session.sim.robots) or 'none'}) and one of its links"
+                )
+                return response
+            link = (robot, link_name)
         try:
-            idx = self.session.sim.grasp(name, (p.x, p.y, p.z), request.radius)
+            idx = self.session.sim.grasp(name, (p.x, p.y, p.z), request.radius, link=link)
         except ValueError as e:
             response.message = str(e)
             return response
         self._gripper_topics(name)
         response.success, response.count = True, len(idx)
-        response.message = f"gripper {name!r} holds {len(idx)} particles"
+        on = f" on {request.link}" if link else ""
+        response.message = f"gripper {name!r}{on} holds {len(idx)} particles"
         return response
 
     def _gripper_topics(self, name: str) -> None:
-        topic = interface.topic_name("gripper_pose", name=name)
-        pose_sub = interface.subscription(
-            self.node,
-            "gripper_pose",
-            PoseStamped,
-            lambda msg, name=name: self._on_pose(("gripper", name), topic, msg),
-            name=name,
-        )
+        """Its wrench topic, and its pose topic unless a robot's link moves it."""
+        pose_sub = None
+        if self.session.sim.gripper_link(name) is None:
+            topic = interface.topic_name("gripper_pose", name=name)
+            pose_sub = interface.subscription(
+                self.node,
+                "gripper_pose",
+                PoseStamped,
+                lambda msg, name=name: self._on_pose(("gripper", name), topic, msg),
+                name=name,
+            )
         wrench_pub = interface.publisher(self.node, "gripper_wrench", WrenchStamped, name=name)
         self.grippers[name] = (pose_sub, wrench_pub)
 
@@ -122,7 +136,8 @@ class Manipulation:
         """Let go with gripper ``name`` and drop its topics (``ValueError`` for an unknown one)."""
         self.session.sim.release(name)
         sub, pub = self.grippers.pop(name)
-        self.node.destroy_subscription(sub)
+        if sub is not None:
+            self.node.destroy_subscription(sub)
         self.node.destroy_publisher(pub)
         self.session.pose_targets.pop(("gripper", name), None)
 
@@ -139,7 +154,8 @@ class Manipulation:
     def drop_grippers(self) -> None:
         """A rebuild or a reset: the grippers' particles are gone or back in place; so are they."""
         for sub, pub in self.grippers.values():
-            self.node.destroy_subscription(sub)
+            if sub is not None:
+                self.node.destroy_subscription(sub)
             self.node.destroy_publisher(pub)
         self.grippers = {}
         self.session.pose_targets = {

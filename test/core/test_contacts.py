@@ -229,6 +229,49 @@ def test_crossing_check_finds_a_particle_passing_through_a_triangle():
     assert crossings(x0, x1, np.array([[0, 1, 2]])) == []
 
 
+def test_a_stage_after_vbd_is_kept_from_pushing_a_vertex_through_the_cloth():
+    """vbd keeps the cloth uncrossed inside its step; the contact stage after it (the exact finish
+    against the colliders) is wrapped so that what it moves cannot cross: a stage that pushes one
+    particle of a two-layer cloth down through the layer under it is scaled back short of it (the
+    independent check finds no crossing), one that moves it less than the gap is left whole."""
+    from cloth_sim.contact.self_collision import SelfCollision, Uncrossed
+
+    model = ClothModel.grid(6, 6, 0.02, 0.001, stiffness=100.0)
+    x = model.positions.copy()
+    top = x.copy()
+    top[:, 2] += 0.004  # a second sheet 4 mm above, as a fold lies
+    n = len(x)
+    tris = np.vstack([model.triangles, model.triangles + n])
+    both = ClothModel.from_springs(
+        np.vstack([x, top]), np.tile(model.masses, 2), np.vstack([model.springs,
+        model.springs + n]), np.tile(model.stiffness, 2), np.tile(model.damping, 2),
+        triangles=tris,
+    )  # fmt: skip
+    sim = Simulator(both, integrator="vbd", dt=1 / 60, gravity=(0, 0, 0))
+    layers = SelfCollision(both, thickness=0.002, enabled=True)
+    p = n + 14  # a particle of the top sheet over the middle of the bottom one
+
+    class Push:
+        name, active = "contacts", True
+
+        def __init__(self, by):
+            self.by = np.asarray(by, float)
+
+        def apply(self, state, start, dt, follow):
+            state.x[p] += self.by
+
+    for by, whole in (([0.0, 0.0, -0.01], False), ([0.003, 0.0, 0.0], True)):
+        guard = Uncrossed(Push(by), layers)
+        state = sim.state.copy()
+        before = state.x.copy()
+        guard.apply(state, state, sim.dt, 1.0)
+        assert crossings(before, state.x, tris) == []
+        assert np.allclose(state.x[p] - before[p], by, rtol=0, atol=1e-15) == whole
+        assert (guard.last_slowed == 0) == whole
+        moved = state.x[p] - before[p]
+        assert np.allclose(np.cross(moved, by), 0) and moved @ np.asarray(by) > 0
+
+
 def test_fold_without_self_collision_crosses_itself():
     assert _count_crossings(_fold(False), 1.5, stop_at_first=True) > 0
 

@@ -226,3 +226,58 @@ def test_a_scene_gripper_may_hold_a_box():
     ]:
         with pytest.raises(SceneError, match=field):
             scene_from_dict({"grid": grid, "grippers": [bad]}, source="s.yaml")
+
+
+def test_a_scene_script_turns_its_grippers_at_a_constant_rate_and_then_lets_go():
+    """A scene's ``motion:`` turns a box gripper's edge about its centre: keyframes a sixth of a
+    turn apart are spherically interpolated, so the edge has turned pi/3·t at every step of the
+    first fifth of a second (a constant rate); after the last keyframe the script sets nothing,
+    so a pose set by hand (as a pose topic does) stays. The twist scene plays its own script."""
+    from cloth_sim.scene import load_scene, scene_from_dict
+
+    rate, half = math.pi / 3, 0.5 * math.pi / 3
+    frames = [
+        {
+            "t": float(t),
+            "position": [0.0, 0.225, 0.0],
+            "orientation": [math.cos(half * t), math.sin(half * t), 0, 0],
+        }
+        for t in (0, 1, 2, 3)
+    ]
+    scene = scene_from_dict(
+        {
+            "grid": {"rows": 10, "cols": 10, "spacing": 0.05},
+            "pinned": [],
+            "gravity": [0.0, 0.0, 0.0],
+            "integrator": "symplectic_euler",
+            "dt": 0.001,
+            "grippers": [
+                {"name": "edge", "box": {"min": [-0.01, -0.01, -0.01], "max": [0.01, 0.46, 0.01]}}
+            ],
+            "motion": {"grippers": {"edge": frames}},
+        }
+    )
+    sim = scene.build_simulator()
+    idx = sim.grippers["edge"]
+    centre = np.array([0.0, 0.225, 0.0])
+    arm = sim.positions[idx] - centre
+    for _ in range(200):
+        sim.step()
+        a = rate * sim.time
+        turned = (
+            arm
+            @ np.array(
+                [[1, 0, 0], [0, math.cos(a), -math.sin(a)], [0, math.sin(a), math.cos(a)]]
+            ).T
+        )
+        assert np.allclose(sim.positions[idx] - centre, turned, atol=1e-9)
+    sim.step(2801)  # past the script's end: a full turn (pi), then it lets go
+    assert sim.time >= 3.0
+    sim.set_gripper_pose("edge", centre + [0.0, 0.0, 0.1], (1.0, 0.0, 0.0, 0.0))
+    sim.step(3)
+    assert np.allclose(sim.positions[idx] - centre, arm + [0.0, 0.0, 0.1], atol=1e-9)
+
+    twist = load_scene("twist")
+    assert set(twist.motion.grippers) == {"left", "right"} and twist.motion.duration == 6.0
+    q = twist.motion.gripper_at("right", 1.5)[1]  # pi/3 rad/s: a quarter turn at 1.5 s
+    assert np.allclose(q, [math.cos(math.pi / 4), math.sin(math.pi / 4), 0, 0], atol=1e-8)

@@ -69,6 +69,49 @@ def test_robot_description_and_joint_states_move_the_links_within_a_tick(ros):
     desc.publish(String(data="<robot name='broken'><link name='a'></robot>"))
     assert ros.spin_until(lambda: node.robot_state.error is not None, 10)
     assert "does not parse" in node.robot_state.error and "demo_arm" in node.sim.robots
+    # ~/grasp on a link: the held particles keep their place in the hand's frame as it moves
+    from geometry_msgs.msg import Point
+
+    from cloth_sim.srv import Grasp
+
+    x = node.sim.positions[len(node.sim.positions) // 2]  # a free particle mid-cloth
+    req = Grasp.Request(gripper="g", point=Point(x=x[0], y=x[1], z=x[2]), radius=0.15)
+    for link, why in [("demo_arm", "<robot>/<link>"), ("demo_arm/nope", "nope")]:
+        req.link = link
+        bad = ros.call(Grasp, "/cloth_sim/grasp", req)
+        assert not bad.success and why in bad.message and "g" not in node.sim.grippers
+    req.link = "demo_arm/hand"
+    res = ros.call(Grasp, "/cloth_sim/grasp", req)
+    assert res.success and "demo_arm/hand" in res.message, res.message
+    assert node.sim.gripper_link("g") == ("demo_arm", "hand")
+    assert ros.node.get_publishers_info_by_topic("/cloth_sim/grippers/g/wrench")
+    assert not ros.node.get_subscriptions_info_by_topic("/cloth_sim/grippers/g/pose")
+    idx = node.sim.grippers["g"]
+
+    def in_hand():
+        p, q = node.sim.link_pose("demo_arm", "hand")
+        return _rotation(q).T @ (node.sim.positions[idx] - p).T
+
+    local = in_hand()
+    states.publish(joint_state(["shoulder_yaw", "elbow"], [0.2, 0.3]))
+    moved = Robot.from_urdf(ARM).link_transforms({**q, "shoulder_yaw": 0.2, "elbow": 0.3})
+    assert not np.allclose(moved["hand"][:3, 3], expected["hand"][:3, 3], atol=0.05)
+    assert ros.spin_until(
+        lambda: np.allclose(node.sim.link_pose("demo_arm", "hand")[0], moved["hand"][:3, 3]), 10
+    )
+    # (links placed when a tick ends early are reached by the particles over the next step)
+    assert ros.spin_until(lambda: np.allclose(in_hand(), local, atol=1e-9), 5)
+
+
+def _rotation(q):
+    w, x, y, z = q
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def _origin(collider, link):
