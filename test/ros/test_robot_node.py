@@ -71,11 +71,14 @@ def test_robot_description_and_joint_states_move_the_links_within_a_tick(ros):
     assert "does not parse" in node.robot_state.error and "demo_arm" in node.sim.robots
     # ~/grasp on a link: the held particles keep their place in the hand's frame as it moves
     from geometry_msgs.msg import Point
+    from std_srvs.srv import SetBool
 
     from cloth_sim.srv import Grasp
 
+    # paused, so that the cloth is where the request says (it swings meanwhile, under load far)
+    assert ros.call(SetBool, "/cloth_sim/pause", SetBool.Request(data=True)).success
     x = node.sim.positions[len(node.sim.positions) // 2]  # a free particle mid-cloth
-    req = Grasp.Request(gripper="g", point=Point(x=x[0], y=x[1], z=x[2]), radius=0.15)
+    req = Grasp.Request(gripper="g", point=Point(x=x[0], y=x[1], z=x[2]), radius=0.05)
     for link, why in [("demo_arm", "<robot>/<link>"), ("demo_arm/nope", "nope")]:
         req.link = link
         bad = ros.call(Grasp, "/cloth_sim/grasp", req)
@@ -93,6 +96,7 @@ def test_robot_description_and_joint_states_move_the_links_within_a_tick(ros):
         return _rotation(q).T @ (node.sim.positions[idx] - p).T
 
     local = in_hand()
+    assert ros.call(SetBool, "/cloth_sim/pause", SetBool.Request(data=False)).success
     states.publish(joint_state(["shoulder_yaw", "elbow"], [0.2, 0.3]))
     moved = Robot.from_urdf(ARM).link_transforms({**q, "shoulder_yaw": 0.2, "elbow": 0.3})
     assert not np.allclose(moved["hand"][:3, 3], expected["hand"][:3, 3], atol=0.05)
