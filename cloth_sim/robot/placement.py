@@ -25,12 +25,26 @@ class Placed:
         self.colliders = []  # (collider, shape)
         #: links placed directly (from TF), 4×4 in the robot's root frame, over their FK poses
         self.placed_links: dict[str, np.ndarray] = {}
+        self._poses = None  # link_poses() until the joints or placed links change
+
+    def set_joints(self, values: dict) -> None:
+        """Joint positions (checked), over those it has."""
+        self.joints = {**self.joints, **values}
+        self._poses = None
+
+    def place_links(self, transforms: dict) -> None:
+        """Links placed directly (checked 4×4s in the root frame), over their FK poses."""
+        self.placed_links.update(transforms)
+        self._poses = None
 
     def link_poses(self) -> dict[str, np.ndarray]:
         """Every link's pose (4×4) in the world: its forward kinematics at the current joint
-        positions, or where it was placed directly."""
-        poses = {**self.robot.link_transforms(self.joints), **self.placed_links}
-        return {k: self.base @ t for k, t in poses.items()}
+        positions, or where it was placed directly (computed once per configuration: a tick's
+        wrenches and poses read it per link; read-only)."""
+        if self._poses is None:
+            poses = {**self.robot.link_transforms(self.joints), **self.placed_links}
+            self._poses = {k: self.base @ t for k, t in poses.items()}
+        return self._poses
 
 
 def _pose(T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -100,7 +114,7 @@ class Robots:
 
     def set_joints(self, name: str, values, teleport: bool = False) -> None:
         placed = self._placed(name)
-        placed.joints = {**placed.joints, **placed.robot.check_joints(values)}
+        placed.set_joints(placed.robot.check_joints(values))
         self._follow(placed, None, teleport)
 
     def set_link_transforms(self, name: str, transforms: dict, teleport: bool = False) -> None:
@@ -113,7 +127,7 @@ class Robots:
             T = np.asarray(T, dtype=np.float64)
             if T.shape != (4, 4) or not np.all(np.isfinite(T)):
                 raise ValueError(f"link {link!r}: a transform must be a finite 4×4 matrix")
-        placed.placed_links.update({k: np.asarray(v, float) for k, v in transforms.items()})
+        placed.place_links({k: np.asarray(v, float) for k, v in transforms.items()})
         self._follow(placed, set(transforms), teleport)
 
     def _follow(self, placed: Placed, links, teleport: bool) -> None:

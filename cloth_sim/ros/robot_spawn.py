@@ -6,16 +6,14 @@ pose) with its joints at 0 and is the entity ``robot/<name>``; its links are
 
 from __future__ import annotations
 
-import re
 from urllib.parse import unquote, urlparse
 
 from simulation_interfaces import srv
 from simulation_interfaces.msg import Result
 
 from ..robot import Robot, resources
+from ..scene import GRIPPER_NAME as NAME  # the rule every entity name follows
 from .messages import checked_pose
-
-NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,63}")
 
 
 def is_urdf(resource) -> bool:

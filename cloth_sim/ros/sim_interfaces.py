@@ -30,7 +30,6 @@ SCOPE_STATE alone puts them back where they were spawned.
 from __future__ import annotations
 
 import itertools
-import re
 
 import numpy as np
 from geometry_msgs.msg import Vector3
@@ -545,7 +544,7 @@ class SimulationInterfaces:
         import yaml
 
         from ..contact.colliders import KINDS
-        from ..scene import SceneError, SceneValidator
+        from ..scene import GRIPPER_NAME, SceneError, SceneValidator
 
         R = srv.SpawnEntity.Response
         if not resource.uri and not resource.resource_string:
@@ -582,7 +581,7 @@ class SimulationInterfaces:
         spec = {**SPAWN_DEFAULTS[kind], **spec}
         # the name: the request's, else the resource's own (as the standard says)
         name = request.name or (spec.get("name") if isinstance(spec.get("name"), str) else "")
-        if name and not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]{0,63}", name):
+        if name and not GRIPPER_NAME.fullmatch(name):  # the rule every entity name follows
             return (
                 R.NAME_INVALID,
                 f"name = {name!r}: expected ASCII letters, digits and _ (not "

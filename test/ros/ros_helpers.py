@@ -62,3 +62,21 @@ def start_node(domain, *extra, ignore_sigint=False):
 def end_node(proc, timeout=30):
     out, _ = proc.communicate(timeout=timeout)
     return proc.returncode, out
+
+
+def run_example(name: str, *node_args) -> subprocess.CompletedProcess:
+    """``examples/<name> --quick`` against a node started with ``node_args`` on a domain of its
+    own; the node is ended whatever the example did."""
+    domain = next_domain()
+    node = start_node(domain, *node_args)
+    try:
+        return subprocess.run(
+            [sys.executable, str(ROOT / "examples" / name), "--quick"],
+            env=node_env(domain),
+            capture_output=True,
+            text=True,
+            timeout=180,
+        )
+    finally:
+        node.terminate()
+        end_node(node)

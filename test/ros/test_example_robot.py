@@ -3,29 +3,12 @@
 shoulder's yaw gives."""
 
 import re
-import subprocess
-import sys
-from pathlib import Path
 
-from ros_helpers import end_node, next_domain, node_env, start_node
-
-ROOT = Path(__file__).resolve().parents[2]
+from ros_helpers import run_example
 
 
 def test_the_robot_example_drives_the_node():
-    domain = next_domain()
-    node = start_node(domain, "-p", "robot.enable:=true", "-p", "scene:=hanging")
-    try:
-        r = subprocess.run(
-            [sys.executable, str(ROOT / "examples" / "robot_node.py"), "--quick"],
-            env=node_env(domain),
-            capture_output=True,
-            text=True,
-            timeout=180,
-        )
-    finally:
-        node.terminate()
-        end_node(node)
+    r = run_example("robot_node.py", "-p", "robot.enable:=true", "-p", "scene:=hanging")
     assert r.returncode == 0, r.stderr[-3000:]
     assert "robot/demo_arm/forearm" in r.stdout
     yaw = float(re.search(r"shoulder_yaw ([-\d.]+) rad", r.stdout).group(1))
