@@ -26,6 +26,10 @@ camera topics subscribed) ``cloth-sim bench lockstep [--size 32]`` (steps per se
 from another process) ``cloth-sim bench startup [--sizes 32 64] [--trials 4]`` (process start to
 the first cloud)
     Print the node's real-time factor with and without a ~/points subscriber (needs rclpy).
+``cloth-sim textile cantilever|tensile|drape [--material NAME ...] [--grid N ...]``
+    The textile standard tests on the simulator, each measured value beside the expected one.
+``cloth-sim fit BAG --scene SCENE --params NAME[,NAME…] -o OUT [--workers N] [--address A]``
+    Fit a scene's material to a recorded point-cloud sequence; write the scene with the result.
 ``cloth-sim record -o BAG [TOPIC ...]``, ``play BAG``, ``info BAG``, ``reindex BAG``
     rosbag2-compatible MCAP bags: record the ROS graph, replay it, inspect it, repair an unclosed
     bag.
@@ -40,9 +44,11 @@ from pathlib import Path
 
 from .bag.store import BagError
 from .bench.cli import add_parser as add_bench_parser
+from .bench.textile import add_parser as add_textile_parser
 from .parameters import SCHEMA
 from .scene import SceneError, load_scene
 from .simulator import SimulationDiverged
+from .sweep.fit import add_parser as add_fit_parser
 
 
 def _run(args) -> int:
@@ -149,6 +155,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--dt", type=_schema_value("dt", float), help=SCHEMA["dt"].range_text())
     r.set_defaults(func=_run)
     add_bench_parser(sub)
+    add_textile_parser(sub)
+    add_fit_parser(sub)
 
     rec = sub.add_parser(
         "record", help="record topics into a rosbag2 (MCAP) bag, like `ros2 bag record`"

@@ -46,6 +46,8 @@ class ClothModel:
         pinned: ``(n,)`` bool.
         triangles: ``(t, 3)`` int64 surface triangles (for normals and wind), possibly empty.
         rows, cols: grid shape, or ``None`` for a general spring network.
+        bending: a material's bending energy (:class:`~cloth_sim.physics.bending.Bending`).
+        meta: ``material`` (the fabric a model was built from), ``size``; a mesh's landmarks.
     """
 
     positions: np.ndarray
@@ -65,6 +67,7 @@ class ClothModel:
     model: str = "provot"
     spacing: float | None = None
     meta: dict = field(default_factory=dict)
+    bending: object | None = None  # a physics.bending.Bending (a material's flexural rigidity)
 
     def __post_init__(self):
         n, m = len(self.masses), len(self.springs)
@@ -83,6 +86,8 @@ class ClothModel:
             raise ValueError(f"springs: particle indices must lie in [0, {n - 1}]")
         if m and np.any(self.springs[:, 0] == self.springs[:, 1]):
             raise ValueError("springs: a spring must join two different particles")
+        if self.bending is not None and self.bending.n != n:
+            raise ValueError("bending: its particle count differs from the model's")
         if not np.all(np.isfinite(self.positions)):
             raise ValueError("positions must be finite")
         if np.any(~np.isfinite(self.masses)) or np.any(self.masses <= 0):
@@ -114,14 +119,16 @@ class ClothModel:
         cls,
         rows: int,
         cols: int,
-        spacing: float,
-        particle_mass: float,
-        stiffness: dict | float,
+        spacing: float | None = None,
+        particle_mass: float | None = None,
+        stiffness: dict | float | None = None,
         damping: dict | float | None = None,
         pinned=(),
         model: str = "provot",
         orientation: str = "horizontal",
         origin=(0.0, 0.0, 0.0),
+        size=None,
+        material=None,
     ) -> "ClothModel":
         """A regular ``rows × cols`` grid after Provot (1995), or Choi & Ko (2002) with
         ``model="choi_ko"``.
@@ -138,6 +145,13 @@ class ClothModel:
 
         ``stiffness`` and ``damping`` are dicts keyed by family (missing families get 0) or one
         number for all. ``pinned`` lists ``(row, col)`` pairs; negative indices count from the end.
+
+        ``size=(width, height)`` (m) sets the spacing instead: ``width/(cols − 1)`` along columns,
+        ``height/(rows − 1)`` along rows. ``material`` (a :class:`~cloth_sim.materials.Fabric`,
+        a library name or a mapping of its fields) with ``size`` replaces ``particle_mass``,
+        ``stiffness`` and ``damping``: :mod:`cloth_sim.materials.discretize` maps the fabric onto
+        the grid (warp along +y, the row index), so the same fabric behaves the same at any
+        ``rows``, ``cols``; its bending rigidity goes to :attr:`bending`.
         """
         from .parameters import SCHEMA, ParameterError  # the schema imports this module
 
@@ -145,8 +159,39 @@ class ClothModel:
             rows, cols = SCHEMA["rows"].check(rows), SCHEMA["cols"].check(cols)
         except ParameterError as e:
             raise ValueError(f"grid: rows and cols: {e}") from None
-        spacing = SCHEMA["spacing"].check(spacing)
-        particle_mass = SCHEMA["particle_mass"].check(particle_mass)
+        fabric = None
+        if material is not None:
+            from .materials import resolve
+
+            fabric = resolve(material)
+            if size is None:
+                raise ValueError("grid: a material needs the cloth's size=(width, height) in m")
+            given = [
+                n
+                for n, v in (
+                    ("particle_mass", particle_mass),
+                    ("stiffness", stiffness),
+                    ("damping", damping),
+                )
+                if v is not None
+            ]
+            if given:
+                raise ValueError(
+                    f"grid: {', '.join(given)} and a material are both given: the material sets "
+                    f"the masses, springs and damping"
+                )
+        if size is not None:
+            ax, ay = _grid_size(size, rows, cols)
+            spacing = min(ax, ay)
+        else:
+            spacing = SCHEMA["spacing"].check(spacing)
+            ax = ay = spacing
+        if fabric is None:
+            if particle_mass is None or stiffness is None:
+                raise ValueError(
+                    "grid: give particle_mass and stiffness, or a material with the size"
+                )
+            particle_mass = SCHEMA["particle_mass"].check(particle_mass)
         if model not in MODELS:
             raise ValueError(f"grid: unknown model {model!r}; expected one of {', '.join(MODELS)}")
         if orientation not in ORIENTATIONS:
@@ -154,8 +199,9 @@ class ClothModel:
                 f"grid: unknown orientation {orientation!r}; expected one of "
                 f"{', '.join(ORIENTATIONS)}"
             )
-        k_fam = _per_family("stiffness", stiffness)
-        c_fam = _per_family("damping", damping if damping is not None else 0.0)
+        if fabric is None:
+            k_fam = _per_family("stiffness", stiffness)
+            c_fam = _per_family("damping", damping if damping is not None else 0.0)
 
         idx = np.arange(rows * cols).reshape(rows, cols)
         pairs, fams = [], []
@@ -178,9 +224,9 @@ class ClothModel:
 
         r, c = np.divmod(np.arange(rows * cols), cols)
         if orientation == "horizontal":
-            x = np.stack([c * spacing, r * spacing, np.zeros(r.size)], axis=1)
+            x = np.stack([c * ax, r * ay, np.zeros(r.size)], axis=1)
         else:
-            x = np.stack([c * spacing, np.zeros(r.size), -r * spacing], axis=1)
+            x = np.stack([c * ax, np.zeros(r.size), -r * ay], axis=1)
         x = x.astype(np.float64)
         rest = np.linalg.norm(x[springs[:, 1]] - x[springs[:, 0]], axis=1)
         o = np.asarray(origin, dtype=np.float64)
@@ -216,13 +262,27 @@ class ClothModel:
         )
         tris = np.concatenate([np.stack([a, b, cq], 1), np.stack([a, cq, d], 1)]).astype(np.int64)
 
+        meta, bending = {}, None
+        if fabric is not None:
+            from .materials.discretize import grid_material
+
+            k, cdamp, masses, bending = grid_material(
+                fabric, rows, cols, ax, ay, springs, family, GRID_FAMILIES, pin_mask
+            )
+            meta = {"material": fabric, "size": (ax * (cols - 1), ay * (rows - 1))}
+        else:
+            k = np.array([k_fam[f] for f in GRID_FAMILIES])[family]
+            cdamp = np.array([c_fam[f] for f in GRID_FAMILIES])[family]
+            masses = np.full(rows * cols, float(particle_mass))
+            if size is not None:
+                meta = {"size": (ax * (cols - 1), ay * (rows - 1))}
         return cls(
             positions=x,
-            masses=np.full(rows * cols, float(particle_mass)),
+            masses=masses,
             springs=springs,
             rest_lengths=rest,
-            stiffness=np.array([k_fam[f] for f in GRID_FAMILIES])[family],
-            damping=np.array([c_fam[f] for f in GRID_FAMILIES])[family],
+            stiffness=k,
+            damping=cdamp,
             family=family,
             family_names=GRID_FAMILIES,
             kind=kind,
@@ -233,6 +293,8 @@ class ClothModel:
             cols=cols,
             model=model,
             spacing=float(spacing),
+            meta=meta,
+            bending=bending,
         )
 
     @classmethod
@@ -295,14 +357,15 @@ class ClothModel:
     def from_mesh(
         cls,
         source,
-        density: float,
-        stiffness: dict | float,
+        density: float | None = None,
+        stiffness: dict | float | None = None,
         damping: dict | float | None = None,
         pinned=(),
         model: str = "provot",
         scale: float = 1.0,
         position=(0.0, 0.0, 0.0),
         orientation=(1.0, 0.0, 0.0, 0.0),
+        material=None,
     ) -> "ClothModel":
         """A cloth from any triangle mesh: ``source`` is a file (OBJ, PLY, STL, glTF/GLB, OFF; see
         :mod:`cloth_sim.physics.mesh`) or a ``(vertices, faces)`` pair.
@@ -319,20 +382,45 @@ class ClothModel:
         both. A file's named vertices (:func:`cloth_sim.physics.mesh.read_landmarks`) are in
         ``meta["landmarks"]``, name → particle index.
 
+        ``material`` (a :class:`~cloth_sim.materials.Fabric`, a library name or a mapping)
+        replaces ``density``, ``stiffness`` and ``damping``: each edge's stiffness from its
+        triangles' areas and the bending from the cotangent stencils
+        (:func:`cloth_sim.materials.discretize.mesh_material`: isotropic, as a mesh here has no
+        warp direction; the geometric mean of warp and weft).
+
         A mesh that cannot be cloth raises ``ValueError`` naming the source and the element (see
         :func:`cloth_sim.physics.mesh.check_mesh`); nothing is built."""
         from .constraints.grippers import check_pose
         from .parameters import SCHEMA
         from .physics import mesh as M
 
+        fabric = None
+        if material is not None:
+            from .materials import resolve
+
+            fabric = resolve(material)
+            given = [
+                n
+                for n, v in (("density", density), ("stiffness", stiffness), ("damping", damping))
+                if v is not None
+            ]
+            if given:
+                raise ValueError(
+                    f"from_mesh: {', '.join(given)} and a material are both given: the material "
+                    f"sets the masses, springs and damping"
+                )
+            density = fabric.density
+        elif density is None or stiffness is None:
+            raise ValueError("from_mesh: give density and stiffness, or a material")
         vertices, faces, name = M.read_mesh(source, scale)
         density = SCHEMA["density"].check(density)
         if model not in MODELS:
             raise ValueError(
                 f"from_mesh: unknown model {model!r}; expected one of {', '.join(MODELS)}"
             )
-        k_fam = _per_family("stiffness", stiffness, MESH_FAMILIES)
-        c_fam = _per_family("damping", damping if damping is not None else 0.0, MESH_FAMILIES)
+        if fabric is None:
+            k_fam = _per_family("stiffness", stiffness, MESH_FAMILIES)
+            c_fam = _per_family("damping", damping if damping is not None else 0.0, MESH_FAMILIES)
         try:
             pos, _, rot = check_pose(position, orientation)
         except ValueError as e:
@@ -359,13 +447,21 @@ class ClothModel:
         if model == "choi_ko":
             kind[family == 0] = TENSION_ONLY
             kind[family == 1] = BUCKLING
+        bending = None
+        if fabric is not None:
+            from .materials.discretize import mesh_material
+
+            k, cdamp, bending = mesh_material(fabric, x, tris, springs, family)
+        else:
+            k = np.array([k_fam[f] for f in MESH_FAMILIES])[family]
+            cdamp = np.array([c_fam[f] for f in MESH_FAMILIES])[family]
         return cls(
             positions=x,
             masses=M.lumped_masses(x, tris, density),
             springs=springs,
             rest_lengths=np.linalg.norm(x[springs[:, 1]] - x[springs[:, 0]], axis=1),
-            stiffness=np.array([k_fam[f] for f in MESH_FAMILIES])[family],
-            damping=np.array([c_fam[f] for f in MESH_FAMILIES])[family],
+            stiffness=k,
+            damping=cdamp,
             family=family,
             family_names=MESH_FAMILIES,
             kind=kind,
@@ -379,7 +475,9 @@ class ClothModel:
                 "density": density,
                 # named vertices (a garment's collar, sleeve ends, …), as particle indices
                 "landmarks": {k: int(index[i]) for k, i in landmarks.items()},
+                **({"material": fabric} if fabric is not None else {}),
             },
+            bending=bending,
         )
 
     # ------------------------------------------------------------------ queries
@@ -405,6 +503,19 @@ class ClothModel:
         if self.cols is None:
             raise ValueError("index(row, col) needs a grid model")
         return (row % self.rows) * self.cols + (col % self.cols)
+
+
+def _grid_size(size, rows: int, cols: int) -> tuple[float, float]:
+    """The spacing ``(along columns, along rows)`` of a ``rows × cols`` grid of ``size`` (w, h)."""
+    try:
+        w, h = (float(v) for v in size)
+    except (TypeError, ValueError):
+        raise ValueError(f"size: expected (width, height) in m, got {size!r}") from None
+    if not (np.isfinite(w) and np.isfinite(h) and w > 0 and h > 0):
+        raise ValueError(f"size: width and height must be finite and > 0 m, got {size!r}")
+    if rows < 2 or cols < 2:
+        raise ValueError("size: a grid with a size needs at least 2 rows and 2 columns")
+    return w / (cols - 1), h / (rows - 1)
 
 
 def _per_family(name: str, value, families=GRID_FAMILIES) -> dict:

@@ -22,6 +22,14 @@ import numbers
 from dataclasses import dataclass
 
 from .kinds import GRID_FAMILIES, INTEGRATORS, MODELS, STRAIN_LIMIT_METHODS
+from .materials.library import LIBRARY
+
+#: the library's fabric names (the material parameter's choices)
+MATERIAL_NAMES = tuple(sorted(LIBRARY))
+
+#: vector parameter types and their lengths
+VECTORS = {"vector2": 2, "vector3": 3}
+VECTOR_NAMES = {2: "[width, height]", 3: "[x, y, z]"}
 
 #: The largest grid side anywhere (scene files, the node, ``ClothModel.grid``).
 MAX_GRID = 512
@@ -50,7 +58,8 @@ def _num(x: float) -> str:
 class Param:
     """One user-settable quantity.
 
-    ``type`` is ``float``, ``int``, ``bool``, ``str`` or ``"vector3"`` (three floats). Numbers and
+    ``type`` is ``float``, ``int``, ``bool``, ``str``, ``"vector2"`` or ``"vector3"`` (two or
+    three floats). Numbers and
     vector components lie in ``[lo, hi]`` (``(lo, hi]`` with ``lo_open``); strings in ``choices``
     when given, and non-empty when ``nonempty``. ``scene_key`` is the field's path in a scene file
     (``grid.rows``), ``None`` for parameters only the node has.
@@ -82,13 +91,13 @@ class Param:
         interval = f"{lo}{_num(self.lo)}, {_num(self.hi)}]"
         if self.type is int:
             return f"an integer in {interval}{unit}"
-        if self.type == "vector3":
-            return f"3 numbers, each in {interval}{unit}"
+        if self.type in VECTORS:
+            return f"{VECTORS[self.type]} numbers, each in {interval}{unit}"
         return f"a number in {interval}{unit}"
 
     # ------------------------------------------------------------------ checks
     def check(self, value, field: str | None = None):
-        """``value`` in canonical form (float, int, bool, str or a list of 3 floats), or
+        """``value`` in canonical form (float, int, bool, str or a list of 2 or 3 floats), or
         :class:`ParameterError` naming ``field`` (default: the parameter's name)."""
         name = field or self.name
         if self.type is bool:
@@ -107,15 +116,16 @@ class Param:
             if not isinstance(value, str) or (self.nonempty and not value):
                 raise ParameterError(name, value, self.range_text())
             return value
-        if self.type == "vector3":
+        if self.type in VECTORS:
             if isinstance(value, (str, bytes, dict)) or not hasattr(value, "__len__"):
                 raise ParameterError(name, value, self.range_text())
-            if len(value) != 3:
+            n = VECTORS[self.type]
+            if len(value) != n:
                 raise ParameterError(
                     name,
                     value,
                     self.range_text(),
-                    f"{name} must have exactly 3 elements [x, y, z], got "
+                    f"{name} must have exactly {n} elements {VECTOR_NAMES[n]}, got "
                     f"{len(value)}: {_show(value)}",
                 )
             return [self._number(v, f"{name}[{i}]") for i, v in enumerate(value)]
@@ -249,6 +259,30 @@ def _schema() -> dict[str, Param]:
             hi=1e3,
             apply="rebuild",
             scene_key="particle_mass",
+        ),
+        P(
+            "material",
+            str,
+            "",
+            "A library fabric (cloth_sim.materials.names()) mapped onto the cloth in SI units: "
+            "its masses, springs and bending follow from the fabric and the cloth's size, the "
+            "same at any rows and cols; '' keeps the scene's own (its material mapping, or "
+            "per-family stiffness and particle_mass when it has none). Rebuilds and resets the "
+            "cloth.",
+            choices=("", *MATERIAL_NAMES),
+            apply="rebuild",
+        ),  # a scene's material: (a name or a mapping: cloth_sim.scene)
+        P(
+            "size",
+            "vector2",
+            "m",
+            "The grid cloth's [width, height]: with it rows and cols set the resolution, not "
+            "the extent (spacing follows); [0, 0]: spacing sets the extent. A material needs "
+            "it. Rebuilds and resets the cloth. Grid scenes only.",
+            lo=0.0,
+            hi=100.0,
+            apply="rebuild",
+            scene_key="size",
         ),
         P(
             "density",

@@ -136,6 +136,12 @@ class Scene:
     gripper_links: dict = field(default_factory=dict)
     #: the scripted motion (:class:`cloth_sim.motion.Motion`), or None
     motion: Motion | None = None
+    #: the cloth's fabric (:class:`cloth_sim.materials.Fabric`), or None for per-family springs
+    material: object | None = None
+    #: the library name the scene gave for its material ("" for a mapping or none)
+    material_name: str = ""
+    #: a grid's (width, height) in m, or None (spacing sets the extent)
+    size: tuple | None = None
 
     @property
     def families(self) -> tuple[str, ...]:
@@ -198,9 +204,17 @@ class Scene:
                 "cols": self.cols,
                 "spacing": self.spacing,
                 "particle_mass": self.particle_mass,
+                "size": self.size,
             }
         )
-        p.update({"model": self.model, "stiffness": self.stiffness, "damping": self.damping})
+        p.update(
+            {
+                "model": self.model,
+                "stiffness": self.stiffness,
+                "damping": self.damping,
+                "material": self.material,
+            }
+        )
         unknown = sorted(set(override) - set(p))
         if unknown:  # (a misspelt or simulator-only option used to vanish here unnoticed)
             raise TypeError(
@@ -210,18 +224,34 @@ class Scene:
         p.update(override)
         if self.mesh is not None:
             return self._mesh_model(p)
+        if p["material"] is not None:
+            return ClothModel.grid(
+                p["rows"],
+                p["cols"],
+                size=p["size"] or self.material_size(p["rows"], p["cols"], p["spacing"]),
+                material=p["material"],
+                pinned=self.pinned_cells(p["rows"], p["cols"]),
+                model=p["model"],
+                orientation=self.orientation,
+                origin=self.origin,
+            )
         return ClothModel.grid(
             p["rows"],
             p["cols"],
-            p["spacing"],
+            None if p["size"] else p["spacing"],
             p["particle_mass"],
             stiffness=p["stiffness"],
             damping=p["damping"],
+            size=p["size"] or None,
             pinned=self.pinned_cells(p["rows"], p["cols"]),
             model=p["model"],
             orientation=self.orientation,
             origin=self.origin,
         )
+
+    def material_size(self, rows: int, cols: int, spacing: float | None) -> tuple:
+        """A material grid's size when none is given: the scene's spacing times its cells."""
+        return (spacing * (cols - 1), spacing * (rows - 1))
 
     def _mesh_model(self, p: dict) -> ClothModel:
         m = self.mesh
@@ -229,9 +259,12 @@ class Scene:
             name: {f: v for f, v in p[name].items() if f in MESH_FAMILIES}
             for name in ("stiffness", "damping")
         }
+        if p["material"] is not None:
+            fams = {"material": p["material"]}
+        else:
+            fams["density"] = p["density"]
         model = ClothModel.from_mesh(
             str(m["file"]),
-            density=p["density"],
             model=p["model"],
             pinned=[q for q in self.pinned if not isinstance(q, str)],
             scale=m["scale"],
@@ -474,6 +507,8 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
         "camera",
         "robot",
         "motion",
+        "material",
+        "size",
     }
     v.known("", data, known)
     if "mesh" in data:
@@ -485,6 +520,7 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
         s = _mesh_scene(v, data, source, name)
     else:
         s = _grid_scene(v, data, source, name)
+    _material(v, data, s, source)
     s.model = v.param("model", data.get("model", "provot"))
     s.gravity = tuple(v.param("gravity", data.get("gravity", s.gravity)))
     wind = data.get("wind", {}) or {}
@@ -659,12 +695,27 @@ def _grid_scene(v: "SceneValidator", data: dict, source: str, name: str) -> Scen
             f"{source}: field 'pinned_box' is for mesh scenes; a grid pins (row, col) "
             f"cells with pinned and pinned_edges"
         )
+    rows, cols = v.param("rows", grid.get("rows")), v.param("cols", grid.get("cols"))
+    size = None
+    if data.get("size") is not None:
+        size = tuple(v.param("size", data["size"]))
+        if min(size) <= 0:
+            v.fail("size", "[width, height], each > 0 m", data["size"])
+        spacing = min(size[0] / (cols - 1), size[1] / (rows - 1))
+        if "spacing" in grid:
+            raise SceneError(
+                f"{source}: fields 'size' and 'grid.spacing' are both given: with a size, rows "
+                f"and cols set the spacing"
+            )
+    else:
+        spacing = v.param("spacing", grid.get("spacing"))
     s = Scene(
         name=str(data.get("name", name)),
         source=source,
-        rows=v.param("rows", grid.get("rows")),
-        cols=v.param("cols", grid.get("cols")),
-        spacing=v.param("spacing", grid.get("spacing")),
+        rows=rows,
+        cols=cols,
+        spacing=spacing,
+        size=size,
         orientation=v.choice(
             "grid.orientation", grid.get("orientation", "horizontal"), ORIENTATIONS
         ),
@@ -742,6 +793,18 @@ def _mesh_scene(v: "SceneValidator", data: dict, source: str, name: str) -> Scen
     scale = v.number("mesh.scale", mesh.get("scale", 1.0), lo=0.0)
     if scale <= 0:
         v.fail("mesh.scale", "a finite number > 0 (metres per file unit)", scale)
+    if "size" in data:
+        raise SceneError(
+            f"{source}: field 'size' is for grid scenes; a mesh's extent is its file's times "
+            f"mesh.scale"
+        )
+    if "density" not in mesh and "material" in data:
+        mesh = {**mesh, "density": 0.1}  # unused: the material's density applies
+    elif "density" in mesh and "material" in data:
+        raise SceneError(
+            f"{source}: fields 'mesh.density' and 'material' are both given: the material's "
+            f"density applies"
+        )
     if "density" not in mesh:
         raise SceneError(
             f"{source}: field 'mesh.density' is missing: a mesh's masses come from its "
@@ -788,6 +851,31 @@ def _mesh_scene(v: "SceneValidator", data: dict, source: str, name: str) -> Scen
             v.fail("pinned_box", "min <= max in every coordinate", box)
         s.pinned_box = (lo, hi)
     return s
+
+
+def _material(v: "SceneValidator", data: dict, s: Scene, source: str) -> None:
+    """A scene's ``material:`` (a library name or a mapping of a fabric's fields): it replaces the
+    per-family springs and masses, so those fields are refused beside it."""
+    from .materials import Fabric, get
+
+    m = data.get("material")
+    if m is None:
+        return
+    clash = [k for k in ("particle_mass", "stiffness", "damping") if k in data]
+    if clash:
+        raise SceneError(
+            f"{source}: field 'material' and {', '.join(repr(k) for k in clash)} are both "
+            f"given: a material sets the masses, springs and damping itself"
+        )
+    try:
+        if isinstance(m, str):
+            s.material, s.material_name = get(m), m
+        else:
+            s.material = Fabric.from_mapping(m, where="material")
+    except ValueError as e:
+        raise SceneError(f"{source}: field {e}") from None
+    if s.mesh is None and s.size is None:
+        s.size = s.material_size(s.rows, s.cols, s.spacing)
 
 
 #: grippers a scene may declare

@@ -29,7 +29,15 @@ from .simulator import Simulator
 MODEL_KEYS = tuple(name for name in REBUILD if name != "scene")
 #: the parameters that shape a grid only, and a mesh only: a scene of the other kind refuses a
 #: change
-GRID_ONLY = ("rows", "cols", "spacing", "particle_mass", "stiffness.shear", "damping.shear")
+GRID_ONLY = (
+    "rows",
+    "cols",
+    "spacing",
+    "particle_mass",
+    "stiffness.shear",
+    "damping.shear",
+    "size",
+)
 MESH_ONLY = ("density",)
 #: what those parameters hold while the scene does not use them (start-up on a scene of the other
 #: kind; they keep their values across scene changes)
@@ -41,6 +49,7 @@ UNUSED_VALUES = {
     "stiffness.shear": 0.0,
     "damping.shear": 0.0,
     "density": 0.1,
+    "size": [0.0, 0.0],
 }
 #: the camera's parameters, without their ``camera.`` prefix
 CAMERA_SETTINGS = (
@@ -73,6 +82,7 @@ def scene_values(scene: Scene) -> dict:
         "thickness": float(scene.thickness),
         "self_collision": bool(scene.self_collision),
         "vbd.iterations": int(scene.vbd_iterations),
+        "material": scene.material_name,
     }
     if scene.mesh is not None:
         values["density"] = float(scene.mesh["density"])
@@ -83,6 +93,7 @@ def scene_values(scene: Scene) -> dict:
                 "cols": int(scene.cols),
                 "spacing": float(scene.spacing),
                 "particle_mass": float(scene.particle_mass),
+                "size": [float(x) for x in scene.size] if scene.size else [0.0, 0.0],
             }
         )
     for k, value in scene.camera.items():  # (the scene's camera, or the default one)
@@ -116,19 +127,51 @@ def defaults(scene: Scene) -> dict:
     return values
 
 
+def fabric(cfg: dict, scene: Scene):
+    """The fabric ``cfg`` maps onto ``scene``'s cloth: the ``material`` parameter's library
+    fabric, else the scene's own, else None (per-family springs)."""
+    if cfg["material"]:
+        from .materials import get
+
+        return get(cfg["material"])
+    return scene.material
+
+
+#: the parameters a material sets itself (refused while one is in use)
+MATERIAL_SETS = ("particle_mass", "density")
+
+
+def _material_set(scene: Scene, cand: dict) -> tuple[str, ...]:
+    return (
+        *MATERIAL_SETS,
+        *(f"{kind}.{f}" for kind in ("stiffness", "damping") for f in scene.families),
+    )
+
+
 def inapplicable_changes(scene: Scene, cand: dict, current: dict) -> list[str]:
     """The parameters ``scene``'s cloth does not have (a grid's size on a mesh, a mesh's density
-    on a grid) that ``cand`` changes from ``current``."""
+    on a grid; the masses and springs a material sets) that ``cand`` changes from ``current``."""
     names = GRID_ONLY if scene.mesh is not None else MESH_ONLY
-    return [n for n in names if cand[n] != current[n]]
+    if fabric(cand, scene) is not None and fabric(current, scene) is not None:
+        names = (*names, *_material_set(scene, cand))
+    return [n for n in dict.fromkeys(names) if cand[n] != current[n]]
 
 
 def not_applicable(scene: Scene, cand: dict, current: dict) -> str | None:
     """The reason to refuse a change of a parameter ``scene``'s cloth does not have (a grid's size
-    on a mesh, a mesh's density on a grid), ``None`` when there is none."""
+    on a mesh, a mesh's density on a grid; what a material sets), ``None`` when there is none."""
     changed = inapplicable_changes(scene, cand, current)
     if not changed:
         return None
+    if fabric(cand, scene) is not None:
+        set_by = [n for n in changed if n in _material_set(scene, cand)]
+        if set_by:
+            which = cand["material"] or f"scene {scene.name}'s"
+            return (
+                f"{', '.join(set_by)}: set by the cloth's material ({which}) from the fabric "
+                f"in SI units; set material to '' on a scene without one to use per-family "
+                f"values"
+            )
     if scene.mesh is not None:
         return (
             f"{', '.join(changed)}: not used by scene {scene.name}, a triangle mesh "
@@ -162,7 +205,10 @@ def camera_reason(cfg: dict) -> str | None:
 
 
 def material(model, cfg: dict) -> tuple[np.ndarray, np.ndarray]:
-    """Per-spring stiffness and damping of ``model`` from the family parameters in ``cfg``."""
+    """Per-spring stiffness and damping of ``model`` from the family parameters in ``cfg``; a
+    model built from a fabric keeps its own (the fabric's mapping)."""
+    if model.meta.get("material") is not None:
+        return model.stiffness, model.damping
     k = np.array([cfg[f"stiffness.{f}"] for f in model.family_names])[model.family]
     c = np.array([cfg[f"damping.{f}"] for f in model.family_names])[model.family]
     return k, c
@@ -181,8 +227,14 @@ def build_model(cfg: dict, scene: Scene):
         if scene.mesh is not None
         else {k: cfg[k] for k in ("rows", "cols", "spacing", "particle_mass")}
     )
+    if scene.mesh is None:
+        w, h = cfg["size"]
+        if (w > 0) != (h > 0):
+            raise ValueError(f"size: [width, height] must be both > 0 or both 0, got {[w, h]}")
+        size["size"] = (w, h) if w > 0 else None
     return scene.build_model(
         **size,
+        material=fabric(cfg, scene),
         model=cfg["model"],
         stiffness={f: cfg[f"stiffness.{f}"] for f in scene.families},
         damping={f: cfg[f"damping.{f}"] for f in scene.families},
@@ -265,7 +317,8 @@ def check_stability(cfg: dict, model) -> tuple[str | None, float]:
 
 def refusal(cfg: dict, model) -> tuple[str | None, tuple[str, ...], float | None]:
     """The checks of a combination of values on ``model``, in the node's order — the thickness
-    self-collision needs, the camera, the method's stable step: ``(reason, the parameters the
+    self-collision needs, the camera, the robot's two topics, a material's bending against the
+    method, the method's stable step: ``(reason, the parameters the
     reason names, stable_dt)``; ``reason`` is ``None`` when all pass (``stable_dt`` is known only
     once the stability check has run)."""
     if cfg["self_collision"]:
@@ -276,8 +329,30 @@ def refusal(cfg: dict, model) -> tuple[str | None, tuple[str, ...], float | None
     reason = camera_reason(cfg)
     if reason:  # a combination (far above near, look_at away from position)
         return reason, tuple(n for n in SCHEMA if n.startswith("camera.") and n in reason), None
+    if cfg["robot.enable"] and _topic(cfg["robot.description_topic"]) == _topic(
+        cfg["robot.joint_states_topic"]
+    ):
+        topic = cfg["robot.joint_states_topic"]
+        reason = (
+            f"robot.joint_states_topic and robot.description_topic are the same topic {topic!r}: "
+            f"a topic has one type (sensor_msgs/JointState, std_msgs/String)"
+        )
+        return reason, ("robot.joint_states_topic", "robot.description_topic"), None
+    if model.bending is not None and not integrators.get(cfg["integrator"]).takes_bending:
+        takers = [n for n in integrators.available() if integrators.get(n).takes_bending]
+        reason = (
+            f"integrator {cfg['integrator']} does not take a material's bending rigidity "
+            f"(material {cfg['material'] or 'of the scene'}): choose one of {', '.join(takers)}"
+        )
+        return reason, ("integrator", "material"), None
     reason, limit = check_stability(cfg, model)
     return reason, (("dt",) if reason else ()), limit
+
+
+def _topic(name: str) -> str:
+    """A topic name without its leading slash (``cloth`` and ``/cloth`` are one topic in the root
+    namespace; a stricter check would need the node's namespace)."""
+    return name.lstrip("/")
 
 
 class Refusal(ValueError):

@@ -305,6 +305,11 @@ def add_parser(sub) -> argparse.ArgumentParser:
         ),
         ("stability", "largest stable dt by bisection vs linear theory; stress scenarios"),
         ("scaling", "ms/step against N, fitted exponents; what skipping unused terms buys"),
+        (
+            "materials",
+            "the textile tests on every library fabric at several resolutions, a material's "
+            "cost a step, the fit to a noisy depth recording at 1 and 2 Ray workers",
+        ),
     ]:
         sp = bsub.add_parser(name, help=text)
         sp.add_argument("--out", metavar="DIR", help=f"output folder (default bench_out/{name})")

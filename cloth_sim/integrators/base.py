@@ -53,6 +53,13 @@ class Stability(enum.Enum):
     UNCONDITIONAL = "unconditional"
 
 
+def _subclasses(cls) -> list:
+    out = []
+    for c in cls.__subclasses__():
+        out += [c, *_subclasses(c)]
+    return out
+
+
 class Integrator:
     """Advances a :class:`~cloth_sim.state.State` by one step of ``dt``, in place."""
 
@@ -82,8 +89,17 @@ class Integrator:
     #: whether its step keeps every particle's path out of the colliders (vbd's conservative
     #: bound): the contact stage then only projects and filters, without checking the paths again
     keeps_paths_off_colliders: bool = False
+    #: whether the method takes a material's bending energy (``model.bending``, a constant
+    #: Hessian): the explicit methods through the force, vbd in its vertex solve
+    takes_bending: bool = False
 
     def __init__(self, model):
+        if getattr(model, "bending", None) is not None and not self.takes_bending:
+            takers = sorted(c.name for c in _subclasses(Integrator) if c.takes_bending and c.name)
+            raise ValueError(
+                f"integrator {self.name!r} does not take a material's bending rigidity yet; "
+                f"with a material use one of: {', '.join(takers)}"
+            )
         self.model = model
         self.counters = dict.fromkeys(self.counter_names, 0)
 

@@ -17,6 +17,8 @@ from .registry import register
 class ExplicitRungeKutta(Integrator):
     """Explicit Runge–Kutta step driven by a Butcher tableau ``(A, b)``."""
 
+    takes_bending = True
+
     A: np.ndarray
     b: np.ndarray
 
@@ -141,6 +143,7 @@ class SymplecticEuler(Integrator):
 
     name = "symplectic_euler"
     order = 1
+    takes_bending = True
 
     def step(self, state, forces, dt):
         forces.kick_drift(state.x, state.v, dt, self._buffer("_a", state.x))
@@ -191,6 +194,7 @@ class Verlet(Integrator):
 
     name = "verlet"
     order = 2
+    takes_bending = True
     velocity_follow = 1.5  # ∂v/∂x of the BDF2 velocity estimate, times dt
 
     def reset(self, state, forces, dt):

@@ -219,15 +219,22 @@ def _springs_at(
 
 @numba.njit(cache=True, inline="always")
 def _local_energy(
-    i, px, py, pz, x, xt, y, m_h2, drag_h, inc_ptr, nbr, rest, k, c, kind, tab, inv_h
+    i, px, py, pz, x, xt, y, m_h2, drag_h, inc_ptr, nbr, rest, k, c, kind, tab, inv_h, bend
 ):
     """The part of the incremental potential that depends on vertex ``i`` placed at ``p``: its
-    inertia and drag, its springs' energy and their damping potential (contacts left out)."""
+    inertia and drag, its springs' energy and their damping potential, the bending's ``½Q_ii|p|²
+    + p·Σ_j Q_ij x_j`` (contacts left out)."""
     ax, ay, az = px - y[i, 0], py - y[i, 1], pz - y[i, 2]
     bx, by, bz = px - xt[i, 0], py - xt[i, 1], pz - xt[i, 2]
     e = 0.5 * m_h2[i] * (ax * ax + ay * ay + az * az) + 0.5 * drag_h * (
         bx * bx + by * by + bz * bz
     )
+    bptr, bidx, bval, bdiag = bend
+    if bdiag.shape[0]:
+        e += 0.5 * bdiag[i] * (px * px + py * py + pz * pz)
+        for q in range(bptr[i], bptr[i + 1]):
+            j = bidx[q]
+            e += bval[q] * (px * x[j, 0] + py * x[j, 1] + pz * x[j, 2])
     for q in range(inc_ptr[i], inc_ptr[i + 1]):
         j = nbr[q]
         dx, dy, dz = x[j, 0] - px, x[j, 1] - py, x[j, 2] - pz
@@ -623,7 +630,8 @@ def _sweep(
     the self-contact records, pairs and topology. (The arrays are unpacked here, once a chunk:
     unpacked per vertex, or passed one by one to a function per vertex, their reference counting
     cost more than the vertex's work.)"""
-    inc_ptr, nbr, rest, k, c, kind, tab, nonsmooth = sp
+    inc_ptr, nbr, rest, k, c, kind, tab, nonsmooth, bptr, bidx, bval, bdiag = sp
+    bend = (bptr, bidx, bval, bdiag)
     ckind, cpos, crot, cpos0, crot0, cgeo, cmu = co[:7]
     cbank = co[8:]
     rec_ptr, rec, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d, colour = sc
@@ -656,6 +664,22 @@ def _sweep(
             h4,
             h5,
         )
+        if bdiag.shape[0]:
+            # the material's bending, quadratic: −(Q x)_i, and Q_ii on the Hessian's diagonal
+            qd = bdiag[i]
+            s0, s1, s2 = qd * x[i, 0], qd * x[i, 1], qd * x[i, 2]
+            for q in range(bptr[i], bptr[i + 1]):
+                j = bidx[q]
+                w = bval[q]
+                s0 += w * x[j, 0]
+                s1 += w * x[j, 1]
+                s2 += w * x[j, 2]
+            f0 -= s0
+            f1 -= s1
+            f2 -= s2
+            h0 += qd
+            h3 += qd
+            h5 += qd
         touch[i] = 0
         if ckind.shape[0] and near[i]:
             f0, f1, f2, h0, h1, h2, h3, h4, h5, touched = _colliders_at(
@@ -759,6 +783,7 @@ def _sweep(
                 kind,
                 tab,
                 inv_h,
+                bend,
             )
             tries = 0
             while (
@@ -780,6 +805,7 @@ def _sweep(
                     kind,
                     tab,
                     inv_h,
+                    bend,
                 )
                 > e0
             ):
@@ -799,6 +825,9 @@ def _sweep(
         x[i, 1] = ny
         x[i, 2] = nz
 
+
+#: a model without bending: empty rows (the kernels test ``bdiag.shape[0]``)
+_NO_BENDING = (np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros(0))
 
 #: chunks a colour is cut into for the cores (a fixed number: the result does not depend on it)
 CHUNKS = 16
@@ -972,6 +1001,7 @@ class VBD(Integrator):
     """
 
     name = "vbd"
+    takes_bending = True
     order = 1
     stability = Stability.UNCONDITIONAL
     implicit = True
@@ -1101,6 +1131,7 @@ class VBD(Integrator):
             # a model with Choi–Ko pairs checks every vertex step against the energy (the line
             # search in _sweep): one compressed pair makes its neighbours' steps overshoot too
             nonsmooth = bool(np.any(forces.kind != LINEAR))
+            bending = forces.bending
             self._springs = (
                 ptr,
                 np.ascontiguousarray(nbr, dtype=np.int64),
@@ -1110,7 +1141,10 @@ class VBD(Integrator):
                 ),
                 BUCKLE_TABLE,
                 nonsmooth,
+                *(_NO_BENDING if bending is None else bending.rows()),
             )
+            if bending is not None:  # a colour's vertices share no bending stencil either
+                springs = np.concatenate([springs, bending.pairs()])
             if self._colours_of is None or not np.array_equal(self._colours_of, springs):
                 self._colours = colour_groups(springs, n, self.free)
                 self._colours_of = springs

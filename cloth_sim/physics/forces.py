@@ -281,6 +281,19 @@ def _block_forces(d, rest, k, c, kind, tab, with_damping, fx, fy, fz):
         )
 
 
+@numba.njit(cache=True, inline="always")
+def bending_row(x, qptr, qidx, qval, p):
+    """``−(Q x)_p`` from ``Q``'s CSR rows: particle ``p``'s bending force."""
+    bx = by = bz = 0.0
+    for e in range(qptr[p], qptr[p + 1]):
+        j = qidx[e]
+        w = qval[e]
+        bx -= w * x[j, 0]
+        by -= w * x[j, 1]
+        bz -= w * x[j, 2]
+    return bx, by, bz
+
+
 @numba.njit(cache=True, parallel=True)
 def spring_forces_gather(
     x,
@@ -296,6 +309,10 @@ def spring_forces_gather(
     adj,
     sign,
     fs,
+    qptr,
+    qidx,
+    qval,
+    fb,
     base,
     f,
     inv_mass,
@@ -311,6 +328,9 @@ def spring_forces_gather(
     so the result is bit-identical to it at any thread count (no racy scatter). Each particle's sum
     starts from ``base`` (``f`` itself to add to it, or gravity's force: no pass to copy it first).
     The arrays are :func:`gather_arrays`' (32-bit indices, ``fs`` by coordinate, (3, springs)).
+    A material's bending (``qptr``, ``qidx``, ``qval``: the rows of its ``Q``, ``fb`` (n, 3)
+    scratch; ``qptr`` of length 1 without) is summed into ``fb`` in a pass of its own before the
+    gather, which starts each particle's sum from ``base + fb``.
 
     The springs go in blocks of :data:`GATHER_BLOCK` in :func:`spring_layout`'s order: their ends'
     differences gathered into a small array, then :func:`_block_forces` in SIMD. What each of these
@@ -356,8 +376,15 @@ def spring_forces_gather(
             fs[1, lo:hi],
             fs[2, lo:hi],
         )
+    if qptr.shape[0] > 1:  # a material's bending, −(Q x)_p, before any position moves
+        for p in numba.prange(f.shape[0]):
+            fb[p, 0], fb[p, 1], fb[p, 2] = bending_row(x, qptr, qidx, qval, p)
     for p in numba.prange(f.shape[0]):
         ax, ay, az = base[p, 0], base[p, 1], base[p, 2]
+        if qptr.shape[0] > 1:
+            ax += fb[p, 0]
+            ay += fb[p, 1]
+            az += fb[p, 2]
         for e in range(ptr[p], ptr[p + 1]):
             s = adj[e]
             if sign[e] > 0:
@@ -412,6 +439,10 @@ def runge_kutta_fused(
     adj,
     sign,
     fs,
+    qptr,
+    qidx,
+    qval,
+    fb,
     base,
     inv_mass,
 ):
@@ -444,6 +475,10 @@ def runge_kutta_fused(
             adj,
             sign,
             fs,
+            qptr,
+            qidx,
+            qval,
+            fb,
             base,
             kv[i],
             inv_mass,
@@ -574,12 +609,29 @@ def spring_layout(springs: np.ndarray, n: int) -> tuple:
     )
 
 
-def gather_arrays(springs, rest, k, c, kind, with_damping: bool, n: int, layout=None) -> tuple:
+#: no bending in the gather: an empty CSR (its ``ptr`` of length 1) and no scratch
+NO_BENDING_ROWS = (np.zeros(1, np.uint32), np.zeros(0, np.uint32), np.zeros(0), np.zeros((0, 3)))
+
+
+def gather_arrays(
+    springs, rest, k, c, kind, with_damping: bool, n: int, layout=None, bending=None
+) -> tuple:
     """The arguments :func:`spring_forces_gather` takes before ``base``, for these springs and
     their material: their ends and material in :func:`spring_layout`'s order, the Choi–Ko table,
-    the incidence, and the per-spring force scratch by coordinate (3, springs). ``layout``: the
+    the incidence, the per-spring force scratch by coordinate (3, springs), and the rows of a
+    material's bending ``Q`` with their scratch (:data:`NO_BENDING_ROWS` without). ``layout``: the
     springs' :func:`spring_layout`, if already at hand."""
     order, ends, ptr, adj, sign = spring_layout(springs, n) if layout is None else layout
+    if bending is None:
+        rows = NO_BENDING_ROWS
+    else:
+        Q = bending.Q
+        rows = (  # 32-bit indices, as the springs' (their loads cost the gather)
+            Q.indptr.astype(np.uint32),
+            Q.indices.astype(np.uint32),
+            Q.data.astype(np.float64),
+            np.empty((n, 3)),
+        )
     return (
         ends,
         rest[order],
@@ -592,6 +644,7 @@ def gather_arrays(springs, rest, k, c, kind, with_damping: bool, n: int, layout=
         adj,
         sign,
         np.empty((3, len(springs))),
+        *rows,
     )
 
 
@@ -614,7 +667,9 @@ class SpringTerm:
     Jacobian blocks: :func:`spring_jacobian_blocks`, which Baraff–Witkin assembles from and
     :meth:`Forces.jacobians` reports."""
 
-    def __init__(self, model: ClothModel, stiffness: np.ndarray, damping: np.ndarray):
+    def __init__(
+        self, model: ClothModel, stiffness: np.ndarray, damping: np.ndarray, bending=None
+    ):
         names, fam = model.family_names, model.family
         k_on = np.array([np.any(stiffness[fam == i] > 0) for i in range(len(names))], bool)
         c_on = np.array([np.any(damping[fam == i] > 0) for i in range(len(names))], bool)
@@ -630,6 +685,9 @@ class SpringTerm:
         self.kind = np.ascontiguousarray(model.kind[live])
         self.with_damping = bool(np.any(self.c > 0))
         self.parallel = len(self.springs) >= PARALLEL_MIN_SPRINGS  # decided once, per term
+        #: a material's bending summed inside the parallel gather (one pass fewer than a term of
+        #: its own, and the fused stages keep fusing); None: the bending is a term of its own
+        self.bending = bending if self.parallel else None
         if self.parallel:
             #: what every call of the gather passes first (:func:`gather_arrays`)
             self._gather_args = gather_arrays(
@@ -641,8 +699,11 @@ class SpringTerm:
                 self.with_damping,
                 model.n_particles,
                 _layout_of(model, live),
+                self.bending,
             )
             self._incidence, self._fs = self._gather_args[7:10], self._gather_args[10]
+            if self.bending is not None:
+                self.labels = (*self.labels, "bending")
 
     @property
     def active(self) -> bool:
@@ -764,6 +825,34 @@ class DragTerm:
         f -= np.multiply(v, self.drag, out=self._dv)  # no temporary per evaluation
 
 
+@numba.njit(cache=True)
+def bending_forces(x, qptr, qidx, qval, f):
+    """``f −= (Q ⊗ I₃) x`` from ``Q``'s CSR rows, one particle after another."""
+    for p in range(x.shape[0]):
+        bx, by, bz = bending_row(x, qptr, qidx, qval, p)
+        f[p, 0] += bx
+        f[p, 1] += by
+        f[p, 2] += bz
+
+
+class BendingTerm:
+    """A material's flexural rigidity: ``−(Q ⊗ I₃) x`` (:mod:`cloth_sim.physics.bending`), where
+    the springs are not summed on every cores (which sum it in their gather)."""
+
+    labels = ("bending",)
+
+    def __init__(self, bending):
+        self.bending = bending
+        Q = bending.Q
+        self._rows = (Q.indptr.astype(np.int64), Q.indices.astype(np.int64), Q.data)
+
+    def add_force(self, x, v, f):
+        bending_forces(x, *self._rows, f)
+
+    def energy(self, x) -> float:
+        return self.bending.energy(x)
+
+
 class Forces:
     """The force pipeline of one simulator: a list of terms compiled from the scene's non-zero
     ones (:attr:`terms`). Each term adds its force; the conservative ones report their energy; the
@@ -784,8 +873,13 @@ class Forces:
         self.gravity = np.asarray(gravity, dtype=np.float64).reshape(3)
         wind = None if wind is None else np.asarray(wind, dtype=np.float64).reshape(3)
         self.drag = float(drag)
+        bending = getattr(model, "bending", None)
+        self.bending = bending if bending is not None and bending.Q.nnz else None
         self.spring_term = SpringTerm(
-            model, np.asarray(stiffness, np.float64), np.asarray(damping, np.float64)
+            model,
+            np.asarray(stiffness, np.float64),
+            np.asarray(damping, np.float64),
+            self.bending,
         )
         # evaluation order: gravity first (it initialises the sum), then springs, wind, drag
         terms: list = (
@@ -793,6 +887,10 @@ class Forces:
         )
         if self.spring_term.active:
             terms.append(self.spring_term)
+        if self.bending is not None and not (
+            self.spring_term.active and self.spring_term.bending is not None
+        ):
+            terms.append(BendingTerm(self.bending))
         if wind is not None and np.any(wind != 0) and len(model.triangles):
             terms.append(WindTerm(model.triangles, wind, model.n_particles))
             self.wind = wind
@@ -929,7 +1027,11 @@ class Forces:
         self.evaluations += len(b)
 
     def spring_energy(self, x: np.ndarray) -> float:
-        return self.spring_term.energy(x)
+        """The elastic energy: the springs' and, with a material's bending, the bending's."""
+        e = self.spring_term.energy(x)
+        if self.bending is not None:
+            e += self.bending.energy(x)
+        return e
 
     def jacobians(self, x: np.ndarray, v: np.ndarray, clamp: bool = False):
         """``(∂f/∂x, ∂f/∂v)`` as ``3n×3n`` sparse matrices (row ``3i + a`` is component ``a`` of
@@ -948,9 +1050,11 @@ class Forces:
         # u both change sign with the pair's order
         dfdx = spring_coupling_matrix(springs, kx + dx, np.transpose(kx, (0, 2, 1)) + dx, n)
         dfdv = spring_coupling_matrix(springs, cv, cv, n)
+        if self.bending is not None:
+            dfdx = dfdx - self.bending.hessian()
         if self.drag > 0:
             dfdv = dfdv - self.drag * sp.identity(3 * n, format="csr")
-        return dfdx, dfdv.tocsr()
+        return dfdx.tocsr(), dfdv.tocsr()
 
 
 def spring_sums(springs: np.ndarray, w: np.ndarray, n: int) -> np.ndarray:

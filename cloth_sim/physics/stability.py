@@ -221,7 +221,7 @@ def fastest_mode(model: ClothModel, k: np.ndarray, c: np.ndarray, drag: float = 
         return Mode(0.0, 0.0)
     if not np.any(effective_stiffness(model, k) > 0):  # no stiffness at all: no oscillation
         return Mode(0.0, 0.0)
-    st = grid_stencil(model, k, c)
+    st = grid_stencil(model, k, c) if getattr(model, "bending", None) is None else None
     if st is not None:
         return _stencil_mode(st, drag)
     return _lanczos_mode(model, k, c, drag)
@@ -234,11 +234,16 @@ def _lanczos_mode(model: ClothModel, k: np.ndarray, c: np.ndarray, drag: float) 
     basis = _mode_basis(model)
     B, k_eff = basis.B, effective_stiffness(model, k)
     nd = B.shape[1]
+    A = (B.T @ sp.diags(k_eff) @ B).tocsr()
+    bending = getattr(model, "bending", None)
+    if bending is not None:  # a material's bending: + M^-½ (Q ⊗ I) M^-½ on the free dofs
+        dofs = np.repeat(~model.pinned, 3)
+        scale = sp.diags(np.sqrt(basis.inv_mass))
+        A = (A + scale @ bending.hessian()[dofs][:, dofs] @ scale).tocsr()
     if nd <= 3:
-        vals, vecs = np.linalg.eigh((B.T @ sp.diags(k_eff) @ B).toarray())
+        vals, vecs = np.linalg.eigh(A.toarray())
         lam, q = vals[-1], vecs[:, -1]
     else:
-        A = (B.T @ sp.diags(k_eff) @ B).tocsr()
         # tol 1e-6 gives ω to about 1e-8 relative, whatever the start
         vals, vecs = eigsh(A, k=1, which="LA", tol=1e-6, v0=basis.last_mode[0])
         lam, q = vals[0], vecs[:, 0]

@@ -16,7 +16,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.parameter import Parameter
 
 from .. import settings
-from ..parameters import SCHEMA
+from ..parameters import SCHEMA, VECTORS
 from ..scene import SceneError, load_scene
 from ..settings import MODEL_KEYS
 from . import params as P
@@ -56,9 +56,14 @@ def as_declared(p: Parameter) -> Parameter:
     spec = SCHEMA.get(p.name)
     if spec is not None and spec.type is float and p.type_ == Parameter.Type.INTEGER:
         return Parameter(p.name, value=float(p.value))
-    if spec is not None and spec.type == "vector3" and p.type_ == Parameter.Type.INTEGER_ARRAY:
+    if spec is not None and spec.type in VECTORS and p.type_ == Parameter.Type.INTEGER_ARRAY:
         return Parameter(p.name, value=[float(v) for v in p.value])
     return p
+
+
+def _hashable(value):
+    """A parameter value as part of a dict key (a vector parameter is a list)."""
+    return tuple(value) if isinstance(value, list) else value
 
 
 class StartupError(ValueError):
@@ -119,7 +124,7 @@ class ParameterGate:
 
     def _model(self, cfg: dict, scene):
         """The model for ``cfg``'s rebuild values (kept: validation and application share it)."""
-        key = (scene.source, *(cfg[k] for k in MODEL_KEYS))
+        key = (scene.source, *(_hashable(cfg[k]) for k in MODEL_KEYS))
         model = self._models.get(key)
         if model is None:
             model = settings.build_model(cfg, scene)

@@ -12,6 +12,7 @@ _TYPES = {
     int: ParameterType.PARAMETER_INTEGER,
     str: ParameterType.PARAMETER_STRING,
     bool: ParameterType.PARAMETER_BOOL,
+    "vector2": ParameterType.PARAMETER_DOUBLE_ARRAY,
     "vector3": ParameterType.PARAMETER_DOUBLE_ARRAY,
 }
 
@@ -22,6 +23,7 @@ def type_name(spec: Param) -> str:
         int: "integer",
         str: "string",
         bool: "bool",
+        "vector2": "double array",
         "vector3": "double array",
     }[spec.type]
 

@@ -92,7 +92,17 @@ class RobotState:
             self._remove()
             return
         self._source, self._base_frame = topics[2], topics[3]
-        self._subs = [
+        try:
+            self._subscribe(topics)
+        except Exception as e:  # noqa: BLE001 (rclpy's RCLError: a topic of another type there)
+            for sub in self._subs:
+                self.node.destroy_subscription(sub)
+            self._subs = []
+            self.error = f"robot topics {topics[0]!r}, {topics[1]!r}: not subscribed: {e}"
+            self.node.get_logger().error(self.error)
+
+    def _subscribe(self, topics) -> None:
+        self._subs.append(
             interface.subscription(
                 self.node,
                 "robot_description",
@@ -101,7 +111,7 @@ class RobotState:
                 qos=DESCRIPTION_QOS,
                 topic=topics[0],
             )
-        ]
+        )
         if self._source == "tf":  # (the standard /tf topics, the node's own output beside)
             self._subs += [
                 self.node.create_subscription(TFMessage, "/tf", self._on_tf, 100),

@@ -116,3 +116,18 @@ def session(workers: int | None, address: str | None, error=ValueError):
     finally:
         if started:
             ray.shutdown()
+
+
+@contextlib.contextmanager
+def pool_map(workers: int, address: str | None, error=ValueError):
+    """A ``map`` whose calls run on Ray's workers (:func:`session`; a ``ray.util.multiprocessing``
+    pool of ``workers`` processes, or of the cluster's CPUs at ``address``): what a fit's
+    optimiser spreads its candidates with."""
+    with session(workers, address, error) as n:
+        from ray.util.multiprocessing import Pool
+
+        pool = Pool(processes=n)
+        try:
+            yield pool.map
+        finally:
+            pool.terminate()

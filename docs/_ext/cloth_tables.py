@@ -7,6 +7,8 @@
   line of its docstring.
 * ``{cloth-scenes}`` — every scene in ``config/scenes/``: its first comment line, the cloth, the
   integrator and step.
+* ``{cloth-materials}`` — every fabric of :mod:`cloth_sim.materials`' library: its values in SI
+  units, its bending length and its source.
 * ``{cloth-topics}``, ``{cloth-services}`` — the node's topics and services from
   :mod:`cloth_sim.ros.interface`, the declaration the node creates them from.
 """
@@ -107,6 +109,8 @@ class Scenes(_Table):
                 cloth = f"{g['rows']} × {g['cols']} grid"
             else:
                 cloth = f"mesh ``{Path(data['mesh']['file']).name}``"
+            if isinstance(data.get("material"), str):
+                cloth += f", ``{data['material']}``"
             step = data.get("integrator", "symplectic_euler")
             dt = data.get("dt")
             out.append(
@@ -118,6 +122,43 @@ class Scenes(_Table):
                 ]
             )
         return ["scene", "cloth", "integrator", "what"], out
+
+
+class Materials(_Table):
+    def rows(self):
+        from cloth_sim.materials import get, names
+        from cloth_sim.materials.library import ALIASES, ARCSIM_DATA
+
+        out = []
+        for n in names():
+            f = get(n)
+            what = (
+                f"the library's {ALIASES[n]}"
+                if n in ALIASES
+                else f"{ARCSIM_DATA[n][0]}, {ARCSIM_DATA[n][1]}"
+            )
+            out.append(
+                [
+                    f"``{n}``",
+                    _cell(what),
+                    f"{f.density:.3f}",
+                    f"{f.stretch[0]:.4g} / {f.stretch[1]:.4g}",
+                    f"{f.shear:.3g}",
+                    f"{1e6 * f.bend[0]:.3g} / {1e6 * f.bend[1]:.3g}",
+                    f"{f.poisson:.3f}",
+                    f"{100 * f.bending_length(0):.2f} / {100 * f.bending_length(1):.2f}",
+                ]
+            )
+        return [
+            "fabric",
+            "use, fibres",
+            "density (kg/m²)",
+            "stretch warp / weft (N/m)",
+            "shear (N/m)",
+            "bend warp / weft (µN·m)",
+            "ν",
+            "bending length (cm)",
+        ], out
 
 
 def _md(text: str) -> str:
@@ -158,6 +199,7 @@ def setup(app):
     app.add_directive("cloth-parameters", Parameters)
     app.add_directive("cloth-integrators", Integrators)
     app.add_directive("cloth-scenes", Scenes)
+    app.add_directive("cloth-materials", Materials)
     app.add_directive("cloth-topics", Topics)
     app.add_directive("cloth-services", Services)
     return {"parallel_read_safe": True, "parallel_write_safe": True}

@@ -20,6 +20,14 @@ EXPECTED = {
     "depth_camera.py": ["depth (60, 80)", "triangles in view", "the centre pixel sees"],
     "sweep.py": ["runs by status: {'ok': 4}", "(complete)"],
     "contacts.py": ["closest to the ball's surface: 0.00", "after moving the ball"],
+    "materials.py": [
+        "denim: 0.324 kg/m²",
+        "9×9: mass 0.0810 kg",
+        "17×17: mass 0.0810 kg",
+        "felt cantilever: bending length 2.85",
+        "felt strip tensile: 800.",
+        "'xpbd' does not take a material's bending",
+    ],
     "robot.py": [
         "7 links with collisions",
         "closest the cloth came to a link: 1.00",

@@ -156,8 +156,9 @@ def valid(spec, value) -> bool:
         return (
             isinstance(value, int) and not isinstance(value, bool) and spec.lo <= value <= spec.hi
         )
-    if spec.type == "vector3":
-        return isinstance(value, list) and len(value) == 3 and all(number(v) for v in value)
+    if spec.type in ("vector2", "vector3"):
+        n = 2 if spec.type == "vector2" else 3
+        return isinstance(value, list) and len(value) == n and all(number(v) for v in value)
     return number(value)
 
 

@@ -38,6 +38,7 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import SetBool, Trigger
 
+from cloth_sim.materials import get as get_fabric
 from cloth_sim.model import GRID_FAMILIES
 from cloth_sim.msg import Stats
 from cloth_sim.parameters import REBUILD, SCHEMA, ParameterError
@@ -139,6 +140,10 @@ class Generator:
             if spec.choices:
                 return str(self.pick(spec.choices)) if r < 0.8 else self.pick(["rk5", "", 3])
             return "cloth" if r < 0.8 else self.pick(["", 1.5])
+        if spec.type == "vector2":  # a grid's size: [w, h], or [0, 0] for none
+            if r < 0.6:
+                return [float(v) for v in self.rng.uniform(0.2, 2.0, 2)]
+            return self.pick([[0.0, 0.0], [1.0, 0.0], [1.0], [1.0, math.inf], -1.0, "big"])
         if spec.type == "vector3":
             if r < 0.6:
                 return [float(v) for v in self.rng.uniform(-20, 20, 3)]
@@ -189,20 +194,60 @@ def limit_refusal_is_right(cfg: dict, params) -> bool:
             cand[name] = SCHEMA[name].check(value)
     if cand["allow_unstable"]:
         return False
-    sim = load_scene(cand["scene"]).build_simulator(
+    scene = load_scene(cand["scene"])
+    fabric = get_fabric(cand["material"]) if cand["material"] else scene.material
+    size = tuple(cand["size"]) if cand["size"][0] > 0 else None
+    cloth = (
+        {"material": fabric, "size": size}
+        if fabric is not None
+        else {
+            "size": size,
+            "particle_mass": cand["particle_mass"],
+            "stiffness": {f: cand[f"stiffness.{f}"] for f in GRID_FAMILIES},
+            "damping": {f: cand[f"damping.{f}"] for f in GRID_FAMILIES},
+        }
+    )
+    sim = scene.build_simulator(
         rows=cand["rows"],
         cols=cand["cols"],
         spacing=cand["spacing"],
         model=cand["model"],
-        particle_mass=cand["particle_mass"],
         integrator=cand["integrator"],
         dt=cand["dt"],
         drag=cand["drag"],
-        stiffness={f: cand[f"stiffness.{f}"] for f in GRID_FAMILIES},
-        damping={f: cand[f"damping.{f}"] for f in GRID_FAMILIES},
         self_collision=False,
+        **cloth,
     )
     return not sim.step_is_stable()
+
+
+def candidate(base: dict, batch) -> dict:
+    """``base`` with the schema's values of a batch's parameters (its scene left out)."""
+    cand = dict(base)
+    for n, v in batch:
+        if n in SCHEMA and n != "scene":
+            cand[n] = SCHEMA[n].check(v)
+    return cand
+
+
+def material_refusal_is_right(cfg: dict, params, reason: str) -> bool:
+    """Whether a refusal that names the material is right for ``cfg`` updated with ``params``:
+    a change of what a material sets while one is in use, or a method without bending."""
+    cand = dict(cfg)
+    for name, value in params:
+        if name in SCHEMA:
+            cand[name] = SCHEMA[name].check(value)
+    fabric = cand["material"] or load_scene(cand["scene"]).material is not None
+    if "set by the cloth's material" in reason:
+        sets = (
+            "particle_mass",
+            "density",
+            *(f"{k}.{f}" for k in ("stiffness", "damping") for f in GRID_FAMILIES),
+        )
+        return bool(fabric) and any(n in sets and cand[n] != cfg[n] for n, _ in params)
+    from cloth_sim.integrators import get
+
+    return bool(fabric) and not get(cand["integrator"]).takes_bending
 
 
 def runaway_is_dt_independent(node: ClothSimNode) -> bool:
@@ -236,7 +281,7 @@ def runaway_is_dt_independent(node: ClothSimNode) -> bool:
         thickness=cfg["thickness"],
         self_collision=cfg["self_collision"],
     )
-    for f in GRID_FAMILIES:
+    for f in GRID_FAMILIES if sim.model.meta.get("material") is None else ():
         if (sim.model.family == sim.model.family_index(f)).any():
             sim.set_stiffness(f, cfg[f"stiffness.{f}"])
             sim.set_damping(f, cfg[f"damping.{f}"])
@@ -273,7 +318,7 @@ def mismatches(node: ClothSimNode) -> list[str]:
         "cols": sim.model.cols,
         "model": sim.model.model,
     }
-    for f in GRID_FAMILIES:
+    for f in GRID_FAMILIES if sim.model.meta.get("material") is None else ():
         family = sim.model.family == sim.model.family_index(f)
         if family.any():  # a 2-row grid has no bend springs
             checks[f"stiffness.{f}"] = float(sim.stiffness(f)[0])
@@ -309,6 +354,8 @@ def run(sets: int, seed: int, domain: int, quiet: bool = False, keep: int = 3) -
         camera_refusals=0,
         rate_refusals=0,
         thickness_refusals=0,
+        material_refusals=0,
+        topic_refusals=0,
     )
     examples: dict[str, list] = {}
 
@@ -508,10 +555,10 @@ def run(sets: int, seed: int, domain: int, quiet: bool = False, keep: int = 3) -
                         # the camera's combinations: right only when the camera is on and its far
                         # is not above its near, or it looks at its own position
                         figures["camera_refusals"] += 1
-                        cand = dict(before_cfg if atomic else running)
-                        for n, v in params if atomic else [(name, value)]:
-                            if n in SCHEMA and n != "scene":
-                                cand[n] = SCHEMA[n].check(v)
+                        cand = candidate(
+                            before_cfg if atomic else running,
+                            params if atomic else [(name, value)],
+                        )
                         if "scene" not in names and not (
                             cand["camera.enable"]
                             and (
@@ -532,14 +579,38 @@ def run(sets: int, seed: int, domain: int, quiet: bool = False, keep: int = 3) -
                             note("valid_refused", (params, r.reason))
                     elif "too thick for self_collision" in r.reason:
                         figures["thickness_refusals"] += 1
-                        cand = dict(before_cfg if atomic else running)
-                        for n, v in params if atomic else [(name, value)]:
-                            if n in SCHEMA and n != "scene":
-                                cand[n] = SCHEMA[n].check(v)
+                        cand = candidate(
+                            before_cfg if atomic else running,
+                            params if atomic else [(name, value)],
+                        )
                         if "scene" not in names and not (
                             cand["self_collision"]
                             and cand["thickness"] > 0.5 * cand["spacing"] * (1 + 1e-9)
                         ):
+                            note("valid_refused", (params, r.reason))
+                    elif "material" in r.reason and (
+                        "set by the cloth's material" in r.reason
+                        or "does not take a material's bending" in r.reason
+                    ):
+                        figures["material_refusals"] += 1
+                        batch = params if atomic else [(name, value)]
+                        base = before_cfg if atomic else running
+                        if "scene" not in names and not material_refusal_is_right(
+                            base,
+                            [(n, v) for n, v in batch if n in SCHEMA and n != "scene"],
+                            r.reason,
+                        ):
+                            note("valid_refused", (params, r.reason))
+                    elif "are the same topic" in r.reason:
+                        figures["topic_refusals"] += 1
+                        cand = candidate(
+                            before_cfg if atomic else running,
+                            params if atomic else [(name, value)],
+                        )
+                        same = cand["robot.description_topic"].lstrip("/") == cand[
+                            "robot.joint_states_topic"
+                        ].lstrip("/")
+                        if "scene" not in names and not (cand["robot.enable"] and same):
                             note("valid_refused", (params, r.reason))
                     elif name == "scene" or "scene" in names:
                         # a scene that exists but whose values this batch contradicts, or

@@ -883,3 +883,28 @@ def test_integer_arrays_are_taken_as_double_arrays(ros):
     assert node.sim.gravity.tolist() == [0.0, 0.0, -5.0]
     (result,) = ros.set_params("/cloth_sim", {"gravity": [0, -9]})
     assert not result.successful and "gravity must have exactly 3 elements" in result.reason
+
+
+def test_a_material_scene_keeps_its_size_and_refuses_the_values_its_fabric_sets(ros):
+    node = ros.start(scene="swing", rows=25, cols=5)
+    assert ros.spin_until(lambda: node.sim.time > 0.1, 20)
+    assert node.sim.model.meta["material"].density == pytest.approx(0.187)
+    assert list(node.get_parameter("size").value) == [0.1, 0.6]
+    (result,) = ros.set_params("/cloth_sim", {"stiffness.structural": 5.0})
+    assert not result.successful and "set by the cloth's material" in result.reason
+    # a finer grid of the same strip: the same extent and weight
+    assert all(r.successful for r in ros.set_params("/cloth_sim", {"rows": 49, "cols": 9}))
+    m = node.sim.model
+    assert (m.rows, m.cols) == (49, 9)
+    assert np.ptp(m.positions[:, 1]) == pytest.approx(0.6)
+    assert m.masses.sum() == pytest.approx(0.187 * 0.06)
+    # a library fabric by name: denim, stiffer, needs a smaller step with symplectic Euler
+    (result,) = ros.set_params("/cloth_sim", {"material": "denim"})
+    assert not result.successful and "stable_dt" in result.reason
+    assert all(
+        r.successful
+        for r in ros.set_params("/cloth_sim", {"material": "denim", "dt": 5e-5}, atomically=True)
+    )
+    assert node.sim.model.masses.sum() == pytest.approx(0.324 * 0.06)
+    (result,) = ros.set_params("/cloth_sim", {"material": "velvet"})
+    assert not result.successful and "velvet" in result.reason

@@ -1,0 +1,83 @@
+"""``cloth-sim textile cantilever|drape|tensile``: the textile standard tests
+(:mod:`cloth_sim.materials.textile`), each measured value printed beside the expected one."""
+
+from __future__ import annotations
+
+import time
+
+from ..materials.library import MEASURED
+
+
+def add_parser(sub) -> None:
+    t = sub.add_parser(
+        "textile",
+        help="the textile standard tests on the simulator: cantilever bending length, strip "
+        "tensile stiffness, Cusick drape coefficient",
+    )
+    t.add_argument("test", choices=("cantilever", "tensile", "drape"))
+    t.add_argument(
+        "--material",
+        nargs="+",
+        default=None,
+        metavar="NAME",
+        help="library fabrics (default: every measured one; cloth_sim.materials.names())",
+    )
+    t.add_argument(
+        "--grid",
+        nargs="+",
+        type=int,
+        default=None,
+        metavar="N",
+        help="cells along the strip or across the drape specimen (default: cantilever 32, "
+        "tensile 4 16 64, drape 64)",
+    )
+    t.set_defaults(func=_textile)
+
+
+def _textile(args) -> int:
+    from ..materials import get, textile
+
+    names = args.material or list(MEASURED)
+    fabrics = {n: get(n) for n in names}  # an unknown name is refused before anything runs
+    grids = args.grid or {"cantilever": [32], "tensile": [4, 16, 64], "drape": [64]}[args.test]
+    for g in grids:
+        if g < 4:
+            raise ValueError(f"--grid: expected integers >= 4, got {g}")
+    if args.test == "drape":
+        print(
+            f"{'material':20s} {'grid':>9s} {'c (cm)':>7s} {'DC':>7s} {'settled':>8s} {'wall':>7s}"
+        )
+        for n, f in fabrics.items():
+            for g in grids:
+                t = time.perf_counter()
+                r = textile.drape(f, grid=g)
+                print(
+                    f"{n:20s} {r['grid']:>9s} {100 * r['bending_length']:7.3f} "
+                    f"{r['drape_coefficient']:7.4f} {r['settled_at']:7.2f}s "
+                    f"{time.perf_counter() - t:6.1f}s",
+                    flush=True,
+                )
+        return 0
+    run = textile.cantilever if args.test == "cantilever" else textile.tensile
+    unit, scale = ("cm", 100.0) if args.test == "cantilever" else ("N/m", 1.0)
+    head = "bending length" if args.test == "cantilever" else "tensile stiffness"
+    print(f"{args.test}: {head} ({unit}), measured beside expected")
+    print(
+        f"{'material':20s} {'dir':5s} {'grid':>7s} {'expected':>10s} {'measured':>10s} "
+        f"{'error':>8s}" + (f" {'angle':>7s} {'Peirce':>8s}" if args.test == "cantilever" else "")
+    )
+    for n, f in fabrics.items():
+        for d in ("warp", "weft"):
+            for g in grids:
+                r = run(f, grid=g, direction=d)
+                extra = (
+                    f" {r['angle_deg']:6.2f}° {scale * r['peirce']:8.3f}"
+                    if args.test == "cantilever"
+                    else ""
+                )
+                print(
+                    f"{n:20s} {d:5s} {r['grid']:>7s} {scale * r['expected']:10.4f} "
+                    f"{scale * r['measured']:10.4f} {100 * r['error']:7.3f}%{extra}",
+                    flush=True,
+                )
+    return 0
