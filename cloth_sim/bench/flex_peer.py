@@ -88,6 +88,7 @@ def print_flex_table(n: int = 32, seconds: float = 2.0) -> int:
             rows=n,
             cols=n,
             spacing=1.0 / (n - 1),
+            material=None,  # MuJoCo's flex takes a mass and springs, not a fabric
             particle_mass=CLOTH_MASS / n**2,
             integrator=name,
             dt=dt,

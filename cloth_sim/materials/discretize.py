@@ -69,7 +69,7 @@ def grid_lattice(fabric: Fabric, ax: float, ay: float) -> dict:
         "k_y": max(ky, 0.0),
         "k_d": g * d2 / (2.0 * ax * ay),
         "shear": g,
-        "poisson": g / q if q > 0 else 0.0,
+        "poisson": g / p if p > 0 else 0.0,  # the weft's contraction per warp strain
         "C11": p,
         "C22": q,
     }

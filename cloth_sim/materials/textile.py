@@ -233,6 +233,8 @@ def tensile(material, grid: int = 32, direction: str = "warp", strain: float = 1
     x = sim.positions
     measured_strain = (x[far, axis].mean() - x[near, axis].mean()) / length - 1.0
     measured = stress / measured_strain
+    mid = x[line(grid // 2), 1 - axis]  # the strip's narrowing at its middle
+    narrowing = (mid.max() - mid.min()) / width - 1.0
     return {
         "test": "tensile",
         "direction": direction,
@@ -240,6 +242,7 @@ def tensile(material, grid: int = 32, direction: str = "warp", strain: float = 1
         "expected": expected,
         "measured": measured,
         "error": measured / expected - 1.0,
+        "contraction": -narrowing / measured_strain,  # the Poisson's ratio the strip shows
     }
 
 
