@@ -66,11 +66,17 @@ for k in range(n + 1):  # the shoulder from 0.2 rad to 2.9 rad at 30 Hz (1 m/s a
     msg.position = [0.2 + 2.7 * k / 90, -0.2]
     states.publish(msg)
     rclpy.spin_once(node, timeout_sec=1 / 30)
-rclpy.spin_once(node, timeout_sec=0.2)
-hand = call(
-    GetEntityState, "/cloth_sim/get_entity_state", GetEntityState.Request(entity="demo_arm/hand")
-).state.pose.position
 yaw = msg.position[0]
+# the node reaches a joint state within its next tick; a busy machine may delay that tick
+for _ in range(int(args.timeout * 20)):
+    hand = call(
+        GetEntityState,
+        "/cloth_sim/get_entity_state",
+        GetEntityState.Request(entity="demo_arm/hand"),
+    ).state.pose.position
+    if abs(math.atan2(hand.y, hand.x) - yaw) < 1e-6:
+        break
+    rclpy.spin_once(node, timeout_sec=0.05)
 print(f"shoulder_yaw {yaw:.3f} rad: the hand is at ({hand.x:.3f}, {hand.y:.3f}, {hand.z:.3f}) m")
 print(f"its heading atan2(y, x) = {math.atan2(hand.y, hand.x):.3f} rad")
 node.destroy_node()

@@ -374,6 +374,8 @@ def constant_system(model, forces, dt: float):
     cols = np.concatenate([fj[both], fi[both], np.arange(n_free)])
     vals = np.concatenate([-w[both], -w[both], diag[free]])
     A = sp.csc_matrix((vals, (rows, cols)), shape=(n_free, n_free))
+    if forces.bending is not None:  # a material's bending: its constant Hessian, exactly
+        A = A + (dt * dt) * forces.bending.Q[free][:, free].tocsc()
     A.sum_duplicates()
     return A, h, w, index
 
@@ -381,7 +383,14 @@ def constant_system(model, forces, dt: float):
 def system_key(forces, dt: float) -> tuple:
     """What :func:`constant_system` depends on besides the model (a new model, a new
     integrator)."""
-    return (dt, forces.drag, forces.springs.copy(), forces.k.copy(), forces.c.copy())
+    return (
+        dt,
+        forces.drag,
+        forces.springs.copy(),
+        forces.k.copy(),
+        forces.c.copy(),
+        forces.bending,
+    )
 
 
 def same_system(key, forces, dt: float) -> bool:
@@ -393,6 +402,7 @@ def same_system(key, forces, dt: float) -> bool:
         and np.array_equal(key[2], forces.springs)
         and np.array_equal(key[3], forces.k)
         and np.array_equal(key[4], forces.c)
+        and key[5] is forces.bending
     )
 
 
@@ -450,6 +460,7 @@ class ImplicitEuler(_LinearisedImplicitEuler):
 
     name = "implicit_euler"
     counter_names = ("solves", "cg_iterations", "last_cg_iterations", "direct_fallbacks")
+    takes_bending = True
 
     def __init__(
         self,
@@ -513,9 +524,27 @@ class ImplicitEuler(_LinearisedImplicitEuler):
         self._jacobian = tuple(np.empty((len(springs), 3, 3)) for _ in range(3))
         self._diag = np.empty(len(index))
 
+    def _pairs(self, forces):
+        """The springs, and with a material's bending each pair its ``Q`` couples after them:
+        its Jacobian is that of a zero-length spring of stiffness ``−Q_ij`` (``Q``'s rows sum to
+        0), constant blocks ``−Q_ij·I`` (:attr:`_bend_blocks`). Kept while the forces' springs and
+        bending are the same objects."""
+        springs, bending = forces.springs, forces.bending
+        if bending is None:
+            self._bend_blocks = None
+            return springs
+        key = self.__dict__.get("_pairs_key")
+        if key is None or key[0] is not springs or key[1] is not bending:
+            Q = bending.Q.tocoo()
+            up = Q.row < Q.col
+            pairs = np.stack([Q.row[up], Q.col[up]], axis=1).astype(springs.dtype)
+            self._bend_blocks = -Q.data[up][:, None, None] * np.eye(3)
+            self._pairs_key = (springs, bending, np.concatenate([springs, pairs]))
+        return self._pairs_key[2]
+
     def step(self, state, forces, dt):
         x, v = state.x, state.v
-        springs = forces.springs
+        springs = self._pairs(forces)
         if self._pattern_springs is not springs and not (
             self._pattern_springs is not None and np.array_equal(self._pattern_springs, springs)
         ):
@@ -524,9 +553,14 @@ class ImplicitEuler(_LinearisedImplicitEuler):
             state.history.pop("dv_before", None)
         self._pattern_springs = springs
         f = forces.force(x, v, out=self._buffer("_f", x))
-        kx, _, cv = forces.spring_term.jacobian_blocks(
-            x, v, self.clamp_compression, position_damping=False, out=self._jacobian
+        m = len(forces.springs)
+        kx, dxb, cv = self._jacobian
+        forces.spring_term.jacobian_blocks(
+            x, v, self.clamp_compression, position_damping=False, out=(kx[:m], dxb[:m], cv[:m])
         )
+        if self._bend_blocks is not None:  # the bending's constant blocks after the springs'
+            kx[m:] = self._bend_blocks
+            cv[m:] = 0.0
         if self._n == 0:
             return
         diag = np.add(self.model.masses, dt * forces.drag, out=self._diag)
@@ -649,6 +683,7 @@ class ImplicitEulerPrefactored(_LinearisedImplicitEuler):
 
     name = "implicit_euler_prefactored"
     counter_names = ("solves", "factorizations")
+    takes_bending = True
     _REFACTOR = frozenset({"stiffness", "damping", "drag", "dt"})
 
     def __init__(self, model):
@@ -688,6 +723,8 @@ class ImplicitEulerPrefactored(_LinearisedImplicitEuler):
         rhs = self._rhs_full
         rhs[:] = 0.0
         graph_product(forces.springs, self._h, v, rhs)  # H v
+        if forces.bending is not None:
+            rhs -= forces.bending.Q @ v  # and the bending's, −Q v
         rhs *= dt
         rhs += f
         rhs *= dt

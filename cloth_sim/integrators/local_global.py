@@ -96,6 +96,8 @@ class Liu2013(Integrator):
 
     name = "liu2013"
     order = 1
+    #: a material's bending is quadratic: its constant Hessian goes into the global matrix
+    takes_bending = True
     force_point = 1.0
     implicit = True
     stability = Stability.UNCONDITIONAL
@@ -141,6 +143,10 @@ class Liu2013(Integrator):
         self._pin_coupling = sp.csr_matrix(
             (off[cross], (rows, cols)), shape=(n_free, self.model.n_particles)
         )
+        if forces.bending is not None:  # the bending's couplings to pins, moved to the right
+            Q = forces.bending.Q.tocsr()[self.model.pinned.__invert__()]
+            Q = Q @ sp.diags(self.model.pinned.astype(np.float64))
+            self._pin_coupling = (self._pin_coupling - (dt * dt) * Q).tocsr()
         self._solver = cholesky(A)
         self._free = index >= 0
         self._free_index = np.flatnonzero(self._free)
