@@ -59,10 +59,10 @@ class Param:
     """One user-settable quantity.
 
     ``type`` is ``float``, ``int``, ``bool``, ``str``, ``"vector2"`` or ``"vector3"`` (two or
-    three floats). Numbers and
-    vector components lie in ``[lo, hi]`` (``(lo, hi]`` with ``lo_open``); strings in ``choices``
-    when given, and non-empty when ``nonempty``. ``scene_key`` is the field's path in a scene file
-    (``grid.rows``), ``None`` for parameters only the node has.
+    three floats). Numbers and vector components lie in ``[lo, hi]`` (``(lo, hi]`` with
+    ``lo_open``); strings in ``choices`` when given, and non-empty when ``nonempty``.
+    ``scene_key`` is the field's path in a scene file (``grid.rows``), ``None`` for parameters only
+    the node has.
     """
 
     name: str

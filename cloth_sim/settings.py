@@ -141,7 +141,8 @@ def fabric(cfg: dict, scene: Scene):
 MATERIAL_SETS = ("particle_mass", "density")
 
 
-def _material_set(scene: Scene, cand: dict) -> tuple[str, ...]:
+def _material_set(scene: Scene) -> tuple[str, ...]:
+    """What a material sets on ``scene``'s cloth: the masses and every family's values."""
     return (
         *MATERIAL_SETS,
         *(f"{kind}.{f}" for kind in ("stiffness", "damping") for f in scene.families),
@@ -153,7 +154,7 @@ def inapplicable_changes(scene: Scene, cand: dict, current: dict) -> list[str]:
     on a grid; the masses and springs a material sets) that ``cand`` changes from ``current``."""
     names = GRID_ONLY if scene.mesh is not None else MESH_ONLY
     if fabric(cand, scene) is not None and fabric(current, scene) is not None:
-        names = (*names, *_material_set(scene, cand))
+        names = (*names, *_material_set(scene))
     return [n for n in dict.fromkeys(names) if cand[n] != current[n]]
 
 
@@ -164,7 +165,8 @@ def not_applicable(scene: Scene, cand: dict, current: dict) -> str | None:
     if not changed:
         return None
     if fabric(cand, scene) is not None:
-        set_by = [n for n in changed if n in _material_set(scene, cand)]
+        sets = _material_set(scene)
+        set_by = [n for n in changed if n in sets]
         if set_by:
             which = cand["material"] or f"scene {scene.name}'s"
             return (

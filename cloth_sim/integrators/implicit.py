@@ -525,20 +525,18 @@ class ImplicitEuler(_LinearisedImplicitEuler):
         self._diag = np.empty(len(index))
 
     def _pairs(self, forces):
-        """The springs, and with a material's bending each pair its ``Q`` couples after them:
-        its Jacobian is that of a zero-length spring of stiffness ``−Q_ij`` (``Q``'s rows sum to
-        0), constant blocks ``−Q_ij·I`` (:attr:`_bend_blocks`). Kept while the forces' springs and
-        bending are the same objects."""
+        """The springs, and with a material's bending each pair its ``Q`` couples after them
+        (:meth:`~cloth_sim.physics.bending.Bending.couplings`), with constant Jacobian blocks
+        ``−Q_ij·I`` (:attr:`_bend_blocks`). Kept while the forces' springs and bending are the
+        same objects."""
         springs, bending = forces.springs, forces.bending
         if bending is None:
             self._bend_blocks = None
             return springs
         key = self.__dict__.get("_pairs_key")
         if key is None or key[0] is not springs or key[1] is not bending:
-            Q = bending.Q.tocoo()
-            up = Q.row < Q.col
-            pairs = np.stack([Q.row[up], Q.col[up]], axis=1).astype(springs.dtype)
-            self._bend_blocks = -Q.data[up][:, None, None] * np.eye(3)
+            pairs, q = bending.couplings()
+            self._bend_blocks = -q[:, None, None] * np.eye(3)
             self._pairs_key = (springs, bending, np.concatenate([springs, pairs]))
         return self._pairs_key[2]
 

@@ -144,7 +144,7 @@ class Liu2013(Integrator):
             (off[cross], (rows, cols)), shape=(n_free, self.model.n_particles)
         )
         if forces.bending is not None:  # the bending's couplings to pins, moved to the right
-            Q = forces.bending.Q.tocsr()[self.model.pinned.__invert__()]
+            Q = forces.bending.Q[~self.model.pinned]
             Q = Q @ sp.diags(self.model.pinned.astype(np.float64))
             self._pin_coupling = (self._pin_coupling - (dt * dt) * Q).tocsr()
         self._solver = cholesky(A)

@@ -66,6 +66,7 @@ from ..contact import triangle_meshes
 from ..contact.colliders import carried, sdf
 from ..contact.geometry import segment_parameters, triangle_weights
 from ..kinds import LINEAR
+from ..physics.bending import bending_row
 from ..physics.forces import BUCKLE_TABLE, axial, incidence
 from .base import Integrator, Stability
 from .registry import register
@@ -234,7 +235,8 @@ def _local_energy(
         e += 0.5 * bdiag[i] * (px * px + py * py + pz * pz)
         for q in range(bptr[i], bptr[i + 1]):
             j = bidx[q]
-            e += bval[q] * (px * x[j, 0] + py * x[j, 1] + pz * x[j, 2])
+            if j != i:
+                e += bval[q] * (px * x[j, 0] + py * x[j, 1] + pz * x[j, 2])
     for q in range(inc_ptr[i], inc_ptr[i + 1]):
         j = nbr[q]
         dx, dy, dz = x[j, 0] - px, x[j, 1] - py, x[j, 2] - pz
@@ -666,17 +668,11 @@ def _sweep(
         )
         if bdiag.shape[0]:
             # the material's bending, quadratic: −(Q x)_i, and Q_ii on the Hessian's diagonal
+            b0, b1, b2 = bending_row(x, bptr, bidx, bval, i)
+            f0 += b0
+            f1 += b1
+            f2 += b2
             qd = bdiag[i]
-            s0, s1, s2 = qd * x[i, 0], qd * x[i, 1], qd * x[i, 2]
-            for q in range(bptr[i], bptr[i + 1]):
-                j = bidx[q]
-                w = bval[q]
-                s0 += w * x[j, 0]
-                s1 += w * x[j, 1]
-                s2 += w * x[j, 2]
-            f0 -= s0
-            f1 -= s1
-            f2 -= s2
             h0 += qd
             h3 += qd
             h5 += qd
@@ -1144,7 +1140,7 @@ class VBD(Integrator):
                 *(_NO_BENDING if bending is None else bending.rows()),
             )
             if bending is not None:  # a colour's vertices share no bending stencil either
-                springs = np.concatenate([springs, bending.pairs()])
+                springs = np.concatenate([springs, bending.couplings()[0]])
             if self._colours_of is None or not np.array_equal(self._colours_of, springs):
                 self._colours = colour_groups(springs, n, self.free)
                 self._colours_of = springs

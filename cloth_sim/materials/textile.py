@@ -131,6 +131,13 @@ def settle(sim: Simulator, tol: float = 1e-6, max_iterations: int = 200, externa
 
 
 # ---------------------------------------------------------------------------- the tests
+def _direction(direction: str) -> int:
+    """0 for warp, 1 for weft; anything else refused naming the accepted ones."""
+    if direction not in DIRECTIONS:
+        raise ValueError(f"direction: expected one of {', '.join(DIRECTIONS)}, got {direction!r}")
+    return DIRECTIONS.index(direction)
+
+
 def _strip(
     fabric,
     length_cells: int,
@@ -144,8 +151,7 @@ def _strip(
     """A strip along ``direction`` (warp: +y, the rows; weft: +x, the columns) with
     ``clamp_rows`` lines pinned at its start (and the same at its end with ``pin_far``); returns
     the model and a function giving the particles of line ``k`` along the strip."""
-    if direction not in DIRECTIONS:
-        raise ValueError(f"direction: expected one of {', '.join(DIRECTIONS)}, got {direction!r}")
+    _direction(direction)
     n_along, n_across = length_cells + 1, across_cells + 1
     ends = list(range(clamp_rows)) + (
         list(range(n_along - clamp_rows, n_along)) if pin_far else []
@@ -173,9 +179,7 @@ def cantilever(material, grid: int = 32, across: int = 3, direction: str = "warp
     ``(G/(w·g))^(1/3)``, the measured one (the elastica through the settled chord angle), Peirce's
     from the same angle, the angle and the relative error."""
     fabric = resolve(material)
-    d = DIRECTIONS.index(direction) if direction in DIRECTIONS else -1
-    if d < 0:
-        raise ValueError(f"direction: expected one of {', '.join(DIRECTIONS)}, got {direction!r}")
+    d = _direction(direction)
     if int(grid) != grid or grid < 4:
         raise ValueError(
             f"grid: expected an integer >= 4 (cells along the overhang), got {grid!r}"
@@ -221,7 +225,7 @@ def tensile(material, grid: int = 32, direction: str = "warp", strain: float = 1
     model, line = _strip(fabric, grid, across, length, width, direction, 0)
     sim = Simulator(model, integrator="vbd", dt=1e-3, gravity=(0.0, 0.0, 0.0))
     axis = 1 if direction == "warp" else 0
-    expected = fabric.stretch[DIRECTIONS.index(direction)]
+    expected = fabric.stretch[_direction(direction)]
     share = np.full(across + 1, width / across)
     share[[0, -1]] *= 0.5
     stress = expected * strain

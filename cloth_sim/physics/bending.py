@@ -6,15 +6,15 @@ only with the *square* of the strip's curvature, so it resists a small bend not 
 cantilever of it droops as if it had no rigidity; it has no flexural rigidity ``G`` (N·m) to map a
 fabric's onto. Choi & Ko's buckling pair has one, but its force jumps from 0 to ``12 k_b/L²`` at
 the onset, where a cloth at rest sits. The energy here is ``E = ½ Σ_s B_s ‖Σ_k w_sk x_k‖²`` with
-``Σ_k w_sk = 0``,
-one term per **stencil** ``s`` (a few particles, weights ``w_s`` that annihilate a straight or
-flat configuration): ``x_{i−1} − 2x_i + x_{i+1}`` along a grid line, ``≈ a²κ`` for a line bent to
-curvature ``κ``, and the cotangent Laplacian at each interior vertex of a triangle mesh (the
-discrete Laplace–Beltrami operator, whose image of the positions is the mean-curvature normal). For
-a surface bent without stretching (what cloth does) ``‖Σ w x‖`` is that curvature measure, so the
-energy is rotation invariant and consistent with ``½ G κ²`` per area. It is *quadratic*: the force
-is ``−(Q ⊗ I₃) x`` with ``Q = Σ_s B_s w_s w_sᵀ`` a constant ``n × n`` matrix, and the Hessian is
-that constant ``Q`` — every integrator can take it implicitly at no extra assembly.
+``Σ_k w_sk = 0``, one term per **stencil** ``s`` (a few particles, weights ``w_s`` that annihilate
+a straight or flat configuration): ``x_{i−1} − 2x_i + x_{i+1}`` along a grid line, ``≈ a²κ`` for a
+line bent to curvature ``κ``, and the cotangent Laplacian at each interior vertex of a triangle
+mesh (the discrete Laplace–Beltrami operator, whose image of the positions is the mean-curvature
+normal). For a surface bent without stretching (what cloth does) ``‖Σ w x‖`` is that curvature
+measure, so the energy is rotation invariant and consistent with ``½ G κ²`` per area. It is
+*quadratic*: the force is ``−(Q ⊗ I₃) x`` with ``Q = Σ_s B_s w_s w_sᵀ`` a constant ``n × n``
+matrix, and the Hessian is that constant ``Q`` — every integrator can take it implicitly at no
+extra assembly.
 
 What it leaves out (Bergou et al. say so): the energy assumes a flat rest shape (a mesh modelled
 curved relaxes towards flat by its bending rigidity, which for fabrics is small: bending lengths of
@@ -24,6 +24,7 @@ tests, does not have it).
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import scipy.sparse as sp
 
@@ -56,10 +57,13 @@ class Bending:
         for a in (idx, w, b):
             a.setflags(write=False)
 
+        #: ``Q``'s CSR rows with 64-bit indices (its diagonal in them), what the kernels read
+        self.csr = (Q.indptr.astype(np.int64), Q.indices.astype(np.int64), Q.data)
+
     # ------------------------------------------------------------------ evaluation
     def add_force(self, x: np.ndarray, f: np.ndarray) -> None:
-        """``f −= Q x`` (each coordinate)."""
-        f -= self.Q @ x
+        """``f −= Q x`` (each coordinate), by :func:`bending_forces`."""
+        bending_forces(x, *self.csr, f)
 
     def energy(self, x: np.ndarray) -> float:
         d = np.einsum("sk,skj->sj", self.weights, x[self.stencils])
@@ -70,23 +74,40 @@ class Bending:
         return sp.kron(self.Q, sp.identity(3), format="csr")
 
     def rows(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Per particle, the off-diagonal entries of its row of ``Q`` (CSR ``ptr``, ``index``,
-        ``value``) and the diagonal ``Q_ii``: what a per-vertex solver (``vbd``) reads."""
-        Q = self.Q.tocoo()
-        off = Q.row != Q.col
-        r, c, v = Q.row[off], Q.col[off], Q.data[off]
-        order = np.lexsort((c, r))
-        r, c, v = r[order], c[order], v[order]
-        ptr = np.zeros(self.n + 1, np.int64)
-        np.cumsum(np.bincount(r, minlength=self.n), out=ptr[1:])
-        return ptr, c.astype(np.int64), v.astype(np.float64), self.Q.diagonal().astype(np.float64)
+        """:attr:`csr` and the diagonal ``Q_ii``: what a per-vertex solver (``vbd``) reads."""
+        return (*self.csr, self.Q.diagonal())
 
-    def pairs(self) -> np.ndarray:
-        """``(p, 2)`` the particle pairs ``Q`` couples (``i < j``): a per-vertex solver's colouring
-        must keep each pair in different colours."""
+    def couplings(self) -> tuple[np.ndarray, np.ndarray]:
+        """``((p, 2) pairs, (p,) Q_ij)``: the particle pairs ``Q`` couples (``i < j``) and its
+        entries there — a per-vertex solver's colouring keeps each pair in different colours, and
+        each is a zero-length spring of stiffness ``−Q_ij`` in a Jacobian (``Q``'s rows sum to
+        0)."""
         Q = self.Q.tocoo()
         keep = Q.row < Q.col
-        return np.stack([Q.row[keep], Q.col[keep]], axis=1).astype(np.int64)
+        return np.stack([Q.row[keep], Q.col[keep]], axis=1).astype(np.int64), Q.data[keep]
+
+
+@numba.njit(cache=True, inline="always")
+def bending_row(x, qptr, qidx, qval, p):
+    """``−(Q x)_p`` from ``Q``'s CSR rows: particle ``p``'s bending force."""
+    bx = by = bz = 0.0
+    for e in range(qptr[p], qptr[p + 1]):
+        j = qidx[e]
+        w = qval[e]
+        bx -= w * x[j, 0]
+        by -= w * x[j, 1]
+        bz -= w * x[j, 2]
+    return bx, by, bz
+
+
+@numba.njit(cache=True)
+def bending_forces(x, qptr, qidx, qval, f):
+    """``f −= (Q ⊗ I₃) x`` from ``Q``'s CSR rows, one particle after another."""
+    for p in range(x.shape[0]):
+        bx, by, bz = bending_row(x, qptr, qidx, qval, p)
+        f[p, 0] += bx
+        f[p, 1] += by
+        f[p, 2] += bz
 
 
 def grid_stencils(

@@ -43,6 +43,7 @@ from numba.extending import intrinsic
 from scipy.optimize import brentq
 
 from ..model import LINEAR, TENSION_ONLY, ClothModel
+from .bending import bending_row
 
 BUCKLE_TABLE_SIZE = 513
 
@@ -279,19 +280,6 @@ def _block_forces(d, rest, k, c, kind, tab, with_damping, fx, fy, fz):
         fx[t], fy[t], fz[t] = _spring_force(
             dx, dy, dz, l, wx[t], wy[t], wz[t], rest[t], k[t], c[t], kind[t], tab, with_damping
         )
-
-
-@numba.njit(cache=True, inline="always")
-def bending_row(x, qptr, qidx, qval, p):
-    """``−(Q x)_p`` from ``Q``'s CSR rows: particle ``p``'s bending force."""
-    bx = by = bz = 0.0
-    for e in range(qptr[p], qptr[p + 1]):
-        j = qidx[e]
-        w = qval[e]
-        bx -= w * x[j, 0]
-        by -= w * x[j, 1]
-        bz -= w * x[j, 2]
-    return bx, by, bz
 
 
 @numba.njit(cache=True, parallel=True)
@@ -625,11 +613,11 @@ def gather_arrays(
     if bending is None:
         rows = NO_BENDING_ROWS
     else:
-        Q = bending.Q
+        qptr, qidx, qval = bending.csr
         rows = (  # 32-bit indices, as the springs' (their loads cost the gather)
-            Q.indptr.astype(np.uint32),
-            Q.indices.astype(np.uint32),
-            Q.data.astype(np.float64),
+            qptr.astype(np.uint32),
+            qidx.astype(np.uint32),
+            qval,
             np.empty((n, 3)),
         )
     return (
@@ -825,29 +813,17 @@ class DragTerm:
         f -= np.multiply(v, self.drag, out=self._dv)  # no temporary per evaluation
 
 
-@numba.njit(cache=True)
-def bending_forces(x, qptr, qidx, qval, f):
-    """``f −= (Q ⊗ I₃) x`` from ``Q``'s CSR rows, one particle after another."""
-    for p in range(x.shape[0]):
-        bx, by, bz = bending_row(x, qptr, qidx, qval, p)
-        f[p, 0] += bx
-        f[p, 1] += by
-        f[p, 2] += bz
-
-
 class BendingTerm:
     """A material's flexural rigidity: ``−(Q ⊗ I₃) x`` (:mod:`cloth_sim.physics.bending`), where
-    the springs are not summed on every cores (which sum it in their gather)."""
+    the springs are not summed on every core (those sum it in their gather)."""
 
     labels = ("bending",)
 
     def __init__(self, bending):
         self.bending = bending
-        Q = bending.Q
-        self._rows = (Q.indptr.astype(np.int64), Q.indices.astype(np.int64), Q.data)
 
     def add_force(self, x, v, f):
-        bending_forces(x, *self._rows, f)
+        self.bending.add_force(x, f)
 
     def energy(self, x) -> float:
         return self.bending.energy(x)

@@ -197,7 +197,6 @@ def test_the_elastica_gives_peirces_41_5_degrees_and_the_linear_beam_when_light(
 
 
 def test_vbd_holds_a_cantilever_at_its_equilibrium_and_steps_like_an_explicit_method():
-    r = textile.cantilever  # noqa: F841 (the strip as the test builds it)
     fabric = materials.get("denim")
     c = fabric.bending_length(0)
     model, line = textile._strip(fabric, 13, 2, 2 * c / 12 * 13, 0.02, "warp", 2)
