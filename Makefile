@@ -36,6 +36,7 @@ $(KERNELS): $(STAMP) $(shell find cloth_sim -name '*.py')
 	@touch $@
 
 $(MSGS): $(STAMP) msg/Stats.msg $(wildcard srv/*.srv) CMakeLists.txt package.xml tools/build_interfaces.py \
+		tools/python_only_interfaces.cmake \
 		$(wildcard interfaces/*/*.txt interfaces/*/package.xml interfaces/*/*/*.msg interfaces/*/*/*.srv interfaces/*/*/*.action) \
 		$(wildcard launch/* config/*.yaml config/scenes/*.yaml)
 	$(PY) tools/build_interfaces.py

@@ -254,7 +254,8 @@ def _schema() -> dict[str, Param]:
             "particle_mass",
             float,
             "kg",
-            "Mass of each particle; rebuilds and resets the cloth.",
+            "Mass of each particle of a grid scene given by it (a grid scene given by its "
+            "density shares that out instead); rebuilds and resets the cloth.",
             lo=1e-6,
             hi=1e3,
             apply="rebuild",
@@ -288,8 +289,10 @@ def _schema() -> dict[str, Param]:
             "density",
             float,
             "kg/m²",
-            "Areal density of a mesh cloth (each vertex carries a third "
-            "of its triangles' mass); rebuilds and resets the cloth. Mesh scenes only.",
+            "Areal density of a mesh cloth (each vertex carries a third of its triangles' "
+            "mass) or of a grid scene given by its size and density (its rows·cols particles "
+            "share the mass equally, so rows and cols refine the same cloth); rebuilds and "
+            "resets the cloth.",
             lo=1e-6,
             hi=1e3,
             apply="rebuild",

@@ -4,7 +4,7 @@ A scene is a YAML mapping (see ``config/scenes/*.yaml``)::
 
     grid: {rows: 24, cols: 24, spacing: 0.04, orientation: horizontal}
     model: provot                  # or choi_ko
-    particle_mass: 0.01
+    particle_mass: 0.01            # per particle: a finer grid of this spacing is a bigger cloth
     stiffness: {structural: 1000, shear: 1000, bend: 100}
     damping: {structural: 0.05, shear: 0.05, bend: 0.01}
     pinned: [[0, 0], [0, -1]]      # (row, col) pairs, negative counts from the end
@@ -29,7 +29,16 @@ A scene is a YAML mapping (see ``config/scenes/*.yaml``)::
          orientation: [1, 0, 0, 0]}
       - {type: capsule, a: [0, 0, 0], b: [0, 0.2, 0], radius: 0.01}
 
-``grid`` may also give ``origin: [x, y, z]``, where particle (0, 0) starts.
+``grid`` may also give ``origin: [x, y, z]``, where particle (0, 0) starts. A cloth that stays
+the same cloth at any ``rows`` and ``cols`` gives its extent and its mass per area instead of a
+spacing and a particle mass::
+
+    grid: {rows: 32, cols: 32, orientation: horizontal}
+    size: [1.0, 1.0]               # m: rows and cols set the resolution, the spacing follows
+    density: 10.24                 # kg/m²: each of the rows·cols particles carries an equal share
+
+(the springs' stiffness per spring keeps a square lattice's membrane stiffness at any spacing; a
+``material`` maps a fabric in SI units exactly, bending included).
 
 A garment or any triangle mesh takes the place of ``grid`` (see :meth:`ClothModel.from_mesh
 <cloth_sim.model.ClothModel.from_mesh>`)::
@@ -142,6 +151,9 @@ class Scene:
     material_name: str = ""
     #: a grid's (width, height) in m, or None (spacing sets the extent)
     size: tuple | None = None
+    #: a grid's mass per area in kg/m² (its particles share it equally: particle_mass follows
+    #: from the size and resolution), or None (particle_mass is per particle)
+    grid_density: float | None = None
 
     @property
     def families(self) -> tuple[str, ...]:
@@ -194,8 +206,9 @@ class Scene:
         return sorted(set(cells))
 
     def build_model(self, **override) -> ClothModel:
-        """The scene's model; ``override`` replaces rows, cols, spacing, particle_mass (a grid) or
-        density (a mesh), model, stiffness or damping (used by the node's live parameters)."""
+        """The scene's model; ``override`` replaces rows, cols, spacing, particle_mass, size and
+        density (a grid's mass per area, which sets particle_mass when given) or density (a
+        mesh), model, stiffness or damping (used by the node's live parameters)."""
         p = (
             {"density": self.mesh["density"]}
             if self.mesh is not None
@@ -205,6 +218,7 @@ class Scene:
                 "spacing": self.spacing,
                 "particle_mass": self.particle_mass,
                 "size": self.size,
+                "density": self.grid_density,
             }
         )
         p.update(
@@ -239,7 +253,9 @@ class Scene:
             p["rows"],
             p["cols"],
             None if p["size"] else p["spacing"],
-            p["particle_mass"],
+            self.grid_particle_mass(p["rows"], p["cols"], p["spacing"], p["size"], p["density"])
+            if p["density"] is not None
+            else p["particle_mass"],
             stiffness=p["stiffness"],
             damping=p["damping"],
             size=p["size"] or None,
@@ -248,6 +264,14 @@ class Scene:
             orientation=self.orientation,
             origin=self.origin,
         )
+
+    def grid_particle_mass(
+        self, rows: int, cols: int, spacing: float, size: tuple | None, density: float
+    ) -> float:
+        """Each particle's equal share of a grid of ``density`` kg/m²: the extent (``size``, else
+        the spacing times the cells) times the density over ``rows·cols``."""
+        w, h = size or self.material_size(rows, cols, spacing)
+        return density * w * h / (rows * cols)
 
     def material_size(self, rows: int, cols: int, spacing: float | None) -> tuple:
         """A material grid's size when none is given: the scene's spacing times its cells."""
@@ -509,6 +533,7 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
         "motion",
         "material",
         "size",
+        "density",
     }
     v.known("", data, known)
     if "mesh" in data:
@@ -720,6 +745,14 @@ def _grid_scene(v: "SceneValidator", data: dict, source: str, name: str) -> Scen
             "grid.orientation", grid.get("orientation", "horizontal"), ORIENTATIONS
         ),
     )
+    if "density" in data:
+        if "particle_mass" in data:
+            raise SceneError(
+                f"{source}: fields 'density' and 'particle_mass' are both given: with a density "
+                f"(kg/m²) the particles share the cloth's mass equally"
+            )
+        s.grid_density = v.param("density", data["density"], field="density")
+        s.particle_mass = s.grid_particle_mass(rows, cols, spacing, size, s.grid_density)
     s.particle_mass = v.param("particle_mass", data.get("particle_mass", s.particle_mass))
     s.stiffness = v.families("stiffness", data.get("stiffness", s.stiffness))
     s.damping = v.families("damping", data.get("damping", s.damping))
@@ -758,13 +791,13 @@ def _mesh_scene(v: "SceneValidator", data: dict, source: str, name: str) -> Scen
             "mesh", "a mapping with file, density and optional scale, position, orientation", mesh
         )
     v.known("mesh.", mesh, {"file", "scale", "density", "position", "orientation"})
-    for key in ("particle_mass", "pinned_edges"):
+    for key in ("particle_mass", "density", "pinned_edges"):
         if key in data:
             raise SceneError(
                 f"{source}: field '{key}' is for grid scenes; "
                 + (
                     "a mesh's masses come from mesh.density (kg/m²)"
-                    if key == "particle_mass"
+                    if key in ("particle_mass", "density")
                     else "a mesh pins vertex indices (pinned) or a box (pinned_box)"
                 )
             )
@@ -861,7 +894,7 @@ def _material(v: "SceneValidator", data: dict, s: Scene, source: str) -> None:
     m = data.get("material")
     if m is None:
         return
-    clash = [k for k in ("particle_mass", "stiffness", "damping") if k in data]
+    clash = [k for k in ("particle_mass", "density", "stiffness", "damping") if k in data]
     if clash:
         raise SceneError(
             f"{source}: field 'material' and {', '.join(repr(k) for k in clash)} are both "

@@ -96,6 +96,8 @@ def scene_values(scene: Scene) -> dict:
                 "size": [float(x) for x in scene.size] if scene.size else [0.0, 0.0],
             }
         )
+        if scene.grid_density is not None:
+            values["density"] = float(scene.grid_density)
     for k, value in scene.camera.items():  # (the scene's camera, or the default one)
         values[f"camera.{k}"] = [float(x) for x in value] if isinstance(value, list) else value
     for f in scene.families:
@@ -137,6 +139,8 @@ def fabric(cfg: dict, scene: Scene):
     return scene.material
 
 
+#: what a grid's mass per area sets (a scene's ``density:``): its particles' equal shares
+DENSITY_SETS = ("particle_mass",)
 #: the parameters a material sets itself (refused while one is in use)
 MATERIAL_SETS = ("particle_mass", "density")
 
@@ -153,6 +157,8 @@ def inapplicable_changes(scene: Scene, cand: dict, current: dict) -> list[str]:
     """The parameters ``scene``'s cloth does not have (a grid's size on a mesh, a mesh's density
     on a grid; the masses and springs a material sets) that ``cand`` changes from ``current``."""
     names = GRID_ONLY if scene.mesh is not None else MESH_ONLY
+    if scene.mesh is None and scene.grid_density is not None:
+        names = DENSITY_SETS
     if fabric(cand, scene) is not None and fabric(current, scene) is not None:
         names = (*names, *_material_set(scene))
     return [n for n in dict.fromkeys(names) if cand[n] != current[n]]
@@ -174,6 +180,11 @@ def not_applicable(scene: Scene, cand: dict, current: dict) -> str | None:
                 f"in SI units; set material to '' on a scene without one to use per-family "
                 f"values"
             )
+    if scene.mesh is None and scene.grid_density is not None:
+        return (
+            f"{', '.join(changed)}: set by scene {scene.name}'s density (kg/m²): its rows·cols "
+            f"particles share the cloth's mass equally at any resolution; set density instead"
+        )
     if scene.mesh is not None:
         return (
             f"{', '.join(changed)}: not used by scene {scene.name}, a triangle mesh "
@@ -184,7 +195,8 @@ def not_applicable(scene: Scene, cand: dict, current: dict) -> str | None:
         )
     return (
         f"{', '.join(changed)}: not used by scene {scene.name}, a {scene.rows}×{scene.cols} grid "
-        f"(its masses come from particle_mass); density applies to mesh scenes"
+        f"(its masses come from particle_mass); density applies to mesh scenes and to grid "
+        f"scenes that give their mass per area"
     )
 
 
@@ -234,6 +246,8 @@ def build_model(cfg: dict, scene: Scene):
         if (w > 0) != (h > 0):
             raise ValueError(f"size: [width, height] must be both > 0 or both 0, got {[w, h]}")
         size["size"] = (w, h) if w > 0 else None
+        if scene.grid_density is not None:
+            size["density"] = cfg["density"]
     return scene.build_model(
         **size,
         material=fabric(cfg, scene),

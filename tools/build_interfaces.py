@@ -27,6 +27,8 @@ BUILD = ROOT / "build" / "interfaces"
 PREFIX = BUILD / "install"
 HOST_PY_INCLUDE = "/opt/python/cp311-cp311/include/python3.11"
 HOST_NUMPY_INCLUDE = "/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include"
+#: included into each package's configure: rosidl_generate_interfaces without the C++ generators
+PYTHON_ONLY = ROOT / "tools" / "python_only_interfaces.cmake"
 #: standard interface packages no wheel has, generated from interfaces/<name> (see its README)
 VENDORED = ("simulation_interfaces", "tf2_msgs")
 
@@ -150,6 +152,9 @@ def main() -> int:
             f"-DCMAKE_INSTALL_PREFIX={PREFIX}",
             f"-DCMAKE_INSTALL_RPATH={rpath}",
             "-DCMAKE_BUILD_TYPE=Release",
+            # Python loads the C type supports only: the C++ generators are left out here (not
+            # in a colcon build), which halves the build
+            f"-DCMAKE_PROJECT_INCLUDE={PYTHON_ONLY}",
         ]
         for cmd in (
             configure,

@@ -188,9 +188,10 @@ def print_scene_node_table(scene: str, seconds: float, rate: float) -> list[dict
 
 
 def print_grid_scene_table(scenes, n: int, seconds: float, rate: float) -> list[dict]:
-    """Each grid scene as a user's ``-p rows:=n -p cols:=n`` runs it (its spacing and particle mass
-    kept: a larger, heavier cloth), its integrator, step and self-collision as it ships,
-    ``~/points`` and ``~/mesh`` subscribed."""
+    """Each grid scene as a user's ``-p rows:=n -p cols:=n`` runs it (one given by its spacing and
+    particle mass grows: a larger, heavier cloth; one given by its size and density, fold, is the
+    same cloth finer), its integrator, step and self-collision as it ships, ``~/points`` and
+    ``~/mesh`` subscribed."""
     from ..scene import load_scene
 
     print(

@@ -103,6 +103,25 @@ def test_shipped_scenes_load_and_run():
     assert np.count_nonzero(curtain.pinned) == curtain.cols
 
 
+def test_a_scene_given_by_size_and_density_is_the_same_cloth_at_any_resolution():
+    """fold gives its extent and mass per area: refined, the cloth keeps its size (so it still
+    fits its floor), its mass (density × area, shared equally) and so its weight."""
+    scene = load_scene("fold")
+    w, h = scene.size
+    for rows, cols in ((scene.rows, scene.cols), (64, 64), (17, 40)):
+        model = scene.build_model(rows=rows, cols=cols)
+        extent = sorted(np.ptp(model.positions, axis=0))[1:]
+        assert extent == pytest.approx(sorted((w, h)), rel=1e-12)
+        assert model.masses.sum() == pytest.approx(scene.grid_density * w * h, rel=1e-12)
+        assert np.ptp(model.masses) == 0.0
+    # given by a particle mass, a grid grows with its rows and cols at its spacing instead
+    hanging = load_scene("hanging")
+    assert hanging.grid_density is None
+    big = hanging.build_model(rows=40, cols=64)
+    assert big.masses.sum() == pytest.approx(40 * 64 * hanging.particle_mass)
+    assert np.ptp(big.positions[:, 0]) == pytest.approx(63 * hanging.spacing)
+
+
 @pytest.mark.parametrize(
     "patch,field",
     [
@@ -117,6 +136,8 @@ def test_shipped_scenes_load_and_run():
         ({"wind": {"direction": [1, 0], "strength": 1}}, "wind.direction"),
         ({"gravity": [0, 0, float("nan")]}, "gravity[2]"),
         ({"colour": "red"}, "colour"),
+        ({"size": [1.0, 1.0], "grid": {"rows": 4, "cols": 4}, "density": 0.0}, "density"),
+        ({"density": 1.0, "particle_mass": 0.01}, "density"),
     ],
 )
 def test_malformed_scene_names_the_file_and_field(patch, field):

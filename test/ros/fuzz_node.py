@@ -203,6 +203,8 @@ def limit_refusal_is_right(cfg: dict, params) -> bool:
         else {
             "size": size,
             "particle_mass": cand["particle_mass"],
+            # a grid given by its mass per area: the particles' shares follow from density
+            "density": cand["density"] if scene.grid_density is not None else None,
             "stiffness": {f: cand[f"stiffness.{f}"] for f in GRID_FAMILIES},
             "damping": {f: cand[f"damping.{f}"] for f in GRID_FAMILIES},
         }
@@ -219,6 +221,13 @@ def limit_refusal_is_right(cfg: dict, params) -> bool:
         **cloth,
     )
     return not sim.step_is_stable()
+
+
+def rest_spacing(cfg: dict) -> float:
+    """The grid's shortest spacing at rest: its size over its cells when it has one, else the
+    spacing parameter."""
+    (w, h), rows, cols = cfg["size"], cfg["rows"], cfg["cols"]
+    return min(w / (cols - 1), h / (rows - 1)) if w > 0 else cfg["spacing"]
 
 
 def candidate(base: dict, batch) -> dict:
@@ -567,6 +576,19 @@ def run(sets: int, seed: int, domain: int, quiet: bool = False, keep: int = 3) -
                             )
                         ):
                             note("valid_refused", (params, r.reason))
+                    elif "particle_mass: set by scene" in r.reason:
+                        # a grid given by its mass per area (hanging, fold): right only when the
+                        # batch changes particle_mass on such a scene
+                        figures["scene_kind_refusals"] += 1
+                        base = before_cfg if atomic else running
+                        if "scene" not in names and not (
+                            load_scene(base["scene"]).grid_density is not None
+                            and any(
+                                n == "particle_mass" and SCHEMA[n].check(v) != base[n]
+                                for n, v in (params if atomic else [(name, value)])
+                            )
+                        ):
+                            note("valid_refused", (params, r.reason))
                     elif "not used by scene" in r.reason:
                         # a mesh's density on a grid (the fuzz's scenes are grids): right only when
                         # the batch changes it
@@ -585,7 +607,7 @@ def run(sets: int, seed: int, domain: int, quiet: bool = False, keep: int = 3) -
                         )
                         if "scene" not in names and not (
                             cand["self_collision"]
-                            and cand["thickness"] > 0.5 * cand["spacing"] * (1 + 1e-9)
+                            and cand["thickness"] > 0.5 * rest_spacing(cand) * (1 + 1e-9)
                         ):
                             note("valid_refused", (params, r.reason))
                     elif "material" in r.reason and (

@@ -59,6 +59,28 @@ def start_node(domain, *extra, ignore_sigint=False):
     return proc
 
 
+def answer(executor, client, request, deadline: float, resend_every: float | None = None):
+    """``client``'s response to ``request``, spinning ``executor`` until the monotonic
+    ``deadline``; ``None`` when none came. Under load DDS can lose the response to a client made a
+    moment before: the server waits a bounded time (rmw_fastrtps: its response writer's
+    max_blocking_time, 100 ms) for the new client's response reader to be discovered, then drops
+    the response (ros2/rmw_fastrtps#390). A request that may be repeated is sent again every
+    ``resend_every`` s until a response comes."""
+    future = client.call_async(request)
+    sent = time.monotonic()
+    while not future.done() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.05)
+        if (
+            resend_every is not None
+            and not future.done()
+            and time.monotonic() > sent + resend_every
+        ):
+            client.remove_pending_request(future)
+            future = client.call_async(request)
+            sent = time.monotonic()
+    return future.result() if future.done() else None
+
+
 def end_node(proc, timeout=30):
     out, _ = proc.communicate(timeout=timeout)
     return proc.returncode, out

@@ -835,6 +835,16 @@ def test_a_mesh_scene_publishes_an_unorganised_cloud_and_refuses_grid_parameters
     assert node.sim.model.rows == 10
     (result,) = ros.set_params("/cloth_sim", {"density": 0.3})
     assert not result.successful and "density applies to mesh scenes" in result.reason
+    # a grid given by its size and mass per area (fold): rows refine the same 1 m, 5.76 kg cloth,
+    # density applies and sets the particles' mass
+    assert all(r.successful for r in ros.set_params("/cloth_sim", {"scene": "fold", "rows": 10}))
+    model = node.sim.model
+    assert model.rows == 10 and model.masses.sum() == pytest.approx(5.76)
+    assert np.ptp(model.positions[:, 2]) == pytest.approx(1.0)
+    (result,) = ros.set_params("/cloth_sim", {"density": 2.0})
+    assert result.successful and node.sim.model.masses.sum() == pytest.approx(2.0)
+    (result,) = ros.set_params("/cloth_sim", {"particle_mass": 0.02})
+    assert not result.successful and "set by scene fold's density" in result.reason
 
 
 def test_the_launch_file_describes_every_scene_the_package_has(monkeypatch):
