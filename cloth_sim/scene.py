@@ -208,7 +208,9 @@ class Scene:
     def build_model(self, **override) -> ClothModel:
         """The scene's model; ``override`` replaces rows, cols, spacing, particle_mass, size and
         density (a grid's mass per area, which sets particle_mass when given) or density (a
-        mesh), model, stiffness or damping (used by the node's live parameters)."""
+        mesh), model, stiffness or damping (used by the node's live parameters). On a grid given
+        by size and density, a spacing given without a size, or a particle mass without a
+        density, replaces them."""
         p = (
             {"density": self.mesh["density"]}
             if self.mesh is not None
@@ -236,6 +238,13 @@ class Scene:
                 f"{', '.join([*p, *self.SIMULATOR_OPTIONS])}"
             )
         p.update(override)
+        if self.mesh is None:
+            # a spacing or a particle mass given without a size or a density: that is the cloth
+            # asked for (a scene given by size and density otherwise keeps its extent and mass)
+            if "spacing" in override and "size" not in override:
+                p["size"] = None
+            if "particle_mass" in override and "density" not in override:
+                p["density"] = None
         if self.mesh is not None:
             return self._mesh_model(p)
         if p["material"] is not None:

@@ -114,6 +114,10 @@ def test_a_scene_given_by_size_and_density_is_the_same_cloth_at_any_resolution()
         assert extent == pytest.approx(sorted((w, h)), rel=1e-12)
         assert model.masses.sum() == pytest.approx(scene.grid_density * w * h, rel=1e-12)
         assert np.ptp(model.masses) == 0.0
+    # a spacing and a particle mass given to build_model are the cloth asked for
+    asked = scene.build_model(rows=12, cols=12, spacing=0.05, particle_mass=0.02)
+    assert np.ptp(asked.positions[:, 0]) == pytest.approx(11 * 0.05)
+    assert asked.masses.sum() == pytest.approx(144 * 0.02)
     # given by a particle mass, a grid grows with its rows and cols at its spacing instead
     hanging = load_scene("hanging")
     assert hanging.grid_density is None
