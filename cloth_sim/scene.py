@@ -238,15 +238,14 @@ class Scene:
                 f"{', '.join([*p, *self.SIMULATOR_OPTIONS])}"
             )
         p.update(override)
-        if self.mesh is None:
-            # a spacing or a particle mass given without a size or a density: that is the cloth
-            # asked for (a scene given by size and density otherwise keeps its extent and mass)
-            if "spacing" in override and "size" not in override:
-                p["size"] = None
-            if "particle_mass" in override and "density" not in override:
-                p["density"] = None
         if self.mesh is not None:
             return self._mesh_model(p)
+        # a spacing or a particle mass given without a size or a density: that is the cloth asked
+        # for (a scene given by size and density otherwise keeps its extent and mass)
+        if "spacing" in override and "size" not in override:
+            p["size"] = None
+        if "particle_mass" in override and "density" not in override:
+            p["density"] = None
         if p["material"] is not None:
             return ClothModel.grid(
                 p["rows"],
@@ -762,7 +761,8 @@ def _grid_scene(v: "SceneValidator", data: dict, source: str, name: str) -> Scen
             )
         s.grid_density = v.param("density", data["density"], field="density")
         s.particle_mass = s.grid_particle_mass(rows, cols, spacing, size, s.grid_density)
-    s.particle_mass = v.param("particle_mass", data.get("particle_mass", s.particle_mass))
+    else:
+        s.particle_mass = v.param("particle_mass", data.get("particle_mass", s.particle_mass))
     s.stiffness = v.families("stiffness", data.get("stiffness", s.stiffness))
     s.damping = v.families("damping", data.get("damping", s.damping))
     pins = data.get("pinned", [])

@@ -577,8 +577,8 @@ def run(sets: int, seed: int, domain: int, quiet: bool = False, keep: int = 3) -
                         ):
                             note("valid_refused", (params, r.reason))
                     elif "particle_mass: set by scene" in r.reason:
-                        # a grid given by its mass per area (hanging, fold): right only when the
-                        # batch changes particle_mass on such a scene
+                        # a grid given by its mass per area (fold): right only when the batch
+                        # changes particle_mass on such a scene
                         figures["scene_kind_refusals"] += 1
                         base = before_cfg if atomic else running
                         if "scene" not in names and not (
