@@ -862,7 +862,7 @@ class Simulator:
         self._contacts_inside = "contacts" in handled and self._contacts.active
         self._contacts.continuous = integ is None or not integ.keeps_paths_off_colliders
         if integ is not None:
-            integ.attach(self._contacts, self._self_collision)
+            integ.attach(self._contacts, self._self_collision, self._strain)
 
     def _build_forces(self) -> Forces:
         return Forces(self.model, self._k, self._c, self._gravity, self._wind, self._drag)

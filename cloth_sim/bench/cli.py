@@ -119,6 +119,13 @@ def _bench_vbd_peers(args) -> int:
     return print_vbd_peer_table(tuple(args.sizes), args.seconds, args.twist_seconds, args.device)
 
 
+def _bench_vbd_floor(args) -> int:
+    from .vbd_floor import print_vbd_floor_table
+
+    print_vbd_floor_table(tuple(args.sizes))
+    return 0
+
+
 def _bench_flex_peer(args) -> int:
     from .flex_peer import print_flex_table
 
@@ -209,6 +216,12 @@ def add_parser(sub) -> argparse.ArgumentParser:
     )
     vp.add_argument("--device", default="cpu", help="Warp device of Newton's side (cpu, cuda:0)")
     vp.set_defaults(func=_bench_vbd_peers)
+    vf = bsub.add_parser(
+        "vbd-floor",
+        help="vbd's cost per vertex and iteration on the grid against its memory-bandwidth floor",
+    )
+    vf.add_argument("--sizes", type=int, nargs="+", default=[32, 64, 128])
+    vf.set_defaults(func=_bench_vbd_floor)
     fp = bsub.add_parser(
         "flex-peer",
         help="MuJoCo's flex cloth beside cloth_sim on the drape scene "

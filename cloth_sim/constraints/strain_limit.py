@@ -249,6 +249,15 @@ class StrainLimit(Stage):
     def active(self) -> bool:
         return self.tau is not None
 
+    def attachments(self, x: np.ndarray) -> int:
+        """The long-range attachments alone on ``x`` (in place): each particle pulled back to
+        ``(1 + τ)`` times its rest geodesic distance from its nearest pins; returns how many
+        moved (0 when the limit or its attachments are off). An integrator that iterates may
+        apply them between its iterations (vbd's ``tethers``)."""
+        if self.tau is None or not self.long_range:
+            return 0
+        return self._attach(x, self._anchor, self._reach, self.tau)
+
     def correct(self, x: np.ndarray) -> int:
         """Correct ``x`` in place; returns the number of passes (or projection iterations) that
         changed something."""

@@ -121,11 +121,12 @@ class Integrator:
     def parameters_changed(self, changed: frozenset) -> None:
         """Some of :data:`CHANGES` changed (no-op by default)."""
 
-    def attach(self, contacts, self_collision) -> None:
-        """The simulator's contact stage (:class:`~cloth_sim.contact.colliders.Contacts`) and
-        self-collision stage (:class:`~cloth_sim.contact.self_collision.SelfCollision`), for a
-        method that resolves them (:attr:`handles`); called whenever they or the method change
-        (no-op by default)."""
+    def attach(self, contacts, self_collision, strain_limit=None) -> None:
+        """The simulator's contact stage (:class:`~cloth_sim.contact.colliders.Contacts`),
+        self-collision stage (:class:`~cloth_sim.contact.self_collision.SelfCollision`) and strain
+        limit (:class:`~cloth_sim.constraints.strain_limit.StrainLimit`), for a method that
+        resolves or uses them (:attr:`handles`); called whenever they or the method change (no-op
+        by default)."""
 
     # ------------------------------------------------------------------ stability
     @classmethod

@@ -991,7 +991,11 @@ class VBD(Integrator):
     self-collides and a vertex met its bound; ``self_friction`` (default 0.5): Coulomb's μ between
     the cloth's own layers; ``time_budget`` (s, default None): when set, iterate until that much
     wall time has passed (at least one iteration, at most ``iterations``) — a node that must keep
-    its tick, whose results then depend on the machine.
+    its tick, whose results then depend on the machine; ``tethers`` (default False): with a strain
+    limit on a pinned cloth and no contacts, its long-range attachments (Kim, Chentanez & Müller
+    2012) after every sweep, so the pins' pull reaches the far edge at once instead of a ring of
+    springs an iteration (the 2 m, 41 kg hanging cloth at 64×64, 1/60 s × 10: worst strain 4.7 →
+    2.2 after the projection; not enough to ship: docs/BENCHMARKS.md §11).
 
     First order (backward Euler); no step limit; any iteration count gives a usable state.
     """
@@ -1032,6 +1036,7 @@ class VBD(Integrator):
         collision_interval: int = 5,
         time_budget: float | None = None,
         self_friction: float = 0.5,
+        tethers: bool = False,
     ):
         super().__init__(model)
         for name, value, hi in (
@@ -1057,6 +1062,10 @@ class VBD(Integrator):
                 f"self_friction must be a number >= 0 (Coulomb's μ), got {self_friction!r}"
             )
         self.self_friction = float(self_friction)
+        if not isinstance(tethers, bool):
+            raise ValueError(f"tethers must be true or false, got {tethers!r}")
+        self.tethers = tethers
+        self._strain_limit = None
         self.iterations = int(iterations)
         self.rho = float(rho)
         self.contact_stiffness = float(contact_stiffness)
@@ -1106,9 +1115,10 @@ class VBD(Integrator):
         )
 
     # ------------------------------------------------------------------ protocol
-    def attach(self, contacts, self_collision) -> None:
+    def attach(self, contacts, self_collision, strain_limit=None) -> None:
         self._contacts = contacts
         self._self_collision = self_collision
+        self._strain_limit = strain_limit
 
     def reset(self, state, forces, dt):
         self._a_prev[:] = 0.0
@@ -1149,6 +1159,23 @@ class VBD(Integrator):
                 self._colour[verts] = np.repeat(np.arange(len(cptr) - 1), np.diff(cptr))
             self._layout_of = forces
         return self._springs, self._colours
+
+    def iteration_traffic(self, forces) -> int:
+        """The bytes one iteration without contacts must move at least (each array once): the
+        sweep reads the positions, the step's start and inertial target, the copy of the iterate,
+        the masses, the colours' vertex list and every vertex's springs (their pointers, far
+        ends, rest lengths, stiffness, damping and kinds, and a material's bending rows), and
+        writes the positions and each vertex's step; the iterate's copy and the Chebyshev
+        extrapolation each read and write the positions once more. Caches and the neighbours'
+        repeated reads are not counted: a lower bound (``cloth-sim bench vbd-floor``)."""
+        sp, (cptr, verts) = self._layout(forces)
+        vec = self.model.positions.nbytes  # n × 3 float64
+        n = self.model.n_particles
+        arrays = sum(a.nbytes for a in sp if isinstance(a, np.ndarray) and a is not BUCKLE_TABLE)
+        read = 4 * vec + 8 * n + verts.nbytes + cptr.nbytes + arrays
+        written = vec + 8 * n
+        copy_and_extrapolate = 2 * vec + 3 * vec
+        return int(read + written + copy_and_extrapolate)
 
     @property
     def colours(self) -> int:
@@ -1233,6 +1260,14 @@ class VBD(Integrator):
         omega = 1.0
         budget_end = None if self.time_budget is None else time.perf_counter() + self.time_budget
         done = 0
+        strain = self._strain_limit
+        tether = (
+            self.tethers
+            and strain is not None
+            and strain.active
+            and not self_contact
+            and not len(colliders[0])
+        )
         for it in range(self.iterations):
             if self_contact and it > 0 and it % self.collision_interval == 0 and cut.any():
                 # a vertex hit its bound: search again from here, for room to move on
@@ -1266,6 +1301,10 @@ class VBD(Integrator):
                 cut,
                 touch,
             )
+            if tether:
+                # the long-range attachments after each sweep: the pins' pull reaches the far
+                # edge at once, where an iteration carries it about one ring of springs
+                strain.attachments(x)
             done += 1
             last = it == self.iterations - 1 or (
                 budget_end is not None and time.perf_counter() >= budget_end

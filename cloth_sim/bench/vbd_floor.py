@@ -1,0 +1,88 @@
+"""``vbd``'s cost per vertex and iteration on the grid against its memory-bandwidth floor.
+
+``cloth-sim bench vbd-floor --sizes 32 64 128`` times the hanging cloth (1 m, 10.24 kg, the scene's
+springs, 1/60 s, no strain limit) at two iteration counts a step, so that the difference is the
+iterations' cost alone (the step's set-up cancels), and prints it per vertex and iteration beside
+the floor: the bytes an iteration must stream (:meth:`~cloth_sim.integrators.vbd.VBD.
+iteration_traffic`) over a STREAM triad's bandwidth on arrays of that size (the caches they fit
+in, as :mod:`cloth_sim.bench.scaling` measures symplectic Euler's). Two cores, numba's threads.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import time
+
+from .scaling import triad_bandwidth
+
+#: the iteration counts timed a step (their difference is what is measured)
+LOW, HIGH = 4, 20
+
+
+def _best_step(sim, steps: int, rounds: int = 5) -> float:
+    best = float("inf")
+    for _ in range(rounds):
+        t = time.perf_counter()
+        sim.step(steps)
+        best = min(best, (time.perf_counter() - t) / steps)
+    return best
+
+
+def measure(n: int) -> dict:
+    """Seconds per iteration of ``vbd`` on the ``n``×``n`` hanging cloth, its traffic and floor."""
+    from ..integrators.vbd import VBD
+    from ..scene import load_scene
+
+    costs = {}
+    for iterations in (LOW, HIGH):
+        scene = load_scene("hanging")
+        sim = scene.build_simulator(
+            rows=n,
+            cols=n,
+            spacing=1.0 / (n - 1),
+            particle_mass=10.24 / n**2,
+            integrator="vbd",
+            dt=1.0 / 60,
+            strain_limit=None,
+            integrator_options={"iterations": iterations},
+        )
+        sim.step(3)  # compile, colour, settle the first fall
+        costs[iterations] = _best_step(sim, 3)
+        traffic = VBD(sim.model).iteration_traffic(sim.forces)
+    per_iteration = (costs[HIGH] - costs[LOW]) / (HIGH - LOW)
+    bandwidth = triad_bandwidth(traffic)
+    floor = traffic / bandwidth
+    return {
+        "N": n,
+        "ns_per_vertex_iteration": 1e9 * per_iteration / n**2,
+        "ms_per_iteration": 1e3 * per_iteration,
+        "traffic_mb": traffic / 1e6,
+        "triad_gb_s": bandwidth / 1e9,
+        "floor_ms": 1e3 * floor,
+        "ratio": per_iteration / floor,
+    }
+
+
+def print_vbd_floor_table(sizes) -> list[dict]:
+    print(
+        f"# vbd per vertex and iteration against the memory-bandwidth floor: the hanging cloth "
+        f"(1 m, 10.24 kg), 1/60 s, {LOW} and {HIGH} iterations a step (their difference); "
+        f"{platform.machine()}, {os.cpu_count()} cores"
+    )
+    print(
+        "| N | ms per iteration | ns per vertex and iteration | traffic per iteration (MB) | "
+        "triad GB/s at that size | floor (ms) | measured / floor |"
+    )
+    print("|---|---|---|---|---|---|---|")
+    rows = []
+    for n in sizes:
+        r = measure(n)
+        rows.append(r)
+        print(
+            f"| {n} | {r['ms_per_iteration']:.3f} | {r['ns_per_vertex_iteration']:.1f} | "
+            f"{r['traffic_mb']:.2f} | {r['triad_gb_s']:.1f} | {r['floor_ms']:.4f} | "
+            f"{r['ratio']:.1f}× |",
+            flush=True,
+        )
+    return rows
