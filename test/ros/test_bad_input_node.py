@@ -187,10 +187,14 @@ def test_pause_false_resumes_after_a_blow_up(ros, integrator):
     node = ros.start(rows=16, cols=16, spacing=1 / 15, integrator=integrator, strain_limit=0.0)
     ros.spin_until(lambda: node.sim.time > 0.5)
     dt, limit = node.sim.dt, node.session.stable_dt
+    # paused, so that the state read here is the one at the change (running, a tick could come
+    # between the read and the request's turn on the executor: it did once in 20 runs)
+    assert ros.call(SetBool, "/cloth_sim/pause", SetBool.Request(data=True)).success
     t_change, x_change = node.sim.time, node.sim.positions.copy()
     assert ros.set_params(
         "/cloth_sim", {"allow_unstable": True, "dt": min(1.0, 10 * limit)}, atomically=True
     )[0].successful
+    assert ros.call(SetBool, "/cloth_sim/pause", SetBool.Request(data=False)).success
     assert ros.spin_until(lambda: node.error is not None, 10)
     # back at the state of the moment of the change, not at the last finite one
     assert node.sim.time == pytest.approx(t_change, abs=1e-9)
