@@ -179,9 +179,13 @@ def test_entities_states_bounds_and_bad_requests(ros):
     assert [b.points[0].x, b.points[0].z, b.points[1].y] == pytest.approx(
         [c.center[0] - c.radius, c.center[2] - c.radius, c.center[1] + c.radius]
     )
+    # paused, so that the positions read here are the ones the answer saw (running, a tick could
+    # come between the answer and the read: it did once in 20 runs)
+    set_state(ros, SimulationState.STATE_PAUSED)
     b = call(ros, srv.GetEntityBounds, "get_entity_bounds", entity="cloth").bounds
     lo, hi = node.sim.positions.min(0), node.sim.positions.max(0)
     assert b.type == b.TYPE_BOX and [b.points[0].x, b.points[1].z] == pytest.approx([lo[0], hi[2]])
+    set_state(ros, SimulationState.STATE_PLAYING)
     # unknown entity, NaN pose, a twist for a kinematic body: the standard's codes, with a message
     r = call(ros, srv.GetEntityState, "get_entity_state", entity="nothing").result
     assert r.result == Result.RESULT_NOT_FOUND and "cloth" in r.error_message
