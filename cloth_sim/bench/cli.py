@@ -255,8 +255,9 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "--grid",
         type=int,
         default=None,
-        help="with --scene: rows and cols of the grid "
-        "scenes (their spacing and particle mass kept: a larger cloth)",
+        help="with --scene: rows and cols of the grid scenes, as -p rows:=N -p cols:=N "
+        "(one given by spacing and particle mass grows; one given by size and density, fold, "
+        "is the same cloth finer)",
     )
     nb.add_argument("--seconds", type=float, default=10.0, help="measured wall time per row")
     nb.add_argument("--integrator", default="symplectic_euler", choices=integrators.available())

@@ -34,44 +34,40 @@ def mean_bending_length(name: str) -> float:
     return (math.sqrt(f.bend[0] * f.bend[1]) / (f.density * 9.81)) ** (1.0 / 3.0)
 
 
+def _directional_rows(names, grids, test, fields: dict) -> list[dict]:
+    """``test(name, grid=, direction=)`` for every fabric, direction and grid: a row each, with
+    ``fields`` (row key: the test's result key)."""
+    return [
+        {"fabric": n, "direction": d, "grid": g, **{k: r[v] for k, v in fields.items()}}
+        for n in names
+        for d in textile.DIRECTIONS
+        for g in grids
+        for r in (test(n, grid=g, direction=d),)
+    ]
+
+
 def tensile_rows(names, grids) -> list[dict]:
-    rows = []
-    for n in names:
-        for d in textile.DIRECTIONS:
-            for g in grids:
-                r = textile.tensile(n, grid=g, direction=d)
-                rows.append(
-                    {
-                        "fabric": n,
-                        "direction": d,
-                        "grid": g,
-                        "expected_N_per_m": r["expected"],
-                        "measured_N_per_m": r["measured"],
-                        "error": r["error"],
-                    }
-                )
-    return rows
+    return _directional_rows(
+        names,
+        grids,
+        textile.tensile,
+        {"expected_N_per_m": "expected", "measured_N_per_m": "measured", "error": "error"},
+    )
 
 
 def cantilever_rows(names, grids) -> list[dict]:
-    rows = []
-    for n in names:
-        for d in textile.DIRECTIONS:
-            for g in grids:
-                r = textile.cantilever(n, grid=g, direction=d)
-                rows.append(
-                    {
-                        "fabric": n,
-                        "direction": d,
-                        "grid": g,
-                        "expected_m": r["expected"],
-                        "measured_m": r["measured"],
-                        "peirce_m": r["peirce"],
-                        "angle_deg": r["angle_deg"],
-                        "error": r["error"],
-                    }
-                )
-    return rows
+    return _directional_rows(
+        names,
+        grids,
+        textile.cantilever,
+        {
+            "expected_m": "expected",
+            "measured_m": "measured",
+            "peirce_m": "peirce",
+            "angle_deg": "angle_deg",
+            "error": "error",
+        },
+    )
 
 
 def drape_rows(names, grids) -> list[dict]:

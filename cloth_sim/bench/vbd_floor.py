@@ -12,21 +12,12 @@ from __future__ import annotations
 
 import os
 import platform
-import time
 
 from .scaling import triad_bandwidth
+from .steps import time_steps
 
 #: the iteration counts timed a step (their difference is what is measured)
 LOW, HIGH = 4, 20
-
-
-def _best_step(sim, steps: int, rounds: int = 5) -> float:
-    best = float("inf")
-    for _ in range(rounds):
-        t = time.perf_counter()
-        sim.step(steps)
-        best = min(best, (time.perf_counter() - t) / steps)
-    return best
 
 
 def measure(n: int) -> dict:
@@ -36,8 +27,7 @@ def measure(n: int) -> dict:
 
     costs = {}
     for iterations in (LOW, HIGH):
-        scene = load_scene("hanging")
-        sim = scene.build_simulator(
+        sim = load_scene("hanging").build_simulator(
             rows=n,
             cols=n,
             spacing=1.0 / (n - 1),
@@ -47,9 +37,8 @@ def measure(n: int) -> dict:
             strain_limit=None,
             integrator_options={"iterations": iterations},
         )
-        sim.step(3)  # compile, colour, settle the first fall
-        costs[iterations] = _best_step(sim, 3)
-        traffic = VBD(sim.model).iteration_traffic(sim.forces)
+        costs[iterations] = time_steps(sim, seconds=1.0, repeats=5)
+    traffic = VBD(sim.model).iteration_traffic(sim.forces)
     per_iteration = (costs[HIGH] - costs[LOW]) / (HIGH - LOW)
     bandwidth = triad_bandwidth(traffic)
     floor = traffic / bandwidth

@@ -223,6 +223,11 @@ def limit_refusal_is_right(cfg: dict, params) -> bool:
     return not sim.step_is_stable()
 
 
+def changes(base: dict, batch, name: str) -> bool:
+    """Whether ``batch`` sets ``name`` to a value other than ``base``'s."""
+    return any(n == name and SCHEMA[n].check(v) != base[n] for n, v in batch)
+
+
 def rest_spacing(cfg: dict) -> float:
     """The grid's shortest spacing at rest: its size over its cells when it has one, else the
     spacing parameter."""
@@ -581,12 +586,10 @@ def run(sets: int, seed: int, domain: int, quiet: bool = False, keep: int = 3) -
                         # changes particle_mass on such a scene
                         figures["scene_kind_refusals"] += 1
                         base = before_cfg if atomic else running
+                        batch = params if atomic else [(name, value)]
                         if "scene" not in names and not (
                             load_scene(base["scene"]).grid_density is not None
-                            and any(
-                                n == "particle_mass" and SCHEMA[n].check(v) != base[n]
-                                for n, v in (params if atomic else [(name, value)])
-                            )
+                            and changes(base, batch, "particle_mass")
                         ):
                             note("valid_refused", (params, r.reason))
                     elif "not used by scene" in r.reason:
@@ -594,10 +597,8 @@ def run(sets: int, seed: int, domain: int, quiet: bool = False, keep: int = 3) -
                         # the batch changes it
                         figures["scene_kind_refusals"] += 1
                         base = before_cfg if atomic else running
-                        if "scene" not in names and not any(
-                            n == "density" and SCHEMA[n].check(v) != base[n]
-                            for n, v in (params if atomic else [(name, value)])
-                        ):
+                        batch = params if atomic else [(name, value)]
+                        if "scene" not in names and not changes(base, batch, "density"):
                             note("valid_refused", (params, r.reason))
                     elif "too thick for self_collision" in r.reason:
                         figures["thickness_refusals"] += 1
