@@ -918,6 +918,7 @@ def compile_kernels() -> float:
     import time
 
     from .integrators.explicit import combine_parallel
+    from .integrators.vbd import PARALLEL_MIN_VERTICES
 
     t0 = time.perf_counter()
     for model_name in ("provot", "choi_ko"):
@@ -940,6 +941,13 @@ def compile_kernels() -> float:
         # contacts with every collider shape, and self-collision
         for name in ("symplectic_euler", "vbd"):  # the contact stage; vbd's own, moving too
             sim = _compile_contacts(model, name)
+        if model_name == "provot":
+            # vbd's sweep on every core, which cloths from vbd.PARALLEL_MIN_VERTICES vertices use
+            # (the T-shirt's first step compiled it for 8 s): one signature serves with and
+            # without contacts
+            side = int(np.ceil(np.sqrt(PARALLEL_MIN_VERTICES)))
+            big = ClothModel.grid(side, side, 0.02, 0.01, stiffness=100.0, pinned=[(0, 0)])
+            Simulator(big, integrator="vbd", dt=1e-4).step(1)
         # the parallel gather, which only cloths above forces.PARALLEL_MIN_SPRINGS use: with the
         # state's own (writable) arrays, updating them or not, and with read-only views (reports)
         term = sim.forces.spring_term
@@ -1025,4 +1033,6 @@ def _compile_contacts(model, integrator: str) -> "Simulator":
     )
     sim.set_collider_pose(1, (0.0, 0.0, -0.5))
     sim.step(2)
+    for collider in sim.colliders:  # the signed distances users and the node ask for
+        collider.signed_distance(sim.positions)
     return sim

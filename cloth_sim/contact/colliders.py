@@ -100,7 +100,8 @@ class Collider:
 
     def signed_distance(self, points) -> np.ndarray:
         """Signed distance of ``(k, 3)`` points from the surface (negative inside)."""
-        pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+        # a copy, writable whoever owns the points: one compiled signature
+        pts = np.array(points, dtype=np.float64).reshape(-1, 3)
         return _distances(self.kind, self.position, self.rotation, self.geometry, pts, self._bank)
 
     #: the bank :meth:`signed_distance` reads (a Mesh's own mesh at index 0)

@@ -385,7 +385,8 @@ def _brute_force_pairs(x, tris, edges, reach):
     largest of its corners') with its exact distance (the projection on the plane when it falls
     inside, else the nearest of the three sides), and every (edge, edge) pair sharing no particle
     whose distance, sampled at 401 points along the first edge, is within 1 % above the two edges'
-    reaches — all by testing every pair with numpy."""
+    reaches — all by testing every pair with numpy (those whose boxes lie farther apart than that
+    along some axis skipped)."""
 
     def seg_point(p, a, b):
         ab = b - a
@@ -422,6 +423,13 @@ def _brute_force_pairs(x, tris, edges, reach):
     for e, (a, b) in enumerate(edges):
         f = np.arange(e + 1, len(edges))
         f = f[~np.isin(edges[f], [a, b]).any(axis=1)]
+        # only the edges whose boxes come within 1.01 reaches of e's on every axis can be that
+        # close (their distance is at least the gap between the boxes along any axis)
+        lo_e, hi_e = np.minimum(x[a], x[b]), np.maximum(x[a], x[b])
+        lo_f = np.minimum(x[edges[f, 0]], x[edges[f, 1]])
+        hi_f = np.maximum(x[edges[f, 0]], x[edges[f, 1]])
+        gap = np.maximum(lo_f - hi_e, lo_e - hi_f).max(axis=1)
+        f = f[gap < (edge_reach[e] + edge_reach[f]) * 1.01]
         # segment–segment distance, densely sampled along e against f exactly
         pts = x[a] + s[:, None] * (x[b] - x[a])  # (401, 3)
         c, d = x[edges[f, 0]], x[edges[f, 1]]
