@@ -167,6 +167,18 @@ def _refit(x0, reach, tris, orphans, order, left, right, first, end, ilo, ihi, l
                 hi[node, d] = max(hi[lt, d], hi[rt, d])
 
 
+@numba.njit(cache=True)
+def _edge_boxes(x0, reach, edges, elo, ehi, ereach):
+    """Each edge's box at ``x0`` and its reach (the larger of its ends'): what the edge–edge test
+    reads for every pair of overlapping items, made once a search."""
+    for e in range(edges.shape[0]):
+        e0, e1 = edges[e, 0], edges[e, 1]
+        for d in range(3):
+            elo[e, d] = min(x0[e0, d], x0[e1, d])
+            ehi[e, d] = max(x0[e0, d], x0[e1, d])
+        ereach[e] = max(reach[e0], reach[e1])
+
+
 @numba.njit(cache=True, inline="always")
 def _apart(lo, hi, a, b):
     return (
@@ -176,6 +188,19 @@ def _apart(lo, hi, a, b):
         or lo[b, 1] > hi[a, 1]
         or lo[a, 2] > hi[b, 2]
         or lo[b, 2] > hi[a, 2]
+    )
+
+
+@numba.njit(cache=True, inline="always")
+def _outside(ilo, ihi, q, lo, hi, node):
+    """Whether item ``q``'s box misses node ``node``'s."""
+    return (
+        ilo[q, 0] > hi[node, 0]
+        or lo[node, 0] > ihi[q, 0]
+        or ilo[q, 1] > hi[node, 1]
+        or lo[node, 1] > ihi[q, 1]
+        or ilo[q, 2] > hi[node, 2]
+        or lo[node, 2] > ihi[q, 2]
     )
 
 
@@ -222,6 +247,9 @@ def _items(
     edges,
     own_v,
     own_e,
+    elo,
+    ehi,
+    ereach,
     order,
     ilo,
     ihi,
@@ -260,24 +288,24 @@ def _items(
         if e < 0:
             break
         e0, e1 = edges[e, 0], edges[e, 1]
-        r_e = max(reach[e0], reach[e1])
+        r_e = ereach[e]
         for c2 in range(3):
             f = own_e[t, c2]
             if f < 0:
                 break
+            r = r_e + ereach[f]
+            if (
+                elo[e, 0] - ehi[f, 0] >= r
+                or elo[f, 0] - ehi[e, 0] >= r
+                or elo[e, 1] - ehi[f, 1] >= r
+                or elo[f, 1] - ehi[e, 1] >= r
+                or elo[e, 2] - ehi[f, 2] >= r
+                or elo[f, 2] - ehi[e, 2] >= r
+            ):
+                continue  # farther apart than r along an axis
             f0, f1 = edges[f, 0], edges[f, 1]
             if f0 == e0 or f0 == e1 or f1 == e0 or f1 == e1:
                 continue
-            r = r_e + max(reach[f0], reach[f1])
-            if (
-                min(x0[e0, 0], x0[e1, 0]) - max(x0[f0, 0], x0[f1, 0]) >= r
-                or min(x0[f0, 0], x0[f1, 0]) - max(x0[e0, 0], x0[e1, 0]) >= r
-                or min(x0[e0, 1], x0[e1, 1]) - max(x0[f0, 1], x0[f1, 1]) >= r
-                or min(x0[f0, 1], x0[f1, 1]) - max(x0[e0, 1], x0[e1, 1]) >= r
-                or min(x0[e0, 2], x0[e1, 2]) - max(x0[f0, 2], x0[f1, 2]) >= r
-                or min(x0[f0, 2], x0[f1, 2]) - max(x0[e0, 2], x0[e1, 2]) >= r
-            ):
-                continue  # farther apart than r along an axis
             d = closest_on_segments(x0, e0, e1, f0, f1)[2]
             if d >= r:
                 continue
@@ -310,6 +338,10 @@ def _traverse(
     edges,
     own_v,
     own_e,
+    elo,
+    ehi,
+    ereach,
+    leaf_cap,
     cap_vf,
     cap_ee,
     vf,
@@ -322,9 +354,12 @@ def _traverse(
     the primitives of each overlapping pair of items in two overlapping leaves (module docstring);
     its particle–triangle pairs go to rows ``task·cap_vf`` on of ``vf``, its edge pairs to
     ``task·cap_ee`` on of ``ee``, and ``counts[task]`` says how many (possibly more than the rows:
-    then run again)."""
+    then run again). Of two different leaves, only the items whose boxes reach the other leaf's
+    box are paired (the rest can overlap none of its items), in the same order."""
     for k in numba.prange(tasks.shape[0]):
         stack = np.empty((stack_size, 2), np.int64)
+        near_a = np.empty(leaf_cap, np.int64)
+        near_b = np.empty(leaf_cap, np.int64)
         stack[0, 0], stack[0, 1] = tasks[k, 0], tasks[k, 1]
         top = 0
         m_vf = m_ee = 0
@@ -351,8 +386,28 @@ def _traverse(
                 stack[top + 2, 0], stack[top + 2, 1] = a, left[b]
                 top += 2
                 continue
-            for qs in range(first[a], end[a]):  # two leaves (or one, against itself)
-                for qt in range(first[b] if a != b else qs + 1, end[b]):
+            if a == b:  # a leaf against itself: each pair of its items once
+                n_a = 0
+                for qs in range(first[a], end[a]):
+                    near_a[n_a] = qs
+                    near_b[n_a] = qs
+                    n_a += 1
+                n_b = n_a
+            else:  # two leaves: the items reaching the other leaf's box
+                n_a = 0
+                for qs in range(first[a], end[a]):
+                    if not _outside(ilo, ihi, qs, lo, hi, b):
+                        near_a[n_a] = qs
+                        n_a += 1
+                n_b = 0
+                for qt in range(first[b], end[b]):
+                    if not _outside(ilo, ihi, qt, lo, hi, a):
+                        near_b[n_b] = qt
+                        n_b += 1
+            for i in range(n_a):
+                qs = near_a[i]
+                for j in range(i + 1 if a == b else 0, n_b):
+                    qt = near_b[j]
                     if _apart(ilo, ihi, qs, qt):
                         continue
                     m_vf, m_ee = _items(
@@ -364,6 +419,9 @@ def _traverse(
                         edges,
                         own_v,
                         own_e,
+                        elo,
+                        ehi,
+                        ereach,
                         order,
                         ilo,
                         ihi,
@@ -468,6 +526,10 @@ class TriangleTree:
         self.ilo = np.empty((len(self.order), 3))
         self.ihi = np.empty((len(self.order), 3))
         self.tri_reach = np.empty(len(self.tris))
+        self.elo = np.empty((len(self.edges), 3))
+        self.ehi = np.empty((len(self.edges), 3))
+        self.ereach = np.empty(len(self.edges))
+        self.leaf_cap = int((self.end - self.first)[self.left < 0].max())
         self.caps = np.array([16, 16], np.int64)  # rows per task, grown as a cloth needs
 
     def pairs(self, x0, radius):
@@ -502,6 +564,7 @@ class TriangleTree:
             self.hi,
             self.tri_reach,
         )
+        _edge_boxes(x0, reach, self.edges, self.elo, self.ehi, self.ereach)
         n_tasks = len(self.tasks)
         while True:
             cap_vf, cap_ee = (int(c) for c in self.caps)
@@ -529,6 +592,10 @@ class TriangleTree:
                 self.edges,
                 self.own_v,
                 self.own_e,
+                self.elo,
+                self.ehi,
+                self.ereach,
+                self.leaf_cap,
                 cap_vf,
                 cap_ee,
                 vf,
