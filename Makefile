@@ -24,11 +24,12 @@ MAKEFLAGS += --jobs=2
 .PHONY: install run test lint docs fuzz bench bench-peers bench-robots bench-learning clean
 install: $(STAMP) $(KERNELS) $(MSGS)
 
-# --no-compile: Python compiles a module's bytecode when it is first imported (a third of pip's
-# time here went to compiling every module of every wheel, most never imported)
+# (pip byte-compiles every wheel: a third of its time here, but --no-compile is slower in the end:
+# these machines set PYTHONDONTWRITEBYTECODE=1, so every process would compile what it imports,
+# Ray's workers and the nodes' processes included: docs/BENCHMARKS.md §11)
 $(STAMP): requirements.txt setup.py pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --disable-pip-version-check -q --no-compile -r requirements.txt
+	$(PY) -m pip install --disable-pip-version-check -q -r requirements.txt
 	$(PY) -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation \
 		--config-settings editable_mode=compat -e .
 	@touch $@
