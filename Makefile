@@ -8,7 +8,9 @@ STAMP  := $(VENV)/.installed
 # with rosidl + cmake from the wheels: tools/build_interfaces.py
 MSGS   := build/interfaces/.built
 # numba's kernels compiled into their on-disk cache (again when the package's code changes: a
-# fraction of a second when the cache holds them)
+# fraction of a second when the cache holds them), and the package's bytecode: these machines set
+# PYTHONDONTWRITEBYTECODE=1, so without it every process (a node, a CLI, a Ray worker) compiled
+# the package's modules again as it imported them (0.5-0.8 s a process: docs/BENCHMARKS.md §11)
 KERNELS := $(VENV)/.kernels
 # scipy's sparse solvers and numpy's BLAS oversubscribe 2 cores badly when threaded.
 export OPENBLAS_NUM_THREADS ?= 1
@@ -35,6 +37,7 @@ $(STAMP): requirements.txt setup.py pyproject.toml
 	@touch $@
 
 $(KERNELS): $(STAMP) $(shell find cloth_sim -name '*.py')
+	$(PY) -m compileall -q cloth_sim
 	$(PY) -c "from cloth_sim.simulator import compile_kernels as c; print(f'kernels compiled in {c():.1f} s')"
 	@touch $@
 
