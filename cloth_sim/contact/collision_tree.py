@@ -180,27 +180,15 @@ def _edge_boxes(x0, reach, edges, elo, ehi, ereach):
 
 
 @numba.njit(cache=True, inline="always")
-def _apart(lo, hi, a, b):
+def _apart(lo_a, hi_a, a, lo_b, hi_b, b):
+    """Whether box ``a`` of ``(lo_a, hi_a)`` misses box ``b`` of ``(lo_b, hi_b)``."""
     return (
-        lo[a, 0] > hi[b, 0]
-        or lo[b, 0] > hi[a, 0]
-        or lo[a, 1] > hi[b, 1]
-        or lo[b, 1] > hi[a, 1]
-        or lo[a, 2] > hi[b, 2]
-        or lo[b, 2] > hi[a, 2]
-    )
-
-
-@numba.njit(cache=True, inline="always")
-def _outside(ilo, ihi, q, lo, hi, node):
-    """Whether item ``q``'s box misses node ``node``'s."""
-    return (
-        ilo[q, 0] > hi[node, 0]
-        or lo[node, 0] > ihi[q, 0]
-        or ilo[q, 1] > hi[node, 1]
-        or lo[node, 1] > ihi[q, 1]
-        or ilo[q, 2] > hi[node, 2]
-        or lo[node, 2] > ihi[q, 2]
+        lo_a[a, 0] > hi_b[b, 0]
+        or lo_b[b, 0] > hi_a[a, 0]
+        or lo_a[a, 1] > hi_b[b, 1]
+        or lo_b[b, 1] > hi_a[a, 1]
+        or lo_a[a, 2] > hi_b[b, 2]
+        or lo_b[b, 2] > hi_a[a, 2]
     )
 
 
@@ -374,7 +362,7 @@ def _traverse(
                     stack[top + 3, 0], stack[top + 3, 1] = left[a], left[a]
                     top += 3
                     continue
-            elif _apart(lo, hi, a, b):
+            elif _apart(lo, hi, a, lo, hi, b):
                 continue
             elif left[a] >= 0 and (left[b] < 0 or size[a] >= size[b]):  # open the larger
                 stack[top + 1, 0], stack[top + 1, 1] = right[a], b
@@ -396,19 +384,19 @@ def _traverse(
             else:  # two leaves: the items reaching the other leaf's box
                 n_a = 0
                 for qs in range(first[a], end[a]):
-                    if not _outside(ilo, ihi, qs, lo, hi, b):
+                    if not _apart(ilo, ihi, qs, lo, hi, b):
                         near_a[n_a] = qs
                         n_a += 1
                 n_b = 0
                 for qt in range(first[b], end[b]):
-                    if not _outside(ilo, ihi, qt, lo, hi, a):
+                    if not _apart(ilo, ihi, qt, lo, hi, a):
                         near_b[n_b] = qt
                         n_b += 1
             for i in range(n_a):
                 qs = near_a[i]
                 for j in range(i + 1 if a == b else 0, n_b):
                     qt = near_b[j]
-                    if _apart(ilo, ihi, qs, qt):
+                    if _apart(ilo, ihi, qs, ilo, ihi, qt):
                         continue
                     m_vf, m_ee = _items(
                         x0,
