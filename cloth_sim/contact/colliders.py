@@ -27,7 +27,14 @@ import numba
 import numpy as np
 
 from . import triangle_meshes
-from .geometry import matrix_quaternion, positive, quaternion_matrix, unit_quaternion, vector
+from .geometry import (
+    matrix_quaternion,
+    positive,
+    quaternion_matrix,
+    read_only,
+    unit_quaternion,
+    vector,
+)
 from .triangle_meshes import TriangleMesh, mesh_distance
 
 PLANE, SPHERE, BOX, CAPSULE, CYLINDER, MESH = 0, 1, 2, 3, 4, 5
@@ -100,8 +107,7 @@ class Collider:
 
     def signed_distance(self, points) -> np.ndarray:
         """Signed distance of ``(k, 3)`` points from the surface (negative inside)."""
-        # a copy, writable whoever owns the points: one compiled signature
-        pts = np.array(points, dtype=np.float64).reshape(-1, 3)
+        pts = read_only(np.reshape(points, (-1, 3)), np.float64)
         return _distances(self.kind, self.position, self.rotation, self.geometry, pts, self._bank)
 
     #: the bank :meth:`signed_distance` reads (a Mesh's own mesh at index 0)

@@ -32,7 +32,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from .geometry import closest_on_segments, point_triangle_distance
+from .geometry import closest_on_segments, point_triangle_distance, read_only
 
 #: the traversal's tasks each hold at most 1/TASKS of the items against themselves or of all pairs
 #: of items between two subtrees (:func:`_tasks`: ~200 tasks at 64×64, fewer on a small cloth)
@@ -457,15 +457,6 @@ def _owned(slots, owner_of) -> np.ndarray:
     )
 
 
-def _read_only(a, dtype) -> np.ndarray:
-    """``a`` as a C-contiguous read-only array (a view where it already is one): whoever owns the
-    positions (a state's writable array, a simulator's read-only view), the traversal and refit
-    see one type and are compiled once (a second signature compiled for 26 s inside a test)."""
-    out = np.ascontiguousarray(a, dtype=dtype).view()
-    out.flags.writeable = False
-    return out
-
-
 def reaches(radius, n: int) -> np.ndarray:
     """Per-particle reaches from a search radius: a number ``R`` (every pair within ``R``) is half
     of it for each particle; an array of ``n`` is taken as it is."""
@@ -485,7 +476,7 @@ class TriangleTree:
     self-collision keeps (``self_collision._features``)."""
 
     def __init__(self, tris, rest, features, leaf: int = LEAF):
-        self.tris = _read_only(tris, np.int64)
+        self.tris = read_only(tris, np.int64)
         rest = np.asarray(rest, dtype=np.float64)
         n = len(rest)
         self.edges, tri_edge, edge_owner, _, vertex_owner = features[:5]
@@ -527,7 +518,7 @@ class TriangleTree:
         (:func:`reaches`; a pair is kept when its distance is below the sum of its two sides'
         reaches, a triangle's or an edge's the largest of its corners') — with those distances, in
         a fixed order, the same at any thread count."""
-        x0 = _read_only(x0, np.float64)
+        x0 = read_only(x0, np.float64)
         if self.empty:
             return (
                 np.empty((0, 2), np.int64),
@@ -535,7 +526,7 @@ class TriangleTree:
                 np.empty((0, 2), np.int64),
                 np.empty(0),
             )
-        reach = _read_only(reaches(radius, len(x0)), np.float64)
+        reach = read_only(reaches(radius, len(x0)), np.float64)
         _refit(
             x0,
             reach,

@@ -1,5 +1,6 @@
 """Geometric primitives the contact code shares: checks of the vectors, lengths and orientations a
-user gives (each refusal names the field), rotation matrices of quaternions, and the closest points
+user gives (each refusal names the field), the arrays the kernels are handed (:func:`read_only`),
+rotation matrices of quaternions, and the closest points
 of a point and a triangle and of two segments (Ericson, *Real-Time Collision Detection*, 5.1.5 and
 5.1.9), compiled with numba for the kernels of :mod:`.colliders`, :mod:`.self_collision`,
 :mod:`.collision_tree` and :mod:`cloth_sim.integrators.vbd`.
@@ -22,6 +23,16 @@ def vector(name: str, value, length: int = 3) -> np.ndarray:
     if a.shape != (length,) or not np.all(np.isfinite(a)):
         raise ValueError(f"{name} must be {length} finite numbers, got {value!r}")
     return a
+
+
+def read_only(a, dtype) -> np.ndarray:
+    """``a`` as a C-contiguous read-only array of ``dtype`` (a view where it already is one):
+    whoever owns the array (a state's writable positions, a simulator's read-only view), a kernel
+    sees one type and numba compiles it once (a second signature compiled for 26 s inside a test:
+    docs/BENCHMARKS.md §11)."""
+    out = np.ascontiguousarray(a, dtype=dtype).view()
+    out.flags.writeable = False
+    return out
 
 
 def positive(name: str, value) -> float:
