@@ -31,26 +31,26 @@ def _task_particles(tree: TriangleTree) -> list:
     return [np.unique(np.concatenate([node(a), node(b)])) for a, b in tree.tasks]
 
 
+def _moves(sim, steps: int) -> np.ndarray:
+    """``(steps, n)``: how far each particle moved in each of the next ``steps`` steps."""
+    out = np.empty((steps, sim.model.n_particles))
+    for k in range(steps):
+        prev = sim.positions.copy()
+        sim.step()
+        out[k] = np.linalg.norm(sim.positions - prev, axis=1)
+    return out
+
+
 def main() -> None:
     sim = load_scene("tshirt").build_simulator()
     sc = sim.stages[2]  # the self-collision stage: its triangles and topology
     print("second  per-step move (mm): max    p99    p90    median")
-    prev = sim.positions.copy()
     for second in range(1, 6):
-        moves = []
-        for _ in range(60):
-            sim.step()
-            moves.append(np.linalg.norm(sim.positions - prev, axis=1))
-            prev = sim.positions.copy()
-        q = np.percentile(np.array(moves[-10:]), [100, 99, 90, 50]) * 1e3
+        q = np.percentile(_moves(sim, 60)[-10:], [100, 99, 90, 50]) * 1e3
         print(f"{second:6d}  {q[0]:27.3f} {q[1]:6.3f} {q[2]:6.3f} {q[3]:8.4f}")
     tree = TriangleTree(sc.triangles, sim.model.positions, sc.features)
     parts = _task_particles(tree)
-    moves = []
-    for _ in range(120):
-        sim.step()
-        moves.append(np.linalg.norm(sim.positions - prev, axis=1))
-        prev = sim.positions.copy()
+    moves = _moves(sim, 120)
     print(f"\n{len(parts)} tasks, {np.mean([len(p) for p in parts]):.0f} particles a task")
     print("budget (mm)  tasks searching again a step")
     for budget in (0.5e-3, 1e-3, 2e-3, 4e-3):
