@@ -10,7 +10,7 @@ MSGS   := build/interfaces/.built
 # numba's kernels compiled into their on-disk cache (again when the package's code changes: a
 # fraction of a second when the cache holds them), and the package's bytecode: these machines set
 # PYTHONDONTWRITEBYTECODE=1, so without it every process (a node, a CLI, a Ray worker) compiled
-# the package's modules again as it imported them (0.5-0.8 s a process: docs/BENCHMARKS.md §11)
+# the package's modules again as it imported them (0.2-0.5 s a process: docs/BENCHMARKS.md §11)
 KERNELS := $(VENV)/.kernels
 # scipy's sparse solvers and numpy's BLAS oversubscribe 2 cores badly when threaded.
 export OPENBLAS_NUM_THREADS ?= 1
