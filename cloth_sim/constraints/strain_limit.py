@@ -289,7 +289,7 @@ class StrainLimit(Stage):
             w = np.where(model.pinned, 0.0, 1.0 / model.masses)
             top = w.max()
             self._w = np.ascontiguousarray(w / top if top > 0 else w)
-            self._scratch = strain_projection.Scratch(self._springs, model.n_particles)
+            self._scratch = strain_projection.Scratch(self._springs, model.positions)
         sp = strain_projection
         return sp.project(
             x,

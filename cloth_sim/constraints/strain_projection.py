@@ -25,18 +25,28 @@ bound whose ``λ`` came out negative (pushed out) leave the set and solving agai
 solves below ``λ``'s sign near 0 is noise, and the set cycled. (Both measured: docs/BENCHMARKS.md
 §7.)
 
-The system is solved by conjugate gradients preconditioned by its diagonal, matrix-free, over the
-active springs and their particles only (a compact numbering, so a step with a few hundred active
-springs touches a few hundred), and loosely (:data:`CG_TOLERANCE`): the next iteration linearises
-again anyway. ``ε`` (:data:`REGULARISATION`, the inverse masses scaled so the
-largest is 1) keeps the system definite where the active springs are redundant — the four sides
-and two diagonals of a quad lying flat ask six things of its four points' five in-plane freedoms;
-with ε = 1e-6 a crumpled cloth with every spring over its bound diverged. Each iteration leaves
-``ε/(w_i + w_j + ε)`` of a lone spring's excess.
+The system is solved by conjugate gradients, matrix-free, over the active springs and their
+particles only (a compact numbering, so a step with a few hundred active springs touches a few
+hundred), and loosely (:data:`CG_TOLERANCE`): the next iteration linearises again anyway. Its
+preconditioner is the system's blocks along **chains**: the springs that go on straight through
+a particle (:func:`chain_neighbours`: on a grid its rows, columns and diagonals) couple only to
+the ones before and after them, so a chain's block is tridiagonal and ``L D Lᵀ`` solves it
+exactly in O(length). A hanging cloth's load runs down such chains, 64 springs long at 64×64:
+the diagonal alone (Jacobi) saw each as a 1-D Laplacian and took ~32 CG iterations a solve to
+bring its residual to 0.3 of the first; the chains take ~6 (the same set, the same bound, the
+projection 2× faster: docs/BENCHMARKS.md §11). A solve's set is numbered chain by chain
+(:func:`_chain_order`), so the blocks are consecutive and their solve two passes over the set; a
+closed ring of springs is cut where its walk starts.
 
-What it costs, against Provot's passes, and the preconditioner tried (symmetric Gauss–Seidel,
-not kept): docs/BENCHMARKS.md §3 and §7. The worst case is a crumpled cloth with every spring
-over: all active and redundant.
+``ε`` (:data:`REGULARISATION`, the inverse masses scaled so the largest is 1) keeps the system
+definite where the active springs are redundant — the four sides and two diagonals of a quad lying
+flat ask six things of its four points' five in-plane freedoms; with ε = 1e-6 a crumpled cloth
+with every spring over its bound diverged. Each iteration leaves ``ε/(w_i + w_j + ε)`` of a lone
+spring's excess.
+
+What it costs, against Provot's passes, and the preconditioner tried before (symmetric
+Gauss–Seidel, not kept): docs/BENCHMARKS.md §3 and §7. The worst case is a crumpled cloth with
+every spring over: all active and redundant.
 
 Each iteration moves the particles by ``−W Jᵀ λ``, so the mass-weighted sum of the moves is zero
 where no pin takes part: the centre of mass (and the linear momentum, the velocities following the
@@ -61,6 +71,9 @@ _JOIN = 1e-9
 #: within this of ``τ`` (below it: held at its length, not pulled out to the bound; module
 #: docstring)
 WARM_START = 0.005
+#: two springs at a particle continue each other in a chain of the preconditioner when the cosine
+#: of their directions is below ``−STRAIGHT`` (the module docstring)
+STRAIGHT = 0.9
 
 
 @numba.njit(cache=True, inline="always")
@@ -93,41 +106,58 @@ def _apply(a, ea, eb, nrm, wl, g, eps, lam):
     )
 
 
+@numba.njit(cache=True, inline="always")
+def _precondition(k, r, z, low, piv, y):
+    """``z = M⁻¹ r``, ``M`` the chains' tridiagonal blocks as ``L D Lᵀ`` (``low``: ``L``'s
+    subdiagonal, 0 where a chain starts; ``piv``: ``D``); the set is numbered chain by chain."""
+    prev = 0.0
+    for a in range(k):
+        prev = r[a] - low[a] * prev
+        y[a] = prev
+    nxt = 0.0
+    for a in range(k - 1, -1, -1):
+        nxt = y[a] / piv[a] - (low[a + 1] * nxt if a + 1 < k else 0.0)
+        z[a] = nxt
+
+
 @numba.njit(cache=True)
-def _solve(k, q, ea, eb, wl, nrm, diag, c, lam, eps, rel_tol, max_it, r, z, p, ap, g):
-    """Preconditioned CG for ``(J W Jᵀ + ε) λ = c`` from ``λ = 0``; returns its iterations."""
-    rz = 0.0
+def _solve(k, q, ea, eb, wl, nrm, low, piv, c, lam, eps, rel_tol, max_it, r, z, p, ap, y, g):
+    """CG for ``(J W Jᵀ + ε) λ = c`` from ``λ = 0``, preconditioned by the chains' blocks
+    (:func:`_precondition`); returns its iterations."""
     r0 = 0.0
     for a in range(k):
         lam[a] = 0.0
         r[a] = c[a]
-        z[a] = c[a] / diag[a]
+        r0 += r[a] * r[a]
+    _precondition(k, r, z, low, piv, y)
+    rz = 0.0
+    for a in range(k):
         p[a] = z[a]
         rz += r[a] * z[a]
-        r0 += r[a] * r[a]
     goal = rel_tol * rel_tol * r0
     it = 0
     while it < max_it and r0 > 0.0:
         _scatter(g, q, k, ea, eb, nrm, p)
         pap = 0.0
         for a in range(k):
-            y = _apply(a, ea, eb, nrm, wl, g, eps, p)
-            ap[a] = y
-            pap += p[a] * y
+            v = _apply(a, ea, eb, nrm, wl, g, eps, p)
+            ap[a] = v
+            pap += p[a] * v
         if pap <= 0.0:
             break
         alpha = rz / pap
         rr = 0.0
-        rz_new = 0.0
         for a in range(k):
             lam[a] += alpha * p[a]
             r[a] -= alpha * ap[a]
-            z[a] = r[a] / diag[a]
             rr += r[a] * r[a]
-            rz_new += r[a] * z[a]
         it += 1
         if rr <= goal:
             break
+        _precondition(k, r, z, low, piv, y)
+        rz_new = 0.0
+        for a in range(k):
+            rz_new += r[a] * z[a]
         beta = rz_new / rz
         rz = rz_new
         for a in range(k):
@@ -135,11 +165,103 @@ def _solve(k, q, ea, eb, wl, nrm, diag, c, lam, eps, rel_tol, max_it, r, z, p, a
     return it
 
 
+@numba.njit(cache=True)
+def _chain_order(k, act, springs, nb, mark, order, link):
+    """Renumber the set ``act[:k]`` chain by chain (``nb``: :func:`chain_neighbours`), a chain's
+    springs one after the other; ``link[a]``: the particle spring ``a`` shares with spring
+    ``a − 1`` of its chain, −1 where a chain starts. ``mark`` (−1 outside the set) is left so."""
+    for a in range(k):
+        mark[act[a]] = 0  # in the set, not yet placed
+    n = 0
+    # from the ends of the open chains first (a spring with at most one chain neighbour in the
+    # set), then whatever is left, which lies on closed rings: each cut where its walk starts
+    for rings in range(2):
+        for a in range(k):
+            s = act[a]
+            if mark[s] != 0:
+                continue
+            if rings == 0:
+                inside = 0
+                for e in range(2):
+                    t = nb[s, e]
+                    if t >= 0 and mark[t] >= 0:
+                        inside += 1
+                if inside == 2:
+                    continue
+            before = -1
+            joint = -1
+            cur = s
+            while True:
+                order[n] = cur
+                link[n] = joint
+                mark[cur] = 1
+                n += 1
+                nxt = -1
+                for e in range(2):
+                    t = nb[cur, e]
+                    if t >= 0 and t != before and mark[t] == 0:
+                        nxt = t
+                        joint = springs[cur, e]
+                        break
+                if nxt < 0:
+                    break
+                before = cur
+                cur = nxt
+    for a in range(k):
+        act[a] = order[a]
+        mark[order[a]] = -1
+
+
+@numba.njit(cache=True)
+def chain_neighbours(springs, positions, inc_ptr, inc, straight):
+    """Per spring and end, the spring that goes on straight through that end, −1 for none: at
+    each particle its springs are paired, the most nearly opposite first, while the cosine of
+    their directions (away from the particle) is below ``−straight``. On a grid the chains are
+    its lines: rows, columns and diagonals. ``inc_ptr``, ``inc``: each particle's springs (CSR)."""
+    m = springs.shape[0]
+    nb = np.full((m, 2), -1, np.int64)
+    for p in range(inc_ptr.shape[0] - 1):
+        lo = inc_ptr[p]
+        d = inc_ptr[p + 1] - lo
+        if d < 2:
+            continue
+        u = np.empty((d, 3))
+        for h in range(d):
+            s = inc[lo + h]
+            o = springs[s, 1] if springs[s, 0] == p else springs[s, 0]
+            v = positions[o] - positions[p]
+            u[h] = v / np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+        pairs = d * (d - 1) // 2
+        cos = np.empty(pairs)
+        first = np.empty(pairs, np.int64)
+        second = np.empty(pairs, np.int64)
+        t = 0
+        for h in range(d):
+            for i in range(h + 1, d):
+                cos[t] = u[h, 0] * u[i, 0] + u[h, 1] * u[i, 1] + u[h, 2] * u[i, 2]
+                first[t] = h
+                second[t] = i
+                t += 1
+        taken = np.zeros(d, np.uint8)
+        for t in np.argsort(cos, kind="mergesort"):
+            if cos[t] >= -straight:
+                break
+            h, i = first[t], second[t]
+            if taken[h] or taken[i]:
+                continue
+            taken[h] = 1
+            taken[i] = 1
+            sh, si = inc[lo + h], inc[lo + i]
+            nb[sh, 0 if springs[sh, 0] == p else 1] = si
+            nb[si, 0 if springs[si, 0] == p else 1] = sh
+    return nb
+
+
 class Scratch:
     """The arrays :func:`project` works in, made once per spring set (a step allocates none)."""
 
-    def __init__(self, springs: np.ndarray, n: int):
-        m = len(springs)
+    def __init__(self, springs: np.ndarray, positions: np.ndarray):
+        m, n = len(springs), len(positions)
         # each particle's springs (CSR): after a solve, only the moved particles' springs can have
         # changed length, so only those are measured again (docs/BENCHMARKS.md §7)
         ends = np.concatenate([springs[:, 0], springs[:, 1]]).astype(np.int64)
@@ -148,15 +270,26 @@ class Scratch:
         np.add.at(self.inc_ptr, ends + 1, 1)
         self.inc_ptr = np.cumsum(self.inc_ptr)
         self.inc = np.ascontiguousarray(np.r_[np.arange(m), np.arange(m)][order], dtype=np.int64)
+        #: per spring and end, the spring it goes on into straight (the preconditioner's chains)
+        self.nb = chain_neighbours(
+            np.array(springs, np.int64),  # copies: writable, one signature whatever is given
+            np.array(positions, np.float64),
+            self.inc_ptr,
+            self.inc,
+            STRAIGHT,
+        )
         self.seen = np.full(m, -1, np.int64)
         self.cand = np.empty(m, np.int64)
         self.inset = np.zeros(m, np.uint8)
         self.prev = np.zeros(m, np.uint8)  # the last call's set (the warm start)
         self.act = np.empty(m, np.int64)
+        self.mark = np.full(m, -1, np.int64)
+        self.order = np.empty(m, np.int64)
+        self.link = np.empty(m, np.int64)
         self.ea = np.empty(m, np.int64)
         self.eb = np.empty(m, np.int64)
         self.nrm = np.empty((m, 3))
-        self.spring = np.empty((7, m))  # c, diag, λ, r, z, p, Ap
+        self.spring = np.empty((9, m))  # c, L's subdiagonal, D, λ, r, z, p, Ap, y
         self.pl = np.empty(n, np.int64)
         self.loc = np.full(n, -1, np.int64)
         self.wl = np.empty(n)
@@ -173,6 +306,10 @@ class Scratch:
             self.prev,
             self.inset,
             self.act,
+            self.nb,
+            self.mark,
+            self.order,
+            self.link,
             self.ea,
             self.eb,
             self.nrm,
@@ -204,6 +341,10 @@ def project(
     prev,
     inset,
     act,
+    nb,
+    mark,
+    order,
+    link,
     ea,
     eb,
     nrm,
@@ -221,7 +362,7 @@ def project(
     then replaced by this call's. Returns the iterations (linearise and solve) it took; ``stats``:
     those, the CG iterations, the active springs and the worst excess strain left."""
     m = springs.shape[0]
-    c, diag, lam, r, z, p, ap = (
+    c, low, piv, lam, r, z, p, ap, y = (
         spring[0],
         spring[1],
         spring[2],
@@ -229,6 +370,8 @@ def project(
         spring[4],
         spring[5],
         spring[6],
+        spring[7],
+        spring[8],
     )
     for s in range(m):
         inset[s] = 0
@@ -278,7 +421,8 @@ def project(
                 k += 1
         if worst <= tol or outer >= max_outer:
             break
-        # the set's particles, numbered locally
+        # the set chain by chain, and its particles numbered locally
+        _chain_order(k, act, springs, nb, mark, order, link)
         q = 0
         for a in range(k):
             s = act[a]
@@ -296,6 +440,9 @@ def project(
                 q += 1
             ea[a] = loc[i]
             eb[a] = loc[j]
+        # the linearised constraints, and the chains' blocks of J W Jᵀ + ε factored: a spring's
+        # diagonal w_i + w_j + ε, and ±w_p n_a·n_b with the one before it in its chain (p the
+        # particle they share; − where p ends one spring and starts the other)
         for a in range(k):
             s = act[a]
             i = springs[s, 0]
@@ -308,9 +455,28 @@ def project(
             nrm[a, 1] = dy / l
             nrm[a, 2] = dz / l
             c[a] = max(l - (1.0 + tau) * rest[s], 0.0)  # within the bound: held, not pulled out
-            diag[a] = wl[ea[a]] + wl[eb[a]] + eps
+            d = wl[ea[a]] + wl[eb[a]] + eps
+            low[a] = 0.0
+            pj = link[a]
+            if pj >= 0:
+                before = act[a - 1]
+                sign = (1.0 if springs[before, 1] == pj else -1.0) * (
+                    1.0 if springs[s, 1] == pj else -1.0
+                )
+                off = (
+                    sign
+                    * w[pj]
+                    * (
+                        nrm[a - 1, 0] * nrm[a, 0]
+                        + nrm[a - 1, 1] * nrm[a, 1]
+                        + nrm[a - 1, 2] * nrm[a, 2]
+                    )
+                )
+                low[a] = off / piv[a - 1]
+                d -= low[a] * off
+            piv[a] = d
         cg_total += _solve(
-            k, q, ea, eb, wl, nrm, diag, c, lam, eps, cg_tol, max_cg, r, z, p, ap, g
+            k, q, ea, eb, wl, nrm, low, piv, c, lam, eps, cg_tol, max_cg, r, z, p, ap, y, g
         )
         _scatter(g, q, k, ea, eb, nrm, lam)
         for t in range(q):
