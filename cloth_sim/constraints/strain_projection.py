@@ -94,74 +94,80 @@ def _scatter(g, q, k, ea, eb, nrm, lam):
         g[i, 2] -= nrm[a, 2] * v
 
 
-@numba.njit(cache=True, inline="always")
-def _apply(a, ea, eb, nrm, wl, g, eps, lam):
-    """Row ``a`` of ``(J W Jᵀ + ε) λ`` given ``g = Jᵀ λ``."""
-    i, j = ea[a], eb[a]
-    return (
-        nrm[a, 0] * (wl[j] * g[j, 0] - wl[i] * g[i, 0])
-        + nrm[a, 1] * (wl[j] * g[j, 1] - wl[i] * g[i, 1])
-        + nrm[a, 2] * (wl[j] * g[j, 2] - wl[i] * g[i, 2])
-        + eps * lam[a]
-    )
-
-
-@numba.njit(cache=True, inline="always")
-def _precondition(k, r, z, low, piv, y):
-    """``z = M⁻¹ r``, ``M`` the chains' tridiagonal blocks as ``L D Lᵀ`` (``low``: ``L``'s
-    subdiagonal, 0 where a chain starts; ``piv``: ``D``); the set is numbered chain by chain."""
+@numba.njit(cache=True)
+def _solve(k, q, ea, eb, wl, nrm, low, dinv, c, lam, eps, rel_tol, max_it, r, z, p, ap, y, g):
+    """CG for ``(J W Jᵀ + ε) λ = c`` from ``λ = 0``, preconditioned by the chains' blocks ``M``
+    factored as ``L D Lᵀ`` (``low``: ``L``'s subdiagonal, 0 where a chain starts; ``dinv``:
+    ``D⁻¹``; the set is numbered chain by chain); returns its iterations. ``z = M⁻¹ r`` is a
+    forward pass (``y``, beside the residual's update) and a backward one (beside ``r·z``)."""
+    r0 = 0.0
     prev = 0.0
     for a in range(k):
-        prev = r[a] - low[a] * prev
-        y[a] = prev
-    nxt = 0.0
-    for a in range(k - 1, -1, -1):
-        nxt = y[a] / piv[a] - (low[a + 1] * nxt if a + 1 < k else 0.0)
-        z[a] = nxt
-
-
-@numba.njit(cache=True)
-def _solve(k, q, ea, eb, wl, nrm, low, piv, c, lam, eps, rel_tol, max_it, r, z, p, ap, y, g):
-    """CG for ``(J W Jᵀ + ε) λ = c`` from ``λ = 0``, preconditioned by the chains' blocks
-    (:func:`_precondition`); returns its iterations."""
-    r0 = 0.0
-    for a in range(k):
         lam[a] = 0.0
+        p[a] = 0.0
         r[a] = c[a]
         r0 += r[a] * r[a]
-    _precondition(k, r, z, low, piv, y)
-    rz = 0.0
-    for a in range(k):
-        p[a] = z[a]
-        rz += r[a] * z[a]
+        prev = r[a] - low[a] * prev
+        y[a] = prev
     goal = rel_tol * rel_tol * r0
+    beta = 0.0
+    rz = 1.0
     it = 0
     while it < max_it and r0 > 0.0:
-        _scatter(g, q, k, ea, eb, nrm, p)
+        # z = M⁻¹ r (backward), r·z, and the search direction p = z + β p with Jᵀ p and W Jᵀ p
+        nxt = 0.0
+        rz_new = 0.0
+        for a in range(k - 1, -1, -1):
+            nxt = y[a] * dinv[a] - (low[a + 1] * nxt if a + 1 < k else 0.0)
+            z[a] = nxt
+            rz_new += r[a] * nxt
+        if it > 0:
+            beta = rz_new / rz
+        rz = rz_new
+        for t in range(q):
+            g[t, 0] = 0.0
+            g[t, 1] = 0.0
+            g[t, 2] = 0.0
+        for a in range(k):
+            v = z[a] + beta * p[a]
+            p[a] = v
+            i, j = ea[a], eb[a]
+            g[j, 0] += nrm[a, 0] * v
+            g[j, 1] += nrm[a, 1] * v
+            g[j, 2] += nrm[a, 2] * v
+            g[i, 0] -= nrm[a, 0] * v
+            g[i, 1] -= nrm[a, 1] * v
+            g[i, 2] -= nrm[a, 2] * v
+        for t in range(q):
+            g[t, 0] *= wl[t]
+            g[t, 1] *= wl[t]
+            g[t, 2] *= wl[t]
         pap = 0.0
         for a in range(k):
-            v = _apply(a, ea, eb, nrm, wl, g, eps, p)
+            i, j = ea[a], eb[a]
+            v = (
+                nrm[a, 0] * (g[j, 0] - g[i, 0])
+                + nrm[a, 1] * (g[j, 1] - g[i, 1])
+                + nrm[a, 2] * (g[j, 2] - g[i, 2])
+                + eps * p[a]
+            )
             ap[a] = v
             pap += p[a] * v
         if pap <= 0.0:
             break
         alpha = rz / pap
         rr = 0.0
+        prev = 0.0
         for a in range(k):
             lam[a] += alpha * p[a]
-            r[a] -= alpha * ap[a]
-            rr += r[a] * r[a]
+            ra = r[a] - alpha * ap[a]
+            r[a] = ra
+            rr += ra * ra
+            prev = ra - low[a] * prev
+            y[a] = prev
         it += 1
         if rr <= goal:
             break
-        _precondition(k, r, z, low, piv, y)
-        rz_new = 0.0
-        for a in range(k):
-            rz_new += r[a] * z[a]
-        beta = rz_new / rz
-        rz = rz_new
-        for a in range(k):
-            p[a] = z[a] + beta * p[a]
     return it
 
 
@@ -289,7 +295,7 @@ class Scratch:
         self.ea = np.empty(m, np.int64)
         self.eb = np.empty(m, np.int64)
         self.nrm = np.empty((m, 3))
-        self.spring = np.empty((9, m))  # c, L's subdiagonal, D, λ, r, z, p, Ap, y
+        self.spring = np.empty((9, m))  # c, L's subdiagonal, D⁻¹, λ, r, z, p, Ap, y
         self.pl = np.empty(n, np.int64)
         self.loc = np.full(n, -1, np.int64)
         self.wl = np.empty(n)
@@ -362,7 +368,7 @@ def project(
     then replaced by this call's. Returns the iterations (linearise and solve) it took; ``stats``:
     those, the CG iterations, the active springs and the worst excess strain left."""
     m = springs.shape[0]
-    c, low, piv, lam, r, z, p, ap, y = (
+    c, low, dinv, lam, r, z, p, ap, y = (
         spring[0],
         spring[1],
         spring[2],
@@ -472,11 +478,11 @@ def project(
                         + nrm[a - 1, 2] * nrm[a, 2]
                     )
                 )
-                low[a] = off / piv[a - 1]
+                low[a] = off * dinv[a - 1]
                 d -= low[a] * off
-            piv[a] = d
+            dinv[a] = 1.0 / d
         cg_total += _solve(
-            k, q, ea, eb, wl, nrm, low, piv, c, lam, eps, cg_tol, max_cg, r, z, p, ap, y, g
+            k, q, ea, eb, wl, nrm, low, dinv, c, lam, eps, cg_tol, max_cg, r, z, p, ap, y, g
         )
         _scatter(g, q, k, ea, eb, nrm, lam)
         for t in range(q):
