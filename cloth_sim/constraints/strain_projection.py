@@ -36,7 +36,9 @@ the diagonal alone (Jacobi) saw each as a 1-D Laplacian and took ~32 CG iteratio
 bring its residual to 0.3 of the first; the chains take ~6 (the same set, the same bound, the
 projection 2× faster: docs/BENCHMARKS.md §11). A solve's set is numbered chain by chain
 (:func:`_chain_order`), so the blocks are consecutive and their solve two passes over the set; a
-closed ring of springs is cut where its walk starts.
+closed ring of springs is cut where its walk starts. Any pairing keeps the preconditioner
+definite: a spring's two couplings, ``w_i |n_a·n_b|`` and ``w_j |n_a·n_c|``, are less than its
+diagonal ``w_i + w_j + ε`` together, so each block is diagonally dominant.
 
 ``ε`` (:data:`REGULARISATION`, the inverse masses scaled so the largest is 1) keeps the system
 definite where the active springs are redundant — the four sides and two diagonals of a quad lying
