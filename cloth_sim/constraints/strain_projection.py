@@ -228,38 +228,44 @@ def chain_neighbours(springs, positions, inc_ptr, inc, straight):
     its lines: rows, columns and diagonals. ``inc_ptr``, ``inc``: each particle's springs (CSR)."""
     m = springs.shape[0]
     nb = np.full((m, 2), -1, np.int64)
+    most = 0
+    for p in range(inc_ptr.shape[0] - 1):
+        most = max(most, inc_ptr[p + 1] - inc_ptr[p])
+    u = np.empty((most, 3))
+    cos = np.empty((most, most))
+    taken = np.empty(most, np.uint8)
     for p in range(inc_ptr.shape[0] - 1):
         lo = inc_ptr[p]
         d = inc_ptr[p + 1] - lo
         if d < 2:
             continue
-        u = np.empty((d, 3))
         for h in range(d):
             s = inc[lo + h]
             o = springs[s, 1] if springs[s, 0] == p else springs[s, 0]
-            v = positions[o] - positions[p]
-            u[h] = v / np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-        pairs = d * (d - 1) // 2
-        cos = np.empty(pairs)
-        first = np.empty(pairs, np.int64)
-        second = np.empty(pairs, np.int64)
-        t = 0
+            vx = positions[o, 0] - positions[p, 0]
+            vy = positions[o, 1] - positions[p, 1]
+            vz = positions[o, 2] - positions[p, 2]
+            length = np.sqrt(vx * vx + vy * vy + vz * vz)
+            u[h, 0] = vx / length
+            u[h, 1] = vy / length
+            u[h, 2] = vz / length
+            taken[h] = 0
         for h in range(d):
             for i in range(h + 1, d):
-                cos[t] = u[h, 0] * u[i, 0] + u[h, 1] * u[i, 1] + u[h, 2] * u[i, 2]
-                first[t] = h
-                second[t] = i
-                t += 1
-        taken = np.zeros(d, np.uint8)
-        for t in np.argsort(cos, kind="mergesort"):
-            if cos[t] >= -straight:
+                cos[h, i] = u[h, 0] * u[i, 0] + u[h, 1] * u[i, 1] + u[h, 2] * u[i, 2]
+        while True:  # the most nearly opposite pair left, first in index order on a tie
+            best, bh, bi = -straight, -1, -1
+            for h in range(d):
+                if taken[h]:
+                    continue
+                for i in range(h + 1, d):
+                    if not taken[i] and cos[h, i] < best:
+                        best, bh, bi = cos[h, i], h, i
+            if bh < 0:
                 break
-            h, i = first[t], second[t]
-            if taken[h] or taken[i]:
-                continue
-            taken[h] = 1
-            taken[i] = 1
-            sh, si = inc[lo + h], inc[lo + i]
+            taken[bh] = 1
+            taken[bi] = 1
+            sh, si = inc[lo + bh], inc[lo + bi]
             nb[sh, 0 if springs[sh, 0] == p else 1] = si
             nb[si, 0 if springs[si, 0] == p else 1] = sh
     return nb
