@@ -33,8 +33,8 @@ a particle (:func:`chain_neighbours`: on a grid its rows, columns and diagonals)
 the ones before and after them, so a chain's block is tridiagonal and ``L D Lᵀ`` solves it
 exactly in O(length). A hanging cloth's load runs down such chains, 64 springs long at 64×64:
 the diagonal alone (Jacobi) saw each as a 1-D Laplacian and took ~32 CG iterations a solve to
-bring its residual to 0.3 of the first; the chains take ~6 (the same set, the same bound, the
-projection 2× faster: docs/BENCHMARKS.md §11). A solve's set is numbered chain by chain
+bring its residual to 0.3 of the first; the chains take ~6 (the same bound, about the same set,
+the projection 2–3× faster: docs/BENCHMARKS.md §11). A solve's set is numbered chain by chain
 (:func:`_chain_order`), so the blocks are consecutive and their solve two passes over the set; a
 closed ring of springs is cut where its walk starts. Any pairing keeps the preconditioner
 definite: a spring's two couplings, ``w_i |n_a·n_b|`` and ``w_j |n_a·n_c|``, are less than its
