@@ -272,7 +272,9 @@ def chain_neighbours(springs, positions, inc_ptr, inc, straight):
 
 
 class Scratch:
-    """The arrays :func:`project` works in, made once per spring set (a step allocates none)."""
+    """The arrays :func:`project` works in, made once per spring set (a step allocates none), and
+    the preconditioner's chains, paired by the springs' directions at ``positions`` (the model's
+    initial positions: any pairing is valid, a straight one is fast)."""
 
     def __init__(self, springs: np.ndarray, positions: np.ndarray):
         m, n = len(springs), len(positions)
