@@ -26,12 +26,17 @@ MAKEFLAGS += --jobs=2
 .PHONY: install run test lint docs fuzz bench bench-peers bench-robots bench-learning clean
 install: $(STAMP) $(KERNELS) $(MSGS)
 
-# (pip byte-compiles every wheel: a third of its time here, but --no-compile is slower in the end:
-# these machines set PYTHONDONTWRITEBYTECODE=1, so every process would compile what it imports,
-# Ray's workers and the nodes' processes included: docs/BENCHMARKS.md §11)
+# uv (pinned in requirements.txt, installed by pip first) installs the pinned set: 23 s where pip
+# took 118 here, the same files (docs/BENCHMARKS.md §11). It copies from its cache instead of
+# linking (tools/build_interfaces.py edits some wheels' CMake files in place) and byte-compiles
+# every wheel as pip did: these machines set PYTHONDONTWRITEBYTECODE=1, so without it every
+# process (Ray's workers, the nodes) would compile what it imports
+UV_PIN := $(shell grep -E '^uv==' requirements.txt | cut -d' ' -f1)
+UV     := $(VENV)/bin/uv pip install --python $(PY) --link-mode copy --compile-bytecode -q
 $(STAMP): requirements.txt setup.py pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --disable-pip-version-check -q -r requirements.txt
+	$(PY) -m pip install --disable-pip-version-check -q $(UV_PIN)
+	$(UV) -r requirements.txt
 	$(PY) -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation \
 		--config-settings editable_mode=compat -e .
 	@touch $@
@@ -87,7 +92,7 @@ bench: install
 # NVIDIA Warp's CPU cloth kernel, Newton's VBD and MuJoCo's flex beside ours (installs the pinned
 # optional extra, ~550 MB: warp-lang, newton, mujoco; about 12 minutes)
 bench-peers: install
-	$(PY) -m pip install --disable-pip-version-check -q -r requirements-peers.txt
+	$(UV) -r requirements-peers.txt
 	$(VENV)/bin/cloth-sim bench peers
 	$(VENV)/bin/cloth-sim bench vbd-peers
 	$(VENV)/bin/cloth-sim bench flex-peer
@@ -96,7 +101,7 @@ bench-peers: install
 # scene, and a Panda and a UR5 from example-robot-data (requirements-robots.txt, ~431 MB, never in
 # make test) swung through its cloth (about 2 minutes)
 bench-robots: install
-	$(PY) -m pip install --disable-pip-version-check -q -r requirements-robots.txt
+	$(UV) -r requirements-robots.txt
 	$(PY) -m cloth_sim.bench.robot --published
 
 # a LeRobot dataset of ClothFold's scripted policy (100 episodes, about 2 minutes), then LeRobot's ACT
