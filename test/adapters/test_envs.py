@@ -2,6 +2,10 @@
 against closed forms, the pickers' rules, scripted policies that must succeed, random policies that
 must stay finite, vector envs, and bad input."""
 
+import functools
+import multiprocessing
+import time
+
 import numpy as np
 import pytest
 
@@ -9,7 +13,7 @@ gym = pytest.importorskip("gymnasium")
 from gymnasium.utils.env_checker import check_env  # noqa: E402
 
 import cloth_sim.envs  # noqa: E402
-from cloth_sim.envs import metrics, policies  # noqa: E402
+from cloth_sim.envs import initial_states, metrics, policies  # noqa: E402
 
 TASKS = ("ClothFlatten", "ClothFold", "ClothDrop")
 
@@ -84,6 +88,43 @@ def test_initial_states_are_cached_on_disk_and_a_damaged_file_is_made_again(tmp_
     assert obs.tobytes() == obs2.tobytes()
     with np.load(files[0]) as f:  # written again, whole
         assert f["positions"].shape == (24 * 24, 3)
+
+
+def _slow_variation(rng, log):
+    """A generator that takes half a second and says each time it runs."""
+    with open(log, "a") as f:
+        f.write("made\n")
+    time.sleep(0.5)
+    return {"x": rng.random(4)}
+
+
+def _get_variation(folder, log, barrier, out):
+    barrier.wait()  # both ask at once
+    cache = initial_states.Cache("Slow", {}, functools.partial(_slow_variation, log=log), folder)
+    out.put(cache.get(3)["x"].tobytes())
+
+
+def test_processes_asking_for_the_same_missing_variation_at_once_make_it_once(tmp_path):
+    """Two processes (vector envs, parallel test workers) missing the same variation: one makes
+    it, the other waits and reads it, the same bytes; a third, later, reads it without making."""
+    ctx = multiprocessing.get_context("fork")
+    log, barrier, out = tmp_path / "log", ctx.Barrier(2), ctx.Queue()
+    procs = [
+        ctx.Process(target=_get_variation, args=(str(tmp_path), log, barrier, out))
+        for _ in range(2)
+    ]
+    for p in procs:
+        p.start()
+    got = [out.get(timeout=60) for _ in procs]
+    for p in procs:
+        p.join(timeout=60)
+        assert p.exitcode == 0
+    assert log.read_text().count("made") == 1
+    assert got[0] == got[1]
+    again = initial_states.Cache(
+        "Slow", {}, functools.partial(_slow_variation, log=log), str(tmp_path)
+    ).get(3)
+    assert again["x"].tobytes() == got[0] and log.read_text().count("made") == 1
 
 
 # ---------------------------------------------------------------- metrics (closed forms)
