@@ -66,6 +66,9 @@ def test_declared_order_is_observed_on_the_harmonic_oscillator(name):
     dts = (
         np.array([2e-3, 1e-3, 5e-4, 2.5e-4]) if order == 1 else np.array([4e-3, 2e-3, 1e-3, 5e-4])
     )
+    # one free particle: each of vbd's iterations is a Newton step on the whole system, so 10 give
+    # the errors of 200 to 12 digits (measured; 200 took 22 s of the core tests)
+    options = {"iterations": 10} if name == "vbd" else EXACT.get(name)
     errs = []
     for dt in dts:
         sim = Simulator(
@@ -73,7 +76,7 @@ def test_declared_order_is_observed_on_the_harmonic_oscillator(name):
             integrator=name,
             dt=dt,
             gravity=NO_GRAVITY,
-            integrator_options=EXACT.get(name),
+            integrator_options=options,
         )
         err = 0.0
         for _ in range(round(1.0 / dt)):
