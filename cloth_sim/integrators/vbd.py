@@ -50,8 +50,16 @@ and so does the strain limit where one is set.
 Counters (:attr:`Simulator.integrator_stats`): ``steps``, ``iterations``, ``last_iterations``,
 ``last_residual`` (the root mean square of the free vertices' Newton steps in the last iteration,
 m), ``detections`` (candidate searches), ``last_contacts`` (self-contact pairs and vertices
-touching a collider at the last search) and ``truncated`` (vertex updates the conservative bound
-shortened).
+touching a collider at the last search), ``truncated`` (vertex updates the conservative bound
+shortened) and ``grid_steps`` (steps whose iterations ran on the grid's blocks, below).
+
+**On a grid** of Hooke springs on Provot's stencil (a grid scene's springs, a material's bending
+stencils) with no contact in the step, the iterations run on the grid's own layout instead of the
+vertices' spring lists (:mod:`cloth_sim.integrators.vbd_grid`): the nine classes ``(i mod 3, j mod
+3)`` as the colours, each stored as a block, so that a colour's vertices are updated in SIMD lanes
+(4–6× the general sweep per vertex and iteration here, docs/BENCHMARKS.md §11). The same Newton
+step per vertex, term for term, in another colour order: a converged step is the same to rounding,
+an unconverged one differs as another order's would. ``grid=False`` keeps the general sweep.
 """
 
 from __future__ import annotations
@@ -70,6 +78,7 @@ from ..physics.bending import bending_row
 from ..physics.forces import BUCKLE_TABLE, axial, incidence
 from .base import Integrator, Stability
 from .registry import register
+from .vbd_grid import GridLayout
 
 #: the share of the nearest found distance a vertex may move between two candidate searches
 GAMMA = 0.45
@@ -918,6 +927,37 @@ def _chebyshev(x, x_prev2, omega, free, x_cd, allow, gamma, sc, cut, touch):
 
 
 @numba.njit(cache=True)
+def _initial_guess(x, y, xt, v, a, free, h, along, gn, gh, adaptive):
+    """``y = x^t + h v + h² a`` (``a`` on the free particles only) and the initial guess ``x``:
+    ``y``, with gravity's part of the free particles' acceleration ``along`` in ``[0, |g|]``
+    instead of all of it where ``adaptive`` (``y`` has all of g: keep ``along``); the kinematic
+    particles (pins, held) go to ``x^t + h v``. Each particle's arithmetic in numpy's order."""
+    hh = h * h
+    for i in range(x.shape[0]):
+        for c in range(3):
+            yc = v[i, c] * h + xt[i, c]
+            if free[i]:
+                yc = yc + hh * a[i, c]
+            y[i, c] = yc
+            if free[i] and adaptive:
+                x[i, c] = yc + hh * ((along[i] - gn) * gh[c])
+            else:
+                x[i, c] = yc
+
+
+@numba.njit(cache=True)
+def _velocities(x, xt, v, free, h, acc):
+    """The step's end: ``v = (x − x^t)/h`` on the free particles (pins keep theirs: they moved by
+    ``h v``) and each particle's acceleration ``(x − x^t)/h − v)/h`` into ``acc``."""
+    for i in range(x.shape[0]):
+        for c in range(3):
+            nv = (x[i, c] - xt[i, c]) / h
+            acc[i, c] = (nv - v[i, c]) / h
+            if free[i]:
+                v[i, c] = nv
+
+
+@numba.njit(cache=True)
 def _allowances(x, allowance, ckind, cpos, crot, cgeo, creach, cbank, cdepth, tau, allow, near):
     """How far each vertex may move from ``x`` before the next search whatever the pairs found
     (its ``allowance``, and short of the far side of any collider near it), and whether it can come
@@ -995,7 +1035,9 @@ class VBD(Integrator):
     limit on a pinned cloth and no contacts, its long-range attachments (Kim, Chentanez & Müller
     2012) after every sweep, so the pins' pull reaches the far edge at once instead of a ring of
     springs an iteration (the 2 m, 41 kg hanging cloth at 64×64, 1/60 s × 10: worst strain 4.7 →
-    2.2 after the projection; not enough to ship: docs/BENCHMARKS.md §11).
+    2.2 after the projection; not enough to ship: docs/BENCHMARKS.md §11); ``grid`` (default
+    True): on a grid of Hooke springs without contacts, the iterations on the grid's blocks
+    (module docstring); False keeps the general sweep.
 
     First order (backward Euler); no step limit; any iteration count gives a usable state.
     """
@@ -1017,6 +1059,7 @@ class VBD(Integrator):
         "detections",
         "last_contacts",
         "truncated",
+        "grid_steps",
     )
     #: the post-step stages resolved inside the iterations. Self-contact, and with it every
     #: self-collision pass, is; the colliders' contacts are in the iterations too, and their stage
@@ -1037,6 +1080,7 @@ class VBD(Integrator):
         time_budget: float | None = None,
         self_friction: float = 0.5,
         tethers: bool = False,
+        grid: bool = True,
     ):
         super().__init__(model)
         for name, value, hi in (
@@ -1065,6 +1109,9 @@ class VBD(Integrator):
         if not isinstance(tethers, bool):
             raise ValueError(f"tethers must be true or false, got {tethers!r}")
         self.tethers = tethers
+        if not isinstance(grid, bool):
+            raise ValueError(f"grid must be true or false, got {grid!r}")
+        self.grid = grid
         self._strain_limit = None
         self.iterations = int(iterations)
         self.rho = float(rho)
@@ -1074,6 +1121,8 @@ class VBD(Integrator):
         self.free = ~np.asarray(model.pinned, bool)
         self._layout_of = None
         self._colours_of = None
+        self._grid = None
+        self._grid_of = None
         self._contacts = None
         self._self_collision = None
         n = model.n_particles
@@ -1167,7 +1216,9 @@ class VBD(Integrator):
         ends, rest lengths, stiffness, damping and kinds, and a material's bending rows), and
         writes the positions and each vertex's step; the iterate's copy and the Chebyshev
         extrapolation each read and write the positions once more. Caches and the neighbours'
-        repeated reads are not counted: a lower bound (``cloth-sim bench vbd-floor``)."""
+        repeated reads are not counted: a lower bound (``cloth-sim bench vbd-floor``). The
+        model's data, whichever sweep runs: the grid's blocks stream about as much (a slot's
+        twelve springs' four numbers where the lists have five, and the ghost slots)."""
         sp, (cptr, verts) = self._layout(forces)
         vec = self.model.positions.nbytes  # n × 3 float64
         n = self.model.n_particles
@@ -1195,19 +1246,13 @@ class VBD(Integrator):
         a = self._external_force(forces, x, v)
         a /= model.masses[:, None]
         y = self._buffer("_y", x)
-        np.multiply(v, h, out=y)
-        y += xt
-        y[free] += (h * h) * a[free]
         # the paper's adaptive initial guess: inertia, with gravity's part of the last step's
         # acceleration clamped to [0, |g|]
         g = forces.gravity
         gn = float(np.linalg.norm(g))
-        np.copyto(x, y)
-        if gn > 0:
-            gh = g / gn
-            along = np.clip(self._a_prev @ gh, 0.0, gn)
-            x[free] += (h * h) * ((along[free] - gn)[:, None] * gh)  # y has all of g: keep `along`
-        x[~free] = y[~free]  # kinematic: pins and held particles go to x + h v
+        gh = g / gn if gn > 0 else g
+        along = np.clip(self._a_prev @ gh, 0.0, gn) if gn > 0 else self._a_prev[:, 0]
+        _initial_guess(x, y, xt, v, a, free, h, along, gn, gh, gn > 0)
         m_h2 = model.masses / (h * h)
         drag_h = forces.drag / h
         # contacts handled here: colliders, and self-contact's candidates and bounds
@@ -1268,7 +1313,13 @@ class VBD(Integrator):
             and not self_contact
             and not len(colliders[0])
         )
-        for it in range(self.iterations):
+        grid = None
+        if not (self_contact or len(colliders[0]) or tether):
+            grid = self._grid_layout(forces)
+        if grid is not None:
+            done = self._iterate_grid(grid, x, xt, y, m_h2, 1.0 / h, drag_h, budget_end)
+            self.counters["grid_steps"] += 1
+        for it in range(0 if grid is not None else self.iterations):
             if self_contact and it > 0 and it % self.collision_interval == 0 and cut.any():
                 # a vertex hit its bound: search again from here, for room to move on
                 self._detect(x, y, colliders, tau, self_contact, x_cd)
@@ -1327,10 +1378,7 @@ class VBD(Integrator):
                     _chebyshev(x, prev2, omega, free, x_cd, allow, GAMMA, sc_arrays, cut, touch)
                 np.copyto(prev2, xs)
         # v = (x − x^t)/h; pins keep their velocity (they moved by h·v)
-        new_v = (x - xt) / h
-        acc = (new_v - v) / h
-        v[free] = new_v[free]
-        self._a_prev[:] = acc
+        _velocities(x, xt, v, free, h, self._a_prev)
         c = self.counters
         c["steps"] += 1
         c["iterations"] += done
@@ -1339,6 +1387,42 @@ class VBD(Integrator):
         c["last_residual"] = float(math.sqrt(stepped[free].sum() / nf)) if nf else 0.0
         c["truncated"] += int(cut.sum())
         self._cut_last = bool(cut.any())
+
+    def _grid_layout(self, forces):
+        """The grid's blocked layout (:mod:`~cloth_sim.integrators.vbd_grid`) for ``forces``, or
+        ``None`` where the model is not a grid of Hooke springs on Provot's stencil."""
+        if self._grid_of is not forces:
+            self._grid = GridLayout.of(self.model, forces) if self.grid else None
+            self._grid_of = forces
+        return self._grid
+
+    def _iterate_grid(self, grid, x, xt, y, m_h2, inv_h, drag_h, budget_end) -> int:
+        """The step's iterations on the grid's blocks (no contact): the general loop's sweeps and
+        Chebyshev steps, colour by colour in SIMD lanes; returns the iterations done."""
+        grid.load(x, xt, y, m_h2, self.free)
+        threads = numba.get_num_threads()
+        if not grid.parallel:
+            numba.set_num_threads(1)  # the same bits: the chunks do not depend on the threads
+        done = total = self.iterations
+        try:
+            if budget_end is None:  # every iteration in one call
+                _, flips = grid.solve(inv_h, drag_h, 0, total, total, self.rho, 1.0)
+                grid.store(x, self._stepped, flips)
+            else:  # the clock read between iterations
+                omega = 1.0
+                for it in range(total):
+                    omega, flips = grid.solve(inv_h, drag_h, it, it + 1, total, self.rho, omega)
+                    if it == total - 1 or time.perf_counter() >= budget_end:
+                        # the step ends on a sweep (as in the general loop): the iterate, not
+                        # the extrapolation made for a next iteration
+                        done = it + 1
+                        break
+                    if flips:
+                        grid.swap()
+                grid.store(x, self._stepped)
+        finally:
+            numba.set_num_threads(threads)
+        return done
 
     def _edges(self):
         sc = self._self_collision

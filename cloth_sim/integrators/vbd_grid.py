@@ -1,0 +1,492 @@
+"""``vbd``'s iterations on a regular grid, a colour's vertices in SIMD lanes.
+
+On a ``rows × cols`` grid whose springs and bending couplings all join a particle ``(i, j)`` to
+one of the twelve of Provot's stencil, ``(i ± 1, j)``, ``(i, j ± 1)``, ``(i ± 1, j ± 1)``,
+``(i ± 2, j)``, ``(i, j ± 2)``, the nine classes ``(i mod 3, j mod 3)`` are colours: no spring
+joins two particles of a class (each offset changes ``i`` or ``j`` by 1 or 2). Each class is stored
+as its own block, and inside a block particle ``(3p + a, 3q + b)`` (in the grid padded by
+:data:`PAD` ghost rows and columns on each side) sits at ``p·Q + q``; then the neighbour at a
+given offset of every particle of a colour lies in one block at one fixed shift of the index. The
+sweep over a colour is one loop over a contiguous range with the same twelve loads at constant
+shifts for every particle, which the compiler turns into SIMD lanes (8 doubles on AVX-512), where
+the general sweep (:func:`cloth_sim.integrators.vbd._sweep`) follows each vertex's spring list.
+
+The ghost cells carry no spring (stiffness, damping, bending and mass 0) and are never moved;
+a missing spring of a real particle (on the cloth's border, or a family absent from the model) is a
+spring of stiffness 0 to its slot. Each particle's Newton step is the general sweep's, term for
+term (the springs' Hooke force and Hessian with the compressed part's ``E'/l`` dropped, the
+damping along the spring as the dissipation potential, the bending's ``−(Q x)_i`` and ``Q_ii``, the
+inertia and the drag), in another colour order, so the iterates differ from the general path's in
+the last bits and converge to the same step. No contact: a step with colliders or self-contact
+uses the general sweep. The same bits at any thread count: a colour's particles read only other
+colours' rows, and each writes only its own.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from ..kinds import LINEAR
+
+#: the neighbour offsets ``(di, dj)``, in the sweep's order: structural, shear, bend
+OFFSETS = (
+    (0, 1),
+    (0, -1),
+    (1, 0),
+    (-1, 0),
+    (1, 1),
+    (-1, -1),
+    (1, -1),
+    (-1, 1),
+    (0, 2),
+    (0, -2),
+    (2, 0),
+    (-2, 0),
+)
+#: ghost rows and columns on each side: a block's first and last rows and columns are ghosts, so
+#: every shift from a real particle stays inside the block arrays
+PAD = 3
+#: a colour's range cut into this many chunks for the cores (the result does not depend on it)
+CHUNKS = 8
+#: slots per colour below which the iterations run on one core: the cores' wake-up for each of
+#: the nine colours costs more than they share (64×64, 528 slots a colour: 0.22 ms an iteration
+#: on one core, 0.25–0.27 on two; 128×128, 1,935: 0.67 against 0.34)
+PARALLEL_MIN = 1000
+#: where a ghost sits (far from the cloth: its springs have length > 0 and stiffness 0)
+GHOST = 1.0e6
+
+
+class GridLayout:
+    """The blocked layout of one grid model's springs and bending (built once per force pipeline).
+
+    ``slot[v]`` is particle ``v``'s index in the flat block arrays (``block·PQ + p·Q + q``);
+    ``shift[c, o]`` the index difference from a particle of colour ``c`` to its neighbour at
+    ``OFFSETS[o]``; ``K, REST, C, QO`` ``(12, 9·PQ)`` each offset's spring stiffness, rest length,
+    damping and bending coupling ``Q_ij``; ``QD`` the bending diagonal."""
+
+    def __init__(self, rows: int, cols: int, springs, rest, k, c, bending_rows, n: int):
+        self.rows, self.cols = rows, cols
+        P = (rows + 2 * PAD + 2) // 3
+        Q = (cols + 2 * PAD + 2) // 3
+        self.P, self.Q, self.PQ = P, Q, P * Q
+        size = 9 * P * Q
+        i, j = np.divmod(np.arange(n), cols)
+        I, J = i + PAD, j + PAD
+        self.slot = np.ascontiguousarray(((I % 3) * 3 + J % 3) * P * Q + (I // 3) * Q + J // 3)
+        self.shift = np.zeros((9, len(OFFSETS)), np.int64)
+        for cb in range(9):
+            a, b = divmod(cb, 3)
+            for o, (di, dj) in enumerate(OFFSETS):
+                na, nb = (a + di) % 3, (b + dj) % 3
+                dp, dq = (a + di) // 3, (b + dj) // 3
+                self.shift[cb, o] = ((na * 3 + nb) - cb) * P * Q + dp * Q + dq
+        self.shift = self.shift.view(np.uint64)  # two's complement: t + shift wraps to t − |shift|
+        # each offset's slot by (di + 2)·5 + (dj + 2), −1 off the stencil
+        where = np.full(25, -1, np.int64)
+        for o, (di, dj) in enumerate(OFFSETS):
+            where[(di + 2) * 5 + dj + 2] = o
+
+        def slots(u, w):
+            di, dj = i[w] - i[u], j[w] - j[u]
+            near = (np.abs(di) <= 2) & (np.abs(dj) <= 2)
+            return np.where(near, where[np.clip((di + 2) * 5 + dj + 2, 0, 24)], -1)
+
+        self.K = np.zeros((len(OFFSETS), size))
+        self.REST = np.zeros((len(OFFSETS), size))
+        self.C = np.zeros((len(OFFSETS), size))
+        self.QO = np.zeros((len(OFFSETS), size))
+        self.QD = np.zeros(size)
+        taken = np.zeros((len(OFFSETS), size), bool)
+        for end, other in ((0, 1), (1, 0)):
+            u, w = springs[:, end], springs[:, other]
+            o = slots(u, w)
+            if np.any(o < 0):
+                raise ValueError("a spring outside the grid's stencil")
+            s = self.slot[u]
+            if np.any(taken[o, s]) or len(np.unique(o * size + s)) != len(s):
+                raise ValueError("two springs in one slot")
+            taken[o, s] = True
+            self.K[o, s], self.REST[o, s], self.C[o, s] = k, rest, c
+        if bending_rows is not None:
+            bptr, bidx, bval, _ = bending_rows
+            owner = np.repeat(np.arange(n), np.diff(bptr))
+            diag = bidx == owner
+            self.QD[self.slot[owner[diag]]] = bval[diag]
+            u, w, val = owner[~diag], bidx[~diag], bval[~diag]
+            o = slots(u, w)
+            if np.any(o < 0):
+                raise ValueError("a bending coupling outside the grid's stencil")
+            self.QO[o, self.slot[u]] = val
+        # each colour's range: a block's rows 1 … P − 2 but the first and last slot (ghost
+        # columns, whose shifts would leave the arrays)
+        self.lo, self.hi = Q + 1, (P - 1) * Q - 1
+        self.size = size
+        # the iteration's arrays, one row per coordinate: the positions (two, taking turns: the
+        # iterate, and Chebyshev's extrapolation of it for the next iteration), the step's start,
+        # the inertial target, the sweep's new positions, the positions before the last sweep
+        self.A, self.B, self.T, self.Y, self.N, self.P2 = (
+            np.full((3, size), GHOST) for _ in range(6)
+        )
+        self.stepped = np.zeros(size)
+        self.m_h2 = np.zeros(size)
+        self.free = np.zeros(size)
+        #: the chunks a colour is cut into, and whether the iterations use every core
+        self.parallel = self.hi - self.lo >= PARALLEL_MIN
+        self.chunks = CHUNKS if self.parallel else 1
+        # the arrays as the kernels take them: a tuple of rows
+        self._a, self._b, self._t, self._y, self._n, self._p = (
+            (a[0], a[1], a[2]) for a in (self.A, self.B, self.T, self.Y, self.N, self.P2)
+        )
+
+    @classmethod
+    def of(cls, model, forces) -> "GridLayout | None":
+        """The layout of ``model`` under ``forces``, or ``None`` where the general sweep must run:
+        not a grid, a spring that is not Hooke's (Choi–Ko's), or a spring or bending coupling
+        outside the stencil."""
+        rows, cols = model.rows, model.cols
+        if rows is None or cols is None or rows * cols != model.n_particles:
+            return None
+        if len(forces.springs) and np.any(forces.kind != LINEAR):
+            return None
+        bending = forces.bending
+        try:
+            return cls(
+                rows,
+                cols,
+                forces.springs,
+                forces.rest,
+                forces.k,
+                forces.c,
+                None if bending is None else bending.rows(),
+                model.n_particles,
+            )
+        except ValueError:
+            return None
+
+    def load(self, x, xt, y, m_h2, free) -> None:
+        """A step's start: the iterate ``x``, the step's start ``xt``, the inertial target ``y``
+        (each ``(n, 3)``), ``m/h²`` and which particles move, into the blocks."""
+        _scatter(x, xt, y, self.slot, self.A, self.T, self.Y)
+        self.m_h2[self.slot] = m_h2
+        self.free[self.slot] = free
+
+    def solve(self, inv_h, drag_h, first, last, total, rho, omega) -> tuple[float, int]:
+        """Iterations ``first … last − 1`` of ``total`` on the loaded blocks (:func:`solve`);
+        returns Chebyshev's weight and how many times the two position arrays took turns (the
+        iterate is in ``A`` after an even number)."""
+        return solve(
+            self._a,
+            self._b,
+            self._t,
+            self._y,
+            self._n,
+            self._p,
+            self.shift,
+            self.PQ,
+            self.lo,
+            self.hi,
+            self.K,
+            self.REST,
+            self.C,
+            self.QO,
+            self.QD,
+            self.m_h2,
+            self.free,
+            inv_h,
+            drag_h,
+            self.stepped,
+            self.chunks,
+            first,
+            last,
+            total,
+            rho,
+            omega,
+        )
+
+    def swap(self) -> None:
+        """The two position arrays take turns (what :func:`solve` did inside, once)."""
+        self.A, self.B = self.B, self.A
+        self._a, self._b = self._b, self._a
+
+    def store(self, x, stepped, flips: int = 0) -> None:
+        """The iterate back into ``x`` ``(n, 3)`` (in ``A``, or in ``B`` after an odd number of
+        turns), each particle's last squared step into ``stepped``."""
+        _gather(self.A if flips % 2 == 0 else self.B, self.slot, x)
+        stepped[:] = self.stepped[self.slot]
+
+
+@numba.njit(cache=True)
+def _scatter(x, xt, y, slot, X, T, Y):
+    for v in range(slot.shape[0]):
+        s = slot[v]
+        for c in range(3):
+            X[c, s] = x[v, c]
+            T[c, s] = xt[v, c]
+            Y[c, s] = y[v, c]
+
+
+@numba.njit(cache=True)
+def _gather(X, slot, x):
+    for v in range(slot.shape[0]):
+        s = slot[v]
+        for c in range(3):
+            x[v, c] = X[c, s]
+
+
+@numba.njit(cache=True, inline="always")
+def _spring(
+    X0,
+    X1,
+    X2,
+    T0,
+    T1,
+    T2,
+    j,
+    t,
+    o,
+    K,
+    REST,
+    C,
+    QO,
+    inv_h,
+    xi,
+    yi,
+    zi,
+    mx,
+    my,
+    mz,
+    f0,
+    f1,
+    f2,
+    h0,
+    h1,
+    h2,
+    h3,
+    h4,
+    h5,
+):
+    """Particle ``t``'s spring and bending coupling to its neighbour ``j`` (slot ``o``): the
+    general sweep's spring terms (:func:`cloth_sim.integrators.vbd._springs_at`)."""
+    xj, yj, zj = X0[j], X1[j], X2[j]
+    dx, dy, dz = xj - xi, yj - yi, zj - zi
+    l = np.sqrt(dx * dx + dy * dy + dz * dz)
+    inv = 1.0 / l if l >= 1e-300 else 0.0
+    ux, uy, uz = dx * inv, dy * inv, dz * inv
+    kk = K[o, t]
+    cs = C[o, t] * inv_h
+    de = kk * (l - REST[o, t])
+    mag = de + cs * (
+        ((xj - T0[j]) - mx) * ux + ((yj - T1[j]) - my) * uy + ((zj - T2[j]) - mz) * uz
+    )
+    q = QO[o, t]
+    f0 += mag * ux - q * xj
+    f1 += mag * uy - q * yj
+    f2 += mag * uz - q * zj
+    geo = de * inv if de > 0.0 else 0.0
+    w = kk + cs - geo
+    wx, wy = w * ux, w * uy
+    h0 += wx * ux + geo
+    h1 += wx * uy
+    h2 += wx * uz
+    h3 += wy * uy + geo
+    h4 += wy * uz
+    h5 += w * uz * uz + geo
+    return f0, f1, f2, h0, h1, h2, h3, h4, h5
+
+
+@numba.njit(cache=True)
+def next_omega(it, rho, omega):
+    """Chebyshev's weight after iteration ``it`` (the general loop's): ``ω₁ = 1``, ``ω₂ = 2/(2 −
+    ρ²)``, ``ω_k = 4/(4 − ρ² ω_{k−1})``."""
+    if it == 0:
+        return 1.0
+    if it == 1:
+        return 2.0 / (2.0 - rho * rho)
+    return 4.0 / (4.0 - rho * rho * omega)
+
+
+@numba.njit(cache=True)
+def solve(
+    A,
+    B,
+    T,
+    Y,
+    N,
+    P,
+    shift,
+    PQ,
+    lo,
+    hi,
+    K,
+    REST,
+    C,
+    QO,
+    QD,
+    MH2,
+    FREE,
+    inv_h,
+    drag_h,
+    stepped,
+    chunks,
+    first,
+    last,
+    total,
+    rho,
+    omega,
+):
+    """Iterations ``first … last − 1`` of a step of ``total``; returns Chebyshev's weight and how
+    many times ``A`` and ``B`` took turns. Each iteration sweeps the nine colours in order from
+    the iterate ``A`` (:func:`_sweeps`). Where ``rho > 0``, after every iteration but the step's
+    last, the general loop's Chebyshev step (:func:`cloth_sim.integrators.vbd._chebyshev` and its
+    copy): the next iterate ``ω (x − p) + p`` of each free particle, ``p`` its position before
+    the last iteration's sweep (``P``), is written to ``B`` as each colour's sweep ends, while
+    ``A`` keeps the swept positions the later colours read; then ``A`` and ``B`` take turns. The
+    same arithmetic as a separate pass after the sweeps, without that pass over every array.
+
+    ``A, B, T, Y, N, P`` are tuples of one array a coordinate (the iterate, its extrapolation,
+    the step's start, the inertial target, the sweep's new positions, the older positions)."""
+    flips = 0
+    for it in range(first, last):
+        mode = 0  # 0: no Chebyshev step; 1: its copy only (ω₁ = 1); 2: the extrapolation
+        if rho > 0.0 and it < total - 1:
+            omega = next_omega(it, rho, omega)
+            mode = 2 if it > 0 else 1
+        _sweeps(
+            A,
+            B,
+            T,
+            Y,
+            N,
+            P,
+            shift,
+            PQ,
+            lo,
+            hi,
+            K,
+            REST,
+            C,
+            QO,
+            QD,
+            MH2,
+            FREE,
+            inv_h,
+            drag_h,
+            stepped,
+            chunks,
+            mode,
+            omega,
+        )
+        if mode:
+            A, B = B, A
+            flips += 1
+    return omega, flips
+
+
+@numba.njit(cache=True, parallel=True, error_model="numpy", fastmath={"contract"})
+def _sweeps(
+    A,
+    B,
+    T,
+    Y,
+    N,
+    P,
+    shift,
+    PQ,
+    lo,
+    hi,
+    K,
+    REST,
+    C,
+    QO,
+    QD,
+    MH2,
+    FREE,
+    inv_h,
+    drag_h,
+    stepped,
+    chunks,
+    mode,
+    omega,
+):
+    """One iteration's sweeps: the nine colours in order, each colour's range cut into
+    ``chunks`` for the cores (any number gives the same bits). Each particle's Newton step is
+    written to ``N`` (its squared length to ``stepped``), then committed: ``A`` takes the new
+    positions, and where ``mode`` asks for Chebyshev's step (:func:`solve`), ``B`` the next
+    iterate and ``P`` the positions before. Free particles only move (not pins, not ghosts).
+
+    The tuples are unpacked here: inside the parallel loop below numba declares its distinct
+    arrays unaliased (no view is taken there, which it would count as an alias), so the
+    particles' loop runs in SIMD lanes without run-time overlap checks, and the new positions go
+    to ``N`` first so that no array is both read at a shift and written. ``fastmath={"contract"}``
+    only fuses multiplies and adds (FMA): the same in every lane and in the scalar remainder,
+    ~10 % faster."""
+    X0, X1, X2 = A
+    B0, B1, B2 = B
+    T0, T1, T2 = T
+    Y0, Y1, Y2 = Y
+    N0, N1, N2 = N
+    P0, P1, P2 = P
+    for cb in range(9):
+        a, bb = cb * PQ + lo, cb * PQ + hi
+        size = (bb - a + chunks - 1) // chunks
+        n0, n1, n2, n3 = shift[cb, 0], shift[cb, 1], shift[cb, 2], shift[cb, 3]
+        n4, n5, n6, n7 = shift[cb, 4], shift[cb, 5], shift[cb, 6], shift[cb, 7]
+        n8, n9, n10, n11 = shift[cb, 8], shift[cb, 9], shift[cb, 10], shift[cb, 11]
+        for ch in numba.prange(chunks):
+            # unsigned indices: numba then adds no wrap-around of negative ones, which made every
+            # load a gather (the shifts are stored as unsigned, two's complement: the sums wrap)
+            lo_ = np.uint64(a + ch * size)
+            hi_ = np.uint64(min(a + ch * size + size, bb))
+            for t in range(lo_, hi_):
+                xi, yi, zi = X0[t], X1[t], X2[t]
+                mx, my, mz = xi - T0[t], yi - T1[t], zi - T2[t]
+                m = MH2[t]
+                qd = QD[t]
+                d = m + drag_h + qd
+                f0 = -m * (xi - Y0[t]) - drag_h * mx - qd * xi
+                f1 = -m * (yi - Y1[t]) - drag_h * my - qd * yi
+                f2 = -m * (zi - Y2[t]) - drag_h * mz - qd * zi
+                a0, b, c, dd, e, ff = d, 0.0, 0.0, d, 0.0, d
+                # the twelve springs, one a line
+                # fmt: off
+                f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n0, t, 0, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
+                f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n1, t, 1, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
+                f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n2, t, 2, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
+                f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n3, t, 3, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
+                f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n4, t, 4, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
+                f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n5, t, 5, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
+                f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n6, t, 6, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
+                f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n7, t, 7, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
+                f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n8, t, 8, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
+                f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n9, t, 9, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
+                f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n10, t, 10, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
+                f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n11, t, 11, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
+                # fmt: on
+                # H⁻¹ f by the adjugate; zero for the particles that do not move and where H is
+                # singular
+                c00 = dd * ff - e * e
+                c01 = c * e - b * ff
+                c02 = b * e - c * dd
+                det = a0 * c00 + b * c01 + c * c02
+                inv = FREE[t] / det if det > 1e-300 else 0.0
+                c11 = a0 * ff - c * c
+                c12 = b * c - a0 * e
+                c22 = a0 * dd - b * b
+                sx = (c00 * f0 + c01 * f1 + c02 * f2) * inv
+                sy = (c01 * f0 + c11 * f1 + c12 * f2) * inv
+                sz = (c02 * f0 + c12 * f1 + c22 * f2) * inv
+                N0[t], N1[t], N2[t] = xi + sx, yi + sy, zi + sz
+                stepped[t] = sx * sx + sy * sy + sz * sz
+            for t in range(lo_, hi_):
+                x0, x1, x2 = N0[t], N1[t], N2[t]
+                move = FREE[t] != 0.0
+                if mode == 2 and move:
+                    B0[t] = omega * (x0 - P0[t]) + P0[t]
+                    B1[t] = omega * (x1 - P1[t]) + P1[t]
+                    B2[t] = omega * (x2 - P2[t]) + P2[t]
+                elif mode:
+                    B0[t], B1[t], B2[t] = x0, x1, x2
+                if mode:
+                    P0[t], P1[t], P2[t] = X0[t], X1[t], X2[t]
+                X0[t], X1[t], X2[t] = x0, x1, x2
