@@ -1400,22 +1400,28 @@ class VBD(Integrator):
         """The step's iterations on the grid's blocks (no contact): the general loop's sweeps and
         Chebyshev steps, colour by colour in SIMD lanes; returns the iterations done."""
         grid.load(x, xt, y, m_h2, self.free)
+        threads = numba.get_num_threads()
+        if not grid.parallel:
+            numba.set_num_threads(1)  # the same bits: the chunks do not depend on the threads
         done = total = self.iterations
-        if budget_end is None:  # every iteration in one call
-            _, flips = grid.solve(inv_h, drag_h, 0, total, total, self.rho, 1.0)
-            grid.store(x, self._stepped, flips)
-        else:  # the clock read between iterations
-            omega = 1.0
-            for it in range(total):
-                omega, flips = grid.solve(inv_h, drag_h, it, it + 1, total, self.rho, omega)
-                if it == total - 1 or time.perf_counter() >= budget_end:
-                    # the step ends on a sweep (as in the general loop): the iterate, not
-                    # the extrapolation made for a next iteration
-                    done = it + 1
-                    break
-                if flips:
-                    grid.swap()
-            grid.store(x, self._stepped)
+        try:
+            if budget_end is None:  # every iteration in one call
+                _, flips = grid.solve(inv_h, drag_h, 0, total, total, self.rho, 1.0)
+                grid.store(x, self._stepped, flips)
+            else:  # the clock read between iterations
+                omega = 1.0
+                for it in range(total):
+                    omega, flips = grid.solve(inv_h, drag_h, it, it + 1, total, self.rho, omega)
+                    if it == total - 1 or time.perf_counter() >= budget_end:
+                        # the step ends on a sweep (as in the general loop): the iterate, not
+                        # the extrapolation made for a next iteration
+                        done = it + 1
+                        break
+                    if flips:
+                        grid.swap()
+                grid.store(x, self._stepped)
+        finally:
+            numba.set_num_threads(threads)
         return done
 
     def _edges(self):

@@ -49,11 +49,11 @@ OFFSETS = (
 PAD = 3
 #: a colour's range cut into this many chunks for the cores (the result does not depend on it)
 CHUNKS = 8
-#: slots per colour below which a colour is one chunk (the pool's second core idle): waking it for
-#: each of the nine colours costs more than it shares. Per iteration, stepping, one chunk against
-#: eight: 32×32 (141 slots a colour) 0.067 against 0.084 ms, 64×64 (526) 0.170 against 0.127.
-#: The pool's size is never changed: after numba.set_num_threads(1) and back, every later
-#: parallel region of the process ran ~2× slower here (TBB; 2.9 → 6.0 ms a 64×64 step)
+#: slots per colour below which a colour is one chunk, on one thread (numba's thread count set to
+#: 1 for the iterations): waking the second core for each of the nine colours costs more than it
+#: shares. A 64×64 step of 20 iterations, in turn in one process (526 slots a colour): 8 chunks
+#: on two threads 2.80 ms, one chunk on one thread 3.30, one chunk with the pool awake 3.56; per
+#: iteration at 32×32 (141 slots): one thread 0.052 ms, 8 chunks on two 0.082
 PARALLEL_MIN = 400
 #: where a ghost sits (far from the cloth: its springs have length > 0 and stiffness 0)
 GHOST = 1.0e6
@@ -133,8 +133,10 @@ class GridLayout:
         self.stepped = np.zeros(size)
         self.m_h2 = np.zeros(size)
         self.free = np.zeros(size)
-        #: the chunks a colour is cut into
-        self.chunks = CHUNKS if self.hi - self.lo >= PARALLEL_MIN else 1
+        #: the chunks a colour is cut into, and whether the iterations use every core (else numba's
+        #: thread count is 1 while they run)
+        self.parallel = self.hi - self.lo >= PARALLEL_MIN
+        self.chunks = CHUNKS if self.parallel else 1
         # the arrays as the kernels take them: a tuple of rows
         self._a, self._b, self._t, self._y, self._n, self._p = (
             (a[0], a[1], a[2]) for a in (self.A, self.B, self.T, self.Y, self.N, self.P2)
