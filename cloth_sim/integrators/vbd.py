@@ -71,13 +71,14 @@ import numba
 import numpy as np
 
 from ..contact import triangle_meshes
-from ..contact.colliders import carried, sdf
+from ..contact.colliders import sdf
 from ..contact.geometry import segment_parameters, triangle_weights
 from ..kinds import LINEAR
 from ..physics.bending import bending_row
 from ..physics.forces import BUCKLE_TABLE, axial, incidence
 from .base import Integrator, Stability
 from .registry import register
+from .vbd_contact import colliders_at, onset, press, slide, solve3, truncate
 from .vbd_grid import GridLayout
 
 #: the share of the nearest found distance a vertex may move between two candidate searches
@@ -152,26 +153,6 @@ def _csr(owner: np.ndarray, item: np.ndarray, n: int) -> tuple[np.ndarray, np.nd
 # ---------------------------------------------------------------------------- per-vertex terms
 # A vertex's force is (f0, f1, f2) and its symmetric Hessian (h0 … h5) = (xx, xy, xz, yy, yz, zz);
 # each term takes them and returns them with its own part added.
-@numba.njit(cache=True, inline="always")
-def _solve3(a, b, c, d, e, f, fx, fy, fz):
-    """``H⁻¹ f`` for a symmetric positive definite ``H`` (6 entries); zeros if it is singular."""
-    c00 = d * f - e * e
-    c01 = c * e - b * f
-    c02 = b * e - c * d
-    det = a * c00 + b * c01 + c * c02
-    if not det > 1e-300:
-        return 0.0, 0.0, 0.0
-    c11 = a * f - c * c
-    c12 = b * c - a * e
-    c22 = a * d - b * b
-    inv = 1.0 / det
-    return (
-        (c00 * fx + c01 * fy + c02 * fz) * inv,
-        (c01 * fx + c11 * fy + c12 * fz) * inv,
-        (c02 * fx + c12 * fy + c22 * fz) * inv,
-    )
-
-
 @numba.njit(cache=True, inline="always")
 def _springs_at(
     i, x, xt, inc_ptr, nbr, rest, k, c, kind, tab, inv_h, f0, f1, f2, h0, h1, h2, h3, h4, h5
@@ -266,94 +247,6 @@ def _local_energy(
 
 
 @numba.njit(cache=True, inline="always")
-def _press(mag, s, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5):
-    """A contact's force ``mag·n`` and stiffness ``s·n nᵀ`` added to a vertex's."""
-    return (
-        f0 + mag * nx,
-        f1 + mag * ny,
-        f2 + mag * nz,
-        h0 + s * nx * nx,
-        h1 + s * nx * ny,
-        h2 + s * nx * nz,
-        h3 + s * ny * ny,
-        h4 + s * ny * nz,
-        h5 + s * nz * nz,
-    )
-
-
-@numba.njit(cache=True, inline="always")
-def _slide(sf, tx, ty, tz, s, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5):
-    """Friction's force ``−sf·t`` and its stiffness ``s (I − n nᵀ)`` (the normal held) added."""
-    return (
-        f0 - sf * tx,
-        f1 - sf * ty,
-        f2 - sf * tz,
-        h0 + (s - s * nx * nx),
-        h1 - s * nx * ny,
-        h2 - s * nx * nz,
-        h3 + (s - s * ny * ny),
-        h4 - s * ny * nz,
-        h5 + (s - s * nz * nz),
-    )
-
-
-@numba.njit(cache=True, inline="always")
-def _colliders_at(
-    i,
-    x,
-    xt,
-    ckind,
-    cpos,
-    crot,
-    cpos0,
-    crot0,
-    cgeo,
-    cmu,
-    cbank,
-    tau,
-    kc,
-    eps,
-    f0,
-    f1,
-    f2,
-    h0,
-    h1,
-    h2,
-    h3,
-    h4,
-    h5,
-):
-    """Vertex ``i``'s collider contacts: the penalty, and IPC's lagged friction on its motion over
-    the step relative to the collider's point under it; and whether it touches one."""
-    touched = False
-    for c in range(ckind.shape[0]):
-        d, nx, ny, nz = sdf(ckind[c], cpos[c], crot[c], cgeo[c], x[i, 0], x[i, 1], x[i, 2], cbank)
-        p = tau - d
-        if p <= 0.0:
-            continue
-        touched = True
-        lam = kc * p
-        f0, f1, f2, h0, h1, h2, h3, h4, h5 = _press(
-            lam, kc, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5
-        )
-        mu = cmu[c]
-        if mu <= 0.0:
-            continue
-        # where the collider's point now under the vertex was at the step's start
-        sx, sy, sz = carried(cpos0[c], crot0[c], cpos[c], crot[c], x[i, 0], x[i, 1], x[i, 2])
-        rx, ry, rz = sx - xt[i, 0], sy - xt[i, 1], sz - xt[i, 2]
-        rn = rx * nx + ry * ny + rz * nz
-        tx, ty, tz = rx - rn * nx, ry - rn * ny, rz - rn * nz
-        tl = math.sqrt(tx * tx + ty * ty + tz * tz)
-        g = 1.0 / tl if tl > eps else (2.0 - tl / eps) / eps
-        s = mu * lam * g
-        f0, f1, f2, h0, h1, h2, h3, h4, h5 = _slide(
-            s, tx, ty, tz, s, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5
-        )
-    return f0, f1, f2, h0, h1, h2, h3, h4, h5, touched
-
-
-@numba.njit(cache=True, inline="always")
 def _pick(x, xs, colour, i, p):
     """Vertex ``p``'s position as vertex ``i`` reads it: the iterate (``i`` itself, and the other
     colours', done earlier in this iteration or not yet begun), or, for a vertex of ``i``'s own
@@ -413,12 +306,12 @@ def _self_contacts_at(
                 ux += cw * (px - xt[v, 0])
                 uy += cw * (py - xt[v, 1])
                 uz += cw * (pz - xt[v, 2])
-        rec_d[q] = d  # (for _onset, after the step is solved)
+        rec_d[q] = d  # (for vbd_contact.onset, after the step is solved)
         if d >= tau:
             continue
         # ∂d/∂x_i = w n: the force pushes the pair apart along n
         lam = ks * (tau - d)
-        f0, f1, f2, h0, h1, h2, h3, h4, h5 = _press(
+        f0, f1, f2, h0, h1, h2, h3, h4, h5 = press(
             lam * w, ks * w * w, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5
         )
         if mu <= 0.0:
@@ -428,7 +321,7 @@ def _self_contacts_at(
         tl = math.sqrt(tx * tx + ty * ty + tz * tz)
         g = 1.0 / tl if tl > eps else (2.0 - tl / eps) / eps
         sf = mu * lam * g
-        f0, f1, f2, h0, h1, h2, h3, h4, h5 = _slide(
+        f0, f1, f2, h0, h1, h2, h3, h4, h5 = slide(
             sf * w, tx, ty, tz, sf * w * w, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5
         )
     return f0, f1, f2, h0, h1, h2, h3, h4, h5
@@ -442,7 +335,7 @@ def contact_pairs(x, vt, ee, tris, edges, tri_edge, edge_owner, vertex_owner):
     w_k x_k`` is their distance along ``n`` (where the two touch, the triangle's normal or the
     normal to both edges); and whether the pair carries the contact energy.
 
-    Every pair bounds its vertices' motion (:func:`_truncate`); the energy is carried by each
+    Every pair bounds its vertices' motion (:func:`~.vbd_contact.truncate`); the energy is carried by each
     contact once, as Bridson, Fedkiw & Anderson (2002) count them: a vertex against the inside of a
     triangle's face, or against an edge or a corner of the other cloth only from the triangle that
     owns it (its first), and two edges whose nearest points lie inside both. Counting a vertex
@@ -523,77 +416,6 @@ def contact_records(n, idx, coef, use):
     return ptr, rec
 
 
-@numba.njit(cache=True, inline="always")
-def _truncate(i, px, py, pz, x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, gamma):
-    """Vertex ``i`` moved to ``p``, held within its bounds from where the last search was made
-    (``x_cd``): its displacement scaled down (whole: every bound is linear in it) so that it moves
-    at most ``allow[i]`` (the pairs the search did not find, the far side of a collider) and, for
-    each pair the search found (its records ``grec``), approaches the pair's other side along the
-    pair's normal by at most ``γ`` times their distance (Newton's planar truncation of the paper's
-    bound: moving away, or sideways, costs nothing). Both sides of a pair approach by at most
-    ``γ·d`` each, ``γ < ½``, and the normal separates them by ``d`` at the search (the nearest
-    points' direction: every point of the one primitive is at least ``d`` from every point of the
-    other along it), so no pair crosses. ``dmin``: each vertex's nearest pair at the search (a
-    displacement below ``γ·dmin`` needs no look at its pairs). Returns the position and whether it
-    was cut."""
-    if allow[i] == math.inf and dmin[i] == math.inf:  # no contact in reach: nothing to hold
-        return px, py, pz, False
-    ex, ey, ez = px - x_cd[i, 0], py - x_cd[i, 1], pz - x_cd[i, 2]
-    t = 1.0
-    el = math.sqrt(ex * ex + ey * ey + ez * ez)
-    if el > allow[i]:
-        t = allow[i] / el
-    if el * t <= gamma * dmin[i]:  # it approaches nothing by more than that: no pair to look at
-        if t >= 1.0:
-            return px, py, pz, False
-        return x_cd[i, 0] + t * ex, x_cd[i, 1] + t * ey, x_cd[i, 2] + t * ez, True
-    for q in range(gptr[i], gptr[i + 1]):
-        r = grec[q]
-        pair = r // 4
-        w = pcoef[pair, r % 4]
-        # its approach to the other side: along −n for the side with positive weights
-        toward = -(pnrm[pair, 0] * ex + pnrm[pair, 1] * ey + pnrm[pair, 2] * ez)
-        if w < 0.0:
-            toward = -toward
-        room = gamma * pdist[pair]
-        if toward * t > room:
-            t = room / toward
-    if t >= 1.0:
-        return px, py, pz, False
-    return x_cd[i, 0] + t * ex, x_cd[i, 1] + t * ey, x_cd[i, 2] + t * ez, True
-
-
-@numba.njit(cache=True, inline="always")
-def _onset(
-    i, sx, sy, sz, x, rec_ptr, rec, rec_d, pcoef, pnrm, tau, ckind, cpos, crot, cgeo, cbank
-):
-    """Vertex ``i``'s step ``s`` with the part that would press a contact not yet pressed
-    (distance at least ``τ``: not in the step's Hessian) taken off along that contact's normal, so
-    that it stops at its onset (the next iteration sees it); the motion along the surface stays.
-    The self-contact pairs by their linear distance, the colliders by their signed distance along
-    their normal."""
-    for q in range(rec_ptr[i], rec_ptr[i + 1]):
-        d = rec_d[q]  # (its distance as _self_contacts_at found it for this step)
-        if d < tau:
-            continue
-        r = rec[q]
-        pair = r // 4
-        w = pcoef[pair, r % 4]
-        nx, ny, nz = w * pnrm[pair, 0], w * pnrm[pair, 1], w * pnrm[pair, 2]
-        over = (tau - d) - (nx * sx + ny * sy + nz * sz)  # how far past the onset d would go
-        if over > 0.0:
-            f = over / (nx * nx + ny * ny + nz * nz)
-            sx, sy, sz = sx + f * nx, sy + f * ny, sz + f * nz
-    for c in range(ckind.shape[0]):
-        d, nx, ny, nz = sdf(ckind[c], cpos[c], crot[c], cgeo[c], x[i, 0], x[i, 1], x[i, 2], cbank)
-        if d < tau:
-            continue
-        over = (tau - d) - (nx * sx + ny * sy + nz * sz)
-        if over > 0.0:
-            sx, sy, sz = sx + over * nx, sy + over * ny, sz + over * nz
-    return sx, sy, sz
-
-
 @numba.njit(cache=True)
 def _nearest(ptr, rec, dist):
     """Each vertex's nearest pair distance over its records (``inf``: none)."""
@@ -635,7 +457,7 @@ def _sweep(
     touch,
 ):
     """The Newton steps of vertices ``verts[lo:hi]`` in order, each on the incremental potential,
-    written to its row of ``x``, within its bounds (:func:`_truncate`). ``sp``: each vertex's
+    written to its row of ``x``, within its bounds (:func:`~.vbd_contact.truncate`). ``sp``: each vertex's
     springs (CSR: the other end, rest length, k, c, kind, in the vertex's order) and Choi–Ko's
     table; ``co``: the colliders (:meth:`~cloth_sim.contact.colliders.Contacts.packed`); ``sc``:
     the self-contact records, pairs and topology. (The arrays are unpacked here, once a chunk:
@@ -687,7 +509,7 @@ def _sweep(
             h5 += qd
         touch[i] = 0
         if ckind.shape[0] and near[i]:
-            f0, f1, f2, h0, h1, h2, h3, h4, h5, touched = _colliders_at(
+            f0, f1, f2, h0, h1, h2, h3, h4, h5, touched = colliders_at(
                 i,
                 x,
                 xt,
@@ -742,12 +564,12 @@ def _sweep(
                 h4,
                 h5,
             )
-        sx, sy, sz = _solve3(h0, h1, h2, h3, h4, h5, f0, f1, f2)
+        sx, sy, sz = solve3(h0, h1, h2, h3, h4, h5, f0, f1, f2)
         if touch[i] or near[i]:
             # a contact not yet pressed is not in the Hessian: a step past its onset would land
             # deep inside (the next iteration pushing back out: the iterations cycled); the step
             # stops at its onset, where the next iteration sees it
-            sx, sy, sz = _onset(
+            sx, sy, sz = onset(
                 i,
                 sx,
                 sy,
@@ -821,7 +643,7 @@ def _sweep(
                 sx, sy, sz = 0.5 * sx, 0.5 * sy, 0.5 * sz
         nx, ny, nz = x[i, 0] + sx, x[i, 1] + sy, x[i, 2] + sz
         stepped[i] = sx * sx + sy * sy + sz * sz
-        nx, ny, nz, was_cut = _truncate(
+        nx, ny, nz, was_cut = truncate(
             i, nx, ny, nz, x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, gamma
         )
         if was_cut:
@@ -909,7 +731,7 @@ def _iterate_serial(verts, cptr, *args):
 @numba.njit(cache=True, error_model="numpy")
 def _chebyshev(x, x_prev2, omega, free, x_cd, allow, gamma, sc, cut, touch):
     """``x ← ω (x − x_prev2) + x_prev2`` on the free vertices not in contact (extrapolated, a
-    contact's penalty made the cloth chatter on a table), within their bounds (:func:`_truncate`);
+    contact's penalty made the cloth chatter on a table), within their bounds (:func:`~.vbd_contact.truncate`);
     ``ω = 1`` only holds them there."""
     _, _, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, _, _ = sc
     for i in range(x.shape[0]):
@@ -918,7 +740,7 @@ def _chebyshev(x, x_prev2, omega, free, x_cd, allow, gamma, sc, cut, touch):
         px = omega * (x[i, 0] - x_prev2[i, 0]) + x_prev2[i, 0]
         py = omega * (x[i, 1] - x_prev2[i, 1]) + x_prev2[i, 1]
         pz = omega * (x[i, 2] - x_prev2[i, 2]) + x_prev2[i, 2]
-        px, py, pz, was_cut = _truncate(
+        px, py, pz, was_cut = truncate(
             i, px, py, pz, x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, gamma
         )
         x[i, 0], x[i, 1], x[i, 2] = px, py, pz

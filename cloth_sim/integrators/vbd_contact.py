@@ -1,0 +1,191 @@
+"""The per-vertex contact terms of :mod:`~cloth_sim.integrators.vbd`, and its 3×3 solve: what the
+general sweep and the grid's blocks (:mod:`~cloth_sim.integrators.vbd_grid`) both take a vertex's
+Newton step with (the penalty and lagged friction of a collider, the step held at a contact's
+onset and within the conservative bounds). Each function is the vertex's part alone, on its own
+rows of the arrays it is given. The method and its bounds: :mod:`cloth_sim.integrators.vbd`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+
+from ..contact.colliders import carried, sdf
+
+
+@numba.njit(cache=True, inline="always")
+def solve3(a, b, c, d, e, f, fx, fy, fz):
+    """``H⁻¹ f`` for a symmetric positive definite ``H`` (6 entries); zeros if it is singular."""
+    c00 = d * f - e * e
+    c01 = c * e - b * f
+    c02 = b * e - c * d
+    det = a * c00 + b * c01 + c * c02
+    if not det > 1e-300:
+        return 0.0, 0.0, 0.0
+    c11 = a * f - c * c
+    c12 = b * c - a * e
+    c22 = a * d - b * b
+    inv = 1.0 / det
+    return (
+        (c00 * fx + c01 * fy + c02 * fz) * inv,
+        (c01 * fx + c11 * fy + c12 * fz) * inv,
+        (c02 * fx + c12 * fy + c22 * fz) * inv,
+    )
+
+
+@numba.njit(cache=True, inline="always")
+def press(mag, s, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5):
+    """A contact's force ``mag·n`` and stiffness ``s·n nᵀ`` added to a vertex's."""
+    return (
+        f0 + mag * nx,
+        f1 + mag * ny,
+        f2 + mag * nz,
+        h0 + s * nx * nx,
+        h1 + s * nx * ny,
+        h2 + s * nx * nz,
+        h3 + s * ny * ny,
+        h4 + s * ny * nz,
+        h5 + s * nz * nz,
+    )
+
+
+@numba.njit(cache=True, inline="always")
+def slide(sf, tx, ty, tz, s, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5):
+    """Friction's force ``−sf·t`` and its stiffness ``s (I − n nᵀ)`` (the normal held) added."""
+    return (
+        f0 - sf * tx,
+        f1 - sf * ty,
+        f2 - sf * tz,
+        h0 + (s - s * nx * nx),
+        h1 - s * nx * ny,
+        h2 - s * nx * nz,
+        h3 + (s - s * ny * ny),
+        h4 - s * ny * nz,
+        h5 + (s - s * nz * nz),
+    )
+
+
+@numba.njit(cache=True, inline="always")
+def colliders_at(
+    i,
+    x,
+    xt,
+    ckind,
+    cpos,
+    crot,
+    cpos0,
+    crot0,
+    cgeo,
+    cmu,
+    cbank,
+    tau,
+    kc,
+    eps,
+    f0,
+    f1,
+    f2,
+    h0,
+    h1,
+    h2,
+    h3,
+    h4,
+    h5,
+):
+    """Vertex ``i``'s collider contacts: the penalty, and IPC's lagged friction on its motion over
+    the step relative to the collider's point under it; and whether it touches one."""
+    touched = False
+    for c in range(ckind.shape[0]):
+        d, nx, ny, nz = sdf(ckind[c], cpos[c], crot[c], cgeo[c], x[i, 0], x[i, 1], x[i, 2], cbank)
+        p = tau - d
+        if p <= 0.0:
+            continue
+        touched = True
+        lam = kc * p
+        f0, f1, f2, h0, h1, h2, h3, h4, h5 = press(
+            lam, kc, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5
+        )
+        mu = cmu[c]
+        if mu <= 0.0:
+            continue
+        # where the collider's point now under the vertex was at the step's start
+        sx, sy, sz = carried(cpos0[c], crot0[c], cpos[c], crot[c], x[i, 0], x[i, 1], x[i, 2])
+        rx, ry, rz = sx - xt[i, 0], sy - xt[i, 1], sz - xt[i, 2]
+        rn = rx * nx + ry * ny + rz * nz
+        tx, ty, tz = rx - rn * nx, ry - rn * ny, rz - rn * nz
+        tl = math.sqrt(tx * tx + ty * ty + tz * tz)
+        g = 1.0 / tl if tl > eps else (2.0 - tl / eps) / eps
+        s = mu * lam * g
+        f0, f1, f2, h0, h1, h2, h3, h4, h5 = slide(
+            s, tx, ty, tz, s, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5
+        )
+    return f0, f1, f2, h0, h1, h2, h3, h4, h5, touched
+
+
+@numba.njit(cache=True, inline="always")
+def truncate(i, px, py, pz, x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, gamma):
+    """Vertex ``i`` moved to ``p``, held within its bounds from where the last search was made
+    (``x_cd``): its displacement scaled down (whole: every bound is linear in it) so that it moves
+    at most ``allow[i]`` (the pairs the search did not find, the far side of a collider) and, for
+    each pair the search found (its records ``grec``), approaches the pair's other side along the
+    pair's normal by at most ``γ`` times their distance (Newton's planar truncation of the paper's
+    bound: moving away, or sideways, costs nothing). Both sides of a pair approach by at most
+    ``γ·d`` each, ``γ < ½``, and the normal separates them by ``d`` at the search (the nearest
+    points' direction: every point of the one primitive is at least ``d`` from every point of the
+    other along it), so no pair crosses. ``dmin``: each vertex's nearest pair at the search (a
+    displacement below ``γ·dmin`` needs no look at its pairs). Returns the position and whether it
+    was cut."""
+    if allow[i] == math.inf and dmin[i] == math.inf:  # no contact in reach: nothing to hold
+        return px, py, pz, False
+    ex, ey, ez = px - x_cd[i, 0], py - x_cd[i, 1], pz - x_cd[i, 2]
+    t = 1.0
+    el = math.sqrt(ex * ex + ey * ey + ez * ez)
+    if el > allow[i]:
+        t = allow[i] / el
+    if el * t <= gamma * dmin[i]:  # it approaches nothing by more than that: no pair to look at
+        if t >= 1.0:
+            return px, py, pz, False
+        return x_cd[i, 0] + t * ex, x_cd[i, 1] + t * ey, x_cd[i, 2] + t * ez, True
+    for q in range(gptr[i], gptr[i + 1]):
+        r = grec[q]
+        pair = r // 4
+        w = pcoef[pair, r % 4]
+        # its approach to the other side: along −n for the side with positive weights
+        toward = -(pnrm[pair, 0] * ex + pnrm[pair, 1] * ey + pnrm[pair, 2] * ez)
+        if w < 0.0:
+            toward = -toward
+        room = gamma * pdist[pair]
+        if toward * t > room:
+            t = room / toward
+    if t >= 1.0:
+        return px, py, pz, False
+    return x_cd[i, 0] + t * ex, x_cd[i, 1] + t * ey, x_cd[i, 2] + t * ez, True
+
+
+@numba.njit(cache=True, inline="always")
+def onset(i, sx, sy, sz, x, rec_ptr, rec, rec_d, pcoef, pnrm, tau, ckind, cpos, crot, cgeo, cbank):
+    """Vertex ``i``'s step ``s`` with the part that would press a contact not yet pressed
+    (distance at least ``τ``: not in the step's Hessian) taken off along that contact's normal, so
+    that it stops at its onset (the next iteration sees it); the motion along the surface stays.
+    The self-contact pairs by their linear distance, the colliders by their signed distance along
+    their normal."""
+    for q in range(rec_ptr[i], rec_ptr[i + 1]):
+        d = rec_d[q]  # (its distance as _self_contacts_at found it for this step)
+        if d < tau:
+            continue
+        r = rec[q]
+        pair = r // 4
+        w = pcoef[pair, r % 4]
+        nx, ny, nz = w * pnrm[pair, 0], w * pnrm[pair, 1], w * pnrm[pair, 2]
+        over = (tau - d) - (nx * sx + ny * sy + nz * sz)  # how far past the onset d would go
+        if over > 0.0:
+            f = over / (nx * nx + ny * ny + nz * nz)
+            sx, sy, sz = sx + f * nx, sy + f * ny, sz + f * nz
+    for c in range(ckind.shape[0]):
+        d, nx, ny, nz = sdf(ckind[c], cpos[c], crot[c], cgeo[c], x[i, 0], x[i, 1], x[i, 2], cbank)
+        if d < tau:
+            continue
+        over = (tau - d) - (nx * sx + ny * sy + nz * sz)
+        if over > 0.0:
+            sx, sy, sz = sx + over * nx, sy + over * ny, sz + over * nz
+    return sx, sy, sz
