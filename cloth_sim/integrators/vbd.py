@@ -335,7 +335,7 @@ def contact_pairs(x, vt, ee, tris, edges, tri_edge, edge_owner, vertex_owner):
     w_k x_k`` is their distance along ``n`` (where the two touch, the triangle's normal or the
     normal to both edges); and whether the pair carries the contact energy.
 
-    Every pair bounds its vertices' motion (:func:`~.vbd_contact.truncate`); the energy is carried by each
+    Every pair bounds its vertices' motion (:func:`.truncate`); the energy is carried by each
     contact once, as Bridson, Fedkiw & Anderson (2002) count them: a vertex against the inside of a
     triangle's face, or against an edge or a corner of the other cloth only from the triangle that
     owns it (its first), and two edges whose nearest points lie inside both. Counting a vertex
@@ -457,7 +457,7 @@ def _sweep(
     touch,
 ):
     """The Newton steps of vertices ``verts[lo:hi]`` in order, each on the incremental potential,
-    written to its row of ``x``, within its bounds (:func:`~.vbd_contact.truncate`). ``sp``: each vertex's
+    written to its row of ``x``, within its bounds (:func:`.truncate`). ``sp``: each vertex's
     springs (CSR: the other end, rest length, k, c, kind, in the vertex's order) and Choi–Ko's
     table; ``co``: the colliders (:meth:`~cloth_sim.contact.colliders.Contacts.packed`); ``sc``:
     the self-contact records, pairs and topology. (The arrays are unpacked here, once a chunk:
@@ -731,7 +731,7 @@ def _iterate_serial(verts, cptr, *args):
 @numba.njit(cache=True, error_model="numpy")
 def _chebyshev(x, x_prev2, omega, free, x_cd, allow, gamma, sc, cut, touch):
     """``x ← ω (x − x_prev2) + x_prev2`` on the free vertices not in contact (extrapolated, a
-    contact's penalty made the cloth chatter on a table), within their bounds (:func:`~.vbd_contact.truncate`);
+    contact's penalty made the cloth chatter on a table), within their bounds (:func:`.truncate`);
     ``ω = 1`` only holds them there."""
     _, _, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, _, _ = sc
     for i in range(x.shape[0]):
