@@ -54,12 +54,14 @@ touching a collider at the last search), ``truncated`` (vertex updates the conse
 shortened) and ``grid_steps`` (steps whose iterations ran on the grid's blocks, below).
 
 **On a grid** of Hooke springs on Provot's stencil (a grid scene's springs, a material's bending
-stencils) with no contact in the step, the iterations run on the grid's own layout instead of the
-vertices' spring lists (:mod:`cloth_sim.integrators.vbd_grid`): the nine classes ``(i mod 3, j mod
-3)`` as the colours, each stored as a block, so that a colour's vertices are updated in SIMD lanes
-(4–6× the general sweep per vertex and iteration here, docs/BENCHMARKS.md §11). The same Newton
-step per vertex, term for term, in another colour order: a converged step is the same to rounding,
-an unconverged one differs as another order's would. ``grid=False`` keeps the general sweep.
+stencils) without self-contact or tethers, the iterations run on the grid's own layout instead of
+the vertices' spring lists (:mod:`cloth_sim.integrators.vbd_grid`): the nine classes ``(i mod 3, j
+mod 3)`` as the colours, each stored as a block, so that a colour's vertices are updated in SIMD
+lanes (4–8× the general sweep per vertex and iteration here, docs/BENCHMARKS.md §11); colliders
+are taken in a second pass over each colour (their terms, onset and bounds as here). The same
+Newton step per vertex, term for term, in another colour order: a converged step is the same to
+rounding, an unconverged one differs as another order's would. ``grid=False`` keeps the general
+sweep.
 """
 
 from __future__ import annotations
@@ -858,7 +860,7 @@ class VBD(Integrator):
     2012) after every sweep, so the pins' pull reaches the far edge at once instead of a ring of
     springs an iteration (the 2 m, 41 kg hanging cloth at 64×64, 1/60 s × 10: worst strain 4.7 →
     2.2 after the projection; not enough to ship: docs/BENCHMARKS.md §11); ``grid`` (default
-    True): on a grid of Hooke springs without contacts, the iterations on the grid's blocks
+    True): on a grid of Hooke springs without self-contact, the iterations on the grid's blocks
     (module docstring); False keeps the general sweep.
 
     First order (backward Euler); no step limit; any iteration count gives a usable state.
@@ -1135,11 +1137,16 @@ class VBD(Integrator):
             and not self_contact
             and not len(colliders[0])
         )
-        grid = None
-        if not (self_contact or len(colliders[0]) or tether):
-            grid = self._grid_layout(forces)
+        grid = None if self_contact or tether else self._grid_layout(forces)
         if grid is not None:
-            done = self._iterate_grid(grid, x, xt, y, m_h2, 1.0 / h, drag_h, budget_end)
+            contact = None
+            if len(colliders[0]):
+                xm = self._buffer("_xm", x)
+                contact = grid.contact(
+                    xm, xt, self._near, touch, cut, x_cd, allow, GAMMA, tau, kc, eps, colliders,
+                    self._rec,
+                )  # fmt: skip
+            done = self._iterate_grid(grid, x, xt, y, m_h2, 1.0 / h, drag_h, budget_end, contact)
             self.counters["grid_steps"] += 1
         for it in range(0 if grid is not None else self.iterations):
             if self_contact and it > 0 and it % self.collision_interval == 0 and cut.any():
@@ -1218,9 +1225,10 @@ class VBD(Integrator):
             self._grid_of = forces
         return self._grid
 
-    def _iterate_grid(self, grid, x, xt, y, m_h2, inv_h, drag_h, budget_end) -> int:
-        """The step's iterations on the grid's blocks (no contact): the general loop's sweeps and
-        Chebyshev steps, colour by colour in SIMD lanes; returns the iterations done."""
+    def _iterate_grid(self, grid, x, xt, y, m_h2, inv_h, drag_h, budget_end, contact) -> int:
+        """The step's iterations on the grid's blocks (no self-contact; ``contact``: the colliders'
+        part, or None): the general loop's sweeps and Chebyshev steps, colour by colour in SIMD
+        lanes; returns the iterations done."""
         grid.load(x, xt, y, m_h2, self.free)
         threads = numba.get_num_threads()
         if not grid.parallel:
@@ -1228,12 +1236,14 @@ class VBD(Integrator):
         done = total = self.iterations
         try:
             if budget_end is None:  # every iteration in one call
-                _, flips = grid.solve(inv_h, drag_h, 0, total, total, self.rho, 1.0)
+                _, flips = grid.solve(inv_h, drag_h, 0, total, total, self.rho, 1.0, contact)
                 grid.store(x, self._stepped, flips)
             else:  # the clock read between iterations
                 omega = 1.0
                 for it in range(total):
-                    omega, flips = grid.solve(inv_h, drag_h, it, it + 1, total, self.rho, omega)
+                    omega, flips = grid.solve(
+                        inv_h, drag_h, it, it + 1, total, self.rho, omega, contact
+                    )
                     if it == total - 1 or time.perf_counter() >= budget_end:
                         # the step ends on a sweep (as in the general loop): the iterate, not
                         # the extrapolation made for a next iteration

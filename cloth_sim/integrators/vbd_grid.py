@@ -17,9 +17,10 @@ spring of stiffness 0 to its slot. Each particle's Newton step is the general sw
 term (the springs' Hooke force and Hessian with the compressed part's ``E'/l`` dropped, the
 damping along the spring as the dissipation potential, the bending's ``−(Q x)_i`` and ``Q_ii``, the
 inertia and the drag), in another colour order, so the iterates differ from the general path's in
-the last bits and converge to the same step. No contact: a step with colliders or self-contact
-uses the general sweep. The same bits at any thread count: a colour's particles read only other
-colours' rows, and each writes only its own.
+the last bits and converge to the same step. Colliders: a second pass over each colour takes again
+the steps of the vertices that may touch one, with the general sweep's contact terms
+(:func:`_sweeps_touching`); self-contact and tethers use the general sweep. The same bits at any
+thread count: a colour's particles read only other colours' rows, and each writes only its own.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ import numba
 import numpy as np
 
 from ..kinds import LINEAR
+from .vbd_contact import colliders_at, onset, truncate
 
 #: the neighbour offsets ``(di, dj)``, in the sweep's order: structural, shear, bend
 OFFSETS = (
@@ -76,6 +78,10 @@ class GridLayout:
         i, j = np.divmod(np.arange(n), cols)
         I, J = i + PAD, j + PAD
         self.slot = np.ascontiguousarray(((I % 3) * 3 + J % 3) * P * Q + (I // 3) * Q + J // 3)
+        self._fh = None  # the springs' force and Hessian a slot, where colliders need them
+        #: each slot's particle, −1 for a ghost
+        self.vof = np.full(9 * P * Q, -1, np.int64)
+        self.vof[self.slot] = np.arange(n)
         self.shift = np.zeros((9, len(OFFSETS)), np.int64)
         for cb in range(9):
             a, b = divmod(cb, 3)
@@ -174,10 +180,13 @@ class GridLayout:
         self.m_h2[self.slot] = m_h2
         self.free[self.slot] = free
 
-    def solve(self, inv_h, drag_h, first, last, total, rho, omega) -> tuple[float, int]:
+    def solve(
+        self, inv_h, drag_h, first, last, total, rho, omega, contact=None
+    ) -> tuple[float, int]:
         """Iterations ``first … last − 1`` of ``total`` on the loaded blocks (:func:`solve`);
         returns Chebyshev's weight and how many times the two position arrays took turns (the
-        iterate is in ``A`` after an even number)."""
+        iterate is in ``A`` after an even number). ``contact``: :meth:`contact`'s tuple where
+        the step has colliders."""
         return solve(
             self._a,
             self._b,
@@ -205,7 +214,18 @@ class GridLayout:
             total,
             rho,
             omega,
+            contact,
         )
+
+    def contact(self, xm, xt, near, touch, cut, x_cd, allow, gamma, tau, kc, eps, colliders, rec):
+        """What the sweep with colliders reads besides the blocks (:func:`_sweeps_touching`):
+        each slot's particle (``−1`` for a ghost), a scratch ``(n, 3)`` for the vertices it
+        takes again, the step's start, the general sweep's per-vertex arrays and colliders, and
+        nine scratch rows for the springs' force and Hessian a slot."""
+        if self._fh is None:
+            self._fh = tuple(np.zeros(self.size) for _ in range(9))
+        rows = (self.vof, xm, xt, near, touch, cut, x_cd, allow, gamma, tau, kc, eps)
+        return (*rows, colliders, rec, self._fh)
 
     def swap(self) -> None:
         """The two position arrays take turns (what :func:`solve` did inside, once)."""
@@ -309,117 +329,121 @@ def next_omega(it, rho, omega):
     return 4.0 / (4.0 - rho * rho * omega)
 
 
+@numba.njit(cache=True, inline="always")
+def _terms(
+    t, n0, n1, n2, n3, n4, n5, n6, n7, n8, n9, n10, n11, X0, X1, X2, T0, T1, T2, Y0, Y1, Y2, K,
+    REST, C, QO, QD, MH2, inv_h, drag_h,
+):  # fmt: skip
+    """Slot ``t``'s position, and its force and Hessian (six entries) of the incremental
+    potential from its inertia, drag, bending diagonal and twelve springs (``n0 … n11``: its
+    colour's shifts): the general sweep's terms (:func:`cloth_sim.integrators.vbd._sweep`)."""
+    xi, yi, zi = X0[t], X1[t], X2[t]
+    mx, my, mz = xi - T0[t], yi - T1[t], zi - T2[t]
+    m = MH2[t]
+    qd = QD[t]
+    d = m + drag_h + qd
+    f0 = -m * (xi - Y0[t]) - drag_h * mx - qd * xi
+    f1 = -m * (yi - Y1[t]) - drag_h * my - qd * yi
+    f2 = -m * (zi - Y2[t]) - drag_h * mz - qd * zi
+    a0, b, c, dd, e, ff = d, 0.0, 0.0, d, 0.0, d
+    # the twelve springs, one a line
+    # fmt: off
+    f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n0, t, 0, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
+    f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n1, t, 1, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
+    f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n2, t, 2, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
+    f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n3, t, 3, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
+    f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n4, t, 4, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
+    f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n5, t, 5, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
+    f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n6, t, 6, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
+    f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n7, t, 7, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
+    f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n8, t, 8, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
+    f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n9, t, 9, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
+    f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n10, t, 10, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
+    f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n11, t, 11, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
+    # fmt: on
+    return xi, yi, zi, f0, f1, f2, a0, b, c, dd, e, ff
+
+
+@numba.njit(cache=True, inline="always")
+def _solve(a0, b, c, dd, e, ff, f0, f1, f2, free):
+    """``H⁻¹ f`` by the adjugate, times ``free`` (0 or 1); zero where ``H`` is singular (the
+    ghosts). Selects, no branch: the loop stays in SIMD lanes."""
+    c00 = dd * ff - e * e
+    c01 = c * e - b * ff
+    c02 = b * e - c * dd
+    det = a0 * c00 + b * c01 + c * c02
+    inv = free / det if det > 1e-300 else 0.0
+    c11 = a0 * ff - c * c
+    c12 = b * c - a0 * e
+    c22 = a0 * dd - b * b
+    return (
+        (c00 * f0 + c01 * f1 + c02 * f2) * inv,
+        (c01 * f0 + c11 * f1 + c12 * f2) * inv,
+        (c02 * f0 + c12 * f1 + c22 * f2) * inv,
+    )
+
+
 @numba.njit(cache=True)
-def solve(
-    A,
-    B,
-    T,
-    Y,
-    N,
-    P,
-    shift,
-    PQ,
-    lo,
-    hi,
-    K,
-    REST,
-    C,
-    QO,
-    QD,
-    MH2,
-    FREE,
-    inv_h,
-    drag_h,
-    stepped,
-    chunks,
-    first,
-    last,
-    total,
-    rho,
-    omega,
-):
+def solve(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE, inv_h, drag_h,
+          stepped, chunks, first, last, total, rho, omega, contact):  # fmt: skip
     """Iterations ``first … last − 1`` of a step of ``total``; returns Chebyshev's weight and how
     many times ``A`` and ``B`` took turns. Each iteration sweeps the nine colours in order from
     the iterate ``A`` (:func:`_sweeps`). Where ``rho > 0``, after every iteration but the step's
     last, the general loop's Chebyshev step (:func:`cloth_sim.integrators.vbd._chebyshev` and its
-    copy): the next iterate ``ω (x − p) + p`` of each free particle, ``p`` its position before
-    the last iteration's sweep (``P``), is written to ``B`` as each colour's sweep ends, while
-    ``A`` keeps the swept positions the later colours read; then ``A`` and ``B`` take turns. The
-    same arithmetic as a separate pass after the sweeps, without that pass over every array.
+    copy): the next iterate ``ω (x − p) + p`` of each free particle not in contact, ``p`` its
+    position before the last iteration's sweep (``P``), is written to ``B`` as each colour's
+    sweep ends, while ``A`` keeps the swept positions the later colours read; then ``A`` and ``B``
+    take turns. The same arithmetic as a separate pass after the sweeps, without that pass over
+    every array.
 
     ``A, B, T, Y, N, P`` are tuples of one array a coordinate (the iterate, its extrapolation,
-    the step's start, the inertial target, the sweep's new positions, the older positions)."""
+    the step's start, the inertial target, the sweep's new positions, the older positions);
+    ``contact``: the colliders and the vertices' bounds (:class:`Contact`), or ``None``."""
     flips = 0
     for it in range(first, last):
         mode = 0  # 0: no Chebyshev step; 1: its copy only (ω₁ = 1); 2: the extrapolation
         if rho > 0.0 and it < total - 1:
             omega = next_omega(it, rho, omega)
             mode = 2 if it > 0 else 1
-        _sweeps(
-            A,
-            B,
-            T,
-            Y,
-            N,
-            P,
-            shift,
-            PQ,
-            lo,
-            hi,
-            K,
-            REST,
-            C,
-            QO,
-            QD,
-            MH2,
-            FREE,
-            inv_h,
-            drag_h,
-            stepped,
-            chunks,
-            mode,
-            omega,
-        )
+        if contact is None:
+            _sweeps(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE, inv_h,
+                    drag_h, stepped, chunks, mode, omega)  # fmt: skip
+        else:
+            _sweeps_touching(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE,
+                             inv_h, drag_h, stepped, chunks, mode, omega, contact)  # fmt: skip
         if mode:
             A, B = B, A
             flips += 1
     return omega, flips
 
 
+@numba.njit(cache=True, inline="always")
+def _commit(t, x0, x1, x2, move, mode, omega, X0, X1, X2, B0, B1, B2, P0, P1, P2):
+    """Slot ``t``'s new position ``x`` into ``A`` (``X``) and, where ``mode`` asks for
+    Chebyshev's step (:func:`solve`), the next iterate into ``B`` (extrapolated if ``move``) and
+    the position before into ``P``; returns what went into ``B``."""
+    b0, b1, b2 = x0, x1, x2
+    if mode == 2 and move:
+        b0 = omega * (x0 - P0[t]) + P0[t]
+        b1 = omega * (x1 - P1[t]) + P1[t]
+        b2 = omega * (x2 - P2[t]) + P2[t]
+    if mode:
+        B0[t], B1[t], B2[t] = b0, b1, b2
+        P0[t], P1[t], P2[t] = X0[t], X1[t], X2[t]
+    X0[t], X1[t], X2[t] = x0, x1, x2
+    return b0, b1, b2
+
+
 @numba.njit(cache=True, parallel=True, error_model="numpy", fastmath={"contract"})
-def _sweeps(
-    A,
-    B,
-    T,
-    Y,
-    N,
-    P,
-    shift,
-    PQ,
-    lo,
-    hi,
-    K,
-    REST,
-    C,
-    QO,
-    QD,
-    MH2,
-    FREE,
-    inv_h,
-    drag_h,
-    stepped,
-    chunks,
-    mode,
-    omega,
-):
+def _sweeps(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE, inv_h, drag_h,
+            stepped, chunks, mode, omega):  # fmt: skip
     """One iteration's sweeps: the nine colours in order, each colour's range cut into
     ``chunks`` for the cores (any number gives the same bits). Each particle's Newton step is
-    written to ``N`` (its squared length to ``stepped``), then committed: ``A`` takes the new
-    positions, and where ``mode`` asks for Chebyshev's step (:func:`solve`), ``B`` the next
-    iterate and ``P`` the positions before. Free particles only move (not pins, not ghosts).
+    written to ``N`` (its squared length to ``stepped``), then committed (:func:`_commit`). Free
+    particles only move (not pins, not ghosts).
 
     The tuples are unpacked here: inside the parallel loop below numba declares its distinct
-    arrays unaliased (no view is taken there, which it would count as an alias), so the
+    arrays unaliased (nothing in it may take a view, which numba counts as an alias), so the
     particles' loop runs in SIMD lanes without run-time overlap checks, and the new positions go
     to ``N`` first so that no array is both read at a shift and written. ``fastmath={"contract"}``
     only fuses multiplies and adds (FMA): the same in every lane and in the scalar remainder,
@@ -442,54 +466,98 @@ def _sweeps(
             lo_ = np.uint64(a + ch * size)
             hi_ = np.uint64(min(a + ch * size + size, bb))
             for t in range(lo_, hi_):
-                xi, yi, zi = X0[t], X1[t], X2[t]
-                mx, my, mz = xi - T0[t], yi - T1[t], zi - T2[t]
-                m = MH2[t]
-                qd = QD[t]
-                d = m + drag_h + qd
-                f0 = -m * (xi - Y0[t]) - drag_h * mx - qd * xi
-                f1 = -m * (yi - Y1[t]) - drag_h * my - qd * yi
-                f2 = -m * (zi - Y2[t]) - drag_h * mz - qd * zi
-                a0, b, c, dd, e, ff = d, 0.0, 0.0, d, 0.0, d
-                # the twelve springs, one a line
-                # fmt: off
-                f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n0, t, 0, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
-                f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n1, t, 1, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
-                f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n2, t, 2, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
-                f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n3, t, 3, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
-                f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n4, t, 4, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
-                f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n5, t, 5, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
-                f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n6, t, 6, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
-                f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n7, t, 7, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
-                f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n8, t, 8, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
-                f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n9, t, 9, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
-                f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n10, t, 10, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
-                f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n11, t, 11, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
-                # fmt: on
-                # H⁻¹ f by the adjugate; zero for the particles that do not move and where H is
-                # singular
-                c00 = dd * ff - e * e
-                c01 = c * e - b * ff
-                c02 = b * e - c * dd
-                det = a0 * c00 + b * c01 + c * c02
-                inv = FREE[t] / det if det > 1e-300 else 0.0
-                c11 = a0 * ff - c * c
-                c12 = b * c - a0 * e
-                c22 = a0 * dd - b * b
-                sx = (c00 * f0 + c01 * f1 + c02 * f2) * inv
-                sy = (c01 * f0 + c11 * f1 + c12 * f2) * inv
-                sz = (c02 * f0 + c12 * f1 + c22 * f2) * inv
+                xi, yi, zi, f0, f1, f2, a0, b, c, dd, e, ff = _terms(
+                    t, n0, n1, n2, n3, n4, n5, n6, n7, n8, n9, n10, n11, X0, X1, X2, T0, T1, T2,
+                    Y0, Y1, Y2, K, REST, C, QO, QD, MH2, inv_h, drag_h,
+                )  # fmt: skip
+                sx, sy, sz = _solve(a0, b, c, dd, e, ff, f0, f1, f2, FREE[t])
                 N0[t], N1[t], N2[t] = xi + sx, yi + sy, zi + sz
                 stepped[t] = sx * sx + sy * sy + sz * sz
             for t in range(lo_, hi_):
-                x0, x1, x2 = N0[t], N1[t], N2[t]
                 move = FREE[t] != 0.0
-                if mode == 2 and move:
-                    B0[t] = omega * (x0 - P0[t]) + P0[t]
-                    B1[t] = omega * (x1 - P1[t]) + P1[t]
-                    B2[t] = omega * (x2 - P2[t]) + P2[t]
-                elif mode:
-                    B0[t], B1[t], B2[t] = x0, x1, x2
-                if mode:
-                    P0[t], P1[t], P2[t] = X0[t], X1[t], X2[t]
-                X0[t], X1[t], X2[t] = x0, x1, x2
+                _commit(t, N0[t], N1[t], N2[t], move, mode, omega, X0, X1, X2, B0, B1, B2, P0,
+                        P1, P2)  # fmt: skip
+
+
+@numba.njit(cache=True, parallel=True, error_model="numpy", fastmath={"contract"})
+def _sweeps_touching(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE, inv_h,
+                     drag_h, stepped, chunks, mode, omega, contact):  # fmt: skip
+    """:func:`_sweeps` with colliders: each colour's SIMD loop as there, then a second pass over
+    its slots (a parallel loop of its own: the contact terms take views of the colliders'
+    arrays, which would cost the first loop its unaliased arrays) that takes again the step of
+    each vertex that may touch a collider (``near``), from the springs' force and Hessian the
+    first loop left, with the collider's penalty and friction in it and held at a contact's onset
+    (the general sweep's :func:`~.vbd_contact.colliders_at` and
+    :func:`~.vbd_contact.onset`, on the vertex's row of the original arrays), holds every step
+    and every extrapolation within the vertex's bounds (:func:`~.vbd_contact.truncate`: what the
+    last search lets it move), extrapolates no vertex in contact, and commits."""
+    (vof, xm, xt, near, touch, cut, x_cd, allow, gamma, tau, kc, eps, co, sc, fh) = contact
+    F0, F1, F2, H0, H1, H2, H3, H4, H5 = fh
+    ckind, cpos, crot, cpos0, crot0, cgeo, cmu = co[:7]
+    cbank = co[8:]
+    rec_ptr, rec, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d = sc
+    X0, X1, X2 = A
+    B0, B1, B2 = B
+    T0, T1, T2 = T
+    Y0, Y1, Y2 = Y
+    N0, N1, N2 = N
+    P0, P1, P2 = P
+    for cb in range(9):
+        a, bb = cb * PQ + lo, cb * PQ + hi
+        size = (bb - a + chunks - 1) // chunks
+        n0, n1, n2, n3 = shift[cb, 0], shift[cb, 1], shift[cb, 2], shift[cb, 3]
+        n4, n5, n6, n7 = shift[cb, 4], shift[cb, 5], shift[cb, 6], shift[cb, 7]
+        n8, n9, n10, n11 = shift[cb, 8], shift[cb, 9], shift[cb, 10], shift[cb, 11]
+        for ch in numba.prange(chunks):
+            lo_ = np.uint64(a + ch * size)
+            hi_ = np.uint64(min(a + ch * size + size, bb))
+            for t in range(lo_, hi_):
+                xi, yi, zi, f0, f1, f2, a0, b, c, dd, e, ff = _terms(
+                    t, n0, n1, n2, n3, n4, n5, n6, n7, n8, n9, n10, n11, X0, X1, X2, T0, T1, T2,
+                    Y0, Y1, Y2, K, REST, C, QO, QD, MH2, inv_h, drag_h,
+                )  # fmt: skip
+                sx, sy, sz = _solve(a0, b, c, dd, e, ff, f0, f1, f2, FREE[t])
+                N0[t], N1[t], N2[t] = xi + sx, yi + sy, zi + sz
+                stepped[t] = sx * sx + sy * sy + sz * sz
+                # the springs' force and Hessian, for the vertices the second pass takes again
+                F0[t], F1[t], F2[t] = f0, f1, f2
+                H0[t], H1[t], H2[t], H3[t], H4[t], H5[t] = a0, b, c, dd, e, ff
+        for ch in numba.prange(chunks):
+            lo_ = np.uint64(a + ch * size)
+            hi_ = np.uint64(min(a + ch * size + size, bb))
+            for t in range(lo_, hi_):
+                v = vof[t]
+                if v < 0 or FREE[t] == 0.0:  # a ghost or a pin: kept
+                    _commit(t, N0[t], N1[t], N2[t], False, mode, omega, X0, X1, X2, B0, B1, B2,
+                            P0, P1, P2)  # fmt: skip
+                    continue
+                x0, x1, x2 = N0[t], N1[t], N2[t]
+                touch[v] = 0
+                if near[v]:
+                    xi, yi, zi = X0[t], X1[t], X2[t]
+                    f0, f1, f2 = F0[t], F1[t], F2[t]
+                    a0, b, c, dd, e, ff = H0[t], H1[t], H2[t], H3[t], H4[t], H5[t]
+                    xm[v, 0], xm[v, 1], xm[v, 2] = xi, yi, zi
+                    f0, f1, f2, a0, b, c, dd, e, ff, touched = colliders_at(
+                        v, xm, xt, ckind, cpos, crot, cpos0, crot0, cgeo, cmu, cbank, tau, kc,
+                        eps, f0, f1, f2, a0, b, c, dd, e, ff,
+                    )  # fmt: skip
+                    if touched:
+                        touch[v] = 1
+                    sx, sy, sz = _solve(a0, b, c, dd, e, ff, f0, f1, f2, 1.0)
+                    sx, sy, sz = onset(v, sx, sy, sz, xm, rec_ptr, rec, rec_d, pcoef, pnrm, tau,
+                                       ckind, cpos, crot, cgeo, cbank)  # fmt: skip
+                    x0, x1, x2 = xi + sx, yi + sy, zi + sz
+                    stepped[t] = sx * sx + sy * sy + sz * sz
+                x0, x1, x2, was_cut = truncate(v, x0, x1, x2, x_cd, allow, gptr, grec, pidx,
+                                               pcoef, pnrm, pdist, dmin, gamma)  # fmt: skip
+                if was_cut:
+                    cut[v] = 1
+                b0, b1, b2 = _commit(t, x0, x1, x2, touch[v] == 0, mode, omega, X0, X1, X2, B0,
+                                     B1, B2, P0, P1, P2)  # fmt: skip
+                if mode == 2 and touch[v] == 0:  # the extrapolation within the bounds too
+                    b0, b1, b2, was_cut = truncate(v, b0, b1, b2, x_cd, allow, gptr, grec, pidx,
+                                                   pcoef, pnrm, pdist, dmin, gamma)  # fmt: skip
+                    B0[t], B1[t], B2[t] = b0, b1, b2
+                    if was_cut:
+                        cut[v] = 1
