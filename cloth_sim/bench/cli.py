@@ -46,7 +46,16 @@ def _bench_node(args) -> int:
 
     if args.scene:
         if args.grid is not None:
-            print_grid_scene_table(args.scene, args.grid, args.seconds, args.rate)
+            print_grid_scene_table(
+                args.scene,
+                args.grid,
+                args.seconds,
+                args.rate,
+                args.integrator,
+                args.dt,
+                args.material,
+                args.size,
+            )
             return 0
         for scene in args.scene:
             print_scene_node_table(scene, args.seconds, args.rate)
@@ -54,8 +63,8 @@ def _bench_node(args) -> int:
     print_node_table(
         args.sizes,
         args.seconds,
-        args.integrator,
-        args.dt,
+        args.integrator or "symplectic_euler",
+        1e-3 if args.dt is None else args.dt,
         args.rate,
         args.strain_limit_passes,
         args.stiffness,
@@ -260,8 +269,31 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "is the same cloth finer)",
     )
     nb.add_argument("--seconds", type=float, default=10.0, help="measured wall time per row")
-    nb.add_argument("--integrator", default="symplectic_euler", choices=integrators.available())
-    nb.add_argument("--dt", type=float, default=1e-3)
+    nb.add_argument(
+        "--integrator",
+        default=None,
+        choices=integrators.available(),
+        help="the node's integrator (default: symplectic_euler; with --scene --grid, the scene's)",
+    )
+    nb.add_argument(
+        "--dt",
+        type=float,
+        default=None,
+        help="s (default: 0.001; with --scene --grid, the scene's)",
+    )
+    nb.add_argument(
+        "--material",
+        default=None,
+        help="with --scene --grid: a library fabric for the cloth (-p material:=…), of --size",
+    )
+    nb.add_argument(
+        "--size",
+        type=float,
+        nargs=2,
+        default=None,
+        metavar=("W", "H"),
+        help="with --material: the cloth's size in m (default 1 1)",
+    )
     nb.add_argument("--rate", type=float, default=60.0, help="publish_rate (Hz)")
     nb.add_argument(
         "--strain-limit-passes",

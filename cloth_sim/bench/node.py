@@ -187,16 +187,35 @@ def print_scene_node_table(scene: str, seconds: float, rate: float) -> list[dict
     return rows
 
 
-def print_grid_scene_table(scenes, n: int, seconds: float, rate: float) -> list[dict]:
+def print_grid_scene_table(
+    scenes,
+    n: int,
+    seconds: float,
+    rate: float,
+    integrator: str | None = None,
+    dt: float | None = None,
+    material: str | None = None,
+    size=None,
+) -> list[dict]:
     """Each grid scene as a user's ``-p rows:=n -p cols:=n`` runs it (one given by its spacing and
     particle mass grows: a larger, heavier cloth; one given by its size and density, fold, is the
-    same cloth finer), its integrator, step and self-collision as it ships, ``~/points`` and
-    ``~/mesh`` subscribed."""
+    same cloth finer), its integrator, step and self-collision as it ships unless ``integrator``
+    and ``dt`` are given, a library fabric of ``size`` (w, h, m) where ``material`` is
+    (``-p material:=… -p size:=[…]``), ``~/points`` and ``~/mesh`` subscribed."""
     from ..scene import load_scene
 
+    extra = []
+    if integrator is not None:
+        extra.append(Parameter("integrator", value=integrator))
+    if dt is not None:
+        extra.append(Parameter("dt", value=float(dt)))
+    if material is not None:
+        extra.append(Parameter("material", value=material))
+        extra.append(Parameter("size", value=[float(v) for v in (size or (1.0, 1.0))]))
+    given = ", ".join(f"-p {p.name}:={p.value}" for p in extra)
     print(
-        f"# cloth_sim_node, grid scenes at -p rows:={n} -p cols:={n}, {rate:g} Hz, ~/points + "
-        "~/mesh "
+        f"# cloth_sim_node, grid scenes at -p rows:={n} -p cols:={n}"
+        f"{', ' + given if given else ''}, {rate:g} Hz, ~/points + ~/mesh "
         f"subscribed, {seconds:g} s per row after 2 s warm-up; {platform.machine()}, "
         f"{os.cpu_count()} cores"
     )
@@ -217,13 +236,15 @@ def print_grid_scene_table(scenes, n: int, seconds: float, rate: float) -> list[
                 Parameter("rows", value=n),
                 Parameter("cols", value=n),
                 Parameter("publish_rate", value=rate),
+                *extra,
             ],
             seconds,
             True,
         )
         rows.append(dict(r, scene=scene))
+        ran = f"{integrator or s.integrator}, {dt if dt is not None else s.dt:g} s"
         print(
-            f"| {scene} | {s.integrator}, {s.dt:g} s | {r['rtf']:.3f} | {r['ms_per_step']:.3f} | "
+            f"| {scene} | {ran} | {r['rtf']:.3f} | {r['ms_per_step']:.3f} | "
             f"{r['tick_ms']:.2f} | {r['overruns']} | {r['worst_strain']:.4f} |",
             flush=True,
         )
