@@ -318,6 +318,16 @@ def _spring(
     return f0, f1, f2, h0, h1, h2, h3, h4, h5
 
 
+@numba.njit(cache=True, inline="always")
+def _advance(t, xi, yi, zi, f0, f1, f2, a0, b, c, dd, e, ff, free, N0, N1, N2, stepped):
+    """Slot ``t``'s Newton step (:func:`_solve`): the new position into ``N``, the step's squared
+    length into ``stepped``. (Calls of more than 30 arguments compile to a tuple and ``*args``,
+    which numba cannot inline: hence the springs' terms and this step are two calls.)"""
+    sx, sy, sz = _solve(a0, b, c, dd, e, ff, f0, f1, f2, free)
+    N0[t], N1[t], N2[t] = xi + sx, yi + sy, zi + sz
+    stepped[t] = sx * sx + sy * sy + sz * sz
+
+
 @numba.njit(cache=True)
 def next_omega(it, rho, omega):
     """Chebyshev's weight after iteration ``it`` (the general loop's): ``ω₁ = 1``, ``ω₂ = 2/(2 −
@@ -418,6 +428,26 @@ def solve(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE, in
 
 
 @numba.njit(cache=True, inline="always")
+def _colour(shift, cb, PQ, lo, hi, chunks):
+    """Colour ``cb``'s range ``[a, b)``, its chunks' size and its twelve shifts (scalars: a row
+    of ``shift`` would be a view)."""
+    a, b = cb * PQ + lo, cb * PQ + hi
+    return (
+        a, b, (b - a + chunks - 1) // chunks,
+        shift[cb, 0], shift[cb, 1], shift[cb, 2], shift[cb, 3], shift[cb, 4], shift[cb, 5],
+        shift[cb, 6], shift[cb, 7], shift[cb, 8], shift[cb, 9], shift[cb, 10], shift[cb, 11],
+    )  # fmt: skip
+
+
+@numba.njit(cache=True, inline="always")
+def _chunk(a, b, size, ch):
+    """Chunk ``ch``'s slots as unsigned indices: numba then adds no wrap-around of negative ones,
+    which made every load a gather (the shifts are stored as unsigned, two's complement: the
+    sums wrap)."""
+    return np.uint64(a + ch * size), np.uint64(min(a + ch * size + size, b))
+
+
+@numba.njit(cache=True, inline="always")
 def _commit(t, x0, x1, x2, move, mode, omega, X0, X1, X2, B0, B1, B2, P0, P1, P2):
     """Slot ``t``'s new position ``x`` into ``A`` (``X``) and, where ``mode`` asks for
     Chebyshev's step (:func:`solve`), the next iterate into ``B`` (extrapolated if ``move``) and
@@ -455,24 +485,18 @@ def _sweeps(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE, 
     N0, N1, N2 = N
     P0, P1, P2 = P
     for cb in range(9):
-        a, bb = cb * PQ + lo, cb * PQ + hi
-        size = (bb - a + chunks - 1) // chunks
-        n0, n1, n2, n3 = shift[cb, 0], shift[cb, 1], shift[cb, 2], shift[cb, 3]
-        n4, n5, n6, n7 = shift[cb, 4], shift[cb, 5], shift[cb, 6], shift[cb, 7]
-        n8, n9, n10, n11 = shift[cb, 8], shift[cb, 9], shift[cb, 10], shift[cb, 11]
+        a, bb, size, n0, n1, n2, n3, n4, n5, n6, n7, n8, n9, n10, n11 = _colour(
+            shift, cb, PQ, lo, hi, chunks
+        )
         for ch in numba.prange(chunks):
-            # unsigned indices: numba then adds no wrap-around of negative ones, which made every
-            # load a gather (the shifts are stored as unsigned, two's complement: the sums wrap)
-            lo_ = np.uint64(a + ch * size)
-            hi_ = np.uint64(min(a + ch * size + size, bb))
+            lo_, hi_ = _chunk(a, bb, size, ch)
             for t in range(lo_, hi_):
                 xi, yi, zi, f0, f1, f2, a0, b, c, dd, e, ff = _terms(
                     t, n0, n1, n2, n3, n4, n5, n6, n7, n8, n9, n10, n11, X0, X1, X2, T0, T1, T2,
                     Y0, Y1, Y2, K, REST, C, QO, QD, MH2, inv_h, drag_h,
                 )  # fmt: skip
-                sx, sy, sz = _solve(a0, b, c, dd, e, ff, f0, f1, f2, FREE[t])
-                N0[t], N1[t], N2[t] = xi + sx, yi + sy, zi + sz
-                stepped[t] = sx * sx + sy * sy + sz * sz
+                _advance(t, xi, yi, zi, f0, f1, f2, a0, b, c, dd, e, ff, FREE[t], N0, N1, N2,
+                         stepped)  # fmt: skip
             for t in range(lo_, hi_):
                 move = FREE[t] != 0.0
                 _commit(t, N0[t], N1[t], N2[t], move, mode, omega, X0, X1, X2, B0, B1, B2, P0,
@@ -503,28 +527,23 @@ def _sweeps_touching(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH
     N0, N1, N2 = N
     P0, P1, P2 = P
     for cb in range(9):
-        a, bb = cb * PQ + lo, cb * PQ + hi
-        size = (bb - a + chunks - 1) // chunks
-        n0, n1, n2, n3 = shift[cb, 0], shift[cb, 1], shift[cb, 2], shift[cb, 3]
-        n4, n5, n6, n7 = shift[cb, 4], shift[cb, 5], shift[cb, 6], shift[cb, 7]
-        n8, n9, n10, n11 = shift[cb, 8], shift[cb, 9], shift[cb, 10], shift[cb, 11]
+        a, bb, size, n0, n1, n2, n3, n4, n5, n6, n7, n8, n9, n10, n11 = _colour(
+            shift, cb, PQ, lo, hi, chunks
+        )
         for ch in numba.prange(chunks):
-            lo_ = np.uint64(a + ch * size)
-            hi_ = np.uint64(min(a + ch * size + size, bb))
+            lo_, hi_ = _chunk(a, bb, size, ch)
             for t in range(lo_, hi_):
                 xi, yi, zi, f0, f1, f2, a0, b, c, dd, e, ff = _terms(
                     t, n0, n1, n2, n3, n4, n5, n6, n7, n8, n9, n10, n11, X0, X1, X2, T0, T1, T2,
                     Y0, Y1, Y2, K, REST, C, QO, QD, MH2, inv_h, drag_h,
                 )  # fmt: skip
-                sx, sy, sz = _solve(a0, b, c, dd, e, ff, f0, f1, f2, FREE[t])
-                N0[t], N1[t], N2[t] = xi + sx, yi + sy, zi + sz
-                stepped[t] = sx * sx + sy * sy + sz * sz
+                _advance(t, xi, yi, zi, f0, f1, f2, a0, b, c, dd, e, ff, FREE[t], N0, N1, N2,
+                         stepped)  # fmt: skip
                 # the springs' force and Hessian, for the vertices the second pass takes again
                 F0[t], F1[t], F2[t] = f0, f1, f2
                 H0[t], H1[t], H2[t], H3[t], H4[t], H5[t] = a0, b, c, dd, e, ff
         for ch in numba.prange(chunks):
-            lo_ = np.uint64(a + ch * size)
-            hi_ = np.uint64(min(a + ch * size + size, bb))
+            lo_, hi_ = _chunk(a, bb, size, ch)
             for t in range(lo_, hi_):
                 v = vof[t]
                 if v < 0 or FREE[t] == 0.0:  # a ghost or a pin: kept
