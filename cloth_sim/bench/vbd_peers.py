@@ -9,8 +9,9 @@ Newton's examples do.
 1. **The hanging cloth, the same springs.** The hanging scene at N×N (1 m, 10.24 kg: the node's
    cloth), its particles, masses, pins and every structural, shear and bend spring given to Newton
    one by one (``ModelBuilder.add_spring``: Newton's VBD takes springs beside its FEM triangles),
-   with our colour groups (Newton colours triangles and bending edges only, none here), no strain
-   limit on either side. Both step each 1/60 s frame in 10 substeps of 10 iterations (the numbers
+   with our general sweep's greedy colour groups (Newton colours triangles and bending edges only,
+   none here; ours runs the grid's nine classes on its blocks: ``vbd_grid``), no strain limit on
+   either side. Both step each 1/60 s frame in 10 substeps of 10 iterations (the numbers
    of Newton's cloth examples). Figures: wall seconds per simulated second, the worst stretch of
    any spring and the bottom row's swing (the range of its mean y), each over the run, sampled a
    frame.
