@@ -1116,13 +1116,9 @@ class VBD(Integrator):
             allow[:] = np.inf
             self._rec = self._no_rec
             self._candidates = False
-        xs = self._buffer("_xs", x)
-        prev2 = self._buffer("_prev2", x)
-        np.copyto(prev2, x)
         ks = self.contact_stiffness
         kc = self.contact_stiffness
         eps = EPS_V * h
-        run = _iterate_parallel if len(verts) >= PARALLEL_MIN_VERTICES else _iterate_serial
         stepped, cut, touch = self._stepped, self._cut, self._touch
         stepped[:] = 0.0
         cut[:] = 0
@@ -1148,6 +1144,11 @@ class VBD(Integrator):
                 )  # fmt: skip
             done = self._iterate_grid(grid, x, xt, y, m_h2, 1.0 / h, drag_h, budget_end, contact)
             self.counters["grid_steps"] += 1
+        else:  # the general sweep's buffers: the iterate's copy and the one two iterations back
+            xs = self._buffer("_xs", x)
+            prev2 = self._buffer("_prev2", x)
+            np.copyto(prev2, x)
+            run = _iterate_parallel if len(verts) >= PARALLEL_MIN_VERTICES else _iterate_serial
         for it in range(0 if grid is not None else self.iterations):
             if self_contact and it > 0 and it % self.collision_interval == 0 and cut.any():
                 # a vertex hit its bound: search again from here, for room to move on
@@ -1229,7 +1230,7 @@ class VBD(Integrator):
         """The step's iterations on the grid's blocks (no self-contact; ``contact``: the colliders'
         part, or None): the general loop's sweeps and Chebyshev steps, colour by colour in SIMD
         lanes; returns the iterations done."""
-        grid.load(x, xt, y, m_h2, self.free)
+        grid.load(x, xt, y, m_h2)
         threads = numba.get_num_threads()
         if not grid.parallel:
             numba.set_num_threads(1)  # the same bits: the chunks do not depend on the threads

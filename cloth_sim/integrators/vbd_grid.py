@@ -69,12 +69,13 @@ class GridLayout:
     ``OFFSETS[o]``; ``K, REST, C, QO`` ``(12, 9·PQ)`` each offset's spring stiffness, rest length,
     damping and bending coupling ``Q_ij``; ``QD`` the bending diagonal."""
 
-    def __init__(self, rows: int, cols: int, springs, rest, k, c, bending_rows, n: int):
+    def __init__(self, rows: int, cols: int, springs, rest, k, c, bending_rows, pinned):
         self.rows, self.cols = rows, cols
         P = (rows + 2 * PAD + 2) // 3
         Q = (cols + 2 * PAD + 2) // 3
         self.P, self.Q, self.PQ = P, Q, P * Q
         size = 9 * P * Q
+        n = len(pinned)
         i, j = np.divmod(np.arange(n), cols)
         I, J = i + PAD, j + PAD
         self.slot = np.ascontiguousarray(((I % 3) * 3 + J % 3) * P * Q + (I // 3) * Q + J // 3)
@@ -138,7 +139,10 @@ class GridLayout:
         )
         self.stepped = np.zeros(size)
         self.m_h2 = np.zeros(size)
+        #: 1 for a slot whose particle moves, 0 for a pin (held particles are pins of the model)
+        #: and a ghost
         self.free = np.zeros(size)
+        self.free[self.slot] = ~np.asarray(pinned, bool)
         #: the chunks a colour is cut into, and whether the iterations use every core (else numba's
         #: thread count is 1 while they run)
         self.parallel = self.hi - self.lo >= PARALLEL_MIN
@@ -168,17 +172,16 @@ class GridLayout:
                 forces.k,
                 forces.c,
                 None if bending is None else bending.rows(),
-                model.n_particles,
+                model.pinned,
             )
         except ValueError:
             return None
 
-    def load(self, x, xt, y, m_h2, free) -> None:
+    def load(self, x, xt, y, m_h2) -> None:
         """A step's start: the iterate ``x``, the step's start ``xt``, the inertial target ``y``
-        (each ``(n, 3)``), ``m/h²`` and which particles move, into the blocks."""
+        (each ``(n, 3)``) and ``m/h²``, into the blocks."""
         _scatter(x, xt, y, self.slot, self.A, self.T, self.Y)
         self.m_h2[self.slot] = m_h2
-        self.free[self.slot] = free
 
     def solve(
         self, inv_h, drag_h, first, last, total, rho, omega, contact=None
@@ -377,7 +380,8 @@ def _terms(
 @numba.njit(cache=True, inline="always")
 def _solve(a0, b, c, dd, e, ff, f0, f1, f2, free):
     """``H⁻¹ f`` by the adjugate, times ``free`` (0 or 1); zero where ``H`` is singular (the
-    ghosts). Selects, no branch: the loop stays in SIMD lanes."""
+    ghosts). The general sweep's :func:`~.vbd_contact.solve3` with selects instead of its early
+    return, which would take the loop out of SIMD lanes."""
     c00 = dd * ff - e * e
     c01 = c * e - b * ff
     c02 = b * e - c * dd
@@ -408,7 +412,8 @@ def solve(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE, in
 
     ``A, B, T, Y, N, P`` are tuples of one array a coordinate (the iterate, its extrapolation,
     the step's start, the inertial target, the sweep's new positions, the older positions);
-    ``contact``: the colliders and the vertices' bounds (:class:`Contact`), or ``None``."""
+    ``contact``: the colliders and the vertices' bounds (:meth:`GridLayout.contact`), or
+    ``None``."""
     flips = 0
     for it in range(first, last):
         mode = 0  # 0: no Chebyshev step; 1: its copy only (ω₁ = 1); 2: the extrapolation

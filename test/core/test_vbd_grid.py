@@ -203,8 +203,8 @@ import json, re
 from cloth_sim.integrators import vbd_grid
 from cloth_sim.model import ClothModel
 m = ClothModel.grid(6, 6, 0.1, 0.01, stiffness=100.0, damping=0.1, pinned=[(0, 0)])
-lay = vbd_grid.GridLayout(6, 6, m.springs, m.rest_lengths, m.stiffness, m.damping, None, 36)
-lay.load(m.positions, m.positions, m.positions, m.masses, ~m.pinned)
+lay = vbd_grid.GridLayout(6, 6, m.springs, m.rest_lengths, m.stiffness, m.damping, None, m.pinned)
+lay.load(m.positions, m.positions, m.positions, m.masses)
 lay.solve(1.0, 0.0, 0, 2, 2, 0.8, 1.0)
 asm = "\\n".join(vbd_grid._sweeps.inspect_asm().values())
 print(json.dumps({"packed": len(re.findall(r"v?sqrtpd", asm)),
