@@ -30,8 +30,9 @@ own limit). ``long_range=False`` keeps Provot's passes alone, for comparison.
 
 ``method="projection"`` replaces the passes by one projection of all the over-stretched springs
 together (:mod:`cloth_sim.constraints.strain_projection`, after the attachments): the stretch is
-held to ``τ + tol`` exactly, for more work a step (hanging 64×64: worst strain 0.1001 against the
-passes' 0.119; figures in docs/BENCHMARKS.md §3).
+held to ``τ`` plus the projection's own tolerance (its ``TOLERANCE``, 1e-3), for more work a step
+(hanging 64×64: worst strain 0.1010 against the passes' 0.119; figures in docs/BENCHMARKS.md §3
+and §11).
 """
 
 from __future__ import annotations
@@ -297,7 +298,7 @@ class StrainLimit(Stage):
             self._rest,
             self._w,
             self.tau,
-            STRAIN_LIMIT_TOLERANCE,
+            sp.TOLERANCE,
             self.passes,
             sp.MAX_CG_ITERATIONS,
             sp.REGULARISATION,

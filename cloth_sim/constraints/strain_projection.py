@@ -12,9 +12,10 @@ linearised constraints,
     (J W Jᵀ + ε I) λ = C,        Δx = −W Jᵀ λ,
 
 then recomputes the lengths. Springs found too long after an iteration join ``A`` until no spring
-exceeds ``(1 + τ + tol)·L``; after the first iteration only the springs of the particles it moved
-are measured again. A spring of ``A`` within its bound is held at its length (``C_s = 0``), never
-pulled out to the bound: the projection adds no stretch. ``A`` only grows within a step.
+exceeds ``(1 + τ + tol)·L`` (``tol``: :data:`TOLERANCE`); after the first iteration only the
+springs of the particles it moved are measured again. A spring of ``A`` within its bound is held
+at its length (``C_s = 0``), never pulled out to the bound: the projection adds no stretch. ``A``
+only grows within a step.
 
 Each solve moves the set's particles, which stretches the ring of springs around the set: left to
 itself the set grows by about a ring an iteration (128×128 at the bottom of the swing: 14,000
@@ -62,6 +63,14 @@ import numpy as np
 
 #: ``ε``, in units of the largest inverse mass (see the module docstring)
 REGULARISATION = 1e-3
+#: the projection stops once no spring's strain exceeds ``τ`` by more than this. Each
+#: linearisation takes the worst excess down by about the CG's tolerance, and the last ones are
+#: the dearest: what is left lies in the redundant constraints' slow modes, 40–70 CG iterations a
+#: solve where the first takes 3–4 (hanging 64×64 at the bottom of its swing, ~4,800 springs
+#: active). 1e-3 (0.1 % of a spring's rest length) instead of Provot's passes' 1e-4 spares one or
+#: two of them: the hanging 64×64 cloth in the node 0.929–0.963 → 0.987–0.988 of real time, its
+#: worst strain 0.1001 → 0.1010 (docs/BENCHMARKS.md §11, sixth session)
+TOLERANCE = 1e-3
 #: most conjugate-gradient iterations per solve
 MAX_CG_ITERATIONS = 400
 #: a solve stops once its residual is this fraction of the first (loose: the next iteration
