@@ -198,6 +198,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="wait S seconds after creating the publishers (lets subscribers connect)",
     )
     pl.add_argument(
+        "--wait-for-subscribers",
+        action="store_true",
+        help="before playing (and before --delay), wait until every topic has a subscriber",
+    )
+    pl.add_argument(
         "--wait-for-all-acked",
         type=float,
         default=5.0,

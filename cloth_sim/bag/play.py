@@ -141,6 +141,17 @@ class Player:
                 self.wait_for_all_acked()
                 return time.perf_counter() - wall0
 
+    def wait_for_subscribers(self, poll: float = 0.05) -> bool:
+        """Until every topic's publisher has matched at least one subscription (ROS 1's ``rosbag
+        play --wait-for-subscribers``: a script or test that subscribes before playing waits for
+        discovery however long it takes); ``False`` when stopped first. The subscription matches
+        the publisher on its own side a moment apart: ``--delay`` after this covers that."""
+        while not self.stop_requested:
+            if all(p.get_subscription_count() > 0 for p in self.publishers.values()):
+                return True
+            time.sleep(poll)
+        return False
+
     def wait_for_all_acked(self) -> bool:
         """Let reliable subscribers acknowledge what was sent before the publishers go away (a DDS
         writer destroyed at exit drops what it has not delivered yet); at most ``ack_timeout``
@@ -176,8 +187,15 @@ def main(args) -> int:
 
         signal.signal(signal.SIGINT, stop)
         signal.signal(signal.SIGTERM, stop)
+        if args.wait_for_subscribers:
+            print(f"waiting for a subscriber on each of {len(player.topics)} topics", flush=True)
+            if not player.wait_for_subscribers():
+                return 0
         if args.delay > 0:
-            time.sleep(args.delay)  # let subscribers discover the publishers first
+            # let subscribers discover the publishers first (after --wait-for-subscribers: let
+            # each subscriber match its publisher too, which DDS does independently of the
+            # publisher matching it: a reliable reader matched late misses what was sent before)
+            time.sleep(args.delay)
         print(
             f"playing {args.bag}: {sum(t.count for t in player.topics.values())} messages on "
             f"{len(player.topics)} topics, rate {args.rate:g}",
