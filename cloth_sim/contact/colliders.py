@@ -108,7 +108,10 @@ class Collider:
     def signed_distance(self, points) -> np.ndarray:
         """Signed distance of ``(k, 3)`` points from the surface (negative inside)."""
         pts = read_only(np.reshape(points, (-1, 3)), np.float64)
-        return _distances(self.kind, self.position, self.rotation, self.geometry, pts, self._bank)
+        pos = np.reshape(np.asarray(self.position, np.float64), (1, 3))
+        rot = np.reshape(np.asarray(self.rotation, np.float64), (1, 3, 3))
+        geo = np.reshape(np.asarray(self.geometry, np.float64), (1, 4))
+        return _distances(self.kind, pos, rot, geo, pts, self._bank)
 
     #: the bank :meth:`signed_distance` reads (a Mesh's own mesh at index 0)
     _bank = triangle_meshes.EMPTY
@@ -328,27 +331,33 @@ KINDS = {
 
 # ---------------------------------------------------------------------------- kernels
 @numba.njit(cache=True, inline="always")
-def sdf(kind, p, R, g, x, y, z, bank, cutoff=math.inf):
-    """Signed distance of the point ``(x, y, z)`` from a collider and the outward unit normal
-    there (the distance's gradient). A Mesh's (``g[0]`` its index in ``bank``, the packed meshes
-    of :func:`.triangle_meshes.pack`) is unsigned, and a lower bound outside its box; a point at
-    least ``cutoff`` from a Mesh is answered ``(cutoff, 0, 0, 0)`` (a query that only asks
-    whether the point is within the cutoff walks less of the tree)."""
-    dx, dy, dz = x - p[0], y - p[1], z - p[2]
+def sdf(kind, pos, rot, geo, c, x, y, z):
+    """Signed distance of the point ``(x, y, z)`` from collider ``c`` of the packed colliders
+    (``pos[c]`` its position, ``rot[c]`` its rotation, ``geo[c]`` its geometry; ``kind`` its
+    kind, any but ``MESH``: :func:`mesh_sdf`) and the outward unit normal there (the distance's
+    gradient).
+
+    A kernel asks ``mesh_sdf`` where ``kind == MESH`` and this otherwise, in two branches of its
+    own: one inlined function taking the packed meshes (a tuple of ten arrays) bound them anew
+    at each call, ten reference counts up and down (atomic) whether the mesh branch ran or not,
+    ~95 ns a call: the contact stage's loop took 113 ns a particle against one plane, 10 with
+    the meshes out of the inlined code (docs/BENCHMARKS.md §11). The collider is named by its
+    index rather than by views ``pos[c]``, … for the same reason."""
+    dx, dy, dz = x - pos[c, 0], y - pos[c, 1], z - pos[c, 2]
     if kind == PLANE:
-        nx = R[0, 0] * g[0] + R[0, 1] * g[1] + R[0, 2] * g[2]
-        ny = R[1, 0] * g[0] + R[1, 1] * g[1] + R[1, 2] * g[2]
-        nz = R[2, 0] * g[0] + R[2, 1] * g[1] + R[2, 2] * g[2]
+        nx = rot[c, 0, 0] * geo[c, 0] + rot[c, 0, 1] * geo[c, 1] + rot[c, 0, 2] * geo[c, 2]
+        ny = rot[c, 1, 0] * geo[c, 0] + rot[c, 1, 1] * geo[c, 1] + rot[c, 1, 2] * geo[c, 2]
+        nz = rot[c, 2, 0] * geo[c, 0] + rot[c, 2, 1] * geo[c, 1] + rot[c, 2, 2] * geo[c, 2]
         return nx * dx + ny * dy + nz * dz, nx, ny, nz
     if kind == SPHERE:
         r = math.sqrt(dx * dx + dy * dy + dz * dz)
         if r < 1e-300:
-            return -g[0], 0.0, 0.0, 1.0
-        return r - g[0], dx / r, dy / r, dz / r
+            return -geo[c, 0], 0.0, 0.0, 1.0
+        return r - geo[c, 0], dx / r, dy / r, dz / r
     if kind == CAPSULE:
-        hx = R[0, 0] * g[0] + R[0, 1] * g[1] + R[0, 2] * g[2]
-        hy = R[1, 0] * g[0] + R[1, 1] * g[1] + R[1, 2] * g[2]
-        hz = R[2, 0] * g[0] + R[2, 1] * g[1] + R[2, 2] * g[2]
+        hx = rot[c, 0, 0] * geo[c, 0] + rot[c, 0, 1] * geo[c, 1] + rot[c, 0, 2] * geo[c, 2]
+        hy = rot[c, 1, 0] * geo[c, 0] + rot[c, 1, 1] * geo[c, 1] + rot[c, 1, 2] * geo[c, 2]
+        hz = rot[c, 2, 0] * geo[c, 0] + rot[c, 2, 1] * geo[c, 1] + rot[c, 2, 2] * geo[c, 2]
         hh = hx * hx + hy * hy + hz * hz
         s = 0.0
         if hh > 0.0:
@@ -363,24 +372,41 @@ def sdf(kind, p, R, g, x, y, z, bank, cutoff=math.inf):
                 ux, uy, uz = -hz, 0.0, hx
             u = math.sqrt(ux * ux + uy * uy + uz * uz)
             if u == 0.0:
-                return -g[3], 0.0, 0.0, 1.0
-            return -g[3], ux / u, uy / u, uz / u
-        return r - g[3], ex / r, ey / r, ez / r
-    # BOX, CYLINDER, MESH: the point in the shape's frame
-    qx = R[0, 0] * dx + R[1, 0] * dy + R[2, 0] * dz
-    qy = R[0, 1] * dx + R[1, 1] * dy + R[2, 1] * dz
-    qz = R[0, 2] * dx + R[1, 2] * dy + R[2, 2] * dz
-    if kind == MESH:
-        d, lx, ly, lz = mesh_distance(bank, int(g[0]), qx, qy, qz, cutoff)
-    elif kind == CYLINDER:
-        d, lx, ly, lz = _cylinder(g[0], g[1], qx, qy, qz)
+                return -geo[c, 3], 0.0, 0.0, 1.0
+            return -geo[c, 3], ux / u, uy / u, uz / u
+        return r - geo[c, 3], ex / r, ey / r, ez / r
+    # BOX, CYLINDER: the point in the shape's frame
+    qx = rot[c, 0, 0] * dx + rot[c, 1, 0] * dy + rot[c, 2, 0] * dz
+    qy = rot[c, 0, 1] * dx + rot[c, 1, 1] * dy + rot[c, 2, 1] * dz
+    qz = rot[c, 0, 2] * dx + rot[c, 1, 2] * dy + rot[c, 2, 2] * dz
+    if kind == CYLINDER:
+        d, lx, ly, lz = _cylinder(geo[c, 0], geo[c, 1], qx, qy, qz)
     else:
-        d, lx, ly, lz = _box(g, qx, qy, qz)
+        d, lx, ly, lz = _box(geo[c, 0], geo[c, 1], geo[c, 2], qx, qy, qz)
     return (
         d,
-        R[0, 0] * lx + R[0, 1] * ly + R[0, 2] * lz,
-        R[1, 0] * lx + R[1, 1] * ly + R[1, 2] * lz,
-        R[2, 0] * lx + R[2, 1] * ly + R[2, 2] * lz,
+        rot[c, 0, 0] * lx + rot[c, 0, 1] * ly + rot[c, 0, 2] * lz,
+        rot[c, 1, 0] * lx + rot[c, 1, 1] * ly + rot[c, 1, 2] * lz,
+        rot[c, 2, 0] * lx + rot[c, 2, 1] * ly + rot[c, 2, 2] * lz,
+    )
+
+
+@numba.njit(cache=True)
+def mesh_sdf(pos, rot, geo, c, x, y, z, bank, cutoff=math.inf):
+    """:func:`sdf` of a Mesh collider ``c`` (``geo[c, 0]`` its index in ``bank``, the packed
+    meshes of :func:`.triangle_meshes.pack`): unsigned, and a lower bound outside its box; a
+    point at least ``cutoff`` from it is answered ``(cutoff, 0, 0, 0)`` (a query that only asks
+    whether the point is within the cutoff walks less of the tree)."""
+    dx, dy, dz = x - pos[c, 0], y - pos[c, 1], z - pos[c, 2]
+    qx = rot[c, 0, 0] * dx + rot[c, 1, 0] * dy + rot[c, 2, 0] * dz
+    qy = rot[c, 0, 1] * dx + rot[c, 1, 1] * dy + rot[c, 2, 1] * dz
+    qz = rot[c, 0, 2] * dx + rot[c, 1, 2] * dy + rot[c, 2, 2] * dz
+    d, lx, ly, lz = mesh_distance(bank, int(geo[c, 0]), qx, qy, qz, cutoff)
+    return (
+        d,
+        rot[c, 0, 0] * lx + rot[c, 0, 1] * ly + rot[c, 0, 2] * lz,
+        rot[c, 1, 0] * lx + rot[c, 1, 1] * ly + rot[c, 1, 2] * lz,
+        rot[c, 2, 0] * lx + rot[c, 2, 1] * ly + rot[c, 2, 2] * lz,
     )
 
 
@@ -404,9 +430,9 @@ def _cylinder(radius, half, qx, qy, qz):
 
 
 @numba.njit(cache=True, inline="always")
-def _box(g, qx, qy, qz):
-    """A box's signed distance and normal in its own frame."""
-    ax, ay, az = abs(qx) - g[0], abs(qy) - g[1], abs(qz) - g[2]
+def _box(gx, gy, gz, qx, qy, qz):
+    """A box's (half extents ``gx, gy, gz``) signed distance and normal in its own frame."""
+    ax, ay, az = abs(qx) - gx, abs(qy) - gy, abs(qz) - gz
     if ax > 0.0 or ay > 0.0 or az > 0.0:
         ox, oy, oz = max(ax, 0.0), max(ay, 0.0), max(az, 0.0)
         d = math.sqrt(ox * ox + oy * oy + oz * oz)
@@ -428,24 +454,30 @@ def _box(g, qx, qy, qz):
 
 
 @numba.njit(cache=True)
-def _distances(kind, p, R, g, pts, bank):
+def _distances(kind, pos, rot, geo, pts, bank):
+    """The signed distances of ``pts`` from the one collider packed in ``pos``, ``rot``,
+    ``geo`` (index 0)."""
     out = np.empty(pts.shape[0])
     for i in range(pts.shape[0]):
-        out[i] = sdf(kind, p, R, g, pts[i, 0], pts[i, 1], pts[i, 2], bank)[0]
+        if kind == MESH:
+            out[i] = mesh_sdf(pos, rot, geo, 0, pts[i, 0], pts[i, 1], pts[i, 2], bank)[0]
+        else:
+            out[i] = sdf(kind, pos, rot, geo, 0, pts[i, 0], pts[i, 1], pts[i, 2])[0]
     return out
 
 
 @numba.njit(cache=True, inline="always")
-def carried(p_old, R_old, p_new, R_new, x, y, z):
-    """Where the point ``(x, y, z)`` attached to the collider's new pose was at its old pose."""
-    dx, dy, dz = x - p_new[0], y - p_new[1], z - p_new[2]
-    lx = R_new[0, 0] * dx + R_new[1, 0] * dy + R_new[2, 0] * dz
-    ly = R_new[0, 1] * dx + R_new[1, 1] * dy + R_new[2, 1] * dz
-    lz = R_new[0, 2] * dx + R_new[1, 2] * dy + R_new[2, 2] * dz
+def carried(p_old, R_old, p_new, R_new, c, x, y, z):
+    """Where the point ``(x, y, z)`` attached to collider ``c``'s new pose (``p_new[c]``,
+    ``R_new[c]``) was at its old pose (``p_old[c]``, ``R_old[c]``); by index, as :func:`sdf`."""
+    dx, dy, dz = x - p_new[c, 0], y - p_new[c, 1], z - p_new[c, 2]
+    lx = R_new[c, 0, 0] * dx + R_new[c, 1, 0] * dy + R_new[c, 2, 0] * dz
+    ly = R_new[c, 0, 1] * dx + R_new[c, 1, 1] * dy + R_new[c, 2, 1] * dz
+    lz = R_new[c, 0, 2] * dx + R_new[c, 1, 2] * dy + R_new[c, 2, 2] * dz
     return (
-        p_old[0] + R_old[0, 0] * lx + R_old[0, 1] * ly + R_old[0, 2] * lz,
-        p_old[1] + R_old[1, 0] * lx + R_old[1, 1] * ly + R_old[1, 2] * lz,
-        p_old[2] + R_old[2, 0] * lx + R_old[2, 1] * ly + R_old[2, 2] * lz,
+        p_old[c, 0] + R_old[c, 0, 0] * lx + R_old[c, 0, 1] * ly + R_old[c, 0, 2] * lz,
+        p_old[c, 1] + R_old[c, 1, 0] * lx + R_old[c, 1, 1] * ly + R_old[c, 1, 2] * lz,
+        p_old[c, 2] + R_old[c, 2, 0] * lx + R_old[c, 2, 1] * ly + R_old[c, 2, 2] * lz,
     )
 
 
@@ -505,7 +537,7 @@ def resolve_contacts(
         for c in range(kinds.shape[0]):
             k = kinds[c]
             # the start, carried with the collider to its new pose (equal to x0 for a static one)
-            sx, sy, sz = carried(pos[c], rot[c], pos0[c], rot0[c], x0[p, 0], x0[p, 1], x0[p, 2])
+            sx, sy, sz = carried(pos, rot, pos0, rot0, c, x0[p, 0], x0[p, 1], x0[p, 2])
             if reach[c] < np.inf:  # every point q of the path s→x: |q − pos| ≥ (a + b − L)/2
                 a = math.sqrt(
                     (x[p, 0] - pos[c, 0]) ** 2
@@ -520,10 +552,13 @@ def resolve_contacts(
                     continue
             # where the collider's point under x[p] was at the start: its displacement over the
             # step
-            cx, cy, cz = carried(pos0[c], rot0[c], pos[c], rot[c], x[p, 0], x[p, 1], x[p, 2])
+            cx, cy, cz = carried(pos0, rot0, pos, rot, c, x[p, 0], x[p, 1], x[p, 2])
             ux, uy, uz = x[p, 0] - cx, x[p, 1] - cy, x[p, 2] - cz
             # (1) continuous detection from a start outside the skin
-            d0, mx, my, mz = sdf(k, pos[c], rot[c], geo[c], sx, sy, sz, bank)
+            if k == MESH:
+                d0, mx, my, mz = mesh_sdf(pos, rot, geo, c, sx, sy, sz, bank)
+            else:
+                d0, mx, my, mz = sdf(k, pos, rot, geo, c, sx, sy, sz)
             d0 -= h
             ex, ey, ez = x[p, 0] - sx, x[p, 1] - sy, x[p, 2] - sz
             length = math.sqrt(ex * ex + ey * ey + ez * ez)
@@ -534,7 +569,10 @@ def resolve_contacts(
                 # a start touching the surface: the end is projected below, unless the path went
                 # past the middle of the solid or through it (the normal at the end points the
                 # other way: a straight path between opposite sides crosses the solid): stay
-                de, fx, fy, fz = sdf(k, pos[c], rot[c], geo[c], x[p, 0], x[p, 1], x[p, 2], bank)
+                if k == MESH:
+                    de, fx, fy, fz = mesh_sdf(pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2], bank)
+                else:
+                    de, fx, fy, fz = sdf(k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])
                 if fx * mx + fy * my + fz * mz < 0.0:
                     x[p, 0], x[p, 1], x[p, 2] = sx, sy, sz
                     held = True
@@ -542,12 +580,11 @@ def resolve_contacts(
                 t = 0.0
                 hit = False
                 for _ in range(_MARCH_STEPS):
-                    d = (
-                        sdf(
-                            k, pos[c], rot[c], geo[c], sx + t * ex, sy + t * ey, sz + t * ez, bank
-                        )[0]
-                        - h
-                    )
+                    qx, qy, qz = sx + t * ex, sy + t * ey, sz + t * ez
+                    if k == MESH:
+                        d = mesh_sdf(pos, rot, geo, c, qx, qy, qz, bank)[0] - h
+                    else:
+                        d = sdf(k, pos, rot, geo, c, qx, qy, qz)[0] - h
                     if d <= 1e-3 * h:
                         hit = True
                         break
@@ -559,7 +596,10 @@ def resolve_contacts(
                 if hit:
                     x[p, 0], x[p, 1], x[p, 2] = sx + t * ex, sy + t * ey, sz + t * ez
             # (2) projection with friction on the motion relative to the collider
-            d, nx, ny, nz = sdf(k, pos[c], rot[c], geo[c], x[p, 0], x[p, 1], x[p, 2], bank)
+            if k == MESH:
+                d, nx, ny, nz = mesh_sdf(pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2], bank)
+            else:
+                d, nx, ny, nz = sdf(k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])
             clearance[p] = min(clearance[p], max(d - h, 0.0))  # (0 once projected onto the skin)
             if d >= h * (1.0 + CONTACT_TOLERANCE):
                 continue
@@ -633,7 +673,10 @@ def _crease(x, p, kinds, pos, rot, geo, bank, h):
     for _ in range(_CREASE_PASSES):
         moved = False
         for c in range(kinds.shape[0]):
-            d, nx, ny, nz = sdf(kinds[c], pos[c], rot[c], geo[c], x[p, 0], x[p, 1], x[p, 2], bank)
+            if kinds[c] == MESH:
+                d, nx, ny, nz = mesh_sdf(pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2], bank)
+            else:
+                d, nx, ny, nz = sdf(kinds[c], pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])
             if d < h * (1.0 - 1e-6):
                 x[p, 0] += (h - d) * nx
                 x[p, 1] += (h - d) * ny

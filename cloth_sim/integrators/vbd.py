@@ -73,7 +73,7 @@ import numba
 import numpy as np
 
 from ..contact import triangle_meshes
-from ..contact.colliders import sdf
+from ..contact.colliders import MESH, mesh_sdf, sdf
 from ..contact.geometry import segment_parameters, triangle_weights
 from ..kinds import LINEAR
 from ..physics.bending import bending_row
@@ -798,7 +798,10 @@ def _allowances(x, allowance, ckind, cpos, crot, cgeo, creach, cbank, cdepth, ta
                 far = math.sqrt(far + (x[i, 2] - cpos[c, 2]) ** 2) - creach[c]
                 if far >= (allowance[i] + tau * 1.01) * (1.0 + 1e-9):
                     continue
-            d = sdf(ckind[c], cpos[c], crot[c], cgeo[c], x[i, 0], x[i, 1], x[i, 2], cbank)[0]
+            if ckind[c] == MESH:
+                d = mesh_sdf(cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2], cbank)[0]
+            else:
+                d = sdf(ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2])[0]
             nearest = min(nearest, d)
             if cdepth[c] < math.inf:
                 b = min(b, max(d, 0.0) + 0.9 * cdepth[c])
@@ -830,9 +833,11 @@ def _overtaken(x, free, ckind, cpos, crot, cpos0, crot0, cgeo, creach, cbank, ta
                 far = (x[i, 0] - cpos[c, 0]) ** 2 + (x[i, 1] - cpos[c, 1]) ** 2
                 if math.sqrt(far + (x[i, 2] - cpos[c, 2]) ** 2) - creach[c] >= tau:
                     continue
-            d, nx, ny, nz = sdf(
-                ckind[c], cpos[c], crot[c], cgeo[c], x[i, 0], x[i, 1], x[i, 2], cbank, tau
-            )
+            if ckind[c] == MESH:
+                xi, yi, zi = x[i, 0], x[i, 1], x[i, 2]
+                d, nx, ny, nz = mesh_sdf(cpos, crot, cgeo, c, xi, yi, zi, cbank, tau)
+            else:
+                d, nx, ny, nz = sdf(ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2])
             if d < tau:
                 x[i, 0] += (tau - d) * nx
                 x[i, 1] += (tau - d) * ny

@@ -11,7 +11,7 @@ import math
 
 import numba
 
-from ..contact.colliders import carried, sdf
+from ..contact.colliders import MESH, carried, mesh_sdf, sdf
 
 
 @numba.njit(cache=True, inline="always")
@@ -96,7 +96,10 @@ def colliders_at(
     the step relative to the collider's point under it; and whether it touches one."""
     touched = False
     for c in range(ckind.shape[0]):
-        d, nx, ny, nz = sdf(ckind[c], cpos[c], crot[c], cgeo[c], x[i, 0], x[i, 1], x[i, 2], cbank)
+        if ckind[c] == MESH:
+            d, nx, ny, nz = mesh_sdf(cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2], cbank)
+        else:
+            d, nx, ny, nz = sdf(ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2])
         p = tau - d
         if p <= 0.0:
             continue
@@ -109,7 +112,7 @@ def colliders_at(
         if mu <= 0.0:
             continue
         # where the collider's point now under the vertex was at the step's start
-        sx, sy, sz = carried(cpos0[c], crot0[c], cpos[c], crot[c], x[i, 0], x[i, 1], x[i, 2])
+        sx, sy, sz = carried(cpos0, crot0, cpos, crot, c, x[i, 0], x[i, 1], x[i, 2])
         rx, ry, rz = sx - xt[i, 0], sy - xt[i, 1], sz - xt[i, 2]
         rn = rx * nx + ry * ny + rz * nz
         tx, ty, tz = rx - rn * nx, ry - rn * ny, rz - rn * nz
@@ -182,7 +185,10 @@ def onset(i, sx, sy, sz, x, rec_ptr, rec, rec_d, pcoef, pnrm, tau, ckind, cpos, 
             f = over / (nx * nx + ny * ny + nz * nz)
             sx, sy, sz = sx + f * nx, sy + f * ny, sz + f * nz
     for c in range(ckind.shape[0]):
-        d, nx, ny, nz = sdf(ckind[c], cpos[c], crot[c], cgeo[c], x[i, 0], x[i, 1], x[i, 2], cbank)
+        if ckind[c] == MESH:
+            d, nx, ny, nz = mesh_sdf(cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2], cbank)
+        else:
+            d, nx, ny, nz = sdf(ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2])
         if d < tau:
             continue
         over = (tau - d) - (nx * sx + ny * sy + nz * sz)
