@@ -1,6 +1,7 @@
 """``compile_kernels`` leaves nothing to compile: after it, the steps and queries a real-time loop
-runs (a cloth above vbd's parallel threshold with self-collision and a collider, the self-contact
-search and the colliders' signed distances, each with writable arrays and with read-only views)
+runs (a cloth above vbd's parallel threshold with self-collision and a collider, the same on the
+grid's blocks with colliders and no self-contact, the self-contact search and the colliders'
+signed distances, each with writable arrays and with read-only views)
 use the signatures it compiled, so no tick of the node compiles (a missing one cost 8–26 s). Run in
 a fresh process: in the test's own, an earlier test may have compiled what it looks for."""
 
@@ -41,6 +42,16 @@ sim = Simulator(
     colliders=[col.Sphere(center=(0.2, 0.2, -0.1), radius=0.1)],
 )
 sim.step(2)
+# the grid's blocks with colliders and no self-contact (a drape or a table at vbd)
+blocks = Simulator(
+    model,
+    integrator="vbd",
+    dt=1e-3,
+    thickness=0.004,
+    colliders=[col.Sphere(center=(0.2, 0.2, -0.1), radius=0.1), col.Plane(offset=-0.3)],
+)
+blocks.step(2)
+assert blocks.integrator_stats["grid_steps"] == 2
 for x in (sim.positions, np.array(sim.positions)):  # a read-only view, a writable copy
     sim.stages[2].candidates(x, 0.004)
     sim.colliders[0].signed_distance(x)
