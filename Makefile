@@ -8,7 +8,9 @@ STAMP  := $(VENV)/.installed
 # with rosidl + cmake from the wheels: tools/build_interfaces.py
 MSGS   := build/interfaces/.built
 # numba's kernels compiled into their on-disk cache (again when the package's code changes: a
-# fraction of a second when the cache holds them), and the package's bytecode: these machines set
+# fraction of a second when the cache holds them; the grid's sweep with colliders, ~50 s alone, in
+# a process of its own beside the rest, on the core the interfaces and the site leave idle after
+# their first two minutes), and the package's bytecode: these machines set
 # PYTHONDONTWRITEBYTECODE=1, so without it every process (a node, a CLI, a Ray worker) compiled
 # the package's modules again as it imported them (0.2-0.5 s a process: docs/BENCHMARKS.md §11)
 KERNELS := $(VENV)/.kernels
@@ -43,7 +45,9 @@ $(STAMP): requirements.txt setup.py pyproject.toml
 
 $(KERNELS): $(STAMP) $(shell find cloth_sim -name '*.py')
 	$(PY) -m compileall -q cloth_sim
-	$(PY) -c "from cloth_sim.simulator import compile_kernels as c; print(f'kernels compiled in {c():.1f} s')"
+	$(PY) -c "from cloth_sim.simulator import compile_grid_contacts as c; c()" & grid=$$!; \
+	$(PY) -c "from cloth_sim.simulator import compile_kernels as c; print(f'kernels compiled in {c():.1f} s')" \
+		&& wait $$grid
 	@touch $@
 
 $(MSGS): $(STAMP) msg/Stats.msg $(wildcard srv/*.srv) CMakeLists.txt package.xml tools/build_interfaces.py \

@@ -1007,12 +1007,21 @@ def compile_kernels() -> float:
     big = ClothModel.grid(side, side, 0.02, 0.01, stiffness=100.0, pinned=[(0, 0)])
     Simulator(big, integrator="vbd", dt=1e-4, integrator_options={"grid": False}).step(1)
     Simulator(big, integrator="vbd", dt=1e-4, integrator_options={"time_budget": 1.0}).step(1)
-    # and the grid's blocks with colliders and no self-contact (drape and table at vbd: the
-    # colours' sweep with the contact pass, ~50 s to compile, which their first tick paid)
-    from .contact.colliders import Plane
-
-    Simulator(big, integrator="vbd", dt=1e-4, colliders=[Plane(offset=-1.0)]).step(1)
+    compile_grid_contacts()
     return time.perf_counter() - t0
+
+
+def compile_grid_contacts() -> None:
+    """``vbd`` on a grid's blocks with a collider and no self-contact (drape and table at
+    ``vbd``): the colours' sweep with the contact pass, ~50 s of numba's compilation alone (their
+    first tick paid it until :func:`compile_kernels` ran this). ``make install`` runs it in a
+    process of its own beside ``compile_kernels``, which then finds it in the cache."""
+    from .contact.colliders import Plane
+    from .integrators.vbd import PARALLEL_MIN_VERTICES
+
+    side = int(np.ceil(np.sqrt(PARALLEL_MIN_VERTICES)))
+    big = ClothModel.grid(side, side, 0.02, 0.01, stiffness=100.0, pinned=[(0, 0)])
+    Simulator(big, integrator="vbd", dt=1e-4, colliders=[Plane(offset=-1.0)]).step(1)
 
 
 def _compile_contacts(model, integrator: str) -> "Simulator":
