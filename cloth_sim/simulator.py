@@ -918,7 +918,6 @@ def compile_kernels() -> float:
     import time
 
     from .integrators.explicit import combine_parallel
-    from .integrators.vbd import PARALLEL_MIN_VERTICES
 
     t0 = time.perf_counter()
     for model_name in ("provot", "choi_ko"):
@@ -1003,25 +1002,31 @@ def compile_kernels() -> float:
     # (the general sweep: a grid without contacts takes the grid's own, compiled above, whose
     # chunks do not change its signature); and the grid's with a time budget (one call an
     # iteration, Chebyshev's step from Python)
-    side = int(np.ceil(np.sqrt(PARALLEL_MIN_VERTICES)))
-    big = ClothModel.grid(side, side, 0.02, 0.01, stiffness=100.0, pinned=[(0, 0)])
+    big = _parallel_grid()
     Simulator(big, integrator="vbd", dt=1e-4, integrator_options={"grid": False}).step(1)
     Simulator(big, integrator="vbd", dt=1e-4, integrator_options={"time_budget": 1.0}).step(1)
-    compile_grid_contacts()
+    compile_grid_contacts(big)
     return time.perf_counter() - t0
 
 
-def compile_grid_contacts() -> None:
+def _parallel_grid() -> ClothModel:
+    """The smallest square grid at vbd.PARALLEL_MIN_VERTICES: one that runs vbd's sweeps on
+    every core."""
+    from .integrators.vbd import PARALLEL_MIN_VERTICES
+
+    side = int(np.ceil(np.sqrt(PARALLEL_MIN_VERTICES)))
+    return ClothModel.grid(side, side, 0.02, 0.01, stiffness=100.0, pinned=[(0, 0)])
+
+
+def compile_grid_contacts(model: ClothModel | None = None) -> None:
     """``vbd`` on a grid's blocks with a collider and no self-contact (drape and table at
     ``vbd``): the colours' sweep with the contact pass, ~50 s of numba's compilation alone (their
     first tick paid it until :func:`compile_kernels` ran this). ``make install`` runs it in a
     process of its own beside ``compile_kernels``, which then finds it in the cache."""
     from .contact.colliders import Plane
-    from .integrators.vbd import PARALLEL_MIN_VERTICES
 
-    side = int(np.ceil(np.sqrt(PARALLEL_MIN_VERTICES)))
-    big = ClothModel.grid(side, side, 0.02, 0.01, stiffness=100.0, pinned=[(0, 0)])
-    Simulator(big, integrator="vbd", dt=1e-4, colliders=[Plane(offset=-1.0)]).step(1)
+    model = _parallel_grid() if model is None else model
+    Simulator(model, integrator="vbd", dt=1e-4, colliders=[Plane(offset=-1.0)]).step(1)
 
 
 def _compile_contacts(model, integrator: str) -> "Simulator":

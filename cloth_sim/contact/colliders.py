@@ -375,20 +375,14 @@ def sdf(kind, pos, rot, geo, c, x, y, z):
                 return -geo[c, 3], 0.0, 0.0, 1.0
             return -geo[c, 3], ux / u, uy / u, uz / u
         return r - geo[c, 3], ex / r, ey / r, ez / r
-    # BOX, CYLINDER: the point in the shape's frame
-    qx = rot[c, 0, 0] * dx + rot[c, 1, 0] * dy + rot[c, 2, 0] * dz
-    qy = rot[c, 0, 1] * dx + rot[c, 1, 1] * dy + rot[c, 2, 1] * dz
-    qz = rot[c, 0, 2] * dx + rot[c, 1, 2] * dy + rot[c, 2, 2] * dz
+    # BOX, CYLINDER: in the shape's frame
+    qx, qy, qz = _to_frame(pos, rot, c, x, y, z)
     if kind == CYLINDER:
         d, lx, ly, lz = _cylinder(geo[c, 0], geo[c, 1], qx, qy, qz)
     else:
         d, lx, ly, lz = _box(geo[c, 0], geo[c, 1], geo[c, 2], qx, qy, qz)
-    return (
-        d,
-        rot[c, 0, 0] * lx + rot[c, 0, 1] * ly + rot[c, 0, 2] * lz,
-        rot[c, 1, 0] * lx + rot[c, 1, 1] * ly + rot[c, 1, 2] * lz,
-        rot[c, 2, 0] * lx + rot[c, 2, 1] * ly + rot[c, 2, 2] * lz,
-    )
+    nx, ny, nz = _from_frame(rot, c, lx, ly, lz)
+    return d, nx, ny, nz
 
 
 @numba.njit(cache=True)
@@ -397,13 +391,27 @@ def mesh_sdf(pos, rot, geo, c, x, y, z, bank, cutoff=math.inf):
     meshes of :func:`.triangle_meshes.pack`): unsigned, and a lower bound outside its box; a
     point at least ``cutoff`` from it is answered ``(cutoff, 0, 0, 0)`` (a query that only asks
     whether the point is within the cutoff walks less of the tree)."""
-    dx, dy, dz = x - pos[c, 0], y - pos[c, 1], z - pos[c, 2]
-    qx = rot[c, 0, 0] * dx + rot[c, 1, 0] * dy + rot[c, 2, 0] * dz
-    qy = rot[c, 0, 1] * dx + rot[c, 1, 1] * dy + rot[c, 2, 1] * dz
-    qz = rot[c, 0, 2] * dx + rot[c, 1, 2] * dy + rot[c, 2, 2] * dz
+    qx, qy, qz = _to_frame(pos, rot, c, x, y, z)
     d, lx, ly, lz = mesh_distance(bank, int(geo[c, 0]), qx, qy, qz, cutoff)
+    nx, ny, nz = _from_frame(rot, c, lx, ly, lz)
+    return d, nx, ny, nz
+
+
+@numba.njit(cache=True, inline="always")
+def _to_frame(pos, rot, c, x, y, z):
+    """The point ``(x, y, z)`` in collider ``c``'s own frame."""
+    dx, dy, dz = x - pos[c, 0], y - pos[c, 1], z - pos[c, 2]
     return (
-        d,
+        rot[c, 0, 0] * dx + rot[c, 1, 0] * dy + rot[c, 2, 0] * dz,
+        rot[c, 0, 1] * dx + rot[c, 1, 1] * dy + rot[c, 2, 1] * dz,
+        rot[c, 0, 2] * dx + rot[c, 1, 2] * dy + rot[c, 2, 2] * dz,
+    )
+
+
+@numba.njit(cache=True, inline="always")
+def _from_frame(rot, c, lx, ly, lz):
+    """A direction in collider ``c``'s frame, in the world's."""
+    return (
         rot[c, 0, 0] * lx + rot[c, 0, 1] * ly + rot[c, 0, 2] * lz,
         rot[c, 1, 0] * lx + rot[c, 1, 1] * ly + rot[c, 1, 2] * lz,
         rot[c, 2, 0] * lx + rot[c, 2, 1] * ly + rot[c, 2, 2] * lz,
