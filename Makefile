@@ -46,8 +46,8 @@ $(STAMP): requirements.txt setup.py pyproject.toml
 $(KERNELS): $(STAMP) $(shell find cloth_sim -name '*.py')
 	$(PY) -m compileall -q cloth_sim
 	$(PY) -c "from cloth_sim.simulator import compile_grid_contacts as c; c()" & grid=$$!; \
-	$(PY) -c "from cloth_sim.simulator import compile_kernels as c; print(f'kernels compiled in {c():.1f} s')" \
-		&& wait $$grid
+	$(PY) -c "from cloth_sim.simulator import compile_kernels as c; print(f'kernels compiled in {c():.1f} s')"; \
+	rest=$$?; wait $$grid && test $$rest -eq 0
 	@touch $@
 
 $(MSGS): $(STAMP) msg/Stats.msg $(wildcard srv/*.srv) CMakeLists.txt package.xml tools/build_interfaces.py \
