@@ -933,10 +933,13 @@ def compile_kernels() -> float:
             sim.max_strain()
         # the strain limit's projection method
         Simulator(model, dt=1e-4, strain_limit=0.1, strain_limit_method="projection").step(2)
-        # a material's bending: its own term (small cloths) and inside vbd's vertex solve
+        # a material's bending: its own term (small cloths) and inside vbd's vertex solve; its
+        # energy (the node's statistics and energy balance, every tick)
         fabric = ClothModel.grid(4, 4, size=(0.1, 0.1), material="denim", pinned=[(0, 0)])
         for name in ("symplectic_euler", "vbd"):
-            Simulator(fabric, integrator=name, dt=1e-5).step(2)
+            bent = Simulator(fabric, integrator=name, dt=1e-5)
+            bent.step(2)
+            bent.energy()
         # contacts with every collider shape, and self-collision
         for name in ("symplectic_euler", "vbd"):  # the contact stage; vbd's own, moving too
             sim = _compile_contacts(model, name)

@@ -44,6 +44,7 @@ class Publishing:
         self.Stats = _stats_type()
         self.points_pub = interface.publisher(node, "points", PointCloud2)
         self.mesh_pub = interface.publisher(node, "mesh", Marker)
+        self.mesh_bytes = messages.MeshBytes()  # (its buffer kept from tick to tick)
         self.stats_pub = interface.publisher(node, "stats", self.Stats)
         self.diag_pub = interface.publisher(node, "diagnostics", DiagnosticArray)
         self.colliders_pub = interface.publisher(node, "colliders", MarkerArray)
@@ -83,7 +84,7 @@ class Publishing:
             self.points_pub.publish(self.point_cloud(stamp))
         if self.mesh_pub.get_subscription_count() > 0:
             self.mesh_pub.publish(
-                messages.mesh_bytes(sim.positions, sim.model.triangles, frame, stamp)
+                self.mesh_bytes(sim.positions, sim.model.triangles, frame, stamp)
             )
         if (
             sim.colliders or self.manipulation.grippers

@@ -501,14 +501,16 @@ def test_messages_are_built_by_pure_functions():
     # what the node publishes: the same marker, serialised without a Python object per point
     from rclpy.serialization import deserialize_message, serialize_message
 
-    for pts, frame in (
-        (x, "base"),
-        (np.random.default_rng(3).normal(size=(6, 3)), "a_longer_frame"),
+    # (and by the node's MeshBytes, whose buffer is reused across calls and sizes)
+    kept = messages.MeshBytes()
+    for pts, frame, t in (
+        (x, "base", tris),
+        (np.random.default_rng(3).normal(size=(6, 3)), "a_longer_frame", tris),
+        (np.random.default_rng(4).normal(size=(6, 3)), "base", tris[:1]),
     ):
-        fast = deserialize_message(messages.mesh_bytes(pts, tris, frame, stamp), Marker)
-        assert fast == deserialize_message(
-            serialize_message(messages.mesh(pts, tris, frame, stamp)), Marker
-        )
+        slow = deserialize_message(serialize_message(messages.mesh(pts, t, frame, stamp)), Marker)
+        assert deserialize_message(messages.mesh_bytes(pts, t, frame, stamp), Marker) == slow
+        assert deserialize_message(kept(pts, t, frame, stamp), Marker) == slow
     energy = {"kinetic": 1.0, "spring": 2.0, "gravity": -5.0}
     common = dict(
         stamp=stamp,
