@@ -95,6 +95,11 @@ ALLOWANCE = (0.1, 1.0)
 #: than half their bound by their initial guess (those are held to their bound until the next
 #: search)
 REUSE_OVER = 0.02
+#: without self-contact, a vertex farther than this many times its allowance from every
+#: collider's skin is held within that distance for the step and skips the colliders' terms
+#: (:func:`collider_allowances`); the hold binds only a vertex moving FAR times farther than its
+#: way to the step's initial guess
+FAR = 4.0
 #: IPC's friction smoothing: relative tangential motion below EPS_V·h (m) is static
 EPS_V = 1e-3
 #: vertices per colour below which a colour is updated on one core (the pool's wake-up costs more)
@@ -782,16 +787,26 @@ def _velocities(x, xt, v, free, h, acc):
 
 
 @numba.njit(cache=True)
-def _allowances(x, allowance, ckind, cpos, crot, cgeo, creach, cbank, cdepth, tau, allow, near):
-    """How far each vertex may move from ``x`` before the next search whatever the pairs found
-    (its ``allowance``, and short of the far side of any collider near it), and whether it can come
-    within the thickness of a collider meanwhile (``near``: the iterations look at the colliders
-    only for those)."""
+def collider_allowances(
+    x, allowance, bounded, ckind, cpos, crot, cgeo, creach, cbank, cdepth, tau, allow, near
+):
+    """How far each vertex may move from ``x`` before the next search (``allow``) and whether it
+    can come within the thickness of a collider meanwhile (``near``: the iterations look at the
+    colliders only for those).
+
+    ``bounded`` (self-contact): ``allowance`` is each vertex's bound whatever the pairs found,
+    kept short of the far side of any collider near it. Otherwise ``allowance`` is only the
+    vertex's expected motion: it may move without bound, short of the far side of a collider near
+    it, except that a vertex farther than :data:`FAR` times that from every collider's skin (``d
+    − 1.01 τ``) is held within that distance (its signed distances are 1-Lipschitz, so it cannot
+    reach a skin within the step) and is not near: the iterations then skip the colliders' terms
+    for it (on a 128×128 cloth over the ball and its floor, every vertex was near, and those
+    terms were most of the iterations' time; docs/BENCHMARKS.md §11)."""
     for i in range(x.shape[0]):
-        b = allowance[i]
+        b = allowance[i] if bounded else math.inf
         nearest = math.inf
         for c in range(ckind.shape[0]):
-            if creach[c] < math.inf and allowance[i] < math.inf:
+            if bounded and creach[c] < math.inf and allowance[i] < math.inf:
                 # beyond its reach: d ≥ |x − pos| − reach ≥ allowance + 1.01 τ, so it neither
                 # bounds the vertex below its allowance nor makes it near (the same as measured)
                 far = (x[i, 0] - cpos[c, 0]) ** 2 + (x[i, 1] - cpos[c, 1]) ** 2
@@ -805,6 +820,10 @@ def _allowances(x, allowance, ckind, cpos, crot, cgeo, creach, cbank, cdepth, ta
             nearest = min(nearest, d)
             if cdepth[c] < math.inf:
                 b = min(b, max(d, 0.0) + 0.9 * cdepth[c])
+        if not bounded:
+            room = nearest - tau * 1.01
+            if room > FAR * allowance[i]:
+                b = min(b, room * (1.0 - 1e-9))
         allow[i] = b
         near[i] = nearest - b < tau * 1.01
 
@@ -1283,18 +1302,17 @@ class VBD(Integrator):
             # each vertex reaches τ/2 and its allowance: a pair not found stays beyond τ
             vt, vt_d, ee, ee_d = sc.candidates(x, 0.5 * tau + allowance)
             self._rec = self._records(n, x, vt, vt_d, ee, ee_d, sc)
-        else:
-            allowance[:] = np.inf
-        _allowances(
+        collider_allowances(
             x,
             allowance,
+            self_contact,
             colliders[0],
             colliders[1],
             colliders[2],
             colliders[5],
             colliders[7],
             colliders[8:],
-            self._depths(colliders),
+            self.depths(colliders),
             tau,
             self._allow,
             self._near,
@@ -1358,7 +1376,7 @@ class VBD(Integrator):
         )
 
     @staticmethod
-    def _depths(colliders):
+    def depths(colliders):
         """Per collider, how far in its far side is (half its thinnest dimension; ``inf`` for a
         plane, a half-space; 0 for a mesh, two-sided: a vertex may not reach its surface between
         two searches, so a moving link cannot pass through the cloth)."""

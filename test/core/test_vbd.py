@@ -16,7 +16,7 @@ from cloths import one_spring
 from test_contacts import _count_crossings, _fold
 
 from cloth_sim import ClothModel, Simulator, colliders
-from cloth_sim.integrators.vbd import VBD, colour_groups
+from cloth_sim.integrators.vbd import FAR, VBD, collider_allowances, colour_groups
 from cloth_sim.physics.forces import BUCKLE_TABLE, spring_energy
 from cloth_sim.scene import load_scene
 
@@ -214,6 +214,50 @@ def test_a_resting_cloth_is_held_at_the_thickness_and_a_fast_one_does_not_tunnel
     for _ in range(30):
         sim.step()
         assert (sim.positions[:, 2] > 0.0).all()  # never below the box's top face
+
+
+def test_a_vertex_far_from_every_collider_skips_their_terms_and_cannot_reach_them():
+    """Without self-contact a vertex's allowance is only its expected motion: it is near a
+    collider (their terms in its iterations) unless it is farther than FAR times that from every
+    collider's skin (1.01 τ out); then it is held within that distance for the step, so that no
+    motion within its bound brings it inside a skin (the signed distances are 1-Lipschitz):
+    checked by random motions up to the bound. With self-contact the allowance is the bound,
+    short of the far side of a thin collider."""
+    tau = 0.005
+    shapes = [
+        colliders.Plane(),
+        colliders.Sphere(center=(0.5, 0.0, 0.2), radius=0.1),
+        colliders.Box(center=(0.0, 0.0, 0.3), half_extents=(0.2, 0.2, 0.004)),
+    ]
+    sim = Simulator(
+        ClothModel.grid(4, 4, 0.05, 0.01, stiffness=100.0),
+        integrator="vbd",
+        colliders=shapes,
+        thickness=tau,
+    )
+    co = sim.stages[1].packed()
+    rng = np.random.default_rng(5)
+    x = np.column_stack([rng.uniform(-0.2, 0.8, 400), rng.uniform(-0.2, 0.2, 400)])
+    x = np.column_stack([x, rng.uniform(0.0, 0.4, 400)])
+    allowance = rng.uniform(0.0, 0.02, len(x))
+    d = np.min([c.signed_distance(x) for c in shapes], axis=0)
+    for bounded in (False, True):
+        allow, near = np.empty(len(x)), np.empty(len(x), np.bool_)
+        args = (*co[:3], co[5], co[7], co[8:], VBD.depths(co), tau, allow, near)
+        collider_allowances(x, allowance, bounded, *args)
+        if bounded:  # its allowance, or less near the thin box (its far side)
+            assert (allow <= allowance).all() and (allow < allowance).any()
+            continue
+        room = d - 1.01 * tau
+        far = room > FAR * allowance
+        assert far.any() and (~far).any()
+        np.testing.assert_array_equal(near, ~far)
+        assert (allow[far] <= room[far]).all() and (allow[far] > 0.999 * room[far]).all()
+        for _ in range(20):  # any motion within the bound stays out of every skin
+            step = rng.normal(size=x.shape)
+            step *= (allow * rng.uniform(0.0, 1.0, len(x)) / np.linalg.norm(step, axis=1))[:, None]
+            y = x[far] + step[far]
+            assert np.min([c.signed_distance(y) for c in shapes], axis=0).min() >= 1.01 * tau
 
 
 def test_self_contact_inside_the_solve_never_crosses():
