@@ -63,17 +63,20 @@ class EnergyBalance:
         self._power = self._power_now()
         self._poses = self._collider_poses()
 
-    def _energy(self) -> float:
+    def _energy(self, energy: dict | None = None) -> float:
+        """The cloth's mechanical energy (J) from ``energy``, :meth:`Simulator.energy`'s terms at
+        the current state (made here when not given), less the pins' kinetic and gravitational
+        parts: the kinematic particles are driven, their energy is not the cloth's."""
         sim = self.sim
-        m = np.where(sim.model.pinned, 0.0, sim.model.masses)  # the free particles' masses
-        x, v = sim.positions, sim.velocities
-        # (einsum, not `@`: a dot product of this length runs on OpenBLAS's threads, which then
-        # spin on the core numba's sweeps run on: +40 % a vbd step after it, docs/BENCHMARKS.md
-        # §11)
-        kinetic = 0.5 * float(np.einsum("i,ij,ij->", m, v, v))
-        return (
-            kinetic + sim.forces.spring_energy(x) - float(np.einsum("i,ij,j->", m, x, sim.gravity))
+        if energy is None:
+            energy = sim.energy()
+        pinned = sim.model.pinned
+        m = sim.model.masses[pinned]
+        x, v = sim.positions[pinned], sim.velocities[pinned]
+        pins = 0.5 * float(np.einsum("i,ij,ij->", m, v, v)) - float(
+            np.einsum("i,ij,j->", m, x, sim.gravity)
         )
+        return energy["kinetic"] + energy["spring"] + energy["gravity"] - pins
 
     def _power_now(self) -> float:
         """The power the wind and the kinematic particles (pins, held particles) put in now (W)."""
@@ -98,9 +101,10 @@ class EnergyBalance:
     def _collider_poses(self):
         return [(c.position.copy(), c.orientation.copy()) for c in self.sim.colliders]
 
-    def sample(self) -> None:
+    def sample(self, energy: dict | None = None) -> None:
         """Advance the balance to the simulator's time, if ``interval`` has passed since the last
-        sample."""
+        sample; ``energy``: :meth:`Simulator.energy` at the current state, where the caller has
+        it (the node's tick publishes it too)."""
         sim = self.sim
         t = sim.time
         if t - self._t < self.interval * (1 - 1e-9):
@@ -115,7 +119,7 @@ class EnergyBalance:
         power = self._power_now()
         self._work += 0.5 * (power + self._power) * (t - self._t)
         self._t, self._power = t, power
-        self.excess = self._energy() - self._e0 - self._work
+        self.excess = self._energy(energy) - self._e0 - self._work
         self.worst = max(self.worst, self.excess / self.allowed)
 
     @property

@@ -69,9 +69,12 @@ class Publishing:
             return TimeMsg(sec=int(sec), nanosec=min(int(round((t - sec) * 1e9)), 999_999_999))
         return self.node.get_clock().now().to_msg()
 
-    def publish(self, t0: float, steps: int, step_wall: float, step_max: float) -> None:
+    def publish(
+        self, t0: float, steps: int, step_wall: float, step_max: float, energy: dict | None = None
+    ) -> None:
         """Everything a tick (or ``~/step``) publishes: /clock, the cloud, mesh, markers, wrenches,
-        stats."""
+        stats; ``energy``: :meth:`Simulator.energy` at the current state, where the caller has it
+        (each term costs ~0.2 ms at 128×128)."""
         sim = self.session.sim
         t1 = time.perf_counter()
         stamp = self.stamp()
@@ -115,7 +118,7 @@ class Publishing:
                 tick_wall=time.perf_counter() - t0,
                 rtf=self.real_time_factor(),
                 sim_time=sim.time,
-                energy=sim.energy(),
+                energy=sim.energy() if energy is None else energy,
                 max_strain=sim.max_strain(),
                 overruns=self.session.overruns,
                 stable_dt=self.session.stable_dt,

@@ -131,6 +131,7 @@ class Ticker:
         self.last_tick, self._resync = t0, False
         sim = session.sim
         steps, step_max, step_wall = 0, 0.0, 0.0
+        energy = None  # the state's energies, for the balance and ~/stats both (once a tick)
         if not session.paused:
             target = session.cfg["real_time_factor"]
             budget = max(0.25 * period, TICK_BUDGET * period - late)
@@ -149,12 +150,13 @@ class Ticker:
                         session.dropped += session.carry - backlog
                         session.carry = backlog
                 self.control.keep_checkpoint()
-                session.balance.sample()
+                energy = sim.energy()
+                session.balance.sample(energy)
             except SimulationDiverged as e:
                 self.control.recover(e)
         elif self.interfaces.busy:  # a simulate_steps goal steps the paused simulation
             budget = max(0.25 * period, TICK_BUDGET * period - late)
             steps, step_wall, step_max = self.interfaces.tick(t0, budget)
-        self.publishing.publish(t0, steps, step_wall, step_max)
+        self.publishing.publish(t0, steps, step_wall, step_max, energy)
         if time.perf_counter() - t0 > period:
             session.overruns += 1
