@@ -80,7 +80,19 @@ from ..physics.bending import bending_row
 from ..physics.forces import BUCKLE_TABLE, axial, incidence
 from .base import Integrator, Stability
 from .registry import register
-from .vbd_contact import colliders_at, onset, press, slide, solve3, truncate
+from .vbd_contact import (
+    colliders_at,
+    has_mesh,
+    onset_colliders,
+    onset_pairs,
+    onset_shapes,
+    press,
+    shapes_at,
+    slide,
+    solve3,
+    truncate,
+    within,
+)
 from .vbd_grid import GridLayout
 
 #: the share of the nearest found distance a vertex may move between two candidate searches
@@ -313,7 +325,7 @@ def _self_contacts_at(
                 ux += cw * (px - xt[v, 0])
                 uy += cw * (py - xt[v, 1])
                 uz += cw * (pz - xt[v, 2])
-        rec_d[q] = d  # (for vbd_contact.onset, after the step is solved)
+        rec_d[q] = d  # (for vbd_contact.onset_pairs, after the step is solved)
         if d >= tau:
             continue
         # ∂d/∂x_i = w n: the force pushes the pair apart along n
@@ -474,6 +486,7 @@ def _sweep(
     bend = (bptr, bidx, bval, bdiag)
     ckind, cpos, crot, cpos0, crot0, cgeo, cmu = co[:7]
     cbank = co[8:]
+    meshes = has_mesh(ckind)  # (else the shapes' own terms: no meshes' arrays to bind)
     rec_ptr, rec, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d, colour = sc
     for q in range(lo, hi):
         i = verts[q]
@@ -516,31 +529,16 @@ def _sweep(
             h5 += qd
         touch[i] = 0
         if ckind.shape[0] and near[i]:
-            f0, f1, f2, h0, h1, h2, h3, h4, h5, touched = colliders_at(
-                i,
-                x,
-                xt,
-                ckind,
-                cpos,
-                crot,
-                cpos0,
-                crot0,
-                cgeo,
-                cmu,
-                cbank,
-                tau,
-                kc,
-                eps,
-                f0,
-                f1,
-                f2,
-                h0,
-                h1,
-                h2,
-                h3,
-                h4,
-                h5,
-            )
+            if meshes:
+                f0, f1, f2, h0, h1, h2, h3, h4, h5, touched = colliders_at(
+                    i, x, xt, ckind, cpos, crot, cpos0, crot0, cgeo, cmu, cbank, tau, kc, eps,
+                    f0, f1, f2, h0, h1, h2, h3, h4, h5,
+                )  # fmt: skip
+            else:
+                f0, f1, f2, h0, h1, h2, h3, h4, h5, touched = shapes_at(
+                    i, x, xt, ckind, cpos, crot, cpos0, crot0, cgeo, cmu, tau, kc, eps, f0, f1,
+                    f2, h0, h1, h2, h3, h4, h5,
+                )  # fmt: skip
             if touched:
                 touch[i] = 1
         if rec_ptr[i + 1] > rec_ptr[i]:
@@ -576,24 +574,12 @@ def _sweep(
             # a contact not yet pressed is not in the Hessian: a step past its onset would land
             # deep inside (the next iteration pushing back out: the iterations cycled); the step
             # stops at its onset, where the next iteration sees it
-            sx, sy, sz = onset(
-                i,
-                sx,
-                sy,
-                sz,
-                x,
-                rec_ptr,
-                rec,
-                rec_d,
-                pcoef,
-                pnrm,
-                tau,
-                ckind if near[i] else ckind[:0],
-                cpos,
-                crot,
-                cgeo,
-                cbank,
-            )
+            if rec_ptr[i + 1] > rec_ptr[i]:
+                sx, sy, sz = onset_pairs(i, sx, sy, sz, rec_ptr, rec, rec_d, pcoef, pnrm, tau)
+            if near[i] and meshes:
+                sx, sy, sz = onset_colliders(i, sx, sy, sz, x, tau, ckind, cpos, crot, cgeo, cbank)
+            elif near[i]:
+                sx, sy, sz = onset_shapes(i, sx, sy, sz, x, tau, ckind, cpos, crot, cgeo)
         if rough or nonsmooth:
             # Choi–Ko's energies are not smooth at the rest length (a buckling pair's force jumps
             # at the onset, a tension-only pair's stiffness vanishes): Newton's step may overshoot.
@@ -650,9 +636,13 @@ def _sweep(
                 sx, sy, sz = 0.5 * sx, 0.5 * sy, 0.5 * sz
         nx, ny, nz = x[i, 0] + sx, x[i, 1] + sy, x[i, 2] + sz
         stepped[i] = sx * sx + sy * sy + sz * sz
-        nx, ny, nz, was_cut = truncate(
-            i, nx, ny, nz, x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, gamma
+        nx, ny, nz, was_cut, settled = within(
+            nx, ny, nz, x_cd[i, 0], x_cd[i, 1], x_cd[i, 2], allow[i], dmin[i], gamma
         )
+        if not settled:
+            nx, ny, nz, was_cut = truncate(
+                i, nx, ny, nz, x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, gamma
+            )
         if was_cut:
             cut[i] = 1
         x[i, 0] = nx
@@ -747,9 +737,13 @@ def _chebyshev(x, x_prev2, omega, free, x_cd, allow, gamma, sc, cut, touch):
         px = omega * (x[i, 0] - x_prev2[i, 0]) + x_prev2[i, 0]
         py = omega * (x[i, 1] - x_prev2[i, 1]) + x_prev2[i, 1]
         pz = omega * (x[i, 2] - x_prev2[i, 2]) + x_prev2[i, 2]
-        px, py, pz, was_cut = truncate(
-            i, px, py, pz, x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, gamma
+        px, py, pz, was_cut, settled = within(
+            px, py, pz, x_cd[i, 0], x_cd[i, 1], x_cd[i, 2], allow[i], dmin[i], gamma
         )
+        if not settled:
+            px, py, pz, was_cut = truncate(
+                i, px, py, pz, x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, gamma
+            )
         x[i, 0], x[i, 1], x[i, 2] = px, py, pz
         if was_cut:
             cut[i] = 1
