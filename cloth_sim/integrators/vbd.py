@@ -486,7 +486,7 @@ def _sweep(
     bend = (bptr, bidx, bval, bdiag)
     ckind, cpos, crot, cpos0, crot0, cgeo, cmu = co[:7]
     cbank = co[8:]
-    meshes = has_mesh(ckind)  # (else the shapes' own terms: no meshes' arrays to bind)
+    meshes = has_mesh(ckind)  # (else the shapes' own terms, without the meshes' arrays)
     rec_ptr, rec, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d, colour = sc
     for q in range(lo, hi):
         i = verts[q]

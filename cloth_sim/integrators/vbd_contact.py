@@ -117,7 +117,7 @@ def colliders_at(
     """Vertex ``i``'s collider contacts: the penalty, and IPC's lagged friction on its motion over
     the step relative to the collider's point under it; and whether it touches one. Every kind of
     collider, meshes too (``cbank``, the packed meshes); :func:`shapes_at` where there is no mesh
-    (each array an inlined call takes costs two atomic reference counts: :func:`within`)."""
+    (without the meshes' ten arrays: 3-5 % of a step on ``table`` and ``tshirt``)."""
     touched = False
     for c in range(ckind.shape[0]):
         if ckind[c] == MESH:
@@ -141,7 +141,7 @@ def colliders_at(
 def shapes_at(i, x, xt, ckind, cpos, crot, cpos0, crot0, cgeo, cmu, tau, kc, eps, f0, f1, f2,
               h0, h1, h2, h3, h4, h5):  # fmt: skip
     """:func:`colliders_at` where no collider is a mesh: the same terms, without the meshes'
-    arrays to bind."""
+    arrays."""
     touched = False
     for c in range(ckind.shape[0]):
         d, nx, ny, nz = sdf(ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2])
@@ -163,10 +163,10 @@ def within(px, py, pz, cx, cy, cz, allow_i, dmin_i, gamma):
     """:func:`truncate`'s answer where it needs no pair: vertex at ``p`` whose search was made at
     ``c``, its allowance and its nearest pair's distance; returns the position, whether it was cut
     and whether that is final (else :func:`truncate` must look at its pairs, and finds the same
-    scale first). Scalars only: an inlined call that takes arrays binds each of them anew, two
-    atomic reference counts apiece, which cost 40 ns a vertex where the arithmetic is a few
-    (``_chebyshev`` at 128×128: 0.70 → 0.06 ms, docs/BENCHMARKS.md §11); the callers take
-    :func:`truncate` only where this leaves the pairs to look at."""
+    scale first). Scalars only: the inlined :func:`truncate`, with its nine arrays, cost ~40 ns a
+    vertex where this arithmetic is a few (``_chebyshev`` at 128×128: 0.70 → 0.06 ms, the same
+    bits; docs/BENCHMARKS.md §11); the callers take :func:`truncate` only where this leaves the
+    pairs to look at."""
     if allow_i == math.inf and dmin_i == math.inf:
         return px, py, pz, False, True
     ex, ey, ez = px - cx, py - cy, pz - cz
@@ -227,7 +227,7 @@ def onset_pairs(i, sx, sy, sz, rec_ptr, rec, rec_d, pcoef, pnrm, tau):
     pressed (distance at least ``τ``: not in the step's Hessian) taken off along that pair's
     normal, so that it stops at its onset (the next iteration sees it); the motion along the
     surface stays. The pairs by their linear distance. Callers ask it only for a vertex with
-    records (:func:`within` says why), then :func:`onset_colliders` or :func:`onset_shapes`."""
+    records, then :func:`onset_colliders` or :func:`onset_shapes`."""
     for q in range(rec_ptr[i], rec_ptr[i + 1]):
         d = rec_d[q]  # (its distance as _self_contacts_at found it for this step)
         if d < tau:

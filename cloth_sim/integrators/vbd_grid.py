@@ -534,7 +534,7 @@ def _sweeps_touching(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH
     F0, F1, F2, H0, H1, H2, H3, H4, H5 = fh
     ckind, cpos, crot, cpos0, crot0, cgeo, cmu = co[:7]
     cbank = co[8:]
-    meshes = has_mesh(ckind)  # (else the shapes' own terms: no meshes' arrays to bind)
+    meshes = has_mesh(ckind)  # (else the shapes' own terms, without the meshes' arrays)
     rec_ptr, rec, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d = sc
     X0, X1, X2 = A
     B0, B1, B2 = B
