@@ -30,7 +30,9 @@ Contacts inside the solve (when the simulator lets the method handle them, :attr
 * **Colliders**: ``½ k_c (τ − d)²`` for a vertex closer than the thickness ``τ`` to a collider
   surface (``d`` the signed distance), and Coulomb friction as IPC's smoothed, lagged friction on
   the vertex's motion relative to the collider's surface over the step (the normal force from the
-  current iterate, the contact normal held), as the paper does.
+  current iterate, the contact normal held), as the paper does. A vertex farther than
+  :data:`FAR` times its expected motion from every collider's skin is held within that distance
+  for the step and skips the colliders' terms (:func:`collider_allowances`).
 * **Self-contact** between the cloth's own primitives, vertex–triangle and edge–edge, the same
   energy on their distance. Candidates come from the self-collision stage's tree
   (:mod:`cloth_sim.contact.collision_tree`) at the start of the step and every
