@@ -82,19 +82,7 @@ from ..physics.bending import bending_row
 from ..physics.forces import BUCKLE_TABLE, axial, incidence
 from .base import Integrator, Stability
 from .registry import register
-from .vbd_contact import (
-    colliders_at,
-    has_mesh,
-    onset_colliders,
-    onset_pairs,
-    onset_shapes,
-    press,
-    shapes_at,
-    slide,
-    solve3,
-    truncate,
-    within,
-)
+from .vbd_contact import colliders_at, onset, press, slide, solve3, truncate, within
 from .vbd_grid import GridLayout
 
 #: the share of the nearest found distance a vertex may move between two candidate searches
@@ -327,7 +315,7 @@ def _self_contacts_at(
                 ux += cw * (px - xt[v, 0])
                 uy += cw * (py - xt[v, 1])
                 uz += cw * (pz - xt[v, 2])
-        rec_d[q] = d  # (for vbd_contact.onset_pairs, after the step is solved)
+        rec_d[q] = d  # (for vbd_contact.onset, after the step is solved)
         if d >= tau:
             continue
         # ∂d/∂x_i = w n: the force pushes the pair apart along n
@@ -488,7 +476,6 @@ def _sweep(
     bend = (bptr, bidx, bval, bdiag)
     ckind, cpos, crot, cpos0, crot0, cgeo, cmu = co[:7]
     cbank = co[8:]
-    meshes = has_mesh(ckind)  # (else the shapes' own terms, without the meshes' arrays)
     rec_ptr, rec, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d, colour = sc
     for q in range(lo, hi):
         i = verts[q]
@@ -531,16 +518,31 @@ def _sweep(
             h5 += qd
         touch[i] = 0
         if ckind.shape[0] and near[i]:
-            if meshes:
-                f0, f1, f2, h0, h1, h2, h3, h4, h5, touched = colliders_at(
-                    i, x, xt, ckind, cpos, crot, cpos0, crot0, cgeo, cmu, cbank, tau, kc, eps,
-                    f0, f1, f2, h0, h1, h2, h3, h4, h5,
-                )  # fmt: skip
-            else:
-                f0, f1, f2, h0, h1, h2, h3, h4, h5, touched = shapes_at(
-                    i, x, xt, ckind, cpos, crot, cpos0, crot0, cgeo, cmu, tau, kc, eps, f0, f1,
-                    f2, h0, h1, h2, h3, h4, h5,
-                )  # fmt: skip
+            f0, f1, f2, h0, h1, h2, h3, h4, h5, touched = colliders_at(
+                i,
+                x,
+                xt,
+                ckind,
+                cpos,
+                crot,
+                cpos0,
+                crot0,
+                cgeo,
+                cmu,
+                cbank,
+                tau,
+                kc,
+                eps,
+                f0,
+                f1,
+                f2,
+                h0,
+                h1,
+                h2,
+                h3,
+                h4,
+                h5,
+            )
             if touched:
                 touch[i] = 1
         if rec_ptr[i + 1] > rec_ptr[i]:
@@ -576,12 +578,24 @@ def _sweep(
             # a contact not yet pressed is not in the Hessian: a step past its onset would land
             # deep inside (the next iteration pushing back out: the iterations cycled); the step
             # stops at its onset, where the next iteration sees it
-            if rec_ptr[i + 1] > rec_ptr[i]:
-                sx, sy, sz = onset_pairs(i, sx, sy, sz, rec_ptr, rec, rec_d, pcoef, pnrm, tau)
-            if near[i] and meshes:
-                sx, sy, sz = onset_colliders(i, sx, sy, sz, x, tau, ckind, cpos, crot, cgeo, cbank)
-            elif near[i]:
-                sx, sy, sz = onset_shapes(i, sx, sy, sz, x, tau, ckind, cpos, crot, cgeo)
+            sx, sy, sz = onset(
+                i,
+                sx,
+                sy,
+                sz,
+                x,
+                rec_ptr,
+                rec,
+                rec_d,
+                pcoef,
+                pnrm,
+                tau,
+                ckind if near[i] else ckind[:0],
+                cpos,
+                crot,
+                cgeo,
+                cbank,
+            )
         if rough or nonsmooth:
             # Choi–Ko's energies are not smooth at the rest length (a buckling pair's force jumps
             # at the onset, a tension-only pair's stiffness vanishes): Newton's step may overshoot.

@@ -67,28 +67,6 @@ def slide(sf, tx, ty, tz, s, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5):
 
 
 @numba.njit(cache=True, inline="always")
-def _pressed(p, kc, mu, nx, ny, nz, sx, sy, sz, tx0, ty0, tz0, eps, f0, f1, f2, h0, h1, h2, h3,
-             h4, h5):  # fmt: skip
-    """One collider's terms on a vertex ``p`` inside its skin (normal ``n``): the penalty, and
-    IPC's lagged friction (``μ > 0``) on the vertex's motion over the step relative to the
-    collider's point now under it, which was at ``s`` at the step's start (the vertex at
-    ``t0``). Scalars only (:func:`within` says why)."""
-    lam = kc * p
-    f0, f1, f2, h0, h1, h2, h3, h4, h5 = press(
-        lam, kc, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5
-    )
-    if mu <= 0.0:
-        return f0, f1, f2, h0, h1, h2, h3, h4, h5
-    rx, ry, rz = sx - tx0, sy - ty0, sz - tz0
-    rn = rx * nx + ry * ny + rz * nz
-    tx, ty, tz = rx - rn * nx, ry - rn * ny, rz - rn * nz
-    tl = math.sqrt(tx * tx + ty * ty + tz * tz)
-    g = 1.0 / tl if tl > eps else (2.0 - tl / eps) / eps
-    s = mu * lam * g
-    return slide(s, tx, ty, tz, s, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5)
-
-
-@numba.njit(cache=True, inline="always")
 def colliders_at(
     i,
     x,
@@ -115,46 +93,35 @@ def colliders_at(
     h5,
 ):
     """Vertex ``i``'s collider contacts: the penalty, and IPC's lagged friction on its motion over
-    the step relative to the collider's point under it; and whether it touches one. Every kind of
-    collider, meshes too (``cbank``, the packed meshes); :func:`shapes_at` where there is no mesh
-    (without the meshes' ten arrays: 3-5 % of a step on ``table`` and ``tshirt``)."""
+    the step relative to the collider's point under it; and whether it touches one."""
     touched = False
     for c in range(ckind.shape[0]):
         if ckind[c] == MESH:
             d, nx, ny, nz = mesh_sdf(cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2], cbank)
         else:
             d, nx, ny, nz = sdf(ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2])
-        if tau - d <= 0.0:
+        p = tau - d
+        if p <= 0.0:
             continue
         touched = True
-        sx = sy = sz = 0.0
-        if cmu[c] > 0.0:  # where the collider's point now under the vertex was at the start
-            sx, sy, sz = carried(cpos0, crot0, cpos, crot, c, x[i, 0], x[i, 1], x[i, 2])
-        f0, f1, f2, h0, h1, h2, h3, h4, h5 = _pressed(
-            tau - d, kc, cmu[c], nx, ny, nz, sx, sy, sz, xt[i, 0], xt[i, 1], xt[i, 2], eps,
-            f0, f1, f2, h0, h1, h2, h3, h4, h5,
-        )  # fmt: skip
-    return f0, f1, f2, h0, h1, h2, h3, h4, h5, touched
-
-
-@numba.njit(cache=True, inline="always")
-def shapes_at(i, x, xt, ckind, cpos, crot, cpos0, crot0, cgeo, cmu, tau, kc, eps, f0, f1, f2,
-              h0, h1, h2, h3, h4, h5):  # fmt: skip
-    """:func:`colliders_at` where no collider is a mesh: the same terms, without the meshes'
-    arrays."""
-    touched = False
-    for c in range(ckind.shape[0]):
-        d, nx, ny, nz = sdf(ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2])
-        if tau - d <= 0.0:
+        lam = kc * p
+        f0, f1, f2, h0, h1, h2, h3, h4, h5 = press(
+            lam, kc, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5
+        )
+        mu = cmu[c]
+        if mu <= 0.0:
             continue
-        touched = True
-        sx = sy = sz = 0.0
-        if cmu[c] > 0.0:
-            sx, sy, sz = carried(cpos0, crot0, cpos, crot, c, x[i, 0], x[i, 1], x[i, 2])
-        f0, f1, f2, h0, h1, h2, h3, h4, h5 = _pressed(
-            tau - d, kc, cmu[c], nx, ny, nz, sx, sy, sz, xt[i, 0], xt[i, 1], xt[i, 2], eps,
-            f0, f1, f2, h0, h1, h2, h3, h4, h5,
-        )  # fmt: skip
+        # where the collider's point now under the vertex was at the step's start
+        sx, sy, sz = carried(cpos0, crot0, cpos, crot, c, x[i, 0], x[i, 1], x[i, 2])
+        rx, ry, rz = sx - xt[i, 0], sy - xt[i, 1], sz - xt[i, 2]
+        rn = rx * nx + ry * ny + rz * nz
+        tx, ty, tz = rx - rn * nx, ry - rn * ny, rz - rn * nz
+        tl = math.sqrt(tx * tx + ty * ty + tz * tz)
+        g = 1.0 / tl if tl > eps else (2.0 - tl / eps) / eps
+        s = mu * lam * g
+        f0, f1, f2, h0, h1, h2, h3, h4, h5 = slide(
+            s, tx, ty, tz, s, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5
+        )
     return f0, f1, f2, h0, h1, h2, h3, h4, h5, touched
 
 
@@ -222,12 +189,12 @@ def truncate(i, px, py, pz, x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, d
 
 
 @numba.njit(cache=True, inline="always")
-def onset_pairs(i, sx, sy, sz, rec_ptr, rec, rec_d, pcoef, pnrm, tau):
-    """Vertex ``i``'s step ``s`` with the part that would press a self-contact pair not yet
-    pressed (distance at least ``τ``: not in the step's Hessian) taken off along that pair's
-    normal, so that it stops at its onset (the next iteration sees it); the motion along the
-    surface stays. The pairs by their linear distance. Callers ask it only for a vertex with
-    records, then :func:`onset_colliders` or :func:`onset_shapes`."""
+def onset(i, sx, sy, sz, x, rec_ptr, rec, rec_d, pcoef, pnrm, tau, ckind, cpos, crot, cgeo, cbank):
+    """Vertex ``i``'s step ``s`` with the part that would press a contact not yet pressed
+    (distance at least ``τ``: not in the step's Hessian) taken off along that contact's normal, so
+    that it stops at its onset (the next iteration sees it); the motion along the surface stays.
+    The self-contact pairs by their linear distance, the colliders by their signed distance along
+    their normal."""
     for q in range(rec_ptr[i], rec_ptr[i + 1]):
         d = rec_d[q]  # (its distance as _self_contacts_at found it for this step)
         if d < tau:
@@ -240,47 +207,14 @@ def onset_pairs(i, sx, sy, sz, rec_ptr, rec, rec_d, pcoef, pnrm, tau):
         if over > 0.0:
             f = over / (nx * nx + ny * ny + nz * nz)
             sx, sy, sz = sx + f * nx, sy + f * ny, sz + f * nz
-    return sx, sy, sz
-
-
-@numba.njit(cache=True, inline="always")
-def _stop(d, nx, ny, nz, sx, sy, sz, tau):
-    """A step ``s`` held at the onset of a collider ``d`` away along its normal ``n``."""
-    if d < tau:
-        return sx, sy, sz
-    over = (tau - d) - (nx * sx + ny * sy + nz * sz)
-    if over > 0.0:
-        return sx + over * nx, sy + over * ny, sz + over * nz
-    return sx, sy, sz
-
-
-@numba.njit(cache=True, inline="always")
-def onset_colliders(i, sx, sy, sz, x, tau, ckind, cpos, crot, cgeo, cbank):
-    """:func:`onset_pairs` for the colliders, by their signed distance along their normal; every
-    kind, meshes too (:func:`onset_shapes` where there is none)."""
     for c in range(ckind.shape[0]):
         if ckind[c] == MESH:
             d, nx, ny, nz = mesh_sdf(cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2], cbank)
         else:
             d, nx, ny, nz = sdf(ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2])
-        sx, sy, sz = _stop(d, nx, ny, nz, sx, sy, sz, tau)
+        if d < tau:
+            continue
+        over = (tau - d) - (nx * sx + ny * sy + nz * sz)
+        if over > 0.0:
+            sx, sy, sz = sx + over * nx, sy + over * ny, sz + over * nz
     return sx, sy, sz
-
-
-@numba.njit(cache=True, inline="always")
-def onset_shapes(i, sx, sy, sz, x, tau, ckind, cpos, crot, cgeo):
-    """:func:`onset_colliders` where no collider is a mesh."""
-    for c in range(ckind.shape[0]):
-        d, nx, ny, nz = sdf(ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2])
-        sx, sy, sz = _stop(d, nx, ny, nz, sx, sy, sz, tau)
-    return sx, sy, sz
-
-
-@numba.njit(cache=True)
-def has_mesh(ckind) -> bool:
-    """Whether any collider is a mesh (the kernels then ask :func:`colliders_at` and
-    :func:`onset_colliders`, else the shapes' own)."""
-    for c in range(ckind.shape[0]):
-        if ckind[c] == MESH:
-            return True
-    return False

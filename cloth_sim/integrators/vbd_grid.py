@@ -29,16 +29,7 @@ import numba
 import numpy as np
 
 from ..kinds import LINEAR
-from .vbd_contact import (
-    colliders_at,
-    has_mesh,
-    onset_colliders,
-    onset_pairs,
-    onset_shapes,
-    shapes_at,
-    truncate,
-    within,
-)
+from .vbd_contact import colliders_at, onset, truncate, within
 
 #: the neighbour offsets ``(di, dj)``, in the sweep's order: structural, shear, bend
 OFFSETS = (
@@ -526,15 +517,14 @@ def _sweeps_touching(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH
     each vertex that may touch a collider (``near``), from the springs' force and Hessian the
     first loop left, with the collider's penalty and friction in it and held at a contact's onset
     (the general sweep's :func:`~.vbd_contact.colliders_at` and
-    :func:`~.vbd_contact.onset_colliders`, or the shapes' own where no collider is a mesh, on
-    the vertex's row of the original arrays), holds every step and every extrapolation within
-    the vertex's bounds (:func:`~.vbd_contact.within`, :func:`~.vbd_contact.truncate`: what the
-    last search lets it move), extrapolates no vertex in contact, and commits."""
+    :func:`~.vbd_contact.onset`, on the vertex's row of the original arrays), holds every step
+    and every extrapolation within the vertex's bounds (:func:`~.vbd_contact.within`,
+    :func:`~.vbd_contact.truncate`: what the last search lets it move), extrapolates no vertex in
+    contact, and commits."""
     (vof, xm, xt, near, touch, cut, x_cd, allow, gamma, tau, kc, eps, co, sc, fh) = contact
     F0, F1, F2, H0, H1, H2, H3, H4, H5 = fh
     ckind, cpos, crot, cpos0, crot0, cgeo, cmu = co[:7]
     cbank = co[8:]
-    meshes = has_mesh(ckind)  # (else the shapes' own terms, without the meshes' arrays)
     rec_ptr, rec, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d = sc
     X0, X1, X2 = A
     B0, B1, B2 = B
@@ -573,27 +563,15 @@ def _sweeps_touching(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH
                     f0, f1, f2 = F0[t], F1[t], F2[t]
                     a0, b, c, dd, e, ff = H0[t], H1[t], H2[t], H3[t], H4[t], H5[t]
                     xm[v, 0], xm[v, 1], xm[v, 2] = xi, yi, zi
-                    if meshes:
-                        f0, f1, f2, a0, b, c, dd, e, ff, touched = colliders_at(
-                            v, xm, xt, ckind, cpos, crot, cpos0, crot0, cgeo, cmu, cbank, tau,
-                            kc, eps, f0, f1, f2, a0, b, c, dd, e, ff,
-                        )  # fmt: skip
-                    else:
-                        f0, f1, f2, a0, b, c, dd, e, ff, touched = shapes_at(
-                            v, xm, xt, ckind, cpos, crot, cpos0, crot0, cgeo, cmu, tau, kc, eps,
-                            f0, f1, f2, a0, b, c, dd, e, ff,
-                        )  # fmt: skip
+                    f0, f1, f2, a0, b, c, dd, e, ff, touched = colliders_at(
+                        v, xm, xt, ckind, cpos, crot, cpos0, crot0, cgeo, cmu, cbank, tau, kc,
+                        eps, f0, f1, f2, a0, b, c, dd, e, ff,
+                    )  # fmt: skip
                     if touched:
                         touch[v] = 1
                     sx, sy, sz = _solve(a0, b, c, dd, e, ff, f0, f1, f2, 1.0)
-                    if rec_ptr[v + 1] > rec_ptr[v]:
-                        sx, sy, sz = onset_pairs(v, sx, sy, sz, rec_ptr, rec, rec_d, pcoef, pnrm,
-                                                 tau)  # fmt: skip
-                    if meshes:
-                        sx, sy, sz = onset_colliders(v, sx, sy, sz, xm, tau, ckind, cpos, crot,
-                                                     cgeo, cbank)  # fmt: skip
-                    else:
-                        sx, sy, sz = onset_shapes(v, sx, sy, sz, xm, tau, ckind, cpos, crot, cgeo)
+                    sx, sy, sz = onset(v, sx, sy, sz, xm, rec_ptr, rec, rec_d, pcoef, pnrm, tau,
+                                       ckind, cpos, crot, cgeo, cbank)  # fmt: skip
                     x0, x1, x2 = xi + sx, yi + sy, zi + sz
                     stepped[t] = sx * sx + sy * sy + sz * sz
                 x0, x1, x2, was_cut, settled = within(x0, x1, x2, x_cd[v, 0], x_cd[v, 1],
