@@ -544,6 +544,14 @@ def resolve_contacts(
             continue
         for c in range(kinds.shape[0]):
             k = kinds[c]
+            if not continuous and reach[c] == np.inf and k != MESH:
+                # a half-space after an integrator that kept the path off it: only (2) and (3)
+                # below can act, and only within its edge; farther, its clearance is all there
+                # is to measure (the same as below, without carrying the path's ends)
+                d = sdf(k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])[0]
+                if d >= h * (1.0 + CONTACT_TOLERANCE):
+                    clearance[p] = min(clearance[p], max(d - h, 0.0))
+                    continue
             # the start, carried with the collider to its new pose (equal to x0 for a static one)
             sx, sy, sz = carried(pos, rot, pos0, rot0, c, x0[p, 0], x0[p, 1], x0[p, 2])
             if reach[c] < np.inf:  # every point q of the path s→x: |q − pos| ≥ (a + b − L)/2
