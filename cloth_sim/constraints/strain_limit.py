@@ -173,6 +173,11 @@ def nearest_attachments(model, count: int = 2) -> tuple[np.ndarray, np.ndarray]:
     return anchor, reach
 
 
+def _no_attachments(x, anchor, reach, tau) -> int:
+    """The attachments of a cloth without a pin: none moves."""
+    return 0
+
+
 class Stage:
     """A post-step correction. ``apply(state, start, dt, velocity_follow)`` changes ``state.x`` /
     ``state.v`` in place; ``start`` is the state before the step. A position change ``Δx`` moves
@@ -244,6 +249,11 @@ class StrainLimit(Stage):
                     if self.model.n_particles >= PARALLEL_MIN_PARTICLES
                     else attachment_pass
                 )
+                if not np.any(self._anchor >= 0):
+                    # no pin (a cloth dropped on a table): nothing to attach; the parallel pass
+                    # over every particle cost ~20 µs a call, after each of up to 20 Provot
+                    # passes a step (docs/BENCHMARKS.md §11)
+                    self._attach = _no_attachments
         self.tau = tau
 
     @property
