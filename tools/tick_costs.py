@@ -1,7 +1,7 @@
 """What the node computes every tick besides the step, on a 128×128 library fabric: the state's
 energies (~/stats and the energy balance), the energy balance's own (its restart), the largest
 strain, the mesh's bytes, each as the best of 5 rounds of 20 calls (ms), beside a step of the
-scene.
+scene (``bench.steps.time_steps``).
 
     .venv/bin/python tools/tick_costs.py [scene ...]      (default: drape hanging)
 
@@ -13,6 +13,7 @@ import time
 
 from builtin_interfaces.msg import Time
 
+from cloth_sim.bench.steps import time_steps
 from cloth_sim.materials import get
 from cloth_sim.physics.energy_balance import EnergyBalance
 from cloth_sim.ros.messages import MeshBytes
@@ -40,7 +41,7 @@ def main(scenes) -> None:
         balance = EnergyBalance(sim)
         mesh = MeshBytes()
         row = {
-            "step": best_ms(sim.step, 3),
+            "step": 1e3 * time_steps(sim),
             "Simulator.energy": best_ms(sim.energy),
             "balance restart (its energy and power)": best_ms(balance.restart),
             "max_strain": best_ms(sim.max_strain),

@@ -109,7 +109,7 @@ def bending_row(x, qptr, qidx, qval, p):
 def bending_energy(x, stencils, weights, rigidity):
     """``½ Σ_s B_s ‖Σ_k w_sk x_k‖²``, one stencil after another: what the node's statistics and
     energy balance ask every tick (the same sum gathered by NumPy took 3.2 ms a call at
-    128×128, the kernel ~0.1: docs/BENCHMARKS.md §11)."""
+    128×128, the kernel 0.19: docs/BENCHMARKS.md §11)."""
     total = 0.0
     for s in range(stencils.shape[0]):
         dx = dy = dz = 0.0
