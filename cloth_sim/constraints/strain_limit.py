@@ -57,11 +57,51 @@ PARALLEL_MIN_PARTICLES = 2048
 STRAIN_LIMIT_TOLERANCE = 1e-4
 
 
+#: a pass after the first visits every spring when more than ``1/FULL_PASS_SHARE`` of them may
+#: have changed (:func:`provot_passes`; a visit from its heap costs more than one in order)
+FULL_PASS_SHARE = 32
+
+
 #: ``l² ≤ this·bound²`` proves ``√l² ≤ bound`` after both roundings (their relative errors are
 #: ~1e-16), so the passes take a square root only for a length near or over its bound and decide
 #: exactly as with ``l = √l²`` for every one: the same bits. Most springs are within their bound;
 #: a square root per spring visit was a tenth of the step (docs/BENCHMARKS.md §7).
 _SURELY_WITHIN = 1.0 - 1e-12
+
+
+@numba.njit(cache=True, inline="always")
+def _excess(dx, dy, dz, rest, tau, tol):
+    """The fraction of a spring's vector ``d`` (rest length ``rest``) to remove to bring it to
+    strain ``tau``, if its strain exceeds ``tau + tol``; else 0. (Scalars only: an inlined function
+    taking the arrays binds each anew at every call, an atomic reference count up and down: a
+    pass took 9× as long.)"""
+    l2 = dx * dx + dy * dy + dz * dz
+    lmax = (1.0 + tau) * rest
+    bound = lmax + tol * rest
+    if l2 <= _SURELY_WITHIN * (bound * bound):  # no square root for a spring surely short enough
+        return 0.0
+    l = np.sqrt(l2)
+    if l <= bound:
+        return 0.0
+    return (l - lmax) / l
+
+
+@numba.njit(cache=True, inline="always")
+def _shorten(x, i, j, pi, pj, excess, dx, dy, dz):
+    """Spring ``(i, j)`` shortened by ``excess`` of its vector ``d``: both ends equally, or only
+    the free one."""
+    if pi:
+        wi, wj = 0.0, 1.0
+    elif pj:
+        wi, wj = 1.0, 0.0
+    else:
+        wi, wj = 0.5, 0.5
+    x[i, 0] += wi * excess * dx
+    x[i, 1] += wi * excess * dy
+    x[i, 2] += wi * excess * dz
+    x[j, 0] -= wj * excess * dx
+    x[j, 1] -= wj * excess * dy
+    x[j, 2] -= wj * excess * dz
 
 
 @numba.njit(cache=True)
@@ -77,33 +117,11 @@ def provot_pass(x, springs, rest, tau, tol, pinned):
         pi, pj = pinned[i], pinned[j]
         if pi and pj:
             continue
-        dx = x[j, 0] - x[i, 0]
-        dy = x[j, 1] - x[i, 1]
-        dz = x[j, 2] - x[i, 2]
-        l2 = dx * dx + dy * dy + dz * dz
-        lmax = (1.0 + tau) * rest[s]
-        bound = lmax + tol * rest[s]
-        if l2 <= _SURELY_WITHIN * (
-            bound * bound
-        ):  # no square root for a spring surely short enough
-            continue
-        l = np.sqrt(l2)
-        if l <= bound:
-            continue
-        corrected += 1
-        excess = (l - lmax) / l  # fraction of the spring vector to remove
-        if pi:
-            wi, wj = 0.0, 1.0
-        elif pj:
-            wi, wj = 1.0, 0.0
-        else:
-            wi, wj = 0.5, 0.5
-        x[i, 0] += wi * excess * dx
-        x[i, 1] += wi * excess * dy
-        x[i, 2] += wi * excess * dz
-        x[j, 0] -= wj * excess * dx
-        x[j, 1] -= wj * excess * dy
-        x[j, 2] -= wj * excess * dz
+        dx, dy, dz = x[j, 0] - x[i, 0], x[j, 1] - x[i, 1], x[j, 2] - x[i, 2]
+        excess = _excess(dx, dy, dz, rest[s], tau, tol)
+        if excess > 0.0:
+            _shorten(x, i, j, pi, pj, excess, dx, dy, dz)
+            corrected += 1
     return corrected
 
 
@@ -151,6 +169,184 @@ def attachment_pass_parallel(x, anchor, reach, tau):
     return moved
 
 
+@numba.njit(cache=True, inline="always")
+def _push(heap, size, s):
+    """``s`` onto the binary min-heap ``heap[:size]``; returns the new size."""
+    k = size
+    heap[k] = s
+    while k > 0:
+        up = (k - 1) // 2
+        if heap[up] <= s:
+            break
+        heap[k] = heap[up]
+        k = up
+    heap[k] = s
+    return size + 1
+
+
+@numba.njit(cache=True, inline="always")
+def _pop(heap, size):
+    """The least of ``heap[:size]`` and the new size."""
+    top = heap[0]
+    size -= 1
+    last = heap[size]
+    k = 0
+    while True:
+        c = 2 * k + 1
+        if c >= size:
+            break
+        if c + 1 < size and heap[c + 1] < heap[c]:
+            c += 1
+        if heap[c] >= last:
+            break
+        heap[k] = heap[c]
+        k = c
+    heap[k] = last
+    return top, size
+
+
+@numba.njit(cache=True)
+def provot_passes(x, springs, rest, tau, tol, pinned, passes, share, inc_ptr, inc, anchor, reach,
+                  attach, clock, heap, nxt, queued, listed, last, lists):  # fmt: skip
+    """What :meth:`StrainLimit.correct` does with Provot's passes: with ``attach``, the long-range
+    attachments first; then up to ``passes`` of :func:`provot_pass`, stopping after one that
+    shortens nothing, each followed by the attachments if it shortened something; returns how
+    many of these changed something. The same corrections in the same order, so the same bits,
+    but a pass after the first visits only the springs that can have changed since their last
+    visit, those at a particle moved after it (a spring neither of whose ends moved is as that
+    visit left it, within its bound), in the springs' order (a heap), unless they are more than
+    ``1/share`` of all (:data:`FULL_PASS_SHARE`; 0: never); and the attachments after a pass look
+    only at the particles moved since they last did (one they put at its bound is looked at
+    again: a rounding can leave it over). A cloth over a table's edge at 128×128 has ~20 springs
+    over the limit after a step and takes 20 passes, each of which visited all 64,000 springs
+    (docs/BENCHMARKS.md §11).
+
+    ``inc_ptr, inc``: each particle's springs (CSR); ``clock`` (one entry), ``queued`` (a spring
+    each) and ``listed`` (a particle each): stamps, kept from call to call
+    (:class:`_PassScratch`); ``heap``, ``nxt`` (a spring each), ``last`` (a particle each: the
+    last spring that moved it in the pass) and ``lists`` (``(2, n)``): scratch."""
+    n_springs = springs.shape[0]
+    stamp = clock[0]
+    used = 0
+    n_next = 0
+    moved, carried = lists[0], lists[1]
+    n_moved = n_carried = 0  # particles moved in the pass; moved by the last attachments
+    if attach:
+        for p in range(x.shape[0]):
+            if _attach(x, anchor, reach, tau, p):
+                carried[n_carried] = p
+                n_carried += 1
+        if n_carried:
+            used = 1
+    for pas in range(passes):
+        stamp += 3  # this pass's: listed as moved (stamp), queued (stamp + 1), next (stamp + 2)
+        corrected = 0
+        n_moved = 0
+        full = pas == 0 or n_next * share > n_springs
+        size = 0
+        if not full:
+            for q in range(n_next):
+                t = nxt[q]
+                queued[t] = stamp + 1
+                size = _push(heap, size, t)
+        if full:  # every spring: the step moved every particle, or many changed
+            for s in range(n_springs):
+                i = springs[s, 0]
+                j = springs[s, 1]
+                pi, pj = pinned[i], pinned[j]
+                if pi and pj:
+                    continue
+                dx, dy, dz = x[j, 0] - x[i, 0], x[j, 1] - x[i, 1], x[j, 2] - x[i, 2]
+                excess = _excess(dx, dy, dz, rest[s], tau, tol)
+                if excess == 0.0:
+                    continue
+                _shorten(x, i, j, pi, pj, excess, dx, dy, dz)
+                corrected += 1
+                # the passes visit in the springs' order: the latest is the last (the moved
+                # particles are listed after the pass, where few moved)
+                last[i] = last[j] = s
+                listed[i] = listed[j] = stamp
+            if 2 * corrected * share <= n_springs:
+                for p in range(x.shape[0]):
+                    if listed[p] == stamp:
+                        moved[n_moved] = p
+                        n_moved += 1
+            else:
+                n_moved = 2 * corrected  # many (or none): the list is not needed
+        while size > 0:  # the springs that may have changed, in order
+            s, size = _pop(heap, size)
+            i = springs[s, 0]
+            j = springs[s, 1]
+            pi, pj = pinned[i], pinned[j]
+            if pi and pj:
+                continue
+            dx, dy, dz = x[j, 0] - x[i, 0], x[j, 1] - x[i, 1], x[j, 2] - x[i, 2]
+            excess = _excess(dx, dy, dz, rest[s], tau, tol)
+            if excess == 0.0:
+                continue
+            _shorten(x, i, j, pi, pj, excess, dx, dy, dz)
+            corrected += 1
+            for end in range(2):
+                p = j if end else i
+                last[p] = s
+                if listed[p] != stamp:
+                    listed[p] = stamp
+                    moved[n_moved] = p
+                    n_moved += 1
+                for q in range(inc_ptr[p], inc_ptr[p + 1]):  # its springs still to visit
+                    t = inc[q]
+                    if t > s and queued[t] != stamp + 1:
+                        queued[t] = stamp + 1
+                        size = _push(heap, size, t)
+        if corrected == 0:
+            break
+        used += 1
+        # the next pass's springs: at a particle moved after their visit in this one (unless
+        # so many particles moved that the next pass visits every spring anyway)
+        n_next = 0
+        many = n_moved * share > n_springs  # (n_moved is a bound where not listed)
+        if many:
+            n_next = n_springs  # (the next pass is a full one)
+        else:
+            for k in range(n_moved):
+                p = moved[k]
+                for q in range(inc_ptr[p], inc_ptr[p + 1]):
+                    t = inc[q]
+                    if t < last[p] and queued[t] != stamp + 2:
+                        queued[t] = stamp + 2
+                        nxt[n_next] = t
+                        n_next += 1
+        if attach:
+            if many:  # every particle's attachments (as a full pass visits every spring)
+                n_carried = 0
+                for p in range(x.shape[0]):
+                    if _attach(x, anchor, reach, tau, p):
+                        carried[n_carried] = p
+                        n_carried += 1
+                continue
+            # the particles this pass moved, and those the last attachments moved
+            for k in range(n_carried):
+                p = carried[k]
+                if listed[p] != stamp:
+                    listed[p] = stamp
+                    moved[n_moved] = p
+                    n_moved += 1
+            n_carried = 0
+            for k in range(n_moved):
+                p = moved[k]
+                if _attach(x, anchor, reach, tau, p):
+                    carried[n_carried] = p
+                    n_carried += 1
+                    for q in range(inc_ptr[p], inc_ptr[p + 1]):  # all its springs again
+                        t = inc[q]
+                        if queued[t] != stamp + 2:
+                            queued[t] = stamp + 2
+                            nxt[n_next] = t
+                            n_next += 1
+    clock[0] = stamp + 3
+    return used
+
+
 def nearest_attachments(model, count: int = 2) -> tuple[np.ndarray, np.ndarray]:
     """``(anchor, reach)``, ``(n, count)``: each free particle's ``count`` nearest pins by rest
     geodesic distance (shortest paths along all springs, weighted by rest length) and those
@@ -176,6 +372,34 @@ def nearest_attachments(model, count: int = 2) -> tuple[np.ndarray, np.ndarray]:
 def _no_attachments(x, anchor, reach, tau) -> int:
     """The attachments of a cloth without a pin: none moves."""
     return 0
+
+
+#: no anchors (a cloth whose attachments are off): what :func:`provot_passes` is given then
+_NO_ANCHOR = np.full((1, 1), -1, np.int64)
+_NO_REACH = np.zeros((1, 1))
+
+
+class _PassScratch:
+    """What :func:`provot_passes` keeps: each particle's limited springs (CSR, in the springs'
+    order) and its stamps and scratch arrays."""
+
+    def __init__(self, springs: np.ndarray, n: int):
+        ends = springs.astype(np.int64).ravel()
+        order = np.argsort(ends, kind="stable")
+        self.inc = np.ascontiguousarray(order // 2)
+        self.inc_ptr = np.zeros(n + 1, np.int64)
+        np.cumsum(np.bincount(ends, minlength=n), out=self.inc_ptr[1:])
+        m = len(springs)
+        self.topology = (self.inc_ptr, self.inc)
+        self.arrays = (
+            np.zeros(1, np.int64),  # the clock
+            np.empty(max(m, 1), np.int64),  # the heap
+            np.empty(max(m, 1), np.int64),  # the next pass's springs
+            np.zeros(max(m, 1), np.int64),  # queued (stamps)
+            np.zeros(max(n, 1), np.int64),  # listed as moved (stamps)
+            np.zeros(max(n, 1), np.int64),  # the last spring that moved a particle
+            np.empty((2, max(n, 1)), np.int64),  # the moved and carried particles
+        )
 
 
 class Stage:
@@ -224,6 +448,7 @@ class StrainLimit(Stage):
         self._anchor = None
         self.tau = None
         self._springs = None  # built when first made active
+        self._passes = None  # the passes' topology and scratch (_PassScratch)
         self.last_passes = 0
         self.set_tau(tau)
 
@@ -274,23 +499,30 @@ class StrainLimit(Stage):
         changed something."""
         used = 0
         lra = self.long_range
-        attach = self._attach if lra else None
-        if lra and attach(x, self._anchor, self._reach, self.tau):
-            used = 1
         if self.method == "projection":
+            attach = self._attach if lra else None
+            if lra and attach(x, self._anchor, self._reach, self.tau):
+                used = 1
             used += self._project(x)
             self.last_passes = used
             return used
-        for _ in range(self.passes):
-            changed = provot_pass(
-                x, self._springs, self._rest, self.tau, STRAIN_LIMIT_TOLERANCE, self._pinned
-            )
-            # the attachments again after each pass: a pass moves a pin's neighbours back out
-            if lra and changed:
-                attach(x, self._anchor, self._reach, self.tau)
-            if changed == 0:
-                break
-            used += 1
+        if self._passes is None:
+            self._passes = _PassScratch(self._springs, self.model.n_particles)
+        used = provot_passes(
+            x,
+            self._springs,
+            self._rest,
+            self.tau,
+            STRAIN_LIMIT_TOLERANCE,
+            self._pinned,
+            self.passes,
+            FULL_PASS_SHARE,
+            *self._passes.topology,
+            self._anchor if lra else _NO_ANCHOR,
+            self._reach if lra else _NO_REACH,
+            lra and self._attach is not _no_attachments,
+            *self._passes.arrays,
+        )
         self.last_passes = used
         return used
 
