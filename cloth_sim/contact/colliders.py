@@ -570,17 +570,20 @@ def resolve_contacts(
             # step
             cx, cy, cz = carried(pos0, rot0, pos, rot, c, x[p, 0], x[p, 1], x[p, 2])
             ux, uy, uz = x[p, 0] - cx, x[p, 1] - cy, x[p, 2] - cz
-            # (1) continuous detection from a start outside the skin
-            if k == MESH:
-                d0, mx, my, mz = mesh_sdf(pos, rot, geo, c, sx, sy, sz, bank)
-            else:
-                d0, mx, my, mz = sdf(k, pos, rot, geo, c, sx, sy, sz)
-            d0 -= h
+            # (1) continuous detection from a start outside the skin (not after an integrator
+            # that kept the path out of the colliders itself: the start's distance unmeasured)
+            d0 = mx = my = mz = 0.0
+            if continuous:
+                if k == MESH:
+                    d0, mx, my, mz = mesh_sdf(pos, rot, geo, c, sx, sy, sz, bank)
+                else:
+                    d0, mx, my, mz = sdf(k, pos, rot, geo, c, sx, sy, sz)
+                d0 -= h
             ex, ey, ez = x[p, 0] - sx, x[p, 1] - sy, x[p, 2] - sz
             length = math.sqrt(ex * ex + ey * ey + ez * ez)
             held = False  # the step's motion undone: it moved with the collider
             if not continuous:
-                pass  # (the integrator kept the path out of the colliders itself)
+                pass
             elif d0 <= CONTACT_TOLERANCE * h:
                 # a start touching the surface: the end is projected below, unless the path went
                 # past the middle of the solid or through it (the normal at the end points the
