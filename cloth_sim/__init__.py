@@ -36,6 +36,14 @@ if "numba" in sys.modules and sys.modules["numba"].config.THREADING_LAYER == "de
 if "OMP_WAIT_POLICY" not in os.environ:
     os.environ.setdefault("GOMP_SPINCOUNT", "10000")
 
+# OpenBLAS's workers spin for a while after each call it runs on them, on the cores numba's
+# kernels need: a dot product of 16,384 masses in the energy balance slowed the node's next vbd
+# step by 40 %, and in the Warp benchmark's process (the other methods' bursts between ours)
+# symplectic Euler's 128×128 step took 0.78 ms instead of 0.41 (docs/BENCHMARKS.md §11). The
+# package's BLAS calls are small; they run on the calling thread. A user's OPENBLAS_NUM_THREADS
+# wins. Read when numpy (or scipy's own OpenBLAS) loads: import cloth_sim first.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 __all__ = ["ClothModel", "Simulator", "SimulationDiverged", "colliders", "integrators"]
 __version__ = "0.1.0"
 

@@ -207,7 +207,7 @@ def _pop(heap, size):
 
 @numba.njit(cache=True)
 def provot_passes(x, springs, rest, tau, tol, pinned, passes, share, inc_ptr, inc, anchor, reach,
-                  attach, clock, heap, nxt, queued, listed, last, lists):  # fmt: skip
+                  attach, clock, by_spring, by_particle):  # fmt: skip
     """What :meth:`StrainLimit.correct` does with Provot's passes: with ``attach``, the long-range
     attachments first; then up to ``passes`` of :func:`provot_pass`, stopping after one that
     shortens nothing, each followed by the attachments if it shortened something; returns how
@@ -221,15 +221,19 @@ def provot_passes(x, springs, rest, tau, tol, pinned, passes, share, inc_ptr, in
     over the limit after a step and takes 20 passes, each of which visited all 64,000 springs
     (docs/BENCHMARKS.md §11).
 
-    ``inc_ptr, inc``: each particle's springs (CSR); ``clock`` (one entry), ``queued`` (a spring
-    each) and ``listed`` (a particle each): stamps, kept from call to call
-    (:class:`_PassScratch`); ``heap``, ``nxt`` (a spring each), ``last`` (a particle each: the
-    last spring that moved it in the pass) and ``lists`` (``(2, n)``): scratch."""
+    ``inc_ptr, inc``: each particle's springs (CSR); ``clock`` (one entry); ``by_spring`` (3 rows:
+    the heap, the next pass's springs, and the stamps of those queued) and ``by_particle`` (4
+    rows: the stamps of those listed as moved, the last spring that moved each in the pass, the
+    lists of the moved and of those the attachments moved): the stamps kept from call to call
+    (:class:`_PassScratch`), the rest scratch. (Twenty arguments of these types made numba's
+    dispatcher keep 400 bytes a call, never freed.)"""
+    heap, nxt, queued = by_spring[0], by_spring[1], by_spring[2]
+    listed, last = by_particle[0], by_particle[1]
     n_springs = springs.shape[0]
     stamp = clock[0]
     used = 0
     n_next = 0
-    moved, carried = lists[0], lists[1]
+    moved, carried = by_particle[2], by_particle[3]
     n_moved = n_carried = 0  # particles moved in the pass; moved by the last attachments
     if attach:
         for p in range(x.shape[0]):
@@ -393,12 +397,8 @@ class _PassScratch:
         self.topology = (self.inc_ptr, self.inc)
         self.arrays = (
             np.zeros(1, np.int64),  # the clock
-            np.empty(max(m, 1), np.int64),  # the heap
-            np.empty(max(m, 1), np.int64),  # the next pass's springs
-            np.zeros(max(m, 1), np.int64),  # queued (stamps)
-            np.zeros(max(n, 1), np.int64),  # listed as moved (stamps)
-            np.zeros(max(n, 1), np.int64),  # the last spring that moved a particle
-            np.empty((2, max(n, 1)), np.int64),  # the moved and carried particles
+            np.zeros((3, max(m, 1)), np.int64),  # the heap, the next pass, queued (stamps)
+            np.zeros((4, max(n, 1)), np.int64),  # listed (stamps), last, the two lists
         )
 
 
