@@ -14,7 +14,8 @@ that length by moving both ends equally along the spring, or only the free end w
 pinned. One pass visits every limited spring once (Gauss–Seidel), so a pass can stretch a spring an
 earlier correction had fixed. Springs are visited outward from the pins (by graph distance), so one
 pass carries a correction from a pin to the far edge, as the weight hangs; passes stop early once
-one corrects nothing.
+one corrects nothing. A pass after the first visits only the springs that can have changed since
+its last visit, with the same result (:func:`provot_passes`).
 
 Provot's passes alone let a hanging cloth's stretch accumulate along its length: each pass moves a
 correction one spring down a chain that is N springs long, and at 64×64 twenty passes left the
