@@ -45,6 +45,7 @@ from .physics.forces import (
     GATHER_RK_STAGE,
     Forces,
     gather_arrays,
+    max_spring_strain,
     runge_kutta_fused,
     spring_forces_gather,
     spring_strains,
@@ -594,8 +595,8 @@ class Simulator:
 
     def max_strain(self) -> float:
         """Largest strain over the structural and shear springs (every spring of a network)."""
-        s = self.strains(limited_only=True)
-        return float(s.max()) if len(s) else 0.0
+        springs, rest = self._limited
+        return float(max_spring_strain(self.state.x, springs, rest)) if len(springs) else 0.0
 
     @property
     def analysis(self) -> stab.Analysis:

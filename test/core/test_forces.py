@@ -412,3 +412,21 @@ def test_provot_passes_visit_what_can_change_and_are_every_springs_passes_bit_fo
         assert used == _full_passes(limit, b)
         assert np.array_equal(a, b)
         assert used >= 2 and not np.array_equal(a, start)
+
+
+def test_the_largest_strain_without_a_root_a_spring_is_the_largest_of_the_strains(rng):
+    """``max_spring_strain`` (the largest ``(l/L)²``, one square root) gives the largest of
+    ``spring_strains`` to rounding on random springs, NaN where a position is NaN (a diverged
+    cloth is not hidden), and ``-inf`` for no spring."""
+    from cloth_sim.physics.forces import max_spring_strain, spring_strains
+
+    for _ in range(100):
+        x = rng.normal(size=(40, 3))
+        springs = rng.integers(0, 40, size=(60, 2))
+        springs = springs[springs[:, 0] != springs[:, 1]]
+        rest = rng.uniform(0.1, 2.0, len(springs))
+        expected = spring_strains(x, springs, rest).max()
+        assert max_spring_strain(x, springs, rest) == pytest.approx(expected, rel=1e-13, abs=1e-13)
+    x[springs[5, 1]] = np.nan
+    assert np.isnan(max_spring_strain(x, springs, rest))
+    assert max_spring_strain(x, springs[:0], rest[:0]) == -np.inf
