@@ -71,26 +71,24 @@ _SURELY_WITHIN = 1.0 - 1e-12
 
 
 @numba.njit(cache=True, inline="always")
-def _excess(dx, dy, dz, rest, tau, tol):
-    """The fraction of a spring's vector ``d`` (rest length ``rest``) to remove to bring it to
-    strain ``tau``, if its strain exceeds ``tau + tol``; else 0. (Scalars only: an inlined function
-    taking the arrays binds each anew at every call, an atomic reference count up and down: a
-    pass took 9× as long.)"""
+def _shorten(x, i, j, pi, pj, rest, tau, tol):
+    """Spring ``(i, j)`` (rest length ``rest``, ends pinned where ``pi``, ``pj``) shortened to
+    strain ``tau`` if its strain exceeds ``tau + tol``, by moving both ends equally, or only the
+    free one; whether it was. (``x`` is its one array: an inlined function taking the springs'
+    arrays too binds each anew at every call, an atomic reference count up and down, and a pass
+    took 9× as long.)"""
+    if pi and pj:
+        return False
+    dx, dy, dz = x[j, 0] - x[i, 0], x[j, 1] - x[i, 1], x[j, 2] - x[i, 2]
     l2 = dx * dx + dy * dy + dz * dz
     lmax = (1.0 + tau) * rest
     bound = lmax + tol * rest
     if l2 <= _SURELY_WITHIN * (bound * bound):  # no square root for a spring surely short enough
-        return 0.0
+        return False
     l = np.sqrt(l2)
     if l <= bound:
-        return 0.0
-    return (l - lmax) / l
-
-
-@numba.njit(cache=True, inline="always")
-def _shorten(x, i, j, pi, pj, excess, dx, dy, dz):
-    """Spring ``(i, j)`` shortened by ``excess`` of its vector ``d``: both ends equally, or only
-    the free one."""
+        return False
+    excess = (l - lmax) / l  # fraction of the spring vector to remove
     if pi:
         wi, wj = 0.0, 1.0
     elif pj:
@@ -103,6 +101,7 @@ def _shorten(x, i, j, pi, pj, excess, dx, dy, dz):
     x[j, 0] -= wj * excess * dx
     x[j, 1] -= wj * excess * dy
     x[j, 2] -= wj * excess * dz
+    return True
 
 
 @numba.njit(cache=True)
@@ -113,15 +112,8 @@ def provot_pass(x, springs, rest, tau, tol, pinned):
     strain ``tau`` exactly."""
     corrected = 0
     for s in range(springs.shape[0]):
-        i = springs[s, 0]
-        j = springs[s, 1]
-        pi, pj = pinned[i], pinned[j]
-        if pi and pj:
-            continue
-        dx, dy, dz = x[j, 0] - x[i, 0], x[j, 1] - x[i, 1], x[j, 2] - x[i, 2]
-        excess = _excess(dx, dy, dz, rest[s], tau, tol)
-        if excess > 0.0:
-            _shorten(x, i, j, pi, pj, excess, dx, dy, dz)
+        i, j = springs[s, 0], springs[s, 1]
+        if _shorten(x, i, j, pinned[i], pinned[j], rest[s], tau, tol):
             corrected += 1
     return corrected
 
@@ -206,6 +198,18 @@ def _pop(heap, size):
     return top, size
 
 
+@numba.njit(cache=True, inline="always")
+def _attach_all(x, anchor, reach, tau, moved):
+    """Every particle's attachments (:func:`attachment_pass`), the moved ones listed in
+    ``moved``; returns how many."""
+    n = 0
+    for p in range(x.shape[0]):
+        if _attach(x, anchor, reach, tau, p):
+            moved[n] = p
+            n += 1
+    return n
+
+
 @numba.njit(cache=True)
 def provot_passes(x, springs, rest, tau, tol, pinned, passes, share, inc_ptr, inc, anchor, reach,
                   attach, clock, by_spring, by_particle):  # fmt: skip
@@ -237,10 +241,7 @@ def provot_passes(x, springs, rest, tau, tol, pinned, passes, share, inc_ptr, in
     moved, carried = by_particle[2], by_particle[3]
     n_moved = n_carried = 0  # particles moved in the pass; moved by the last attachments
     if attach:
-        for p in range(x.shape[0]):
-            if _attach(x, anchor, reach, tau, p):
-                carried[n_carried] = p
-                n_carried += 1
+        n_carried = _attach_all(x, anchor, reach, tau, carried)
         if n_carried:
             used = 1
     for pas in range(passes):
@@ -256,16 +257,9 @@ def provot_passes(x, springs, rest, tau, tol, pinned, passes, share, inc_ptr, in
                 size = _push(heap, size, t)
         if full:  # every spring: the step moved every particle, or many changed
             for s in range(n_springs):
-                i = springs[s, 0]
-                j = springs[s, 1]
-                pi, pj = pinned[i], pinned[j]
-                if pi and pj:
+                i, j = springs[s, 0], springs[s, 1]
+                if not _shorten(x, i, j, pinned[i], pinned[j], rest[s], tau, tol):
                     continue
-                dx, dy, dz = x[j, 0] - x[i, 0], x[j, 1] - x[i, 1], x[j, 2] - x[i, 2]
-                excess = _excess(dx, dy, dz, rest[s], tau, tol)
-                if excess == 0.0:
-                    continue
-                _shorten(x, i, j, pi, pj, excess, dx, dy, dz)
                 corrected += 1
                 # the passes visit in the springs' order: the latest is the last (the moved
                 # particles are listed after the pass, where few moved)
@@ -278,21 +272,12 @@ def provot_passes(x, springs, rest, tau, tol, pinned, passes, share, inc_ptr, in
                         n_moved += 1
             else:
                 n_moved = 2 * corrected  # many (or none): the list is not needed
-        # (the visit is written out in each loop, as in provot_pass: a helper taking the arrays
-        # binds them anew at every call, an atomic reference count each, and a pass took 9× as
-        # long; the full pass has a loop of its own, 1.5× as fast as the heap's with a branch)
+        # (the full pass has a loop of its own: 1.5× as fast as the heap's with a branch)
         while size > 0:  # the springs that may have changed, in order
             s, size = _pop(heap, size)
-            i = springs[s, 0]
-            j = springs[s, 1]
-            pi, pj = pinned[i], pinned[j]
-            if pi and pj:
+            i, j = springs[s, 0], springs[s, 1]
+            if not _shorten(x, i, j, pinned[i], pinned[j], rest[s], tau, tol):
                 continue
-            dx, dy, dz = x[j, 0] - x[i, 0], x[j, 1] - x[i, 1], x[j, 2] - x[i, 2]
-            excess = _excess(dx, dy, dz, rest[s], tau, tol)
-            if excess == 0.0:
-                continue
-            _shorten(x, i, j, pi, pj, excess, dx, dy, dz)
             corrected += 1
             for end in range(2):
                 p = j if end else i
@@ -326,11 +311,7 @@ def provot_passes(x, springs, rest, tau, tol, pinned, passes, share, inc_ptr, in
                         n_next += 1
         if attach:
             if many:  # every particle's attachments (as a full pass visits every spring)
-                n_carried = 0
-                for p in range(x.shape[0]):
-                    if _attach(x, anchor, reach, tau, p):
-                        carried[n_carried] = p
-                        n_carried += 1
+                n_carried = _attach_all(x, anchor, reach, tau, carried)
                 continue
             # the particles this pass moved, and those the last attachments moved
             for k in range(n_carried):
@@ -501,12 +482,9 @@ class StrainLimit(Stage):
     def correct(self, x: np.ndarray) -> int:
         """Correct ``x`` in place; returns the number of passes (or projection iterations) that
         changed something."""
-        used = 0
         lra = self.long_range
         if self.method == "projection":
-            attach = self._attach if lra else None
-            if lra and attach(x, self._anchor, self._reach, self.tau):
-                used = 1
+            used = 1 if lra and self._attach(x, self._anchor, self._reach, self.tau) else 0
             used += self._project(x)
             self.last_passes = used
             return used

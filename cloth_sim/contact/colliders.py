@@ -571,49 +571,49 @@ def resolve_contacts(
             cx, cy, cz = carried(pos0, rot0, pos, rot, c, x[p, 0], x[p, 1], x[p, 2])
             ux, uy, uz = x[p, 0] - cx, x[p, 1] - cy, x[p, 2] - cz
             # (1) continuous detection from a start outside the skin (not after an integrator
-            # that kept the path out of the colliders itself: the start's distance unmeasured)
-            d0 = mx = my = mz = 0.0
+            # that kept the path out of the colliders itself)
+            held = False  # the step's motion undone: it moved with the collider
             if continuous:
                 if k == MESH:
                     d0, mx, my, mz = mesh_sdf(pos, rot, geo, c, sx, sy, sz, bank)
                 else:
                     d0, mx, my, mz = sdf(k, pos, rot, geo, c, sx, sy, sz)
                 d0 -= h
-            ex, ey, ez = x[p, 0] - sx, x[p, 1] - sy, x[p, 2] - sz
-            length = math.sqrt(ex * ex + ey * ey + ez * ez)
-            held = False  # the step's motion undone: it moved with the collider
-            if not continuous:
-                pass
-            elif d0 <= CONTACT_TOLERANCE * h:
-                # a start touching the surface: the end is projected below, unless the path went
-                # past the middle of the solid or through it (the normal at the end points the
-                # other way: a straight path between opposite sides crosses the solid): stay
-                if k == MESH:
-                    de, fx, fy, fz = mesh_sdf(pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2], bank)
-                else:
-                    de, fx, fy, fz = sdf(k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])
-                if fx * mx + fy * my + fz * mz < 0.0:
-                    x[p, 0], x[p, 1], x[p, 2] = sx, sy, sz
-                    held = True
-            elif length > d0:
-                t = 0.0
-                hit = False
-                for _ in range(_MARCH_STEPS):
-                    qx, qy, qz = sx + t * ex, sy + t * ey, sz + t * ez
+                ex, ey, ez = x[p, 0] - sx, x[p, 1] - sy, x[p, 2] - sz
+                length = math.sqrt(ex * ex + ey * ey + ez * ez)
+                if d0 <= CONTACT_TOLERANCE * h:
+                    # a start touching the surface: the end is projected below, unless the path
+                    # went past the middle of the solid or through it (the normal at the end
+                    # points the other way: a straight path between opposite sides crosses the
+                    # solid): stay
                     if k == MESH:
-                        d = mesh_sdf(pos, rot, geo, c, qx, qy, qz, bank)[0] - h
+                        de, fx, fy, fz = mesh_sdf(
+                            pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2], bank
+                        )
                     else:
-                        d = sdf(k, pos, rot, geo, c, qx, qy, qz)[0] - h
-                    if d <= 1e-3 * h:
-                        hit = True
-                        break
-                    t += d / length
-                    if t >= 1.0:
-                        break
-                if not hit and t < 1.0:
-                    hit = True  # the march did not settle: stop where it stands (conservative)
-                if hit:
-                    x[p, 0], x[p, 1], x[p, 2] = sx + t * ex, sy + t * ey, sz + t * ez
+                        de, fx, fy, fz = sdf(k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])
+                    if fx * mx + fy * my + fz * mz < 0.0:
+                        x[p, 0], x[p, 1], x[p, 2] = sx, sy, sz
+                        held = True
+                elif length > d0:
+                    t = 0.0
+                    hit = False
+                    for _ in range(_MARCH_STEPS):
+                        qx, qy, qz = sx + t * ex, sy + t * ey, sz + t * ez
+                        if k == MESH:
+                            d = mesh_sdf(pos, rot, geo, c, qx, qy, qz, bank)[0] - h
+                        else:
+                            d = sdf(k, pos, rot, geo, c, qx, qy, qz)[0] - h
+                        if d <= 1e-3 * h:
+                            hit = True
+                            break
+                        t += d / length
+                        if t >= 1.0:
+                            break
+                    if not hit and t < 1.0:
+                        hit = True  # the march did not settle: stop where it stands (conservative)
+                    if hit:
+                        x[p, 0], x[p, 1], x[p, 2] = sx + t * ex, sy + t * ey, sz + t * ez
             # (2) projection with friction on the motion relative to the collider
             if k == MESH:
                 d, nx, ny, nz = mesh_sdf(pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2], bank)

@@ -127,13 +127,13 @@ def colliders_at(
 
 @numba.njit(cache=True, inline="always")
 def within(px, py, pz, cx, cy, cz, allow_i, dmin_i, gamma):
-    """:func:`truncate`'s answer where it needs no pair: vertex at ``p`` whose search was made at
-    ``c``, its allowance and its nearest pair's distance; returns the position, whether it was cut
-    and whether that is final (else :func:`truncate` must look at its pairs, and finds the same
-    scale first). Scalars only: the inlined :func:`truncate`, with its nine arrays, cost ~40 ns a
-    vertex where this arithmetic is a few (``_chebyshev`` at 128×128: 0.70 → 0.06 ms, the same
-    bits; docs/BENCHMARKS.md §11); the callers take :func:`truncate` only where this leaves the
-    pairs to look at."""
+    """A vertex held within its bounds where that needs no look at its pairs (:func:`truncate`):
+    vertex at ``p`` whose search was made at ``c``, its allowance and its nearest pair's
+    distance; returns the position, whether it was cut and whether that is final (else
+    :func:`truncate` must look at its pairs, from the same scale). Scalars only: the inlined
+    :func:`truncate`, with its nine arrays, cost ~40 ns a vertex where this arithmetic is a few
+    (``_chebyshev`` at 128×128: 0.70 → 0.06 ms, the same bits; docs/BENCHMARKS.md §11); the
+    callers take :func:`truncate` only where this leaves the pairs to look at."""
     if allow_i == math.inf and dmin_i == math.inf:
         return px, py, pz, False, True
     ex, ey, ez = px - cx, py - cy, pz - cz
@@ -159,19 +159,14 @@ def truncate(i, px, py, pz, x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, d
     ``γ·d`` each, ``γ < ½``, and the normal separates them by ``d`` at the search (the nearest
     points' direction: every point of the one primitive is at least ``d`` from every point of the
     other along it), so no pair crosses. ``dmin``: each vertex's nearest pair at the search (a
-    displacement below ``γ·dmin`` needs no look at its pairs). Returns the position and whether it
-    was cut."""
-    if allow[i] == math.inf and dmin[i] == math.inf:  # no contact in reach: nothing to hold
-        return px, py, pz, False
+    displacement below ``γ·dmin`` needs no look at its pairs). Called where :func:`within`, which
+    answers every vertex that needs no look at its pairs, was not settled. Returns the position
+    and whether it was cut."""
     ex, ey, ez = px - x_cd[i, 0], py - x_cd[i, 1], pz - x_cd[i, 2]
     t = 1.0
     el = math.sqrt(ex * ex + ey * ey + ez * ez)
     if el > allow[i]:
         t = allow[i] / el
-    if el * t <= gamma * dmin[i]:  # it approaches nothing by more than that: no pair to look at
-        if t >= 1.0:
-            return px, py, pz, False
-        return x_cd[i, 0] + t * ex, x_cd[i, 1] + t * ey, x_cd[i, 2] + t * ez, True
     for q in range(gptr[i], gptr[i + 1]):
         r = grec[q]
         pair = r // 4
