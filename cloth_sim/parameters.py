@@ -201,10 +201,23 @@ def _schema() -> dict[str, Param]:
             int,
             "",
             "Iterations per step of the vbd integrator (Vertex Block "
-            "Descent): more is closer to backward Euler's step, any count gives a usable state.",
+            "Descent) at most: it stops earlier where the step reaches vbd.tolerance; more is "
+            "closer to backward Euler's step, any count gives a usable state.",
             lo=1,
             hi=10_000,
             scene_key="vbd.iterations",
+        ),
+        P(
+            "vbd.tolerance",
+            float,
+            "",
+            "The relative residual at which a vbd step stops iterating before vbd.iterations: "
+            "the step's force imbalance over the weight, RMS over the vertices "
+            "(docs/convergence.md). 0 runs every iteration; ~/stats says whether each step "
+            "reached it (solver_converged) and /diagnostics warns while steps do not.",
+            lo=0.0,
+            hi=10.0,
+            scene_key="vbd.tolerance",
         ),
         P(
             "vbd.fit_tick",

@@ -71,6 +71,7 @@ import yaml
 
 from .contact.colliders import KINDS
 from .contact.self_collision import MAX_THICKNESS_FRACTION
+from .integrators.vbd import TOLERANCE as VBD_TOLERANCE
 from .model import GRID_FAMILIES, MESH_FAMILIES, ORIENTATIONS, ClothModel
 from .motion import Motion, motion_from_dict
 from .parameters import SCHEMA, ParameterError
@@ -120,6 +121,8 @@ class Scene:
     integrator: str = "symplectic_euler"
     #: the vbd integrator's iterations a step (``vbd: {iterations: N}``)
     vbd_iterations: int = 10
+    #: the relative residual at which its steps stop iterating (``vbd: {tolerance: r}``)
+    vbd_tolerance: float = VBD_TOLERANCE
     dt: float = 1e-3
     origin: tuple = (0.0, 0.0, 0.0)
     thickness: float = 0.005
@@ -355,7 +358,10 @@ class Scene:
             if key in override:
                 sim_kw[key] = override.pop(key)
         if sim_kw["integrator"] == "vbd" and "integrator_options" not in sim_kw:
-            sim_kw["integrator_options"] = {"iterations": self.vbd_iterations}
+            sim_kw["integrator_options"] = {
+                "iterations": self.vbd_iterations,
+                "tolerance": self.vbd_tolerance,
+            }
         sim = Simulator(self.build_model(**override), **sim_kw)
         if self.robot is not None:
             self.add_robot(sim)
@@ -572,8 +578,9 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
     vbd = data.get("vbd", {}) or {}
     if not isinstance(vbd, dict):
         v.fail("vbd", "a mapping with iterations", vbd)
-    v.known("vbd.", vbd, {"iterations"})
+    v.known("vbd.", vbd, {"iterations", "tolerance"})
     s.vbd_iterations = v.param("vbd.iterations", vbd.get("iterations", s.vbd_iterations))
+    s.vbd_tolerance = v.param("vbd.tolerance", vbd.get("tolerance", s.vbd_tolerance))
     s.dt = v.param("dt", data.get("dt", s.dt))
     s.thickness = v.param("thickness", data.get("thickness", s.thickness))
     s.self_collision = v.param("self_collision", data.get("self_collision", False))

@@ -82,6 +82,7 @@ def scene_values(scene: Scene) -> dict:
         "thickness": float(scene.thickness),
         "self_collision": bool(scene.self_collision),
         "vbd.iterations": int(scene.vbd_iterations),
+        "vbd.tolerance": float(scene.vbd_tolerance),
         "material": scene.material_name,
     }
     if scene.mesh is not None:
@@ -258,9 +259,11 @@ def build_model(cfg: dict, scene: Scene):
 
 
 def integrator_options(cfg: dict) -> dict:
-    """The options of ``cfg``'s integrator that parameters set (vbd's iterations; the node adds a
-    time budget under ``vbd.fit_tick``)."""
-    return {"iterations": cfg["vbd.iterations"]} if cfg["integrator"] == "vbd" else {}
+    """The options of ``cfg``'s integrator that parameters set (vbd's iterations and tolerance; the
+    node adds a time budget under ``vbd.fit_tick``)."""
+    if cfg["integrator"] != "vbd":
+        return {}
+    return {"iterations": cfg["vbd.iterations"], "tolerance": cfg["vbd.tolerance"]}
 
 
 def build_simulator(cfg: dict, model, scene: Scene) -> Simulator:

@@ -165,6 +165,7 @@ def stats(
     paused: bool,
     solver_iterations: int = 0,
     solver_residual: float = 0.0,
+    solver_converged: bool = True,
 ) -> bytes:
     """``cloth_sim/msg/Stats`` (msg/Stats.msg), field for field."""
     w = CdrWriter()
@@ -188,4 +189,5 @@ def stats(
     w.boolean(paused)
     w.u32(solver_iterations)
     w.f64(solver_residual)
+    w.boolean(solver_converged)
     return w.getvalue()

@@ -135,6 +135,13 @@ def _bench_vbd_floor(args) -> int:
     return 0
 
 
+def _bench_convergence(args) -> int:
+    from .convergence import print_convergence_table
+
+    print_convergence_table(args.material, tuple(args.sizes), args.seconds)
+    return 0
+
+
 def _bench_flex_peer(args) -> int:
     from .flex_peer import print_flex_table
 
@@ -231,6 +238,15 @@ def add_parser(sub) -> argparse.ArgumentParser:
     )
     vf.add_argument("--sizes", type=int, nargs="+", default=[32, 64, 128])
     vf.set_defaults(func=_bench_vbd_floor)
+    cv = bsub.add_parser(
+        "convergence",
+        help="vbd on a library fabric: iterations a step against its residual, and substeps "
+        "against iterations at equal cost",
+    )
+    cv.add_argument("--material", default="cotton", help="a library fabric (default cotton)")
+    cv.add_argument("--sizes", type=int, nargs="+", default=[32, 64])
+    cv.add_argument("--seconds", type=float, default=1.0, help="simulated seconds a run")
+    cv.set_defaults(func=_bench_convergence)
     fp = bsub.add_parser(
         "flex-peer",
         help="MuJoCo's flex cloth beside cloth_sim on the drape scene "

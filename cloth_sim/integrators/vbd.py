@@ -79,11 +79,13 @@ from ..contact.colliders import MESH, mesh_sdf, sdf
 from ..contact.geometry import segment_parameters, triangle_weights
 from ..kinds import LINEAR
 from ..physics.bending import bending_row
-from ..physics.forces import BUCKLE_TABLE, axial, incidence
+from ..physics.forces import BUCKLE_TABLE, incidence
 from .base import Integrator, Stability
 from .registry import register
-from .vbd_contact import colliders_at, onset, press, slide, solve3, truncate, within
+from .vbd_contact import colliders_at, onset, solve3, truncate, within
 from .vbd_grid import GridLayout
+from .vbd_residual import ContactTerms, StepPoint, grid_residual, residual
+from .vbd_terms import local_energy, self_contacts_at, springs_at
 
 #: the share of the nearest found distance a vertex may move between two candidate searches
 GAMMA = 0.45
@@ -104,6 +106,16 @@ REUSE_OVER = 0.02
 FAR = 4.0
 #: IPC's friction smoothing: relative tangential motion below EPS_V·h (m) is static
 EPS_V = 1e-3
+#: the relative residual a step iterates down to by default (:mod:`.vbd_residual`: the force
+#: imbalance over the weight, RMS over the free vertices)
+TOLERANCE = 1e-2
+#: iterations between two measures of the residual
+CHECK_EVERY = 5
+#: a step that ended more than this many times its tolerance above it measures the next step's
+#: residual at its end only
+FAR_ABOVE = 4.0
+#: the iterations a step may take when none are given
+MAX_ITERATIONS = 200
 #: vertices per colour below which a colour is updated on one core (the pool's wake-up costs more)
 PARALLEL_MIN_VERTICES = 512
 
@@ -157,183 +169,6 @@ def _csr(owner: np.ndarray, item: np.ndarray, n: int) -> tuple[np.ndarray, np.nd
     ptr = np.zeros(n + 1, np.int64)
     np.cumsum(np.bincount(owner, minlength=n), out=ptr[1:])
     return ptr, np.ascontiguousarray(item[order], dtype=np.int64)
-
-
-# ---------------------------------------------------------------------------- per-vertex terms
-# A vertex's force is (f0, f1, f2) and its symmetric Hessian (h0 … h5) = (xx, xy, xz, yy, yz, zz);
-# each term takes them and returns them with its own part added.
-@numba.njit(cache=True, inline="always")
-def _springs_at(
-    i, x, xt, inc_ptr, nbr, rest, k, c, kind, tab, inv_h, f0, f1, f2, h0, h1, h2, h3, h4, h5
-):
-    """Vertex ``i``'s springs: elastic, and damping along the spring; and whether one of them is a
-    compressed Choi–Ko buckling pair (the step is then checked against the energy)."""
-    rough = False
-    xi, yi, zi = x[i, 0], x[i, 1], x[i, 2]
-    # the vertex's own motion over the step, for the damping
-    mx, my, mz = xi - xt[i, 0], yi - xt[i, 1], zi - xt[i, 2]
-    for q in range(inc_ptr[i], inc_ptr[i + 1]):
-        j = nbr[q]
-        xj, yj, zj = x[j, 0], x[j, 1], x[j, 2]
-        dx, dy, dz = xj - xi, yj - yi, zj - zi
-        l = math.sqrt(dx * dx + dy * dy + dz * dz)
-        if l < 1e-300:
-            continue
-        inv = 1.0 / l
-        ux, uy, uz = dx * inv, dy * inv, dz * inv
-        L, kk, kd = rest[q], k[q], kind[q]
-        if kd == LINEAR:
-            de, d2e = kk * (l - L), kk
-        else:
-            _, de, d2e = axial(l, L, kk, kd, tab)
-            if l < L:
-                rough = (
-                    True  # a compressed Choi–Ko pair: its energy is not smooth at the rest length
-                )
-        # the force on i pulls it towards j by E'(l); the damping along the spring resists the
-        # ends' relative motion over the step
-        cs = c[q] * inv_h
-        mag = de
-        if cs > 0.0:
-            mag += cs * (
-                ((xj - xt[j, 0]) - mx) * ux
-                + ((yj - xt[j, 1]) - my) * uy
-                + ((zj - xt[j, 2]) - mz) * uz
-            )
-        f0 += mag * ux
-        f1 += mag * uy
-        f2 += mag * uz
-        # E'' u uᵀ + (E'/l)(I − u uᵀ), each part clamped at 0 (positive semi-definite), and the
-        # damping's (c/h) u uᵀ
-        geo = de * inv if de > 0.0 else 0.0
-        w = (d2e if d2e > 0.0 else 0.0) + cs - geo
-        wx, wy = w * ux, w * uy
-        h0 += wx * ux + geo
-        h1 += wx * uy
-        h2 += wx * uz
-        h3 += wy * uy + geo
-        h4 += wy * uz
-        h5 += w * uz * uz + geo
-    return f0, f1, f2, h0, h1, h2, h3, h4, h5, rough
-
-
-@numba.njit(cache=True, inline="always")
-def _local_energy(
-    i, px, py, pz, x, xt, y, m_h2, drag_h, inc_ptr, nbr, rest, k, c, kind, tab, inv_h, bend
-):
-    """The part of the incremental potential that depends on vertex ``i`` placed at ``p``: its
-    inertia and drag, its springs' energy and their damping potential, the bending's ``½Q_ii|p|²
-    + p·Σ_j Q_ij x_j`` (contacts left out)."""
-    ax, ay, az = px - y[i, 0], py - y[i, 1], pz - y[i, 2]
-    bx, by, bz = px - xt[i, 0], py - xt[i, 1], pz - xt[i, 2]
-    e = 0.5 * m_h2[i] * (ax * ax + ay * ay + az * az) + 0.5 * drag_h * (
-        bx * bx + by * by + bz * bz
-    )
-    bptr, bidx, bval, bdiag = bend
-    if bdiag.shape[0]:
-        e += 0.5 * bdiag[i] * (px * px + py * py + pz * pz)
-        for q in range(bptr[i], bptr[i + 1]):
-            j = bidx[q]
-            if j != i:
-                e += bval[q] * (px * x[j, 0] + py * x[j, 1] + pz * x[j, 2])
-    for q in range(inc_ptr[i], inc_ptr[i + 1]):
-        j = nbr[q]
-        dx, dy, dz = x[j, 0] - px, x[j, 1] - py, x[j, 2] - pz
-        l = math.sqrt(dx * dx + dy * dy + dz * dz)
-        if l < 1e-300:
-            continue
-        es, _, _ = axial(l, rest[q], k[q], kind[q], tab)
-        e += es
-        if c[q] > 0.0:
-            rel = (
-                ((x[j, 0] - xt[j, 0]) - bx) * dx
-                + ((x[j, 1] - xt[j, 1]) - by) * dy
-                + ((x[j, 2] - xt[j, 2]) - bz) * dz
-            )
-            rel /= l
-            e += 0.5 * c[q] * inv_h * rel * rel
-    return e
-
-
-@numba.njit(cache=True, inline="always")
-def _pick(x, xs, colour, i, p):
-    """Vertex ``p``'s position as vertex ``i`` reads it: the iterate (``i`` itself, and the other
-    colours', done earlier in this iteration or not yet begun), or, for a vertex of ``i``'s own
-    colour (being moved at the same time), where it was when the iteration began."""
-    if p != i and colour[p] == colour[i]:
-        return xs[p, 0], xs[p, 1], xs[p, 2]
-    return x[p, 0], x[p, 1], x[p, 2]
-
-
-@numba.njit(cache=True, inline="always")
-def _self_contacts_at(
-    i,
-    x,
-    xs,
-    xt,
-    colour,
-    rec_ptr,
-    rec,
-    pidx,
-    pcoef,
-    pnrm,
-    tau,
-    ks,
-    mu,
-    eps,
-    rec_d,
-    f0,
-    f1,
-    f2,
-    h0,
-    h1,
-    h2,
-    h3,
-    h4,
-    h5,
-):
-    """Vertex ``i``'s self-contacts: ``½ k (τ − d)²`` on each pair's distance ``d`` along the
-    normal the search found, ``d = n·Σ_k w_k x_k`` over the pair's four vertices
-    (:func:`contact_pairs`: the normal and the nearest points' weights held between two searches),
-    for the pairs ``i`` is in (its records ``4·pair + slot``); and friction ``μ`` between the two
-    sides as on a collider (IPC's smoothed, lagged friction on their relative tangential motion
-    over the step, ``Σ_k w_k (x_k − x_k^t)``, with the pressing force of the iterate). The
-    partners' positions by :func:`_pick`."""
-    for q in range(rec_ptr[i], rec_ptr[i + 1]):
-        r = rec[q]
-        pair = r // 4
-        w = pcoef[pair, r % 4]
-        nx, ny, nz = pnrm[pair, 0], pnrm[pair, 1], pnrm[pair, 2]
-        d = 0.0
-        ux = uy = uz = 0.0
-        for slot in range(4):
-            cw = pcoef[pair, slot]
-            if cw != 0.0:
-                v = pidx[pair, slot]
-                px, py, pz = _pick(x, xs, colour, i, v)
-                d += cw * (nx * px + ny * py + nz * pz)
-                ux += cw * (px - xt[v, 0])
-                uy += cw * (py - xt[v, 1])
-                uz += cw * (pz - xt[v, 2])
-        rec_d[q] = d  # (for vbd_contact.onset, after the step is solved)
-        if d >= tau:
-            continue
-        # ∂d/∂x_i = w n: the force pushes the pair apart along n
-        lam = ks * (tau - d)
-        f0, f1, f2, h0, h1, h2, h3, h4, h5 = press(
-            lam * w, ks * w * w, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5
-        )
-        if mu <= 0.0:
-            continue
-        un = ux * nx + uy * ny + uz * nz
-        tx, ty, tz = ux - un * nx, uy - un * ny, uz - un * nz
-        tl = math.sqrt(tx * tx + ty * ty + tz * tz)
-        g = 1.0 / tl if tl > eps else (2.0 - tl / eps) / eps
-        sf = mu * lam * g
-        f0, f1, f2, h0, h1, h2, h3, h4, h5 = slide(
-            sf * w, tx, ty, tz, sf * w * w, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5
-        )
-    return f0, f1, f2, h0, h1, h2, h3, h4, h5
 
 
 @numba.njit(cache=True, parallel=True)
@@ -484,7 +319,7 @@ def _sweep(
         f1 = -m_h2[i] * (x[i, 1] - y[i, 1]) - drag_h * (x[i, 1] - xt[i, 1])
         f2 = -m_h2[i] * (x[i, 2] - y[i, 2]) - drag_h * (x[i, 2] - xt[i, 2])
         h0, h1, h2, h3, h4, h5 = m, 0.0, 0.0, m, 0.0, m
-        f0, f1, f2, h0, h1, h2, h3, h4, h5, rough = _springs_at(
+        f0, f1, f2, h0, h1, h2, h3, h4, h5, rough = springs_at(
             i,
             x,
             xt,
@@ -547,7 +382,7 @@ def _sweep(
                 touch[i] = 1
         if rec_ptr[i + 1] > rec_ptr[i]:
             touch[i] = 1
-            f0, f1, f2, h0, h1, h2, h3, h4, h5 = _self_contacts_at(
+            f0, f1, f2, h0, h1, h2, h3, h4, h5 = self_contacts_at(
                 i,
                 x,
                 xs,
@@ -601,7 +436,7 @@ def _sweep(
             # at the onset, a tension-only pair's stiffness vanishes): Newton's step may overshoot.
             # Backtrack (halving, at most 8 times) until the vertex's energy does not rise, so each
             # vertex step, and so each iteration, descends
-            e0 = _local_energy(
+            e0 = local_energy(
                 i,
                 x[i, 0],
                 x[i, 1],
@@ -623,7 +458,7 @@ def _sweep(
             )
             tries = 0
             while (
-                _local_energy(
+                local_energy(
                     i,
                     x[i, 0] + sx,
                     x[i, 1] + sy,
@@ -914,6 +749,9 @@ class VBD(Integrator):
         "iterations",
         "last_iterations",
         "last_residual",
+        "converged",
+        "tolerance",
+        "unconverged_steps",
         "detections",
         "last_contacts",
         "truncated",
@@ -931,8 +769,10 @@ class VBD(Integrator):
     def __init__(
         self,
         model,
-        iterations: int = 10,
+        iterations: int | None = None,
         rho: float = 0.8,
+        tolerance: float = TOLERANCE,
+        check_every: int = CHECK_EVERY,
         contact_stiffness: float = 1e4,
         collision_interval: int = 5,
         time_budget: float | None = None,
@@ -941,12 +781,26 @@ class VBD(Integrator):
         grid: bool = True,
     ):
         super().__init__(model)
+        self.chosen_iterations = iterations is None
+        if iterations is None:
+            iterations = MAX_ITERATIONS
         for name, value, hi in (
-            ("iterations", iterations, 10_000),
+            ("iterations", iterations, 100_000),
             ("collision_interval", collision_interval, 10_000),
+            ("check_every", check_every, 10_000),
         ):
             if isinstance(value, bool) or int(value) != value or not 1 <= value <= hi:
                 raise ValueError(f"{name} must be an integer in [1, {hi}], got {value!r}")
+        if isinstance(tolerance, bool) or not (
+            isinstance(tolerance, (int, float)) and 0.0 <= tolerance < math.inf
+        ):
+            raise ValueError(
+                "tolerance must be a number >= 0 (the relative residual: the force imbalance over "
+                f"the weight, RMS over the vertices; 0 runs every iteration), got {tolerance!r}"
+            )
+        self.tolerance = float(tolerance)
+        self.check_every = int(check_every)
+        self._first_check = self.check_every  # the iterations after which a step first measures
         if not (isinstance(rho, (int, float)) and 0.0 <= rho < 1.0):
             raise ValueError(f"rho must be a number in [0, 1), got {rho!r}")
         if not (isinstance(contact_stiffness, (int, float)) and 0 < contact_stiffness < math.inf):
@@ -984,6 +838,10 @@ class VBD(Integrator):
         self._contacts = None
         self._self_collision = None
         n = model.n_particles
+        self.counters["tolerance"] = self.tolerance
+        self.counters["converged"] = False
+        self.counters["last_residual"] = 0.0
+        self._imbalance = np.zeros(n)
         self._a_prev = np.zeros((n, 3))
         self._stepped = np.zeros(n)
         self._cut = np.zeros(n, np.int8)
@@ -1159,6 +1017,22 @@ class VBD(Integrator):
         omega = 1.0
         budget_end = None if self.time_budget is None else time.perf_counter() + self.time_budget
         done = 0
+        point = StepPoint(x, xt, y, m_h2, model.masses, 1.0 / h, drag_h, free)
+        terms = ContactTerms(tau, kc, eps, ks, self.self_friction, self._near)
+        res = math.inf
+        measured = [-1]  # the iterations done when the residual was last measured
+
+        def measure(iterations_done: int, grid_forces=None) -> float:
+            """The residual of the iterate in ``x`` (:mod:`.vbd_residual`); on the grid's blocks
+            from the forces they gave (``grid_forces``)."""
+            measured[0] = iterations_done
+            if grid_forces is not None:
+                return grid_residual(
+                    grid_forces, grid.slot, point, colliders, terms, self._imbalance
+                )
+            records = (*self._rec, self._colour)
+            return residual(point, sp, colliders, records, terms, self._imbalance)
+
         strain = self._strain_limit
         tether = (
             self.tethers
@@ -1176,7 +1050,9 @@ class VBD(Integrator):
                     xm, xt, self._near, touch, cut, x_cd, allow, GAMMA, tau, kc, eps, colliders,
                     self._rec,
                 )  # fmt: skip
-            done = self._iterate_grid(grid, x, xt, y, m_h2, 1.0 / h, drag_h, budget_end, contact)
+            done, res = self._iterate_grid(
+                grid, x, xt, y, m_h2, 1.0 / h, drag_h, budget_end, contact, measure
+            )
             self.counters["grid_steps"] += 1
         else:  # the general sweep's buffers: the iterate's copy and the one two iterations back
             xs = self._buffer("_xs", x)
@@ -1221,8 +1097,12 @@ class VBD(Integrator):
                 # edge at once, where an iteration carries it about one ring of springs
                 strain.attachments(x)
             done += 1
-            last = it == self.iterations - 1 or (
-                budget_end is not None and time.perf_counter() >= budget_end
+            if self._checks_at(done):
+                res = measure(done)  # at the swept iterate, before any extrapolation
+            last = (
+                it == self.iterations - 1
+                or (budget_end is not None and time.perf_counter() >= budget_end)
+                or res <= self.tolerance
             )
             if last:
                 # the step ends on a sweep, never on an extrapolation: an over-relaxed iterate is
@@ -1241,14 +1121,27 @@ class VBD(Integrator):
                 if it > 0:
                     _chebyshev(x, prev2, omega, free, x_cd, allow, GAMMA, sc_arrays, cut, touch)
                 np.copyto(prev2, xs)
+        if measured[0] != done:
+            res = measure(done)  # the residual of the iterate the step ends on
         # v = (x − x^t)/h; pins keep their velocity (they moved by h·v)
         _velocities(x, xt, v, free, h, self._a_prev)
         c = self.counters
         c["steps"] += 1
         c["iterations"] += done
         c["last_iterations"] = done
-        nf = int(free.sum())
-        c["last_residual"] = float(math.sqrt(stepped[free].sum() / nf)) if nf else 0.0
+        c["last_residual"] = res
+        c["converged"] = bool(res <= self.tolerance)
+        c["unconverged_steps"] += 0 if res <= self.tolerance else 1
+        # where the next step first measures: a step that converged at n checks a run earlier
+        # (so a cloth coming to rest finds its fewer iterations); one that ended far above the
+        # tolerance measures only at its end (each measure costs about two sweeps)
+        every, cap = self.check_every, self.iterations
+        if res <= self.tolerance:
+            self._first_check = max(every, done - every)
+        elif res > FAR_ABOVE * self.tolerance:
+            self._first_check = cap
+        else:
+            self._first_check = max(every, cap - every)
         c["truncated"] += int(cut.sum())
         self._cut_last = bool(cut.any())
 
@@ -1260,36 +1153,57 @@ class VBD(Integrator):
             self._grid_of = forces
         return self._grid
 
-    def _iterate_grid(self, grid, x, xt, y, m_h2, inv_h, drag_h, budget_end, contact) -> int:
+    def _checks_at(self, done: int) -> bool:
+        """Whether the residual is measured after ``done`` iterations (before the last): at the
+        first check (set by the last step) and every :attr:`check_every` iterations after."""
+        first = self._first_check
+        return done < self.iterations and done >= first and (done - first) % self.check_every == 0
+
+    def _next_check(self, done: int) -> int:
+        """The iterations after which the residual is next measured, past ``done`` (the step's
+        cap if no measure comes before)."""
+        first, every = self._first_check, self.check_every
+        later = -(-max(0, done + 1 - first) // every)  # runs of check_every after the first
+        return min(self.iterations, first + later * every)
+
+    def _iterate_grid(self, grid, x, xt, y, m_h2, inv_h, drag_h, budget_end, contact, measure):
         """The step's iterations on the grid's blocks (no self-contact; ``contact``: the colliders'
         part, or None): the general loop's sweeps and Chebyshev steps, colour by colour in SIMD
-        lanes; returns the iterations done."""
+        lanes, in runs of :attr:`check_every` iterations between two measures of the residual
+        (``measure``, on the iterate gathered into ``x``); returns the iterations done and the
+        last residual measured (``inf`` if none was)."""
         grid.load(x, xt, y, m_h2)
         threads = numba.get_num_threads()
         if not grid.parallel:
             numba.set_num_threads(1)  # the same bits: the chunks do not depend on the threads
-        done = total = self.iterations
+        total = self.iterations
+        omega, done, res = 1.0, 0, math.inf
         try:
-            if budget_end is None:  # every iteration in one call
-                _, flips = grid.solve(inv_h, drag_h, 0, total, total, self.rho, 1.0, contact)
-                grid.store(x, self._stepped, flips)
-            else:  # the clock read between iterations
-                omega = 1.0
-                for it in range(total):
-                    omega, flips = grid.solve(
-                        inv_h, drag_h, it, it + 1, total, self.rho, omega, contact
-                    )
-                    if it == total - 1 or time.perf_counter() >= budget_end:
-                        # the step ends on a sweep (as in the general loop): the iterate, not
-                        # the extrapolation made for a next iteration
-                        done = it + 1
-                        break
-                    if flips:
-                        grid.swap()
-                grid.store(x, self._stepped)
+            while True:
+                # to the next measure or the end (one at a time under a budget: the clock)
+                last = done + 1 if budget_end is not None else self._next_check(done)
+                omega, flips = grid.solve(
+                    inv_h, drag_h, done, last, total, self.rho, omega, contact
+                )
+                done = last
+                # the step ends on a sweep (as in the general loop): the iterate, not the
+                # extrapolation made for a next iteration, which took the last turn where made
+                extrapolated = self.rho > 0.0 and done < total
+                swept = flips + (1 if extrapolated else 0)  # turns before the swept iterate
+                stop = done == total or (
+                    budget_end is not None and time.perf_counter() >= budget_end
+                )
+                check = not stop and self._checks_at(done)
+                if stop or check:
+                    grid.store(x, self._stepped, swept)
+                    res = measure(done, grid.forces(swept, inv_h, drag_h))
+                    stop = stop or res <= self.tolerance
+                if stop:
+                    return done, res
+                if flips % 2:
+                    grid.swap()
         finally:
             numba.set_num_threads(threads)
-        return done
 
     def _edges(self):
         sc = self._self_collision

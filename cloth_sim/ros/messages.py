@@ -145,6 +145,7 @@ def stats(
     msg.paused = paused
     msg.solver_iterations = int((solver or {}).get("last_iterations", 0))
     msg.solver_residual = float((solver or {}).get("last_residual", 0.0))
+    msg.solver_converged = bool((solver or {}).get("converged", True))
     return msg
 
 

@@ -46,6 +46,7 @@ class Publishing:
         self.mesh_pub = interface.publisher(node, "mesh", Marker)
         self.mesh_bytes = messages.MeshBytes()  # (its buffer kept from tick to tick)
         self.stats_pub = interface.publisher(node, "stats", self.Stats)
+        self._solver_seen = (0, 0)  # the solver's steps and unconverged steps at the last report
         self.diag_pub = interface.publisher(node, "diagnostics", DiagnosticArray)
         self.colliders_pub = interface.publisher(node, "colliders", MarkerArray)
         self.clock_pub = None  # /clock, made when publish_clock is first on
@@ -199,7 +200,33 @@ class Publishing:
             warn_margin=WARN_MARGIN,
             values=values,
             energy=self.session.balance.message() if self.session.balance.unstable else None,
-            others=[p for p in (source() for source in self.session.problem_sources) if p],
+            others=[
+                p
+                for p in (self.solver_problem(), *(s() for s in self.session.problem_sources))
+                if p
+            ],
+        )
+
+    def solver_problem(self) -> str | None:
+        """What ``/diagnostics`` says while an iterative method's steps end above its tolerance
+        (``vbd``): how many of the steps since the last report did, and the last residual;
+        ``None`` while they converge (and for the direct methods)."""
+        stats = self.session.sim.integrator_stats
+        if "unconverged_steps" not in stats:
+            self._solver_seen = (0, 0)
+            return None
+        seen = (stats["steps"], stats["unconverged_steps"])
+        last_steps, last_unconverged = self._solver_seen
+        self._solver_seen = seen
+        if seen[0] < last_steps:  # the method was selected again: its counters restarted
+            last_steps = last_unconverged = 0
+        steps, unconverged = seen[0] - last_steps, seen[1] - last_unconverged
+        if unconverged == 0:
+            return None
+        return (
+            f"{unconverged} of the last {steps} {self.session.sim.integrator} steps ended "
+            f"unconverged (residual {stats['last_residual']:.3g} > tolerance "
+            f"{stats['tolerance']:.3g}: raise its iterations or lower dt)"
         )
 
     def publish_diagnostics(self) -> None:

@@ -232,6 +232,7 @@ class _Bag:
                 paused=False,
                 solver_iterations=int(sim.integrator_stats.get("last_iterations", 0)),
                 solver_residual=float(sim.integrator_stats.get("last_residual", 0.0)),
+                solver_converged=bool(sim.integrator_stats.get("converged", True)),
             ),
         )
         self.last_steps = sim.steps_taken

@@ -631,6 +631,7 @@ def test_the_bags_cdr_is_what_rclpy_reads_and_what_rosbags_writes():
         paused=True,
         solver_iterations=7,
         solver_residual=2.5e-4,
+        solver_converged=False,
     )
     msg = deserialize_message(data, Stats)
     assert (
@@ -644,4 +645,5 @@ def test_the_bags_cdr_is_what_rclpy_reads_and_what_rosbags_writes():
         msg.paused,
         msg.solver_iterations,
         msg.solver_residual,
-    ) == (stamp, "rk4", 3, 0.1, 5.0, 4, 0.5, True, 7, 2.5e-4)
+        msg.solver_converged,
+    ) == (stamp, "rk4", 3, 0.1, 5.0, 4, 0.5, True, 7, 2.5e-4, False)

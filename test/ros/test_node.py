@@ -154,6 +154,30 @@ def test_a_softer_cloth_sags_more(ros):
     assert np.mean(low_b[len(low_b) // 2 :]) < np.mean(low_a[len(low_a) // 2 :]) - 0.05
 
 
+def test_stats_and_diagnostics_say_whether_the_solver_converged(ros):
+    """vbd capped at one iteration on a stiff step: ~/stats says solver_converged false with the
+    relative residual above the tolerance, and /diagnostics' status warns that steps end
+    unconverged; given room (and a live change of its iterations), the steps converge, the flag
+    turns true with the residual at or below the tolerance, and the warning goes."""
+    node = ros.start(integrator="vbd", dt=1 / 60, publish_rate=30.0)
+    node.publishing.diagnostic_status()  # the report's window starts here
+    assert ros.set_params("/cloth_sim", {"vbd.iterations": 1, "vbd.tolerance": 1e-4})[0].successful
+    stats = ros.collect(Stats, "/cloth_sim/stats")
+    assert ros.spin_until(lambda: len(stats) >= 3 and stats[-1].steps > 0)
+    low = stats[-1]
+    assert low.solver_iterations == 1 and not low.solver_converged
+    assert low.solver_residual > 1e-4
+    status = node.publishing.diagnostic_status()
+    assert status.level == DiagnosticStatus.WARN and "unconverged" in status.message
+    assert ros.set_params("/cloth_sim", {"vbd.iterations": 3000})[0].successful
+    n = len(stats)
+    assert ros.spin_until(lambda: len(stats) >= n + 3 and stats[-1].solver_converged, 20)
+    assert stats[-1].solver_residual <= 1e-4 and stats[-1].solver_iterations < 3000
+    node.publishing.diagnostic_status()  # the unconverged steps before the change
+    assert ros.spin_until(lambda: len(stats) >= n + 6)
+    assert "unconverged" not in node.publishing.diagnostic_status().message
+
+
 def test_an_integrator_switch_keeps_the_state(ros):
     node = ros.start()
     ros.spin_until(lambda: node.sim.time > 0.5)

@@ -1,0 +1,195 @@
+"""The per-vertex terms of :mod:`~cloth_sim.integrators.vbd`'s incremental potential that are not
+contacts with colliders (those: :mod:`~cloth_sim.integrators.vbd_contact`): a vertex's springs
+(elastic and their damping), its part of the potential for a line search, and its self-contacts.
+Each adds the vertex's force ``(f0, f1, f2)`` and symmetric Hessian ``(h0 … h5) = (xx, xy, xz, yy,
+yz, zz)`` to those it is given and returns them; the sweeps
+(:func:`cloth_sim.integrators.vbd._sweep`) and the residual
+(:mod:`~cloth_sim.integrators.vbd_residual`) both call them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+
+from ..kinds import LINEAR
+from ..physics.forces import axial
+from .vbd_contact import press, slide
+
+
+# A vertex's force is (f0, f1, f2) and its symmetric Hessian (h0 … h5) = (xx, xy, xz, yy, yz, zz);
+# each term takes them and returns them with its own part added.
+@numba.njit(cache=True, inline="always")
+def springs_at(
+    i, x, xt, inc_ptr, nbr, rest, k, c, kind, tab, inv_h, f0, f1, f2, h0, h1, h2, h3, h4, h5
+):
+    """Vertex ``i``'s springs: elastic, and damping along the spring; and whether one of them is a
+    compressed Choi–Ko buckling pair (the step is then checked against the energy)."""
+    rough = False
+    xi, yi, zi = x[i, 0], x[i, 1], x[i, 2]
+    # the vertex's own motion over the step, for the damping
+    mx, my, mz = xi - xt[i, 0], yi - xt[i, 1], zi - xt[i, 2]
+    for q in range(inc_ptr[i], inc_ptr[i + 1]):
+        j = nbr[q]
+        xj, yj, zj = x[j, 0], x[j, 1], x[j, 2]
+        dx, dy, dz = xj - xi, yj - yi, zj - zi
+        l = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if l < 1e-300:
+            continue
+        inv = 1.0 / l
+        ux, uy, uz = dx * inv, dy * inv, dz * inv
+        L, kk, kd = rest[q], k[q], kind[q]
+        if kd == LINEAR:
+            de, d2e = kk * (l - L), kk
+        else:
+            _, de, d2e = axial(l, L, kk, kd, tab)
+            if l < L:
+                rough = (
+                    True  # a compressed Choi–Ko pair: its energy is not smooth at the rest length
+                )
+        # the force on i pulls it towards j by E'(l); the damping along the spring resists the
+        # ends' relative motion over the step
+        cs = c[q] * inv_h
+        mag = de
+        if cs > 0.0:
+            mag += cs * (
+                ((xj - xt[j, 0]) - mx) * ux
+                + ((yj - xt[j, 1]) - my) * uy
+                + ((zj - xt[j, 2]) - mz) * uz
+            )
+        f0 += mag * ux
+        f1 += mag * uy
+        f2 += mag * uz
+        # E'' u uᵀ + (E'/l)(I − u uᵀ), each part clamped at 0 (positive semi-definite), and the
+        # damping's (c/h) u uᵀ
+        geo = de * inv if de > 0.0 else 0.0
+        w = (d2e if d2e > 0.0 else 0.0) + cs - geo
+        wx, wy = w * ux, w * uy
+        h0 += wx * ux + geo
+        h1 += wx * uy
+        h2 += wx * uz
+        h3 += wy * uy + geo
+        h4 += wy * uz
+        h5 += w * uz * uz + geo
+    return f0, f1, f2, h0, h1, h2, h3, h4, h5, rough
+
+
+@numba.njit(cache=True, inline="always")
+def local_energy(
+    i, px, py, pz, x, xt, y, m_h2, drag_h, inc_ptr, nbr, rest, k, c, kind, tab, inv_h, bend
+):
+    """The part of the incremental potential that depends on vertex ``i`` placed at ``p``: its
+    inertia and drag, its springs' energy and their damping potential, the bending's ``½Q_ii|p|²
+    + p·Σ_j Q_ij x_j`` (contacts left out)."""
+    ax, ay, az = px - y[i, 0], py - y[i, 1], pz - y[i, 2]
+    bx, by, bz = px - xt[i, 0], py - xt[i, 1], pz - xt[i, 2]
+    e = 0.5 * m_h2[i] * (ax * ax + ay * ay + az * az) + 0.5 * drag_h * (
+        bx * bx + by * by + bz * bz
+    )
+    bptr, bidx, bval, bdiag = bend
+    if bdiag.shape[0]:
+        e += 0.5 * bdiag[i] * (px * px + py * py + pz * pz)
+        for q in range(bptr[i], bptr[i + 1]):
+            j = bidx[q]
+            if j != i:
+                e += bval[q] * (px * x[j, 0] + py * x[j, 1] + pz * x[j, 2])
+    for q in range(inc_ptr[i], inc_ptr[i + 1]):
+        j = nbr[q]
+        dx, dy, dz = x[j, 0] - px, x[j, 1] - py, x[j, 2] - pz
+        l = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if l < 1e-300:
+            continue
+        es, _, _ = axial(l, rest[q], k[q], kind[q], tab)
+        e += es
+        if c[q] > 0.0:
+            rel = (
+                ((x[j, 0] - xt[j, 0]) - bx) * dx
+                + ((x[j, 1] - xt[j, 1]) - by) * dy
+                + ((x[j, 2] - xt[j, 2]) - bz) * dz
+            )
+            rel /= l
+            e += 0.5 * c[q] * inv_h * rel * rel
+    return e
+
+
+@numba.njit(cache=True, inline="always")
+def pick(x, xs, colour, i, p):
+    """Vertex ``p``'s position as vertex ``i`` reads it: the iterate (``i`` itself, and the other
+    colours', done earlier in this iteration or not yet begun), or, for a vertex of ``i``'s own
+    colour (being moved at the same time), where it was when the iteration began."""
+    if p != i and colour[p] == colour[i]:
+        return xs[p, 0], xs[p, 1], xs[p, 2]
+    return x[p, 0], x[p, 1], x[p, 2]
+
+
+@numba.njit(cache=True, inline="always")
+def self_contacts_at(
+    i,
+    x,
+    xs,
+    xt,
+    colour,
+    rec_ptr,
+    rec,
+    pidx,
+    pcoef,
+    pnrm,
+    tau,
+    ks,
+    mu,
+    eps,
+    rec_d,
+    f0,
+    f1,
+    f2,
+    h0,
+    h1,
+    h2,
+    h3,
+    h4,
+    h5,
+):
+    """Vertex ``i``'s self-contacts: ``½ k (τ − d)²`` on each pair's distance ``d`` along the
+    normal the search found, ``d = n·Σ_k w_k x_k`` over the pair's four vertices
+    (:func:`~cloth_sim.integrators.vbd.contact_pairs`: the normal and the nearest points'
+    weights held between two searches), for the pairs ``i`` is in (its records ``4·pair +
+    slot``); and friction ``μ`` between the two
+    sides as on a collider (IPC's smoothed, lagged friction on their relative tangential motion
+    over the step, ``Σ_k w_k (x_k − x_k^t)``, with the pressing force of the iterate). The
+    partners' positions by :func:`pick`."""
+    for q in range(rec_ptr[i], rec_ptr[i + 1]):
+        r = rec[q]
+        pair = r // 4
+        w = pcoef[pair, r % 4]
+        nx, ny, nz = pnrm[pair, 0], pnrm[pair, 1], pnrm[pair, 2]
+        d = 0.0
+        ux = uy = uz = 0.0
+        for slot in range(4):
+            cw = pcoef[pair, slot]
+            if cw != 0.0:
+                v = pidx[pair, slot]
+                px, py, pz = pick(x, xs, colour, i, v)
+                d += cw * (nx * px + ny * py + nz * pz)
+                ux += cw * (px - xt[v, 0])
+                uy += cw * (py - xt[v, 1])
+                uz += cw * (pz - xt[v, 2])
+        rec_d[q] = d  # (for vbd_contact.onset, after the step is solved)
+        if d >= tau:
+            continue
+        # ∂d/∂x_i = w n: the force pushes the pair apart along n
+        lam = ks * (tau - d)
+        f0, f1, f2, h0, h1, h2, h3, h4, h5 = press(
+            lam * w, ks * w * w, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5
+        )
+        if mu <= 0.0:
+            continue
+        un = ux * nx + uy * ny + uz * nz
+        tx, ty, tz = ux - un * nx, uy - un * ny, uz - un * nz
+        tl = math.sqrt(tx * tx + ty * ty + tz * tz)
+        g = 1.0 / tl if tl > eps else (2.0 - tl / eps) / eps
+        sf = mu * lam * g
+        f0, f1, f2, h0, h1, h2, h3, h4, h5 = slide(
+            sf * w, tx, ty, tz, sf * w * w, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5
+        )
+    return f0, f1, f2, h0, h1, h2, h3, h4, h5
