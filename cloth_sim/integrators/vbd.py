@@ -49,11 +49,16 @@ The self-collision stage does not run after the method (:attr:`VBD.handles`); th
 does, as an exact finish of what the iterations did (the distance and static friction to rounding),
 and so does the strain limit where one is set.
 
+**Convergence**: a step iterates until its relative residual (:mod:`.vbd_residual`: the force
+imbalance of the step over the vertices' weight, RMS) is at most ``tolerance``, measured every
+``check_every`` iterations, or until ``iterations``, the cap (docs/convergence.md).
+
 Counters (:attr:`Simulator.integrator_stats`): ``steps``, ``iterations``, ``last_iterations``,
-``last_residual`` (the root mean square of the free vertices' Newton steps in the last iteration,
-m), ``detections`` (candidate searches), ``last_contacts`` (self-contact pairs and vertices
-touching a collider at the last search), ``truncated`` (vertex updates the conservative bound
-shortened) and ``grid_steps`` (steps whose iterations ran on the grid's blocks, below).
+``last_residual`` (that relative residual, at the iterate the step ended on), ``converged``
+(whether it reached the tolerance), ``tolerance``, ``unconverged_steps``, ``detections`` (candidate
+searches), ``last_contacts`` (self-contact pairs and vertices touching a collider at the last
+search), ``truncated`` (vertex updates the conservative bound shortened) and ``grid_steps`` (steps
+whose iterations ran on the grid's blocks, below).
 
 **On a grid** of Hooke springs on Provot's stencil (a grid scene's springs, a material's bending
 stencils) without self-contact or tethers, the iterations run on the grid's own layout instead of
@@ -716,21 +721,23 @@ class VBD(Integrator):
     colour groups, Chebyshev-accelerated, with collider contact and self-contact inside the
     iterations (module docstring).
 
-    Options: ``iterations`` (default 10) per step; ``rho`` (default 0.8), the Chebyshev
-    acceleration's spectral radius estimate, 0 for none (measured on the swinging 48×48 cloth: 0.8
-    is the best of 0.5, 0.8, 0.9 and 0.95 at 1/240 s, 15× closer to the converged step than none
-    after 10 iterations; docs/BENCHMARKS.md); ``contact_stiffness`` (N/m, default 1e4);
-    ``collision_interval`` (default 5): iterations between candidate searches when the cloth
-    self-collides and a vertex met its bound; ``self_friction`` (default 0.5): Coulomb's μ between
-    the cloth's own layers; ``time_budget`` (s, default None): when set, iterate until that much
-    wall time has passed (at least one iteration, at most ``iterations``) — a node that must keep
-    its tick, whose results then depend on the machine; ``tethers`` (default False): with a strain
-    limit on a pinned cloth and no contacts, its long-range attachments (Kim, Chentanez & Müller
-    2012) after every sweep, so the pins' pull reaches the far edge at once instead of a ring of
-    springs an iteration (the 2 m, 41 kg hanging cloth at 64×64, 1/60 s × 10: worst strain 4.7 →
-    2.2 after the projection; not enough to ship: docs/BENCHMARKS.md §11); ``grid`` (default
-    True): on a grid of Hooke springs without self-contact, the iterations on the grid's blocks
-    (module docstring); False keeps the general sweep.
+    Options: ``iterations`` per step at most (default :data:`MAX_ITERATIONS`); ``tolerance``
+    (default :data:`TOLERANCE`): the relative residual at which a step stops (0: every iteration
+    runs); ``check_every`` (default :data:`CHECK_EVERY`): iterations between two measures; ``rho``
+    (default 0.8), the Chebyshev acceleration's spectral radius estimate, 0 for none (measured on
+    the swinging 48×48 cloth: 0.8 is the best of 0.5, 0.8, 0.9 and 0.95 at 1/240 s, 15× closer to
+    the converged step than none after 10 iterations; docs/BENCHMARKS.md); ``contact_stiffness``
+    (N/m, default 1e4); ``collision_interval`` (default 5): iterations between candidate searches
+    when the cloth self-collides and a vertex met its bound; ``self_friction`` (default 0.5):
+    Coulomb's μ between the cloth's own layers; ``time_budget`` (s, default None): when set,
+    iterate until that much wall time has passed (at least one iteration, at most ``iterations``) —
+    a node that must keep its tick, whose results then depend on the machine; ``tethers`` (default
+    False): with a strain limit on a pinned cloth and no contacts, its long-range attachments (Kim,
+    Chentanez & Müller 2012) after every sweep, so the pins' pull reaches the far edge at once
+    instead of a ring of springs an iteration (the 2 m, 41 kg hanging cloth at 64×64, 1/60 s × 10:
+    worst strain 4.7 → 2.2 after the projection; not enough to ship: docs/BENCHMARKS.md §11);
+    ``grid`` (default True): on a grid of Hooke springs without self-contact, the iterations on the
+    grid's blocks (module docstring); False keeps the general sweep.
 
     First order (backward Euler); no step limit; any iteration count gives a usable state.
     """
