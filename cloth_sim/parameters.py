@@ -220,6 +220,17 @@ def _schema() -> dict[str, Param]:
             scene_key="vbd.tolerance",
         ),
         P(
+            "vbd.substeps",
+            int,
+            "",
+            "Substeps a vbd step is cut into, each a backward-Euler step of its own (0: as many "
+            "as the cloth's stiffness over its inertia asks for at this dt, which converge in a "
+            "few sweeps each; docs/convergence.md). vbd.iterations caps each substep.",
+            lo=0,
+            hi=10_000,
+            scene_key="vbd.substeps",
+        ),
+        P(
             "vbd.fit_tick",
             bool,
             "",

@@ -123,6 +123,8 @@ class Scene:
     vbd_iterations: int = 10
     #: the relative residual at which its steps stop iterating (``vbd: {tolerance: r}``)
     vbd_tolerance: float = VBD_TOLERANCE
+    #: the substeps a step is cut into, 0 for as many as the cloth asks (``vbd: {substeps: n}``)
+    vbd_substeps: int = 1
     dt: float = 1e-3
     origin: tuple = (0.0, 0.0, 0.0)
     thickness: float = 0.005
@@ -361,6 +363,7 @@ class Scene:
             sim_kw["integrator_options"] = {
                 "iterations": self.vbd_iterations,
                 "tolerance": self.vbd_tolerance,
+                "substeps": self.vbd_substeps or "auto",
             }
         sim = Simulator(self.build_model(**override), **sim_kw)
         if self.robot is not None:
@@ -578,9 +581,10 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
     vbd = data.get("vbd", {}) or {}
     if not isinstance(vbd, dict):
         v.fail("vbd", "a mapping with iterations", vbd)
-    v.known("vbd.", vbd, {"iterations", "tolerance"})
+    v.known("vbd.", vbd, {"iterations", "tolerance", "substeps"})
     s.vbd_iterations = v.param("vbd.iterations", vbd.get("iterations", s.vbd_iterations))
     s.vbd_tolerance = v.param("vbd.tolerance", vbd.get("tolerance", s.vbd_tolerance))
+    s.vbd_substeps = v.param("vbd.substeps", vbd.get("substeps", s.vbd_substeps))
     s.dt = v.param("dt", data.get("dt", s.dt))
     s.thickness = v.param("thickness", data.get("thickness", s.thickness))
     s.self_collision = v.param("self_collision", data.get("self_collision", False))

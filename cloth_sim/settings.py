@@ -83,6 +83,7 @@ def scene_values(scene: Scene) -> dict:
         "self_collision": bool(scene.self_collision),
         "vbd.iterations": int(scene.vbd_iterations),
         "vbd.tolerance": float(scene.vbd_tolerance),
+        "vbd.substeps": int(scene.vbd_substeps),
         "material": scene.material_name,
     }
     if scene.mesh is not None:
@@ -263,7 +264,11 @@ def integrator_options(cfg: dict) -> dict:
     node adds a time budget under ``vbd.fit_tick``)."""
     if cfg["integrator"] != "vbd":
         return {}
-    return {"iterations": cfg["vbd.iterations"], "tolerance": cfg["vbd.tolerance"]}
+    return {
+        "iterations": cfg["vbd.iterations"],
+        "tolerance": cfg["vbd.tolerance"],
+        "substeps": cfg["vbd.substeps"] or "auto",
+    }
 
 
 def build_simulator(cfg: dict, model, scene: Scene) -> Simulator:

@@ -136,9 +136,12 @@ def _bench_vbd_floor(args) -> int:
 
 
 def _bench_convergence(args) -> int:
-    from .convergence import print_convergence_table
+    from .convergence import print_accuracy_table, print_convergence_table
 
-    print_convergence_table(args.material, tuple(args.sizes), args.seconds)
+    if args.accuracy:
+        print_accuracy_table(args.material.split(","), tuple(args.sizes), args.seconds or 2.0)
+    else:
+        print_convergence_table(args.material, tuple(args.sizes), args.seconds or 1.0)
     return 0
 
 
@@ -243,9 +246,21 @@ def add_parser(sub) -> argparse.ArgumentParser:
         help="vbd on a library fabric: iterations a step against its residual, and substeps "
         "against iterations at equal cost",
     )
-    cv.add_argument("--material", default="cotton", help="a library fabric (default cotton)")
+    cv.add_argument(
+        "--material", default="cotton", help="a library fabric, or several with --accuracy: a,b"
+    )
     cv.add_argument("--sizes", type=int, nargs="+", default=[32, 64])
-    cv.add_argument("--seconds", type=float, default=1.0, help="simulated seconds a run")
+    cv.add_argument(
+        "--seconds",
+        type=float,
+        default=None,
+        help="simulated seconds a run (1; 2 with --accuracy)",
+    )
+    cv.add_argument(
+        "--accuracy",
+        action="store_true",
+        help="vbd's defaults at 1/60 s against a fine-step reference (the solver issue's targets)",
+    )
     cv.set_defaults(func=_bench_convergence)
     fp = bsub.add_parser(
         "flex-peer",

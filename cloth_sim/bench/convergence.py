@@ -89,3 +89,76 @@ def print_convergence_table(material: str, sizes, seconds: float = SECONDS) -> N
                 f"{r['wall']:>9.2f}",
                 flush=True,
             )
+
+
+#: frames a simulated second sampled for the accuracy table
+FRAMES = 60
+#: the reference's step: this share of symplectic Euler's stable step
+REFERENCE_SHARE = 0.9
+
+
+def trajectory(sim: Simulator, n: int, seconds: float) -> dict:
+    """The free edge's centroid (row 0: the edge away from the pins) and the worst strain at
+    every frame, the wall time, and ``vbd``'s unconverged steps."""
+    frames = int(round(seconds * FRAMES))
+    centroid = np.empty((frames + 1, 3))
+    strain = np.empty(frames + 1)
+    centroid[0], strain[0] = sim.positions[:n].mean(axis=0), sim.max_strain()
+    t0 = time.perf_counter()
+    unconverged = 0
+    for f in range(1, frames + 1):
+        sim.advance(f / FRAMES)
+        centroid[f], strain[f] = sim.positions[:n].mean(axis=0), sim.max_strain()
+        unconverged += int(not sim.integrator_stats.get("converged", True))
+    return {
+        "centroid": centroid,
+        "strain": strain,
+        "wall": (time.perf_counter() - t0) / seconds,
+        "unconverged": unconverged,
+    }
+
+
+def accuracy(run: dict, ref: dict) -> tuple[float, float]:
+    """The solver issue's two figures: the worst strain averaged over the last half against the
+    reference's (difference), and the RMS distance between the free edge's centroid paths over
+    the reference's travel (the farthest its centroid gets from where it started)."""
+    half = len(ref["strain"]) // 2
+    strain = float(run["strain"][half:].mean() - ref["strain"][half:].mean())
+    travel = float(np.linalg.norm(ref["centroid"] - ref["centroid"][0], axis=1).max())
+    rms = float(np.sqrt(((run["centroid"] - ref["centroid"]) ** 2).sum(axis=1).mean()))
+    return strain, rms / travel
+
+
+def print_accuracy_table(materials, sizes, seconds: float = 2.0) -> None:
+    """``vbd`` at 1/60 s with its defaults against a fine-step reference (symplectic Euler at
+    :data:`REFERENCE_SHARE` of its stable step), hanging from two corners from flat."""
+    print(
+        f"vbd at 1/60 s, defaults, against symplectic Euler at {REFERENCE_SHARE:g} of its stable "
+        f"step; {seconds:g} s from flat; strain: the worst, averaged over the last half; path: "
+        "RMS distance of the free edge's centroid over the reference's travel"
+    )
+    print(
+        f"{'fabric':>10} {'N':>4} {'substeps':>8} {'sweeps/frame':>12} {'unconverged':>11} "
+        f"{'strain':>7} {'ref strain':>10} {'Δ strain':>9} {'path':>7} {'wall s/s':>9} "
+        f"{'ref s/s':>8}"
+    )
+    for material in materials:
+        for n in sizes:
+            model = hanging(n, material)
+            ref_sim = Simulator(model, integrator="symplectic_euler", dt=1.0)
+            ref_sim.dt = REFERENCE_SHARE * ref_sim.stable_dt()
+            ref = trajectory(ref_sim, n, seconds)
+            sim = Simulator(model, integrator="vbd", dt=1.0 / 60)
+            sim.step()  # numba's kernels for this model, and its substeps
+            sim = Simulator(model, integrator="vbd", dt=1.0 / 60)
+            got = trajectory(sim, n, seconds)
+            stats = sim.integrator_stats
+            d_strain, path = accuracy(got, ref)
+            half = len(ref["strain"]) // 2
+            print(
+                f"{material:>10} {n:>4} {stats['last_substeps']:>8} "
+                f"{stats['iterations'] / max(stats['steps'], 1):>12.1f} {got['unconverged']:>11} "
+                f"{got['strain'][half:].mean():>7.3f} {ref['strain'][half:].mean():>10.3f} "
+                f"{d_strain:>+9.3f} {path:>7.1%} {got['wall']:>9.2f} {ref['wall']:>8.2f}",
+                flush=True,
+            )

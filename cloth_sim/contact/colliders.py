@@ -25,6 +25,7 @@ import math
 
 import numba
 import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
 
 from . import triangle_meshes
 from .geometry import (
@@ -897,3 +898,28 @@ class Contacts:
             self._reach,
             *self._bank,
         )
+
+
+def packed_between(packed: tuple, s0: float, s1: float) -> tuple:
+    """:meth:`Contacts.packed` over the part ``[s0, s1]`` of the step (``0 ≤ s0 < s1 ≤ 1``): each
+    collider's pose at ``s0`` as the start and at ``s1`` as the end, its position interpolated
+    linearly and its rotation by spherical interpolation between the step's two poses (a
+    substep of an integrator that steps the step's motion in parts)."""
+    kinds, pos, rot, pos0, rot0 = packed[:5]
+    if not len(kinds):
+        return packed
+
+    def at(s):
+        if s == 0.0:
+            return pos0, rot0
+        if s == 1.0:
+            return pos, rot
+        p = np.ascontiguousarray(pos0 + s * (pos - pos0))
+        r = np.empty_like(rot)
+        for i in range(len(kinds)):
+            turn = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([rot0[i], rot[i]])))
+            r[i] = turn([s]).as_matrix()[0]
+        return p, r
+
+    start, end = at(s0), at(s1)
+    return (kinds, *end, *start, *packed[5:])

@@ -80,7 +80,7 @@ import numba
 import numpy as np
 
 from ..contact import triangle_meshes
-from ..contact.colliders import MESH, mesh_sdf, sdf
+from ..contact.colliders import MESH, mesh_sdf, packed_between, sdf
 from ..contact.geometry import segment_parameters, triangle_weights
 from ..kinds import LINEAR
 from ..physics.bending import bending_row
@@ -116,6 +116,12 @@ EPS_V = 1e-3
 TOLERANCE = 1e-2
 #: iterations between two measures of the residual
 CHECK_EVERY = 5
+#: where ``substeps`` is not given, a step is cut into substeps until every vertex's
+#: stiffness-to-inertia ratio over a substep is at most this (measured: the fewest sweeps a
+#: frame on cotton hanging at 32×32 and 64×64 at ratios of 10–30; docs/convergence.md)
+SUBSTEP_RATIO = 25.0
+#: the most substeps a step is cut into where they are chosen
+MAX_SUBSTEPS = 64
 #: a step that ended more than this many times its tolerance above it measures the next step's
 #: residual at its end only
 FAR_ABOVE = 4.0
@@ -759,6 +765,7 @@ class VBD(Integrator):
         "converged",
         "tolerance",
         "unconverged_steps",
+        "last_substeps",
         "detections",
         "last_contacts",
         "truncated",
@@ -780,6 +787,7 @@ class VBD(Integrator):
         rho: float = 0.8,
         tolerance: float = TOLERANCE,
         check_every: int = CHECK_EVERY,
+        substeps: int | str | None = None,
         contact_stiffness: float = 1e4,
         collision_interval: int = 5,
         time_budget: float | None = None,
@@ -807,6 +815,21 @@ class VBD(Integrator):
             )
         self.tolerance = float(tolerance)
         self.check_every = int(check_every)
+        if substeps is None:  # the work is chosen where neither is given
+            substeps = "auto" if self.chosen_iterations else 1
+        if substeps != "auto" and (
+            isinstance(substeps, (bool, str))
+            or not isinstance(substeps, (int, float))
+            or int(substeps) != substeps
+            or not 1 <= substeps <= 10_000
+        ):
+            raise ValueError(
+                "substeps must be 'auto' (chosen from the cloth and dt), None (auto where "
+                f"iterations is not given, else 1) or an integer in [1, 10000], got {substeps!r}"
+            )
+        self.substeps = None if substeps == "auto" else int(substeps)
+        self._substeps_of, self._substeps_n = None, 1
+        self._step_dt = 1.0
         self._first_check = self.check_every  # the iterations after which a step first measures
         if not (isinstance(rho, (int, float)) and 0.0 <= rho < 1.0):
             raise ValueError(f"rho must be a number in [0, 1), got {rho!r}")
@@ -957,7 +980,60 @@ class VBD(Integrator):
         return len(self._colours[0]) - 1 if self._layout_of is not None else 0
 
     # ------------------------------------------------------------------ the step
+    def substeps_for(self, forces, dt) -> int:
+        """The substeps a step of ``dt`` takes: the ``substeps`` option, or where it was not given
+        the fewest for which every free vertex's stiffness-to-inertia ratio over a substep
+        (``h²·Σk + h·Σc`` over its springs, plus its bending's ``h²·Q_ii``, over ``m``) is at most
+        :data:`SUBSTEP_RATIO` (at most :data:`MAX_SUBSTEPS`): the sweeps a substep needs grow
+        with that ratio (docs/convergence.md)."""
+        if self.substeps is not None:
+            return self.substeps
+        key = (forces, float(dt))
+        if self._substeps_of != key:
+            sp, _ = self._layout(forces)
+            ptr, k, c, bdiag = sp[0], sp[3], sp[4], sp[11]
+            starts = np.minimum(ptr[:-1], max(len(k) - 1, 0))
+            ks = np.add.reduceat(k, starts) if len(k) else np.zeros(len(ptr) - 1)
+            cs = np.add.reduceat(c, starts) if len(c) else np.zeros(len(ptr) - 1)
+            empty = np.diff(ptr) == 0
+            ks[empty] = cs[empty] = 0.0
+            if len(bdiag):
+                ks = ks + bdiag
+            free = self.free
+            ratio = (dt * dt * ks + dt * cs)[free] / self.model.masses[free]
+            worst = float(ratio.max()) if len(ratio) else 0.0
+            n = math.ceil(math.sqrt(worst / SUBSTEP_RATIO)) if worst > SUBSTEP_RATIO else 1
+            self._substeps_of, self._substeps_n = key, min(MAX_SUBSTEPS, n)
+        return self._substeps_n
+
     def step(self, state, forces, dt):
+        """One step of ``dt`` in :meth:`substeps_for` substeps, each a backward-Euler step of its
+        own (the colliders' motion over the step taken in as many parts); the counters add the
+        substeps' iterations and keep their worst residual."""
+        n = self.substeps_for(forces, dt)
+        self._step_dt = dt
+        contacts = self._contacts
+        packed = contacts.packed() if contacts is not None and contacts.active else None
+        iterations, worst = 0, 0.0
+        for part in range(n):
+            colliders = packed
+            if n > 1 and packed is not None:
+                colliders = packed_between(packed, part / n, (part + 1) / n)
+            done, res = self._substep(state, forces, dt / n, colliders)
+            iterations += done
+            worst = max(worst, res)
+        c = self.counters
+        c["steps"] += 1
+        c["iterations"] += iterations
+        c["last_iterations"] = iterations
+        c["last_substeps"] = n
+        c["last_residual"] = worst
+        c["converged"] = bool(worst <= self.tolerance)
+        c["unconverged_steps"] += 0 if worst <= self.tolerance else 1
+
+    def _substep(self, state, forces, dt, packed):
+        """A backward-Euler step of ``dt`` (``packed``: the colliders over it, or None); returns
+        the iterations done and the residual of the iterate it ended on."""
         x, v = state.x, state.v
         model = self.model
         sp, (cptr, verts) = self._layout(forces)
@@ -982,8 +1058,8 @@ class VBD(Integrator):
         contacts = self._contacts
         colliders = self._no_colliders
         tau = 0.0
-        if contacts is not None and contacts.active:
-            colliders = contacts.packed()
+        if packed is not None:
+            colliders = packed
             tau = contacts.thickness
         sc = self._self_collision
         self_contact = sc is not None and sc.active
@@ -1022,7 +1098,9 @@ class VBD(Integrator):
         stepped[:] = 0.0
         cut[:] = 0
         omega = 1.0
-        budget_end = None if self.time_budget is None else time.perf_counter() + self.time_budget
+        budget_end = None
+        if self.time_budget is not None:  # a step's budget shared by its substeps
+            budget_end = time.perf_counter() + self.time_budget * dt / self._step_dt
         done = 0
         point = StepPoint(x, xt, y, m_h2, model.masses, 1.0 / h, drag_h, free)
         terms = ContactTerms(tau, kc, eps, ks, self.self_friction, self._near)
@@ -1133,12 +1211,6 @@ class VBD(Integrator):
         # v = (x − x^t)/h; pins keep their velocity (they moved by h·v)
         _velocities(x, xt, v, free, h, self._a_prev)
         c = self.counters
-        c["steps"] += 1
-        c["iterations"] += done
-        c["last_iterations"] = done
-        c["last_residual"] = res
-        c["converged"] = bool(res <= self.tolerance)
-        c["unconverged_steps"] += 0 if res <= self.tolerance else 1
         # where the next step first measures: a step that converged at n checks a run earlier
         # (so a cloth coming to rest finds its fewer iterations); one that ended far above the
         # tolerance measures only at its end (each measure costs about two sweeps)
@@ -1151,6 +1223,7 @@ class VBD(Integrator):
             self._first_check = max(every, cap - every)
         c["truncated"] += int(cut.sum())
         self._cut_last = bool(cut.any())
+        return done, res
 
     def _grid_layout(self, forces):
         """The grid's blocked layout (:mod:`~cloth_sim.integrators.vbd_grid`) for ``forces``, or

@@ -13,7 +13,7 @@ import pytest
 from cloths import one_spring
 
 from cloth_sim import ClothModel, Simulator, colliders
-from cloth_sim.integrators.vbd import VBD
+from cloth_sim.integrators.vbd import SUBSTEP_RATIO, VBD
 from cloth_sim.integrators.vbd_residual import G0
 
 NO_GRAVITY = (0.0, 0.0, 0.0)
@@ -158,3 +158,76 @@ def test_no_gravity_keeps_the_same_unit():
     sim.positions = x
     sim.step()
     assert 0.0 < sim.integrator_stats["last_residual"] <= 1e-6
+
+
+def test_with_no_options_a_fabric_gets_substeps_that_converge():
+    """Named fabric, no options: the step is cut into the fewest substeps whose stiffness over
+    inertia is at most SUBSTEP_RATIO (one fewer would exceed it), and every step converges."""
+    model = _hanging(16)
+    sim = Simulator(model, integrator="vbd", dt=1 / 60)
+    sim.step(20)
+    s = sim.integrator_stats
+    n = s["last_substeps"]
+    assert n > 1 and s["unconverged_steps"] == 0 and s["converged"]
+    k = np.zeros(model.n_particles)
+    c = np.zeros(model.n_particles)
+    for (a, b), ks, cs in zip(model.springs, model.stiffness, model.damping):
+        k[[a, b]] += ks
+        c[[a, b]] += cs
+    if model.bending is not None:
+        k += model.bending.Q.diagonal()
+    free = ~model.pinned
+
+    def worst(parts):
+        h = 1 / 60 / parts
+        return float(((h * h * k + h * c) / model.masses)[free].max())
+
+    assert worst(n) <= SUBSTEP_RATIO * (1 + 1e-12) < worst(n - 1)
+    # iterations given alone: one step of at most that many, as before
+    capped = Simulator(model, integrator="vbd", dt=1 / 60, integrator_options={"iterations": 10})
+    capped.step()
+    assert capped.integrator_stats["last_substeps"] == 1
+
+
+def test_substeps_are_steps_of_their_own():
+    """Without colliders, a step of dt in n substeps is n steps of dt/n to rounding."""
+    model = _hanging(10)
+    opts = {"iterations": 8, "tolerance": 0.0}
+    whole = Simulator(
+        model, integrator="vbd", dt=1 / 60, integrator_options={**opts, "substeps": 4}
+    )
+    parts = Simulator(model, integrator="vbd", dt=1 / 240, integrator_options=opts)
+    whole.step(6)
+    parts.step(24)
+    np.testing.assert_allclose(whole.positions, parts.positions, rtol=0, atol=1e-12)
+    assert whole.integrator_stats["last_iterations"] == 4 * 8
+
+
+def test_a_moving_collider_is_taken_in_parts_over_the_substeps():
+    """packed_between: the step's own poses at its ends, a continuous path between (the end of a
+    part is the start of the next), the position interpolated linearly and the rotation on the
+    sphere (half of a quarter turn about z is an eighth turn)."""
+    from scipy.spatial.transform import Rotation
+
+    from cloth_sim.contact.colliders import BOX, packed_between
+
+    turn = Rotation.from_euler("z", 90, degrees=True).as_matrix()
+    packed = (
+        np.array([BOX]),
+        np.array([[0.4, 0.0, 0.2]]),
+        turn[None].copy(),
+        np.zeros((1, 3)),
+        np.eye(3)[None].copy(),
+        np.array([[0.1, 0.1, 0.1, 0.0]]),
+        np.array([0.5]),
+        np.array([0.2]),
+    )
+    whole = packed_between(packed, 0.0, 1.0)
+    for a, b in zip(whole, packed):
+        np.testing.assert_array_equal(a, b)
+    first, second = packed_between(packed, 0.0, 0.5), packed_between(packed, 0.5, 1.0)
+    np.testing.assert_array_equal(first[1], second[3])
+    np.testing.assert_array_equal(first[2], second[4])
+    np.testing.assert_allclose(first[1][0], (0.2, 0.0, 0.1), atol=1e-15)
+    angle = Rotation.from_matrix(first[2][0]).as_euler("xyz", degrees=True)
+    np.testing.assert_allclose(angle, (0.0, 0.0, 45.0), atol=1e-9)
