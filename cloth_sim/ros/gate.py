@@ -66,6 +66,10 @@ def _hashable(value):
     return tuple(value) if isinstance(value, list) else value
 
 
+#: the share of an explicit method's stable step a scene's refused step is carried at (_carry)
+CARRY_SHARE = 0.9
+
+
 class StartupError(ValueError):
     """A value the node cannot start with; one line naming it."""
 
@@ -92,9 +96,14 @@ class ParameterGate:
         values = {name: overrides[name] for name in SCHEMA if name in overrides}
         try:  # the values checked whole, on the model they build (settings.check: one pass)
             checked = settings.check(scene, values, model=self._model)
+        except settings.Refusal as e:
+            checked = self._carry(scene, values, e)
         except ValueError as e:
             raise StartupError(str(e)) from None
         defaults = P.defaults(scene)
+        for name in ("integrator", "dt"):  # where the scene's step was carried (_carry)
+            if name not in overrides:
+                defaults[name] = checked.cfg[name]
         for name in SCHEMA:  # declared once the values are known to be good
             try:
                 node.declare_parameter(
@@ -112,6 +121,35 @@ class ParameterGate:
         self.session = Session(scene, cfg, settings.build(checked), checked.stable_dt)
         self._rates_run = {cfg["publish_rate"]}  # rates the node has run with: never refused
         self._fit_solver(cfg)
+
+    def _carry(self, scene, values: dict, refused: settings.Refusal) -> settings.Checked:
+        """The scene's own step refused for the cloth asked for (a material, a finer grid: the
+        scene's explicit method above its stable step), with neither the method nor ``dt`` given:
+        the same method at :data:`CARRY_SHARE` of its stable step, or ``vbd`` where the method
+        has no stable step; said in the log. Any other refusal stops the start-up as before."""
+        if refused.named != ("dt",) or "dt" in values or "integrator" in values:
+            raise StartupError(str(refused)) from None
+        try:
+            limit = settings.check(
+                scene, {**values, "allow_unstable": True}, model=self._model
+            ).stable_dt
+            carried = dict(values)
+            if 0.0 < limit < float("inf"):
+                carried["dt"] = CARRY_SHARE * limit
+            else:
+                carried["integrator"] = "vbd"
+            checked = settings.check(scene, carried, model=self._model)
+        except ValueError:
+            raise StartupError(str(refused)) from None
+        cfg = checked.cfg
+        how = (
+            f"running {cfg['integrator']} at dt={cfg['dt']:.4g} s ({CARRY_SHARE:.0%} of its "
+            f"stable step)"
+            if "dt" in carried
+            else f"running vbd (unconditionally stable) at dt={cfg['dt']:g} s"
+        )
+        self.node.get_logger().warning(f"scene {scene.name}: {refused}. Instead: {how}")
+        return checked
 
     def open(self, manipulation, publishing, ticker, robot_state) -> None:
         """Take changes from now on."""

@@ -629,6 +629,25 @@ def test_sigint_ends_a_node_started_with_sigint_ignored():
     assert code == 0 and "Traceback" not in out, out
 
 
+def test_a_scene_whose_step_the_cloth_refuses_runs_at_a_step_that_carries_it(ros):
+    """hanging's explicit step (1 ms) is above symplectic Euler's stable step for 1 m of cotton at
+    128×128: with neither dt nor the method given, the node starts at 90 % of that stable step
+    (the method and the declared dt say so) instead of exiting; a dt the user gave is still
+    refused (test_a_bad_start_up_value_is_one_line_naming_it)."""
+    from cloth_sim.settings import check
+
+    node = ros.start(material="cotton", rows=128, cols=128, size=[1.0, 1.0])
+    limit = check("hanging", {"material": "cotton", "rows": 128, "cols": 128, "size": [1.0, 1.0],
+                              "allow_unstable": True}).stable_dt  # fmt: skip
+    assert 0.0 < limit < 1e-3
+    assert node.sim.integrator == "symplectic_euler"
+    assert node.sim.dt == pytest.approx(0.9 * limit, rel=1e-12)
+    assert node.get_parameter("dt").value == node.sim.dt
+    t0 = node.sim.time
+    assert ros.spin_until(lambda: node.sim.time > t0 + 0.01, 20)
+    assert np.isfinite(node.sim.positions).all()
+
+
 @pytest.mark.parametrize(
     "arg,words",
     [
