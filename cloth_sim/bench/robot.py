@@ -74,9 +74,15 @@ def mesh_against_primitive(steps: int = 400) -> None:
         print(f"| {name} | {a * 1e3:.3f} | {b * 1e3:.3f} | {b / a:.2f} |")
 
 
-def sweep(seconds: float) -> None:
+def sweep(seconds: float, collider_share: float | None = None) -> None:
+    """robot_sweep headless: the deepest vertex inside a link (the links' own signed distances:
+    a closed mesh, as the forearm is, is a solid), the self-crossings and the speed; with
+    ``collider_share``, vbd's option that cuts a step so that no link moves more than that share
+    of the thickness a substep."""
     scene = load_scene("robot_sweep")
     sim = scene.build_simulator()
+    if collider_share is not None:
+        sim.set_integrator("vbd", **{**sim.integrator_options, "collider_share": collider_share})
     links = list(sim.colliders)
     tris = sim.model.triangles
     h = sim.thickness
@@ -93,6 +99,7 @@ def sweep(seconds: float) -> None:
     depth = max(0.0, h - worst)
     print(
         f"robot_sweep ({sim.model.n_particles} particles, {sim.integrator}, dt {sim.dt:.4g} s, "
+        f"collider_share {collider_share}, "
         f"{sum(s.triangles for s in sim.robots['arm'].shapes)} mesh triangles, "
         f"self-collision {'on' if sim.self_collision else 'off'}), {seconds:g} s: deepest "
         f"inside a link {max(0.0, -worst) / h:.1%} of the thickness h, into the skin "
@@ -175,11 +182,19 @@ def main(argv=None) -> None:
     p.add_argument(
         "--published", action="store_true", help="also Panda and UR5 from example-robot-data"
     )
+    p.add_argument(
+        "--collider-share",
+        type=float,
+        default=None,
+        help="robot_sweep again with vbd's collider_share (e.g. 0.4), beside it as it ships",
+    )
     args = p.parse_args(argv)
     compile_kernels()
     forward_kinematics()
     mesh_against_primitive()
     sweep(args.seconds)
+    if args.collider_share is not None:
+        sweep(args.seconds, args.collider_share)
     if args.published:
         share = robot_data_share()
         if share is None:

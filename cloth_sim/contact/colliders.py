@@ -266,7 +266,8 @@ class Cylinder(Collider):
 
 
 class Mesh(Collider):
-    """A rigid triangle mesh, two-sided (:mod:`.triangle_meshes`): ``source`` a mesh file (the
+    """A rigid triangle mesh, a solid where it is closed and two-sided where it is open
+    (:mod:`.triangle_meshes`): ``source`` a mesh file (the
     formats :meth:`cloth_sim.model.ClothModel.from_mesh` reads: OBJ, PLY, STL, glTF/GLB, OFF) or a
     ``(vertices (n, 3), faces (t, 3))`` pair, in its own frame times ``scale`` (metres per unit, a
     number or one per axis, as URDF's ``<mesh scale>``); placed at ``position``, turned by
@@ -389,9 +390,9 @@ def sdf(kind, pos, rot, geo, c, x, y, z):
 @numba.njit(cache=True)
 def mesh_sdf(pos, rot, geo, c, x, y, z, bank, cutoff=math.inf):
     """:func:`sdf` of a Mesh collider ``c`` (``geo[c, 0]`` its index in ``bank``, the packed
-    meshes of :func:`.triangle_meshes.pack`): unsigned, and a lower bound outside its box; a
-    point at least ``cutoff`` from it is answered ``(cutoff, 0, 0, 0)`` (a query that only asks
-    whether the point is within the cutoff walks less of the tree)."""
+    meshes of :func:`.triangle_meshes.pack`): signed where the mesh is closed, unsigned where it is
+    open; a point outside and at least ``cutoff`` from it is answered ``(cutoff, 0, 0, 0)`` (a
+    query that only asks whether the point is within the cutoff walks less of the tree)."""
     qx, qy, qz = _to_frame(pos, rot, c, x, y, z)
     d, lx, ly, lz = mesh_distance(bank, int(geo[c, 0]), qx, qy, qz, cutoff)
     nx, ny, nz = _from_frame(rot, c, lx, ly, lz)

@@ -721,6 +721,20 @@ def _overtaken(x, free, ckind, cpos, crot, cpos0, crot0, cgeo, creach, cbank, ta
     return moved
 
 
+def collider_travel(packed: tuple) -> float:
+    """The farthest any point within a collider's reach travels over the step (``packed``:
+    :meth:`~cloth_sim.contact.colliders.Contacts.packed`): its position's move plus its reach
+    times the angle it turned (a half-space's turn is not counted: its reach is unbounded)."""
+    kinds, pos, rot, pos0, rot0, _, _, reach = packed[:8]
+    if not len(kinds):
+        return 0.0
+    moved = np.linalg.norm(pos - pos0, axis=1)
+    cos = (np.einsum("cij,cij->c", rot, rot0) - 1.0) / 2.0  # trace(R R0ᵀ)
+    angle = np.arccos(np.clip(cos, -1.0, 1.0))
+    turned = np.where(np.isfinite(reach), reach * angle, 0.0)
+    return float((moved + turned).max())
+
+
 @register
 class VBD(Integrator):
     """Vertex Block Descent (Chen et al. 2024): backward Euler by per-vertex 3×3 Newton steps over
@@ -729,21 +743,29 @@ class VBD(Integrator):
 
     Options: ``iterations`` per step at most (default :data:`MAX_ITERATIONS`); ``tolerance``
     (default :data:`TOLERANCE`): the relative residual at which a step stops (0: every iteration
-    runs); ``check_every`` (default :data:`CHECK_EVERY`): iterations between two measures; ``rho``
-    (default 0.8), the Chebyshev acceleration's spectral radius estimate, 0 for none (measured on
-    the swinging 48×48 cloth: 0.8 is the best of 0.5, 0.8, 0.9 and 0.95 at 1/240 s, 15× closer to
-    the converged step than none after 10 iterations; docs/BENCHMARKS.md); ``contact_stiffness``
-    (N/m, default 1e4); ``collision_interval`` (default 5): iterations between candidate searches
-    when the cloth self-collides and a vertex met its bound; ``self_friction`` (default 0.5):
-    Coulomb's μ between the cloth's own layers; ``time_budget`` (s, default None): when set,
-    iterate until that much wall time has passed (at least one iteration, at most ``iterations``) —
-    a node that must keep its tick, whose results then depend on the machine; ``tethers`` (default
-    False): with a strain limit on a pinned cloth and no contacts, its long-range attachments (Kim,
-    Chentanez & Müller 2012) after every sweep, so the pins' pull reaches the far edge at once
-    instead of a ring of springs an iteration (the 2 m, 41 kg hanging cloth at 64×64, 1/60 s × 10:
-    worst strain 4.7 → 2.2 after the projection; not enough to ship: docs/BENCHMARKS.md §11);
-    ``grid`` (default True): on a grid of Hooke springs without self-contact, the iterations on the
-    grid's blocks (module docstring); False keeps the general sweep.
+    runs); ``check_every`` (default :data:`CHECK_EVERY`): iterations between two measures;
+    ``substeps`` ('auto' where neither it nor ``iterations`` is given, else 1): backward-Euler
+    steps a step is cut into, 'auto' from the cloth's stiffness over its inertia
+    (:meth:`substeps_for`); ``collider_share`` (default None, off): a step whose colliders'
+    surfaces travel farther than this share of the thickness is cut into as many more substeps,
+    each seeing the colliders' motion in part (:func:`collider_travel`): a link overtaking the
+    cloth faster than its bounds let it give way otherwise ends inside (0.4 keeps the Franka
+    Panda's 1.8 m/s sweep and robot_sweep out of every link, at 3-20 times the cost;
+    docs/contacts.md); ``rho`` (default 0.8), the Chebyshev acceleration's spectral radius
+    estimate, 0 for none (measured on the swinging 48×48 cloth: 0.8 is the best of 0.5, 0.8, 0.9
+    and 0.95 at 1/240 s, 15× closer to the converged step than none after 10 iterations;
+    docs/BENCHMARKS.md); ``contact_stiffness`` (N/m, default 1e4); ``collision_interval`` (default
+    5): iterations between candidate searches when the cloth self-collides and a vertex met its
+    bound; ``self_friction`` (default 0.5): Coulomb's μ between the cloth's own layers;
+    ``time_budget`` (s, default None): when set, iterate until that much wall time has passed (at
+    least one iteration, at most ``iterations``) — a node that must keep its tick, whose results
+    then depend on the machine; ``tethers`` (default False): with a strain limit on a pinned cloth
+    and no contacts, its long-range attachments (Kim, Chentanez & Müller 2012) after every sweep,
+    so the pins' pull reaches the far edge at once instead of a ring of springs an iteration (the 2
+    m, 41 kg hanging cloth at 64×64, 1/60 s × 10: worst strain 4.7 → 2.2 after the projection; not
+    enough to ship: docs/BENCHMARKS.md §11); ``grid`` (default True): on a grid of Hooke springs
+    without self-contact, the iterations on the grid's blocks (module docstring); False keeps the
+    general sweep.
 
     First order (backward Euler); no step limit; any iteration count gives a usable state.
     """
@@ -788,6 +810,7 @@ class VBD(Integrator):
         tolerance: float = TOLERANCE,
         check_every: int = CHECK_EVERY,
         substeps: int | str | None = None,
+        collider_share: float | None = None,
         contact_stiffness: float = 1e4,
         collision_interval: int = 5,
         time_budget: float | None = None,
@@ -828,6 +851,16 @@ class VBD(Integrator):
                 f"iterations is not given, else 1) or an integer in [1, 10000], got {substeps!r}"
             )
         self.substeps = None if substeps == "auto" else int(substeps)
+        if collider_share is not None and (
+            isinstance(collider_share, bool)
+            or not isinstance(collider_share, (int, float))
+            or not 0.0 < collider_share < math.inf
+        ):
+            raise ValueError(
+                "collider_share must be None (off) or a number > 0 (the share of the thickness "
+                f"a collider may travel in a substep), got {collider_share!r}"
+            )
+        self.collider_share = None if collider_share is None else float(collider_share)
         self._substeps_of, self._substeps_n = None, 1
         self._step_dt = 1.0
         self._first_check = self.check_every  # the iterations after which a step first measures
@@ -1014,6 +1047,10 @@ class VBD(Integrator):
         self._step_dt = dt
         contacts = self._contacts
         packed = contacts.packed() if contacts is not None and contacts.active else None
+        share = self.collider_share
+        if packed is not None and share is not None:  # a collider moves ≤ share·τ a substep
+            parts = math.ceil(collider_travel(packed) / (share * contacts.thickness))
+            n = max(n, min(MAX_SUBSTEPS, parts))
         iterations, worst = 0, 0.0
         for part in range(n):
             colliders = packed

@@ -59,7 +59,8 @@ def parse_params(text) -> list[str]:
 @numba.njit(cache=True)
 def _distances(bank, points, out):
     for i in range(points.shape[0]):
-        out[i] = mesh_distance(bank, 0, points[i, 0], points[i, 1], points[i, 2])[0]
+        # the distance to the surface, unsigned (a closed cloth mesh has an inside)
+        out[i] = abs(mesh_distance(bank, 0, points[i, 0], points[i, 1], points[i, 2])[0])
 
 
 def one_way(recorded: np.ndarray, x: np.ndarray, triangles: np.ndarray) -> tuple[float, float]:

@@ -37,24 +37,48 @@ def quad(size):
     )
 
 
-def test_a_box_mesh_is_as_far_as_the_box_from_every_point():
-    """The mesh is two-sided: its distance is the box's signed distance's magnitude, outside and
-    inside, at any pose."""
+def test_a_closed_box_mesh_is_the_box_signed_distance_from_every_point():
+    """A closed mesh is a solid: its distance is the box's signed distance (negative inside), at
+    any pose, whether its corners are shared, each triangle has its own (as an STL file has them),
+    or its faces turn inwards (the file's winding reversed)."""
     half = (0.2, 0.15, 0.1)
     q = np.array([0.9, 0.1, -0.3, 0.2])
     q /= np.linalg.norm(q)
-    mesh = colliders.Mesh(box_mesh(half), position=(0.1, 0.2, 0.3), orientation=q)
     box = colliders.Box(center=(0.1, 0.2, 0.3), half_extents=half, orientation=q)
     pts = np.random.default_rng(0).uniform(-0.4, 0.7, (3000, 3))
-    db, dm = box.signed_distance(pts), mesh.signed_distance(pts)
+    db = box.signed_distance(pts)
     assert (db < 0).sum() > 50 and (db > 0).sum() > 50
-    # (outside its bounding box a mesh answers that box's distance: for a box, the same)
-    np.testing.assert_allclose(dm, np.abs(db), atol=1e-12)
+    v, f = box_mesh(half)
+    unwelded = (v[f].reshape(-1, 3), np.arange(3 * len(f)).reshape(-1, 3))
+    for source in ((v, f), unwelded, (v, f[:, ::-1])):
+        mesh = colliders.Mesh(source, position=(0.1, 0.2, 0.3), orientation=q)
+        assert mesh.mesh.closed
+        np.testing.assert_allclose(mesh.signed_distance(pts), db, atol=1e-12)
+
+
+def test_an_open_mesh_is_two_sided():
+    """The box without its top (two triangles removed) is open: both sides of every triangle are
+    surfaces, so its distance is unsigned, the distance to the nearest remaining triangle."""
+    half = (0.2, 0.15, 0.1)
+    v, f = box_mesh(half)
+    top = np.all(v[f][:, :, 2] > 0, axis=1)
+    mesh = colliders.Mesh((v, f[~top]))
+    assert not mesh.mesh.closed
+    pts = np.random.default_rng(2).uniform(-0.3, 0.3, (2000, 3))
+    d = mesh.signed_distance(pts)
+    assert np.all(d >= 0.0)
+    inside = np.all(np.abs(pts) < np.array(half) - 0.02, axis=1) & (pts[:, 2] < 0.0)
+    # a point inside, below the missing top: as far as the nearest of the five walls left
+    walls = np.minimum.reduce(
+        [half[0] - np.abs(pts[:, 0]), half[1] - np.abs(pts[:, 1]), half[2] + pts[:, 2]]
+    )
+    np.testing.assert_allclose(d[inside], walls[inside], atol=1e-12)
 
 
 def test_a_body_meshs_distance_is_trimeshs_everywhere():
-    """The mannequin (3,656 triangles, a deep hierarchy) against trimesh's own closest-point query
-    (an independent implementation), inside and outside its bounding box, at a pose."""
+    """The mannequin (3,656 triangles, a deep hierarchy, closed) against trimesh (an independent
+    implementation): the distance is trimesh's closest-point distance, negative exactly where
+    trimesh's own inside test (ray casting) says the point is inside, at a pose."""
     import trimesh
 
     path = Path(__file__).resolve().parents[2] / "config" / "meshes" / "mannequin.obj"
@@ -62,10 +86,14 @@ def test_a_body_meshs_distance_is_trimeshs_everywhere():
     q = np.array([0.96, 0.0, 0.0, 0.28])
     q /= np.linalg.norm(q)
     mesh = colliders.Mesh(str(path), position=(0.1, -0.2, 0.3), orientation=q)
+    assert mesh.mesh.closed
     pts = np.random.default_rng(1).uniform([-0.8, -0.6, -0.3], [0.9, 0.4, 1.4], (3000, 3))
     local = (pts - mesh.position) @ mesh.rotation  # into the mesh's frame
     _, expected, _ = trimesh.proximity.closest_point(body, local)
-    np.testing.assert_allclose(mesh.signed_distance(pts), expected, atol=1e-6)
+    inside = body.contains(local)
+    assert inside.sum() > 20
+    np.testing.assert_allclose(mesh.signed_distance(pts), np.where(inside, -expected, expected),
+                               atol=1e-6)  # fmt: skip
 
 
 def test_a_cylinder_is_as_far_as_its_closed_form():

@@ -202,6 +202,37 @@ def test_a_link_sweeping_at_1_m_s_pushes_a_hanging_cloth_aside_without_entering(
     assert sim.positions[:, 1].max() > 0.05  # pushed aside, behind its plane
 
 
+def test_a_fast_link_is_taken_in_parts_of_a_share_of_the_thickness():
+    """collider_share: the demo arm swung 0.0125 rad in a step of 1/240 s (3 rad/s, its forearm's
+    tip ~9 mm) is taken in substeps in none of which any vertex of its mesh forearm moves more
+    than the share of the thickness; collider_travel, which sets their number, is a position's
+    move plus the reach times the angle turned."""
+    from cloth_sim.contact.colliders import BOX
+    from cloth_sim.integrators.vbd import collider_travel
+
+    n, h, share = 8, 0.005, 0.4
+    model = ClothModel.grid(n, n, 0.05, 0.001, stiffness=100.0, pinned=[(n - 1, 0)])
+    sim = Simulator(
+        model, integrator="vbd", dt=1 / 240, thickness=h,
+        integrator_options={"iterations": 2, "collider_share": share},
+    )  # fmt: skip
+    sim.add_robot(Robot.from_urdf(ARM), name="arm", position=(0.0, -2.0, 0.0))
+    forearm = next(c for c in sim.colliders if c.name.endswith("forearm"))
+    before = forearm.vertices
+    sim.set_joint_positions("arm", {"shoulder_yaw": 3.0 / 240})
+    moved = float(np.linalg.norm(forearm.vertices - before, axis=1).max())
+    sim.step()
+    parts = sim.integrator_stats["last_substeps"]
+    assert moved > h and parts > 1
+    assert moved / parts <= share * h
+    # a box of reach 0.3 m moved 4 mm and turned 0.01 rad about z: 4 mm + 3 mm
+    turn = np.array([[math.cos(0.01), -math.sin(0.01), 0], [math.sin(0.01), math.cos(0.01), 0],
+                     [0, 0, 1]])  # fmt: skip
+    packed = (np.array([BOX]), np.array([[0.004, 0.0, 0.0]]), turn[None], np.zeros((1, 3)),
+              np.eye(3)[None], np.zeros((1, 4)), np.zeros(1), np.array([0.3]))  # fmt: skip
+    assert collider_travel(packed) == pytest.approx(0.004 + 0.3 * 0.01, rel=1e-9)
+
+
 def test_bad_robot_input_is_refused_by_name_and_changes_nothing(tmp_path):
     with pytest.raises(ValueError, match="does not parse"):
         Robot.from_urdf("<robot name='x'><link name='a'></robot>")
