@@ -1052,6 +1052,7 @@ class VBD(Integrator):
             parts = math.ceil(collider_travel(packed) / (share * contacts.thickness))
             n = max(n, min(MAX_SUBSTEPS, parts))
         iterations, worst = 0, 0.0
+        self._on_grid = False
         for part in range(n):
             colliders = packed
             if n > 1 and packed is not None:
@@ -1064,6 +1065,7 @@ class VBD(Integrator):
         c["iterations"] += iterations
         c["last_iterations"] = iterations
         c["last_substeps"] = n
+        c["grid_steps"] += 1 if self._on_grid else 0
         c["last_residual"] = worst
         c["converged"] = bool(worst <= self.tolerance)
         c["unconverged_steps"] += 0 if worst <= self.tolerance else 1
@@ -1175,7 +1177,7 @@ class VBD(Integrator):
             done, res = self._iterate_grid(
                 grid, x, xt, y, m_h2, 1.0 / h, drag_h, budget_end, contact, measure
             )
-            self.counters["grid_steps"] += 1
+            self._on_grid = True
         else:  # the general sweep's buffers: the iterate's copy and the one two iterations back
             xs = self._buffer("_xs", x)
             prev2 = self._buffer("_prev2", x)

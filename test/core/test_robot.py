@@ -320,18 +320,24 @@ def test_a_parallel_gripper_lifts_a_cloth_by_friction_alone_and_feels_its_weight
 
 
 def test_the_tshirt_put_on_the_body_settles_on_its_shoulders_without_entering_or_crossing():
-    """tshirt_on_body: the shirt dropped over the mannequin (a mesh collider of 3,656 triangles)
-    comes to rest on its shoulders, its hem below the shoulders, no vertex deeper than 10 % of the
-    thickness into the body at any step, and no self-crossing (the independent check)."""
+    """tshirt_on_body: the shirt dropped over the mannequin (a closed mesh collider of 3,656
+    triangles: a solid) comes to rest on its shoulders, its hem below the shoulders, and never
+    crosses itself (the independent check). The flat sleeves' seams start up to 38 mm inside the
+    form's round arms (the shirt as cut is narrower than the arm there): the solid body pushes
+    them out within 0.1 s, and from then on no vertex is deeper than 10 % of the thickness into
+    the body at any step. (While meshes were two-sided, those seams stayed inside the arms for
+    the whole run, held at the thickness from the arms' inner surface.)"""
     from cloth_sim.bench.crossings import crossings
     from cloth_sim.scene import load_scene
 
     sim = load_scene("tshirt_on_body").build_simulator()
     body = sim.colliders[0]
     h, prev, crossed = sim.thickness, sim.positions.copy(), 0
+    assert body.signed_distance(sim.positions).min() < -0.03  # the seams in the arms
     while sim.time < 2.5:
         sim.step()
-        assert body.signed_distance(sim.positions).min() >= 0.9 * h
+        if sim.time > 0.1:
+            assert body.signed_distance(sim.positions).min() >= 0.9 * h
         crossed += len(crossings(prev, sim.positions, sim.model.triangles))
         prev = sim.positions.copy()
     assert crossed == 0
