@@ -54,8 +54,9 @@ imbalance of the step over the vertices' weight, RMS) is at most ``tolerance``, 
 ``check_every`` iterations, or until ``iterations``, the cap (docs/convergence.md).
 
 Counters (:attr:`Simulator.integrator_stats`): ``steps``, ``iterations``, ``last_iterations``,
-``last_residual`` (that relative residual, at the iterate the step ended on), ``converged``
-(whether it reached the tolerance), ``tolerance``, ``unconverged_steps``, ``detections`` (candidate
+``last_residual`` (that relative residual, from the step's last sweep; the worst of its
+substeps'), ``converged`` (whether it reached the tolerance), ``tolerance``,
+``unconverged_steps``, ``last_substeps``, ``detections`` (candidate
 searches), ``last_contacts`` (self-contact pairs and vertices touching a collider at the last
 search), ``truncated`` (vertex updates the conservative bound shortened) and ``grid_steps`` (steps
 whose iterations ran on the grid's blocks, below).
@@ -89,7 +90,7 @@ from .base import Integrator, Stability
 from .registry import register
 from .vbd_contact import colliders_at, onset, solve3, truncate, within
 from .vbd_grid import GridLayout
-from .vbd_residual import ContactTerms, StepPoint, grid_residual, residual
+from .vbd_residual import sweep_residual
 from .vbd_terms import local_energy, self_contacts_at, springs_at
 
 #: the share of the nearest found distance a vertex may move between two candidate searches
@@ -419,6 +420,7 @@ def _sweep(
                 h4,
                 h5,
             )
+        stepped[i] = f0 * f0 + f1 * f1 + f2 * f2  # its imbalance as the sweep found it
         sx, sy, sz = solve3(h0, h1, h2, h3, h4, h5, f0, f1, f2)
         if touch[i] or near[i]:
             # a contact not yet pressed is not in the Hessian: a step past its onset would land
@@ -497,7 +499,6 @@ def _sweep(
                     break
                 sx, sy, sz = 0.5 * sx, 0.5 * sy, 0.5 * sz
         nx, ny, nz = x[i, 0] + sx, x[i, 1] + sy, x[i, 2] + sz
-        stepped[i] = sx * sx + sy * sy + sz * sz
         nx, ny, nz, was_cut, settled = within(
             nx, ny, nz, x_cd[i, 0], x_cd[i, 1], x_cd[i, 2], allow[i], dmin[i], gamma
         )
@@ -904,7 +905,6 @@ class VBD(Integrator):
         self.counters["tolerance"] = self.tolerance
         self.counters["converged"] = False
         self.counters["last_residual"] = 0.0
-        self._imbalance = np.zeros(n)
         self._a_prev = np.zeros((n, 3))
         self._stepped = np.zeros(n)
         self._cut = np.zeros(n, np.int8)
@@ -1141,21 +1141,14 @@ class VBD(Integrator):
         if self.time_budget is not None:  # a step's budget shared by its substeps
             budget_end = time.perf_counter() + self.time_budget * dt / self._step_dt
         done = 0
-        point = StepPoint(x, xt, y, m_h2, model.masses, 1.0 / h, drag_h, free)
-        terms = ContactTerms(tau, kc, eps, ks, self.self_friction, self._near)
         res = math.inf
         measured = [-1]  # the iterations done when the residual was last measured
 
-        def measure(iterations_done: int, grid_forces=None) -> float:
-            """The residual of the iterate in ``x`` (:mod:`.vbd_residual`); on the grid's blocks
-            from the forces they gave (``grid_forces``)."""
+        def measure(iterations_done: int) -> float:
+            """The residual of the last sweep (:func:`.vbd_residual.sweep_residual`: each free
+            vertex's imbalance as the sweep found it, kept in ``stepped``)."""
             measured[0] = iterations_done
-            if grid_forces is not None:
-                return grid_residual(
-                    grid_forces, grid.slot, point, colliders, terms, self._imbalance
-                )
-            records = (*self._rec, self._colour)
-            return residual(point, sp, colliders, records, terms, self._imbalance)
+            return sweep_residual(self._stepped, model.masses, free)
 
         strain = self._strain_limit
         tether = (
@@ -1246,7 +1239,7 @@ class VBD(Integrator):
                     _chebyshev(x, prev2, omega, free, x_cd, allow, GAMMA, sc_arrays, cut, touch)
                 np.copyto(prev2, xs)
         if measured[0] != done:
-            res = measure(done)  # the residual of the iterate the step ends on
+            res = measure(done)  # the residual of the step's last sweep
         # v = (x − x^t)/h; pins keep their velocity (they moved by h·v)
         _velocities(x, xt, v, free, h, self._a_prev)
         c = self.counters
@@ -1315,7 +1308,7 @@ class VBD(Integrator):
                 check = not stop and self._checks_at(done)
                 if stop or check:
                     grid.store(x, self._stepped, swept)
-                    res = measure(done, grid.forces(swept, inv_h, drag_h))
+                    res = measure(done)
                     stop = stop or res <= self.tolerance
                 if stop:
                     return done, res

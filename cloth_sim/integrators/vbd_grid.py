@@ -148,7 +148,6 @@ class GridLayout:
         self.parallel = self.hi - self.lo >= PARALLEL_MIN
         self.chunks = CHUNKS if self.parallel else 1
         # the arrays as the kernels take them: a tuple of rows
-        self._f = None  # the slots' forces, for the residual (made on first use)
         self._a, self._b, self._t, self._y, self._n, self._p = (
             (a[0], a[1], a[2]) for a in (self.A, self.B, self.T, self.Y, self.N, self.P2)
         )
@@ -230,27 +229,6 @@ class GridLayout:
             self._fh = tuple(np.zeros(self.size) for _ in range(9))
         rows = (self.vof, xm, xt, near, touch, cut, x_cd, allow, gamma, tau, kc, eps)
         return (*rows, colliders, rec, self._fh)
-
-    def forces(self, turns: int, inv_h, drag_h) -> tuple:
-        """Each slot's force of the incremental potential without contacts (:func:`_forces`) at
-        the iterate in ``A`` (``B`` after an odd number of ``turns``), as three arrays by slot."""
-        if self._f is None:
-            self._f = tuple(np.zeros(self.size) for _ in range(3))
-        _forces(
-            self._a if turns % 2 == 0 else self._b,
-            self._t,
-            self._y,
-            self.shift,
-            self.PQ,
-            self.lo,
-            self.hi,
-            (self.K, self.REST, self.C, self.QO, self.QD, self.m_h2),
-            inv_h,
-            drag_h,
-            self.chunks,
-            self._f,
-        )
-        return self._f
 
     def swap(self) -> None:
         """The two position arrays take turns (what :func:`solve` did inside, once)."""
@@ -345,12 +323,13 @@ def _spring(
 
 @numba.njit(cache=True, inline="always")
 def _advance(t, xi, yi, zi, f0, f1, f2, a0, b, c, dd, e, ff, free, N0, N1, N2, stepped):
-    """Slot ``t``'s Newton step (:func:`_solve`): the new position into ``N``, the step's squared
-    length into ``stepped``. (Calls of more than 30 arguments compile to a tuple and ``*args``,
-    which numba cannot inline: hence the springs' terms and this step are two calls.)"""
+    """Slot ``t``'s Newton step (:func:`_solve`): the new position into ``N``, its squared force
+    (the imbalance the step answers) into ``stepped``. (Calls of more than 30 arguments compile
+    to a tuple and ``*args``, which numba cannot inline: hence the springs' terms and this step
+    are two calls.)"""
     sx, sy, sz = _solve(a0, b, c, dd, e, ff, f0, f1, f2, free)
     N0[t], N1[t], N2[t] = xi + sx, yi + sy, zi + sz
-    stepped[t] = sx * sx + sy * sy + sz * sz
+    stepped[t] = f0 * f0 + f1 * f1 + f2 * f2  # its imbalance as the sweep found it
 
 
 @numba.njit(cache=True)
@@ -595,7 +574,7 @@ def _sweeps_touching(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH
                     sx, sy, sz = onset(v, sx, sy, sz, xm, rec_ptr, rec, rec_d, pcoef, pnrm, tau,
                                        ckind, cpos, crot, cgeo, cbank)  # fmt: skip
                     x0, x1, x2 = xi + sx, yi + sy, zi + sz
-                    stepped[t] = sx * sx + sy * sy + sz * sz
+                    stepped[t] = f0 * f0 + f1 * f1 + f2 * f2
                 x0, x1, x2, was_cut, settled = within(x0, x1, x2, x_cd[v, 0], x_cd[v, 1],
                                                       x_cd[v, 2], allow[v], dmin[v],
                                                       gamma)  # fmt: skip
@@ -617,28 +596,3 @@ def _sweeps_touching(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH
                     B0[t], B1[t], B2[t] = b0, b1, b2
                     if was_cut:
                         cut[v] = 1
-
-
-@numba.njit(cache=True, parallel=True, error_model="numpy", fastmath={"contract"})
-def _forces(A, T, Y, shift, PQ, lo, hi, springs, inv_h, drag_h, chunks, F):
-    """Each slot's force ``−∂G/∂x`` from its inertia, drag, bending and springs (the sweeps'
-    :func:`_terms`, contacts left out) at the iterate ``A``, into ``F`` (a tuple of three arrays):
-    the residual's (:mod:`~cloth_sim.integrators.vbd_residual`) part in SIMD lanes. Nothing moves,
-    so the colours' order does not matter; ``springs``: ``K, REST, C, QO, QD`` and ``m/h²``."""
-    X0, X1, X2 = A
-    T0, T1, T2 = T
-    Y0, Y1, Y2 = Y
-    F0, F1, F2 = F
-    K, REST, C, QO, QD, MH2 = springs
-    for cb in range(9):
-        a, bb, size, n0, n1, n2, n3, n4, n5, n6, n7, n8, n9, n10, n11 = _colour(
-            shift, cb, PQ, lo, hi, chunks
-        )
-        for ch in numba.prange(chunks):
-            lo_, hi_ = _chunk(a, bb, size, ch)
-            for t in range(lo_, hi_):
-                _, _, _, f0, f1, f2, _, _, _, _, _, _ = _terms(
-                    t, n0, n1, n2, n3, n4, n5, n6, n7, n8, n9, n10, n11, X0, X1, X2, T0, T1, T2,
-                    Y0, Y1, Y2, K, REST, C, QO, QD, MH2, inv_h, drag_h,
-                )  # fmt: skip
-                F0[t], F1[t], F2[t] = f0, f1, f2

@@ -2,9 +2,8 @@
 contacts with colliders (those: :mod:`~cloth_sim.integrators.vbd_contact`): a vertex's springs
 (elastic and their damping), its part of the potential for a line search, and its self-contacts.
 Each adds the vertex's force ``(f0, f1, f2)`` and symmetric Hessian ``(h0 … h5) = (xx, xy, xz, yy,
-yz, zz)`` to those it is given and returns them; the sweeps
-(:func:`cloth_sim.integrators.vbd._sweep`) and the residual
-(:mod:`~cloth_sim.integrators.vbd_residual`) both call them.
+yz, zz)`` to those it is given and returns them, for the sweeps
+(:func:`cloth_sim.integrators.vbd._sweep`).
 """
 
 from __future__ import annotations
