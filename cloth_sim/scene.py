@@ -98,6 +98,12 @@ class SceneError(ValueError):
     """A scene file that cannot be used; the message names the file and the field."""
 
 
+def vbd_options(iterations: int, tolerance: float, substeps: int) -> dict:
+    """The vbd integrator's options from a scene's or the node's values (``vbd.iterations``,
+    ``vbd.tolerance``, ``vbd.substeps``: 0 for as many as the cloth asks, ``"auto"``)."""
+    return {"iterations": iterations, "tolerance": tolerance, "substeps": substeps or "auto"}
+
+
 @dataclass
 class Scene:
     """A validated scene."""
@@ -341,6 +347,10 @@ class Scene:
         "self_collision",
     )
 
+    def vbd_options(self) -> dict:
+        """The vbd integrator's options this scene sets (:func:`vbd_options`)."""
+        return vbd_options(self.vbd_iterations, self.vbd_tolerance, self.vbd_substeps)
+
     def build_simulator(self, **override) -> Simulator:
         """A simulator of the scene; ``override`` takes :meth:`build_model`'s keys and the
         simulator's options in :attr:`SIMULATOR_OPTIONS`; any other key is a ``TypeError``."""
@@ -360,11 +370,7 @@ class Scene:
             if key in override:
                 sim_kw[key] = override.pop(key)
         if sim_kw["integrator"] == "vbd" and "integrator_options" not in sim_kw:
-            sim_kw["integrator_options"] = {
-                "iterations": self.vbd_iterations,
-                "tolerance": self.vbd_tolerance,
-                "substeps": self.vbd_substeps or "auto",
-            }
+            sim_kw["integrator_options"] = self.vbd_options()
         sim = Simulator(self.build_model(**override), **sim_kw)
         if self.robot is not None:
             self.add_robot(sim)

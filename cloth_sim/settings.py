@@ -22,7 +22,7 @@ from .contact.self_collision import check_thickness
 from .integrators.base import Stability
 from .parameters import REBUILD, SCHEMA, ParameterError
 from .physics import stability as stab
-from .scene import Scene, load_scene
+from .scene import Scene, load_scene, vbd_options
 from .simulator import Simulator
 
 #: the rebuild parameters that shape the model (``scene`` is the other one)
@@ -260,15 +260,11 @@ def build_model(cfg: dict, scene: Scene):
 
 
 def integrator_options(cfg: dict) -> dict:
-    """The options of ``cfg``'s integrator that parameters set (vbd's iterations and tolerance; the
-    node adds a time budget under ``vbd.fit_tick``)."""
+    """The options of ``cfg``'s integrator that parameters set (vbd's iterations, tolerance and
+    substeps; the node adds a time budget under ``vbd.fit_tick``)."""
     if cfg["integrator"] != "vbd":
         return {}
-    return {
-        "iterations": cfg["vbd.iterations"],
-        "tolerance": cfg["vbd.tolerance"],
-        "substeps": cfg["vbd.substeps"] or "auto",
-    }
+    return vbd_options(cfg["vbd.iterations"], cfg["vbd.tolerance"], cfg["vbd.substeps"])
 
 
 def build_simulator(cfg: dict, model, scene: Scene) -> Simulator:

@@ -267,8 +267,8 @@ class Cylinder(Collider):
 
 class Mesh(Collider):
     """A rigid triangle mesh, a solid where it is closed and two-sided where it is open
-    (:mod:`.triangle_meshes`): ``source`` a mesh file (the
-    formats :meth:`cloth_sim.model.ClothModel.from_mesh` reads: OBJ, PLY, STL, glTF/GLB, OFF) or a
+    (:mod:`.triangle_meshes`): ``source`` a mesh file (the formats
+    :meth:`cloth_sim.model.ClothModel.from_mesh` reads: OBJ, PLY, STL, glTF/GLB, OFF) or a
     ``(vertices (n, 3), faces (t, 3))`` pair, in its own frame times ``scale`` (metres per unit, a
     number or one per axis, as URDF's ``<mesh scale>``); placed at ``position``, turned by
     ``orientation``."""
@@ -924,3 +924,17 @@ def packed_between(packed: tuple, s0: float, s1: float) -> tuple:
 
     start, end = at(s0), at(s1)
     return (kinds, *end, *start, *packed[5:])
+
+
+def collider_travel(packed: tuple) -> float:
+    """The farthest any point within a collider's reach travels over the step (``packed``:
+    :meth:`Contacts.packed`): its position's move plus its reach times the angle it turned (a
+    half-space's turn is not counted: its reach is unbounded)."""
+    kinds, pos, rot, pos0, rot0, _, _, reach = packed[:8]
+    if not len(kinds):
+        return 0.0
+    moved = np.linalg.norm(pos - pos0, axis=1)
+    cos = (np.einsum("cij,cij->c", rot, rot0) - 1.0) / 2.0  # trace(R R0ᵀ)
+    angle = np.arccos(np.clip(cos, -1.0, 1.0))
+    turned = np.where(np.isfinite(reach), reach * angle, 0.0)
+    return float((moved + turned).max())

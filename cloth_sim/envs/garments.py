@@ -69,11 +69,7 @@ class GarmentEnv(ClothEnv):
             self.model,
             "vbd",
             dt=FRAME,
-            integrator_options={
-                "iterations": s.vbd_iterations,
-                "tolerance": s.vbd_tolerance,
-                "substeps": s.vbd_substeps or "auto",
-            },
+            integrator_options=s.vbd_options(),
             strain_limit=s.strain_limit,
             colliders=[colliders.Plane(normal=(0, 0, 1), offset=0.0, friction=0.5, name="floor")],
             thickness=self.thickness,

@@ -81,7 +81,7 @@ import numba
 import numpy as np
 
 from ..contact import triangle_meshes
-from ..contact.colliders import MESH, mesh_sdf, packed_between, sdf
+from ..contact.colliders import MESH, collider_travel, mesh_sdf, packed_between, sdf
 from ..contact.geometry import segment_parameters, triangle_weights
 from ..kinds import LINEAR
 from ..physics.bending import bending_row
@@ -123,9 +123,6 @@ CHECK_EVERY = 5
 SUBSTEP_RATIO = 25.0
 #: the most substeps a step is cut into where they are chosen
 MAX_SUBSTEPS = 64
-#: a step that ended more than this many times its tolerance above it measures the next step's
-#: residual at its end only
-FAR_ABOVE = 4.0
 #: the iterations a step may take when none are given
 MAX_ITERATIONS = 200
 #: vertices per colour below which a colour is updated on one core (the pool's wake-up costs more)
@@ -722,20 +719,6 @@ def _overtaken(x, free, ckind, cpos, crot, cpos0, crot0, cgeo, creach, cbank, ta
     return moved
 
 
-def collider_travel(packed: tuple) -> float:
-    """The farthest any point within a collider's reach travels over the step (``packed``:
-    :meth:`~cloth_sim.contact.colliders.Contacts.packed`): its position's move plus its reach
-    times the angle it turned (a half-space's turn is not counted: its reach is unbounded)."""
-    kinds, pos, rot, pos0, rot0, _, _, reach = packed[:8]
-    if not len(kinds):
-        return 0.0
-    moved = np.linalg.norm(pos - pos0, axis=1)
-    cos = (np.einsum("cij,cij->c", rot, rot0) - 1.0) / 2.0  # trace(R R0ᵀ)
-    angle = np.arccos(np.clip(cos, -1.0, 1.0))
-    turned = np.where(np.isfinite(reach), reach * angle, 0.0)
-    return float((moved + turned).max())
-
-
 @register
 class VBD(Integrator):
     """Vertex Block Descent (Chen et al. 2024): backward Euler by per-vertex 3×3 Newton steps over
@@ -749,24 +732,24 @@ class VBD(Integrator):
     steps a step is cut into, 'auto' from the cloth's stiffness over its inertia
     (:meth:`substeps_for`); ``collider_share`` (default None, off): a step whose colliders'
     surfaces travel farther than this share of the thickness is cut into as many more substeps,
-    each seeing the colliders' motion in part (:func:`collider_travel`): a link overtaking the
-    cloth faster than its bounds let it give way otherwise ends inside (0.4 keeps the Franka
-    Panda's 1.8 m/s sweep and robot_sweep out of every link, at 3-20 times the cost;
-    docs/contacts.md); ``rho`` (default 0.8), the Chebyshev acceleration's spectral radius
-    estimate, 0 for none (measured on the swinging 48×48 cloth: 0.8 is the best of 0.5, 0.8, 0.9
-    and 0.95 at 1/240 s, 15× closer to the converged step than none after 10 iterations;
-    docs/BENCHMARKS.md); ``contact_stiffness`` (N/m, default 1e4); ``collision_interval`` (default
-    5): iterations between candidate searches when the cloth self-collides and a vertex met its
-    bound; ``self_friction`` (default 0.5): Coulomb's μ between the cloth's own layers;
-    ``time_budget`` (s, default None): when set, iterate until that much wall time has passed (at
-    least one iteration, at most ``iterations``) — a node that must keep its tick, whose results
-    then depend on the machine; ``tethers`` (default False): with a strain limit on a pinned cloth
-    and no contacts, its long-range attachments (Kim, Chentanez & Müller 2012) after every sweep,
-    so the pins' pull reaches the far edge at once instead of a ring of springs an iteration (the 2
-    m, 41 kg hanging cloth at 64×64, 1/60 s × 10: worst strain 4.7 → 2.2 after the projection; not
-    enough to ship: docs/BENCHMARKS.md §11); ``grid`` (default True): on a grid of Hooke springs
-    without self-contact, the iterations on the grid's blocks (module docstring); False keeps the
-    general sweep.
+    each seeing the colliders' motion in part
+    (:func:`~cloth_sim.contact.colliders.collider_travel`): a link overtaking the cloth faster than
+    its bounds let it give way otherwise ends inside (0.4 keeps the Franka Panda's 1.8 m/s sweep
+    and robot_sweep out of every link, at 3-20 times the cost; docs/robots.md); ``rho`` (default
+    0.8), the Chebyshev acceleration's spectral radius estimate, 0 for none (measured on the
+    swinging 48×48 cloth: 0.8 is the best of 0.5, 0.8, 0.9 and 0.95 at 1/240 s, 15× closer to the
+    converged step than none after 10 iterations; docs/BENCHMARKS.md); ``contact_stiffness`` (N/m,
+    default 1e4); ``collision_interval`` (default 5): iterations between candidate searches when
+    the cloth self-collides and a vertex met its bound; ``self_friction`` (default 0.5): Coulomb's
+    μ between the cloth's own layers; ``time_budget`` (s, default None): when set, iterate until
+    that much wall time has passed (at least one iteration, at most ``iterations``) — a node that
+    must keep its tick, whose results then depend on the machine; ``tethers`` (default False): with
+    a strain limit on a pinned cloth and no contacts, its long-range attachments (Kim, Chentanez &
+    Müller 2012) after every sweep, so the pins' pull reaches the far edge at once instead of a
+    ring of springs an iteration (the 2 m, 41 kg hanging cloth at 64×64, 1/60 s × 10: worst strain
+    4.7 → 2.2 after the projection; not enough to ship: docs/BENCHMARKS.md §11); ``grid`` (default
+    True): on a grid of Hooke springs without self-contact, the iterations on the grid's blocks
+    (module docstring); False keeps the general sweep.
 
     First order (backward Euler); no step limit; any iteration count gives a usable state.
     """
@@ -863,8 +846,6 @@ class VBD(Integrator):
             )
         self.collider_share = None if collider_share is None else float(collider_share)
         self._substeps_of, self._substeps_n = None, 1
-        self._step_dt = 1.0
-        self._first_check = self.check_every  # the iterations after which a step first measures
         if not (isinstance(rho, (int, float)) and 0.0 <= rho < 1.0):
             raise ValueError(f"rho must be a number in [0, 1), got {rho!r}")
         if not (isinstance(contact_stiffness, (int, float)) and 0 < contact_stiffness < math.inf):
@@ -1025,11 +1006,10 @@ class VBD(Integrator):
         if self._substeps_of != key:
             sp, _ = self._layout(forces)
             ptr, k, c, bdiag = sp[0], sp[3], sp[4], sp[11]
-            starts = np.minimum(ptr[:-1], max(len(k) - 1, 0))
-            ks = np.add.reduceat(k, starts) if len(k) else np.zeros(len(ptr) - 1)
-            cs = np.add.reduceat(c, starts) if len(c) else np.zeros(len(ptr) - 1)
-            empty = np.diff(ptr) == 0
-            ks[empty] = cs[empty] = 0.0
+            n = len(ptr) - 1
+            owner = np.repeat(np.arange(n), np.diff(ptr))  # each vertex's springs, in CSR order
+            ks = np.bincount(owner, weights=k, minlength=n)
+            cs = np.bincount(owner, weights=c, minlength=n)
             if len(bdiag):
                 ks = ks + bdiag
             free = self.free
@@ -1044,35 +1024,37 @@ class VBD(Integrator):
         own (the colliders' motion over the step taken in as many parts); the counters add the
         substeps' iterations and keep their worst residual."""
         n = self.substeps_for(forces, dt)
-        self._step_dt = dt
         contacts = self._contacts
         packed = contacts.packed() if contacts is not None and contacts.active else None
         share = self.collider_share
         if packed is not None and share is not None:  # a collider moves ≤ share·τ a substep
             parts = math.ceil(collider_travel(packed) / (share * contacts.thickness))
             n = max(n, min(MAX_SUBSTEPS, parts))
-        iterations, worst = 0, 0.0
-        self._on_grid = False
+        # a step's time budget is shared by its substeps
+        budget = None if self.time_budget is None else self.time_budget / n
+        iterations, worst, on_grid = 0, 0.0, False
         for part in range(n):
             colliders = packed
             if n > 1 and packed is not None:
                 colliders = packed_between(packed, part / n, (part + 1) / n)
-            done, res = self._substep(state, forces, dt / n, colliders)
+            done, res, blocks = self._substep(state, forces, dt / n, colliders, budget)
             iterations += done
             worst = max(worst, res)
+            on_grid = on_grid or blocks
         c = self.counters
         c["steps"] += 1
         c["iterations"] += iterations
         c["last_iterations"] = iterations
         c["last_substeps"] = n
-        c["grid_steps"] += 1 if self._on_grid else 0
+        c["grid_steps"] += 1 if on_grid else 0
         c["last_residual"] = worst
         c["converged"] = bool(worst <= self.tolerance)
         c["unconverged_steps"] += 0 if worst <= self.tolerance else 1
 
-    def _substep(self, state, forces, dt, packed):
-        """A backward-Euler step of ``dt`` (``packed``: the colliders over it, or None); returns
-        the iterations done and the residual of the iterate it ended on."""
+    def _substep(self, state, forces, dt, packed, budget):
+        """A backward-Euler step of ``dt`` (``packed``: the colliders over it, or None; ``budget``:
+        its wall time, s, or None); returns the iterations done, the residual of its last sweep
+        and whether they ran on the grid's blocks."""
         x, v = state.x, state.v
         model = self.model
         sp, (cptr, verts) = self._layout(forces)
@@ -1137,18 +1119,9 @@ class VBD(Integrator):
         stepped[:] = 0.0
         cut[:] = 0
         omega = 1.0
-        budget_end = None
-        if self.time_budget is not None:  # a step's budget shared by its substeps
-            budget_end = time.perf_counter() + self.time_budget * dt / self._step_dt
+        budget_end = None if budget is None else time.perf_counter() + budget
         done = 0
         res = math.inf
-        measured = [-1]  # the iterations done when the residual was last measured
-
-        def measure(iterations_done: int) -> float:
-            """The residual of the last sweep (:func:`.vbd_residual.sweep_residual`: each free
-            vertex's imbalance as the sweep found it, kept in ``stepped``)."""
-            measured[0] = iterations_done
-            return sweep_residual(self._stepped, model.masses, free)
 
         strain = self._strain_limit
         tether = (
@@ -1167,10 +1140,7 @@ class VBD(Integrator):
                     xm, xt, self._near, touch, cut, x_cd, allow, GAMMA, tau, kc, eps, colliders,
                     self._rec,
                 )  # fmt: skip
-            done, res = self._iterate_grid(
-                grid, x, xt, y, m_h2, 1.0 / h, drag_h, budget_end, contact, measure
-            )
-            self._on_grid = True
+            done = self._iterate_grid(grid, x, xt, y, m_h2, 1.0 / h, drag_h, budget_end, contact)
         else:  # the general sweep's buffers: the iterate's copy and the one two iterations back
             xs = self._buffer("_xs", x)
             prev2 = self._buffer("_prev2", x)
@@ -1214,8 +1184,8 @@ class VBD(Integrator):
                 # edge at once, where an iteration carries it about one ring of springs
                 strain.attachments(x)
             done += 1
-            if self._checks_at(done):
-                res = measure(done)  # at the swept iterate, before any extrapolation
+            if self._checks_at(done):  # the last sweep's, before any extrapolation
+                res = sweep_residual(stepped, model.masses, free)
             last = (
                 it == self.iterations - 1
                 or (budget_end is not None and time.perf_counter() >= budget_end)
@@ -1238,24 +1208,12 @@ class VBD(Integrator):
                 if it > 0:
                     _chebyshev(x, prev2, omega, free, x_cd, allow, GAMMA, sc_arrays, cut, touch)
                 np.copyto(prev2, xs)
-        if measured[0] != done:
-            res = measure(done)  # the residual of the step's last sweep
+        res = sweep_residual(stepped, model.masses, free)  # the step's last sweep's
         # v = (x − x^t)/h; pins keep their velocity (they moved by h·v)
         _velocities(x, xt, v, free, h, self._a_prev)
-        c = self.counters
-        # where the next step first measures: a step that converged at n checks a run earlier
-        # (so a cloth coming to rest finds its fewer iterations); one that ended far above the
-        # tolerance measures only at its end (each measure costs about two sweeps)
-        every, cap = self.check_every, self.iterations
-        if res <= self.tolerance:
-            self._first_check = max(every, done - every)
-        elif res > FAR_ABOVE * self.tolerance:
-            self._first_check = cap
-        else:
-            self._first_check = max(every, cap - every)
-        c["truncated"] += int(cut.sum())
+        self.counters["truncated"] += int(cut.sum())
         self._cut_last = bool(cut.any())
-        return done, res
+        return done, res, grid is not None
 
     def _grid_layout(self, forces):
         """The grid's blocked layout (:mod:`~cloth_sim.integrators.vbd_grid`) for ``forces``, or
@@ -1266,30 +1224,28 @@ class VBD(Integrator):
         return self._grid
 
     def _checks_at(self, done: int) -> bool:
-        """Whether the residual is measured after ``done`` iterations (before the last): at the
-        first check (set by the last step) and every :attr:`check_every` iterations after."""
-        first = self._first_check
-        return done < self.iterations and done >= first and (done - first) % self.check_every == 0
+        """Whether the residual is measured after ``done`` iterations, before the last: every
+        :attr:`check_every` iterations (the sweeps keep each vertex's imbalance, so a measure is
+        a sum over the vertices)."""
+        return done < self.iterations and done % self.check_every == 0
 
     def _next_check(self, done: int) -> int:
         """The iterations after which the residual is next measured, past ``done`` (the step's
         cap if no measure comes before)."""
-        first, every = self._first_check, self.check_every
-        later = -(-max(0, done + 1 - first) // every)  # runs of check_every after the first
-        return min(self.iterations, first + later * every)
+        return min(self.iterations, (done // self.check_every + 1) * self.check_every)
 
-    def _iterate_grid(self, grid, x, xt, y, m_h2, inv_h, drag_h, budget_end, contact, measure):
+    def _iterate_grid(self, grid, x, xt, y, m_h2, inv_h, drag_h, budget_end, contact) -> int:
         """The step's iterations on the grid's blocks (no self-contact; ``contact``: the colliders'
         part, or None): the general loop's sweeps and Chebyshev steps, colour by colour in SIMD
         lanes, in runs of :attr:`check_every` iterations between two measures of the residual
-        (``measure``, on the iterate gathered into ``x``); returns the iterations done and the
-        last residual measured (``inf`` if none was)."""
+        (on the iterate and imbalances gathered into ``x`` and ``stepped``); returns the
+        iterations done."""
         grid.load(x, xt, y, m_h2)
         threads = numba.get_num_threads()
         if not grid.parallel:
             numba.set_num_threads(1)  # the same bits: the chunks do not depend on the threads
         total = self.iterations
-        omega, done, res = 1.0, 0, math.inf
+        omega, done = 1.0, 0
         try:
             while True:
                 # to the next measure or the end (one at a time under a budget: the clock)
@@ -1308,10 +1264,11 @@ class VBD(Integrator):
                 check = not stop and self._checks_at(done)
                 if stop or check:
                     grid.store(x, self._stepped, swept)
-                    res = measure(done)
-                    stop = stop or res <= self.tolerance
+                if check:
+                    res = sweep_residual(self._stepped, self.model.masses, self.free)
+                    stop = res <= self.tolerance
                 if stop:
-                    return done, res
+                    return done
                 if flips % 2:
                     grid.swap()
         finally:
