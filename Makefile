@@ -25,7 +25,8 @@ SCENE    ?= hanging
 # install here; the interfaces' cmake steps leave a core idle)
 MAKEFLAGS += --jobs=2
 
-.PHONY: install run test lint docs fuzz bench bench-peers bench-robots bench-learning clean
+.PHONY: install run test lint docs fuzz bench bench-peers bench-robots bench-learning gpu test-gpu \
+	bench-gpu clean
 install: $(STAMP) $(KERNELS) $(MSGS)
 
 # uv (pinned in requirements.txt, installed by pip first) installs the pinned set: 23 s where pip
@@ -72,6 +73,28 @@ test: install
 	$(PY) -m pytest $(PYTEST_N) test/core $(PYTEST_ARGS)
 	$(PY) -m pytest $(PYTEST_N) test/adapters test/ros $(addprefix --ignore=,$(RAY_TESTS)) $(PYTEST_ARGS)
 	$(PY) -m pytest $(PYTEST_N) $(RAY_TESTS) $(PYTEST_ARGS)
+
+# the CUDA backend (cloth_sim.cuda, device="cuda"): numba-cuda and the CUDA 13 wheels it loads
+# (requirements-gpu.txt, ~200 MB), never part of make test. test-gpu runs the kernels' tests on the
+# GPU, or on numba-cuda's simulator where none is found (tiny cloths, ~30 s), then compiles every
+# kernel to PTX for sm_90 (NVVM from the wheels: no GPU needed); bench-gpu prints the GPU's figures
+# (docs/gpu.md) and needs a GPU
+GPU := $(VENV)/.gpu
+# (a test to a worker: the simulator's tests and the two precisions' compile checks are independent)
+GPU_N := $(if $(filter 0,$(PYTEST_WORKERS)),,-n $(PYTEST_WORKERS) --dist load)
+gpu: $(GPU)
+$(GPU): $(STAMP) requirements-gpu.txt
+	$(UV) -r requirements-gpu.txt
+	@touch $@
+
+test-gpu: install $(GPU)
+	@if $(PY) -c "from numba import cuda; raise SystemExit(not cuda.is_available())" 2>/dev/null; \
+	then sim=0; echo "test-gpu: on the GPU"; else sim=1; echo "test-gpu: no GPU, on numba-cuda's simulator"; fi; \
+	NUMBA_ENABLE_CUDASIM=$$sim $(PY) -m pytest $(GPU_N) test/gpu/sim $(PYTEST_ARGS)
+	NUMBA_ENABLE_CUDASIM=0 $(PY) -m pytest $(GPU_N) test/gpu/ptx $(PYTEST_ARGS)
+
+bench-gpu: install $(GPU)
+	$(VENV)/bin/cloth-sim bench gpu
 
 # ruff (pinned in requirements.txt, configured in pyproject.toml): the linter and the formatter's check
 lint: $(STAMP)

@@ -44,10 +44,18 @@ if "OMP_WAIT_POLICY" not in os.environ:
 # wins. Read when numpy (or scipy's own OpenBLAS) loads: import cloth_sim first.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-__all__ = ["ClothModel", "Simulator", "SimulationDiverged", "colliders", "integrators"]
+__all__ = [
+    "BatchSimulator",
+    "ClothModel",
+    "Simulator",
+    "SimulationDiverged",
+    "colliders",
+    "integrators",
+]
 __version__ = "0.1.0"
 
 _LAZY = {
+    "BatchSimulator": ".batch",
     "ClothModel": ".model",
     "Simulator": ".simulator",
     "SimulationDiverged": ".simulator",

@@ -20,6 +20,8 @@ MODELS = ("provot", "choi_ko")
 #: (:mod:`cloth_sim.constraints.strain_projection`)
 STRAIN_LIMIT_METHODS = ("provot", "projection")
 ORIENTATIONS = ("horizontal", "vertical")
+#: Where a cloth is stepped (:mod:`cloth_sim.backends`): the host's cores, or an NVIDIA GPU
+DEVICES = ("cpu", "cuda")
 
 #: The integrators, in the order :func:`cloth_sim.integrators.available` lists them. The registry
 #: (:mod:`cloth_sim.integrators`) refuses a class whose name is not here and checks, once every

@@ -21,7 +21,7 @@ import math
 import numbers
 from dataclasses import dataclass
 
-from .kinds import GRID_FAMILIES, INTEGRATORS, MODELS, STRAIN_LIMIT_METHODS
+from .kinds import DEVICES, GRID_FAMILIES, INTEGRATORS, MODELS, STRAIN_LIMIT_METHODS
 from .materials.library import LIBRARY
 
 #: the library's fabric names (the material parameter's choices)
@@ -620,6 +620,18 @@ def _schema() -> dict[str, Param]:
             "",
             "Keep the cloth from passing through itself (off: no self-collision code runs).",
             scene_key="self_collision",
+        ),
+        P(
+            "device",
+            str,
+            "",
+            "Where the cloth is stepped: cpu, or cuda (an NVIDIA GPU through numba-cuda: make "
+            "gpu; symplectic_euler and vbd, springs, bending, gravity, wind, drag and pins). "
+            "Changing it rebuilds the cloth on that device and resets it; cuda is refused, and "
+            "the cpu keeps running, where no CUDA device can run or the scene needs what the "
+            "device does not have (colliders, a strain limit, self-collision, grippers).",
+            apply="rebuild",
+            choices=DEVICES,
         ),
     ]
     return {p.name: p for p in params}

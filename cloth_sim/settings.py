@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import integrators
+from . import backends, integrators
 from .constraints.strain_limit import DEFAULT_STRAIN_LIMIT_PASSES
 from .contact.self_collision import check_thickness
 from .integrators.base import Stability
@@ -125,6 +125,7 @@ def defaults(scene: Scene) -> dict:
         "robot.joint_states_topic": "/joint_states",
         "robot.source": "joint_states",
         "robot.base_frame": "",
+        "device": "cpu",
     }
     values.update(UNUSED_VALUES)
     values.update(scene_values(scene))
@@ -284,6 +285,7 @@ def build_simulator(cfg: dict, model, scene: Scene) -> Simulator:
         colliders=scene.make_colliders(),
         thickness=cfg["thickness"],
         self_collision=cfg["self_collision"],
+        device=cfg["device"],
     )
     if scene.robot is not None:
         scene.add_robot(sim)
@@ -443,10 +445,40 @@ def check(
         built = model(cfg, scene) if model is not None else build_model(cfg, scene)
     except ValueError as e:
         raise Refusal(str(e), (), "model") from None
+    refused = device_refusal(cfg, built, scene)
+    if refused is not None:
+        raise Refusal(*refused)
     reason, named, limit = refusal(cfg, built)
     if reason:
         raise Refusal(reason, named)
     return Checked(cfg, scene, built, limit)
+
+
+def device_refusal(cfg: dict, model, scene: Scene) -> tuple[str, tuple[str, ...]] | None:
+    """Why ``cfg["device"]`` cannot step this cloth here, as ``(reason, the parameters it
+    names)``: the device missing (what is, in its words), or a method or a part of the scene it
+    does not run (:func:`cloth_sim.backends.refusal`); ``None`` on the cpu."""
+    device = cfg["device"]
+    if device == "cpu":
+        return None
+    why = backends.problem(device)
+    if why is not None:
+        return f"device={device} is refused: {why}", ("device",)
+    refused = backends.refusal(
+        device,
+        cfg["integrator"],
+        model,
+        strain_limit=bool(cfg["strain_limit"]),
+        colliders=bool(scene.colliders),
+        self_collision=cfg["self_collision"],
+        grippers=bool(scene.grippers),
+        robot=scene.robot is not None,
+    )
+    if refused is None:
+        return None
+    reason, name = refused
+    named = ("device",) + ((name,) if name in SCHEMA else ())
+    return f"device={device}: {reason}", named
 
 
 def build(checked: Checked) -> Simulator:

@@ -24,7 +24,7 @@ import numba
 import numpy as np
 import scipy.sparse as sp
 
-from . import integrators
+from . import backends, integrators
 from .constraints.grippers import Gripper, check_box, check_grasp, check_name, check_pose
 from .constraints.strain_limit import (
     DEFAULT_STRAIN_LIMIT_PASSES,
@@ -51,11 +51,7 @@ from .physics.forces import (
     spring_strains,
 )
 from .robot.placement import Robots
-from .state import State
-
-
-class SimulationDiverged(RuntimeError):
-    """A step produced a non-finite or exploding state; the simulator was put back before it."""
+from .state import SimulationDiverged, State
 
 
 @numba.njit(cache=True)
@@ -115,7 +111,16 @@ class Simulator:
             from its own non-adjacent triangles.
         self_collision: keep the cloth from passing through itself
             (:mod:`cloth_sim.contact.self_collision`).
+        device: ``"cpu"`` (this class) or ``"cuda"``: the same method and API on a GPU
+            (:mod:`cloth_sim.backends`; ``Simulator(..., device="cuda")`` returns
+            :class:`cloth_sim.cuda.simulator.CudaSimulator`, and raises ``ValueError`` naming
+            what is missing where no CUDA device can run).
     """
+
+    def __new__(cls, *args, device: str = "cpu", **kwargs):
+        if cls is Simulator and device != "cpu":  # another device's implementation
+            return backends.implementation(device)(*args, **kwargs)
+        return super().__new__(cls)
 
     def __init__(
         self,
@@ -135,7 +140,12 @@ class Simulator:
         colliders=None,
         thickness: float = 0.005,
         self_collision: bool = False,
+        device: str = "cpu",
     ):
+        if backends.check_device(device) != "cpu":
+            raise ValueError(f"{type(self).__name__} steps on the cpu, got device={device!r}")
+        #: where the cloth is stepped (:mod:`cloth_sim.backends`)
+        self.device = "cpu"
         self.model = model
         #: the model as given; ``model`` is it with the held particles pinned while grippers hold
         #: some

@@ -11,6 +11,10 @@ from __future__ import annotations
 import numpy as np
 
 
+class SimulationDiverged(RuntimeError):
+    """A step produced a non-finite or exploding state; the simulator was put back before it."""
+
+
 class State:
     """``x``, ``v``: ``(n, 3)`` float64 positions and velocities. Time is ``t_base + steps·dt``:
     ``t_base`` moves when ``dt`` changes, so the time of many steps carries no rounding drift."""

@@ -145,6 +145,13 @@ def _bench_convergence(args) -> int:
     return 0
 
 
+def _bench_gpu(args) -> int:
+    from .gpu import print_gpu_tables
+
+    print_gpu_tables(tuple(args.sizes), tuple(args.worlds), args.seconds, args.simulator)
+    return 0
+
+
 def _bench_flex_peer(args) -> int:
     from .flex_peer import print_flex_table
 
@@ -262,6 +269,20 @@ def add_parser(sub) -> argparse.ArgumentParser:
         help="vbd's defaults at 1/60 s against a fine-step reference (the solver issue's targets)",
     )
     cv.set_defaults(func=_bench_convergence)
+    gp = bsub.add_parser(
+        "gpu",
+        help="the CUDA backend on a GPU: the same cloth as the CPU, one large cloth's real-time "
+        "factor, many worlds' world-seconds a second (needs numba-cuda and a GPU: make bench-gpu)",
+    )
+    gp.add_argument("--sizes", type=int, nargs="+", default=[128, 256])
+    gp.add_argument("--worlds", type=int, nargs="+", default=[1, 16, 128, 1024, 4096, 16384])
+    gp.add_argument("--seconds", type=float, default=2.0, help="simulated seconds a run")
+    gp.add_argument(
+        "--simulator",
+        action="store_true",
+        help="a tiny run on numba-cuda's simulator (NUMBA_ENABLE_CUDASIM=1): the script's check",
+    )
+    gp.set_defaults(func=_bench_gpu)
     fp = bsub.add_parser(
         "flex-peer",
         help="MuJoCo's flex cloth beside cloth_sim on the drape scene "

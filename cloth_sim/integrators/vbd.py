@@ -172,6 +172,24 @@ def colour_groups(springs: np.ndarray, n: int, free: np.ndarray) -> tuple[np.nda
     return cptr, np.ascontiguousarray(verts, dtype=np.int64)
 
 
+def substeps_needed(ptr, k, c, bdiag, masses, free, dt) -> int:
+    """The fewest substeps (at most :data:`MAX_SUBSTEPS`) of a step of ``dt`` in which every free
+    vertex's ``(h²·Σk + h·Σc + h²·Q_ii)/m`` is at most :data:`SUBSTEP_RATIO`: ``ptr`` the
+    vertices' springs (CSR), ``k``, ``c`` their stiffness and damping in that order, ``bdiag`` the
+    bending's diagonal (empty for none). What :meth:`VBD.substeps_for` chooses, and the CUDA
+    backend with it."""
+    n = len(ptr) - 1
+    owner = np.repeat(np.arange(n), np.diff(ptr))  # each vertex's springs, in CSR order
+    ks = np.bincount(owner, weights=k, minlength=n)
+    cs = np.bincount(owner, weights=c, minlength=n)
+    if len(bdiag):
+        ks = ks + bdiag
+    ratio = (dt * dt * ks + dt * cs)[free] / masses[free]
+    worst = float(ratio.max()) if len(ratio) else 0.0
+    steps = math.ceil(math.sqrt(worst / SUBSTEP_RATIO)) if worst > SUBSTEP_RATIO else 1
+    return min(MAX_SUBSTEPS, steps)
+
+
 def _csr(owner: np.ndarray, item: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     """CSR of ``item`` grouped by ``owner`` (in ``item``'s order within an owner)."""
     order = np.argsort(owner, kind="stable")
@@ -1005,18 +1023,8 @@ class VBD(Integrator):
         key = (forces, float(dt))
         if self._substeps_of != key:
             sp, _ = self._layout(forces)
-            ptr, k, c, bdiag = sp[0], sp[3], sp[4], sp[11]
-            n = len(ptr) - 1
-            owner = np.repeat(np.arange(n), np.diff(ptr))  # each vertex's springs, in CSR order
-            ks = np.bincount(owner, weights=k, minlength=n)
-            cs = np.bincount(owner, weights=c, minlength=n)
-            if len(bdiag):
-                ks = ks + bdiag
-            free = self.free
-            ratio = (dt * dt * ks + dt * cs)[free] / self.model.masses[free]
-            worst = float(ratio.max()) if len(ratio) else 0.0
-            n = math.ceil(math.sqrt(worst / SUBSTEP_RATIO)) if worst > SUBSTEP_RATIO else 1
-            self._substeps_of, self._substeps_n = key, min(MAX_SUBSTEPS, n)
+            n = substeps_needed(sp[0], sp[3], sp[4], sp[11], self.model.masses, self.free, dt)
+            self._substeps_of, self._substeps_n = key, n
         return self._substeps_n
 
     def step(self, state, forces, dt):

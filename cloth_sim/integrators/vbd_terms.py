@@ -20,6 +20,28 @@ from .vbd_contact import press, slide
 # A vertex's force is (f0, f1, f2) and its symmetric Hessian (h0 … h5) = (xx, xy, xz, yy, yz, zz);
 # each term takes them and returns them with its own part added.
 @numba.njit(cache=True, inline="always")
+def spring_part(ux, uy, uz, inv, mag, de, d2e, cs, f0, f1, f2, h0, h1, h2, h3, h4, h5):
+    """One spring's share of a vertex's Newton step, along the unit vector ``u`` to the other end
+    (``inv``: one over the length): the force ``mag·u``, and the Hessian ``E'' u uᵀ + (E'/l)(I −
+    u uᵀ)``, each part clamped at 0 (positive semi-definite), plus the damping's ``(c/h) u uᵀ``
+    (``de``, ``d2e``: ``E'``, ``E''``; ``cs``: ``c/h``). Scalars only: the CUDA kernels call it
+    too (:func:`cloth_sim.cuda.kernels.newton_at`)."""
+    f0 += mag * ux
+    f1 += mag * uy
+    f2 += mag * uz
+    geo = de * inv if de > 0.0 else 0.0
+    w = (d2e if d2e > 0.0 else 0.0) + cs - geo
+    wx, wy = w * ux, w * uy
+    h0 += wx * ux + geo
+    h1 += wx * uy
+    h2 += wx * uz
+    h3 += wy * uy + geo
+    h4 += wy * uz
+    h5 += w * uz * uz + geo
+    return f0, f1, f2, h0, h1, h2, h3, h4, h5
+
+
+@numba.njit(cache=True, inline="always")
 def springs_at(
     i, x, xt, inc_ptr, nbr, rest, k, c, kind, tab, inv_h, f0, f1, f2, h0, h1, h2, h3, h4, h5
 ):
@@ -57,20 +79,9 @@ def springs_at(
                 + ((yj - xt[j, 1]) - my) * uy
                 + ((zj - xt[j, 2]) - mz) * uz
             )
-        f0 += mag * ux
-        f1 += mag * uy
-        f2 += mag * uz
-        # E'' u uᵀ + (E'/l)(I − u uᵀ), each part clamped at 0 (positive semi-definite), and the
-        # damping's (c/h) u uᵀ
-        geo = de * inv if de > 0.0 else 0.0
-        w = (d2e if d2e > 0.0 else 0.0) + cs - geo
-        wx, wy = w * ux, w * uy
-        h0 += wx * ux + geo
-        h1 += wx * uy
-        h2 += wx * uz
-        h3 += wy * uy + geo
-        h4 += wy * uz
-        h5 += w * uz * uz + geo
+        f0, f1, f2, h0, h1, h2, h3, h4, h5 = spring_part(
+            ux, uy, uz, inv, mag, de, d2e, cs, f0, f1, f2, h0, h1, h2, h3, h4, h5
+        )
     return f0, f1, f2, h0, h1, h2, h3, h4, h5, rough
 
 

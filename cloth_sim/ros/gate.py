@@ -118,6 +118,8 @@ class ParameterGate:
                     f"1.0, not 1, for a double)"
                 ) from None
         cfg = checked.cfg
+        if cfg["device"] != node.get_parameter("device").value:  # carried to the cpu (_carry)
+            node.set_parameters([Parameter("device", value=cfg["device"])])
         self.session = Session(scene, cfg, settings.build(checked), checked.stable_dt)
         self._rates_run = {cfg["publish_rate"]}  # rates the node has run with: never refused
         self._fit_solver(cfg)
@@ -126,7 +128,20 @@ class ParameterGate:
         """The scene's own step refused for the cloth asked for (a material, a finer grid: the
         scene's explicit method above its stable step), with neither the method nor ``dt`` given:
         the same method at :data:`CARRY_SHARE` of its stable step, or ``vbd`` where the method
-        has no stable step; said in the log. Any other refusal stops the start-up as before."""
+        has no stable step; a ``device`` that cannot run here or cannot run the scene: the cpu.
+        Each said in the log. Any other refusal stops the start-up as before."""
+        if "device" in refused.named and values.get("device", "cpu") != "cpu":
+            # a device that cannot run here, or cannot run this scene: the cpu instead
+            self.node.get_logger().warning(
+                f"scene {scene.name}: {refused}. Instead: running on the cpu"
+            )
+            values = {**values, "device": "cpu"}
+            try:
+                return settings.check(scene, values, model=self._model)
+            except settings.Refusal as e:
+                refused = e
+            except ValueError as e:
+                raise StartupError(str(e)) from None
         if refused.named != ("dt",) or "dt" in values or "integrator" in values:
             raise StartupError(str(refused)) from None
         try:

@@ -963,3 +963,27 @@ def test_a_material_scene_keeps_its_size_and_refuses_the_values_its_fabric_sets(
     assert node.sim.model.masses.sum() == pytest.approx(0.324 * 0.06)
     (result,) = ros.set_params("/cloth_sim", {"material": "velvet"})
     assert not result.successful and "velvet" in result.reason
+
+
+def test_a_device_that_cannot_run_here_is_refused_and_the_cpu_keeps_running(ros):
+    """``device:=cuda`` on a machine where no CUDA device can run (these machines: no GPU) starts
+    on the cpu with a warning naming what is missing, and is refused live with the same words;
+    the simulation goes on untouched."""
+    from cloth_sim import backends
+
+    # where a GPU can run, hanging is refused on cuda for its strain limit instead
+    why = backends.problem("cuda") or "strain_limit: not on the cuda device"
+    node = ros.start(device="cuda", rows=12, cols=12)
+    assert node.sim.device == "cpu"
+    assert node.get_parameter("device").value == "cpu"
+    t0 = node.sim.time
+    assert ros.spin_until(lambda: node.sim.time > t0 + 0.05, 20)
+    result = ros.set_params("/cloth_sim", {"device": "cuda"})[0]
+    assert not result.successful
+    assert result.reason.startswith("device=cuda")
+    assert why in result.reason, result.reason
+    assert node.sim.device == "cpu" and node.get_parameter("device").value == "cpu"
+    t1 = node.sim.time
+    assert ros.spin_until(lambda: node.sim.time > t1 + 0.05, 20)
+    bad = ros.set_params("/cloth_sim", {"device": "gpu"})[0]
+    assert not bad.successful and "accepted values: cpu, cuda" in bad.reason

@@ -1,0 +1,134 @@
+"""Where a cloth is stepped: the device is its own axis beside the method.
+
+``Simulator(model, integrator="vbd", dt=1/60, device="cuda")`` keeps the method's name and asks
+this registry for the device's implementation: ``cpu`` is :class:`cloth_sim.Simulator` itself
+(every method), ``cuda`` is :mod:`cloth_sim.cuda` (numba-cuda, an optional dependency:
+``requirements-gpu.txt``, ``make gpu``), which runs the methods in :data:`METHODS`. A device
+that is named but cannot run here is refused by :func:`check_device` with what is missing.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+
+import numpy as np
+
+from .kinds import DEVICES, LINEAR
+from .model import ClothModel
+
+__all__ = ["DEVICES", "check_device", "check_method", "implementation", "problem", "refusal"]
+
+#: the methods each device runs (``None``: every registered method)
+METHODS: dict[str, tuple[str, ...] | None] = {
+    "cpu": None,
+    "cuda": ("symplectic_euler", "vbd"),
+}
+
+#: each device's implementation: ``(module, single-world class, batch class)``
+_IMPLEMENTATIONS = {
+    "cuda": ("cloth_sim.cuda.simulator", "CudaSimulator", "CudaBatchSimulator"),
+}
+
+
+def problem(device: str) -> str | None:
+    """Why ``device`` cannot run here, in words a user can act on (``None`` when it can). Unknown
+    names are a problem too."""
+    if device not in DEVICES:
+        return f"device must be one of {', '.join(DEVICES)}, got {device!r}"
+    if device == "cpu":
+        return None
+    if importlib.util.find_spec("numba_cuda") is None:
+        return (
+            "device 'cuda' needs numba-cuda, which is not installed: `make gpu` installs "
+            "requirements-gpu.txt into the venv"
+        )
+    # the optional dependency is imported only when a user names its device
+    return importlib.import_module("cloth_sim.cuda").problem()
+
+
+def check_device(device) -> str:
+    """``device`` if it can run here, else ``ValueError`` naming what is missing."""
+    if not isinstance(device, str):
+        raise ValueError(f"device must be one of {', '.join(DEVICES)}, got {device!r}")
+    why = problem(device)
+    if why is not None:
+        raise ValueError(why)
+    return device
+
+
+def check_method(method: str, device: str) -> None:
+    """``ValueError`` where ``device`` has no implementation of ``method``."""
+    methods = METHODS[device]
+    if methods is not None and method not in methods:
+        raise ValueError(
+            f"integrator {method!r} has no {device} backend; on {device}: {', '.join(methods)} "
+            "(device='cpu' runs every method)"
+        )
+
+
+def refusal(device: str, integrator: str, model: ClothModel, **features) -> tuple[str, str] | None:
+    """Why ``device`` cannot step ``model`` with ``integrator`` and ``features`` (keyword: a
+    feature's name and whether it is asked for: ``strain_limit``, ``colliders``,
+    ``self_collision``, ``grippers``, ``robot``), as ``(reason, the argument it names)``, or
+    ``None``. Nothing is refused on the cpu; what :mod:`cloth_sim.cuda` does not run yet is
+    refused on cuda."""
+    if device == "cpu":
+        return None
+    methods = METHODS[device]
+    if integrator not in methods:
+        return (
+            f"integrator {integrator!r} has no {device} backend; on {device}: "
+            f"{', '.join(methods)} (device='cpu' runs every method)",
+            "integrator",
+        )
+    for name, asked in features.items():
+        if asked:
+            hint = (
+                " (vbd converged holds the stretch without one: set strain_limit to 0)"
+                if name == "strain_limit"
+                else ""
+            )
+            return (
+                f"{name}: not on the {device} device yet{hint}; it runs springs, bending, "
+                "gravity, wind, drag and pins, and device='cpu' has the rest",
+                name,
+            )
+    if len(model.kind) and int(max(model.kind)) != LINEAR:
+        return (
+            f"model {model.model!r}: Choi & Ko's tension-only and buckling pairs are not on the "
+            f"{device} device yet (Hooke springs and a material's bending are); device='cpu' runs "
+            "them",
+            "model",
+        )
+    return None
+
+
+def implementation(device: str, batch: bool = False):
+    """The class that steps a cloth (``batch``: many worlds) on ``device`` (checked first)."""
+    check_device(device)
+    module, single, many = _IMPLEMENTATIONS[device]
+    return getattr(importlib.import_module(module), many if batch else single)
+
+
+def world_ids(worlds, count: int):
+    """``worlds`` (indices, or ``None`` for all ``count``) as an int64 array, each checked."""
+    ids = np.arange(count) if worlds is None else np.asarray(worlds, np.int64).ravel()
+    if ids.size and (ids.min() < 0 or ids.max() >= count):
+        raise ValueError(f"worlds: indices must lie in [0, {count - 1}], got {ids.tolist()}")
+    return ids
+
+
+def models_of(models, worlds: int | None) -> list[ClothModel]:
+    """One model ``worlds`` times, or the list given (``worlds`` then its length, or None)."""
+    if isinstance(models, ClothModel):
+        count = 1 if worlds is None else worlds
+        if isinstance(count, bool) or int(count) != count or not 1 <= count <= 1_000_000:
+            raise ValueError(f"worlds must be an integer in [1, 1000000], got {worlds!r}")
+        return [models] * int(count)
+    models = list(models)
+    if not models or not all(isinstance(m, ClothModel) for m in models):
+        raise ValueError("models must be a ClothModel or a non-empty list of them")
+    if worlds is not None and worlds != len(models):
+        raise ValueError(f"worlds={worlds} but {len(models)} models were given")
+    return models

@@ -1,0 +1,96 @@
+"""Many worlds of one cloth stepped together: :class:`BatchSimulator`.
+
+``BatchSimulator(model, worlds=4096, integrator="vbd", dt=1/60, device="cuda")`` steps every world
+in the same launches on a GPU (:class:`cloth_sim.cuda.simulator.CudaBatchSimulator`);
+``device="cpu"`` (the default) is this class: one :class:`~cloth_sim.simulator.Simulator` a world,
+stepped in turn, with the same names, so code written against a batch runs on either.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import backends
+from .simulator import Simulator
+
+
+class BatchSimulator:
+    """``worlds`` copies of ``model`` (or a list of models, one a world), each with its own
+    parameters (:meth:`set`) and state.
+
+    ``positions``: ``(worlds, n, 3)``; on the GPU a device array (``__cuda_array_interface__``),
+    here a numpy array (a copy). :meth:`positions_host` is the numpy array on both."""
+
+    def __new__(cls, *args, device: str = "cpu", **kwargs):
+        if cls is BatchSimulator and device != "cpu":
+            return backends.implementation(device, batch=True)(*args, **kwargs)
+        return super().__new__(cls)
+
+    def __init__(
+        self,
+        models,
+        worlds: int | None = None,
+        integrator: str = "vbd",
+        dt: float = 1 / 60,
+        device: str = "cpu",
+        **kwargs,
+    ):
+        backends.check_device(device)
+        self.device = "cpu"
+        models = backends.models_of(models, worlds)
+        self.sims = [Simulator(m, integrator=integrator, dt=dt, **kwargs) for m in models]
+        self.worlds = len(self.sims)
+        self.dt = float(dt)
+
+    def _ids(self, worlds) -> np.ndarray:
+        return backends.world_ids(worlds, self.worlds)
+
+    @property
+    def positions(self) -> np.ndarray:
+        return np.stack([s.positions for s in self.sims])
+
+    def positions_host(self) -> np.ndarray:
+        return self.positions
+
+    def velocities_host(self) -> np.ndarray:
+        return np.stack([s.velocities for s in self.sims])
+
+    @property
+    def time(self) -> np.ndarray:
+        return np.array([s.time for s in self.sims])
+
+    def set(
+        self, worlds=None, *, gravity=None, wind=None, drag=None, stiffness=None, damping=None
+    ):
+        """As :meth:`cloth_sim.cuda.worlds.CudaWorlds.set`: per-world ``gravity``, ``wind`` (a
+        3-vector or one a world), ``drag``, ``stiffness``/``damping`` ``{family: value}``."""
+        ids = self._ids(worlds)
+        for r, w in enumerate(ids):
+            s = self.sims[w]
+            if gravity is not None:
+                g = np.asarray(gravity, np.float64)
+                s.gravity = g[r] if g.ndim == 2 else g
+            if wind is not None:
+                a = np.asarray(wind, np.float64)
+                s.wind = a[r] if a.ndim == 2 else a
+            if drag is not None:
+                s.drag = drag
+            for fam, k in (stiffness or {}).items():
+                s.set_stiffness(fam, k)
+            for fam, c in (damping or {}).items():
+                s.set_damping(fam, c)
+
+    def reset(self, worlds=None) -> None:
+        for w in self._ids(worlds):
+            self.sims[w].reset()
+
+    def step(self, n: int = 1) -> None:
+        for s in self.sims:
+            s.step(n)
+
+    def advance(self, t: float) -> int:
+        n = max(0, math.ceil((t - float(self.time.min())) / self.dt - 1e-9))
+        self.step(n)
+        return n

@@ -1,0 +1,633 @@
+"""The CUDA kernels: each thread one vertex of one world, the worlds side by side in the arrays'
+first axis, so one launch steps every world.
+
+The arithmetic is the CPU's: its scalar-only functions are called as they are (a spring's share
+of a Newton step, :func:`~cloth_sim.integrators.vbd_terms.spring_part`; the 3×3 solve,
+:func:`~cloth_sim.integrators.vbd_contact.solve3`), and what reads arrays is written again for the
+worlds' arrays (the CPU's kernels index one world; numba-cuda's simulator cannot pass them its
+arrays): the
+symplectic Euler force of :mod:`cloth_sim.physics.forces` (Hooke springs and their damping along
+the spring, gravity, wind on the vertex normals, linear drag, the material's bending ``−Q x``),
+and the per-vertex Newton step of :mod:`cloth_sim.integrators.vbd`'s general sweep (inertia, drag,
+springs with their damping over the step, bending; the adaptive initial guess, Chebyshev's
+extrapolation and the sweeps' residual of :mod:`cloth_sim.integrators.vbd_residual`). The tests
+hold both to the CPU's numbers (``test/gpu``).
+
+Kernels take three named bundles (:mod:`cloth_sim.cuda.layout`): ``top`` (the topology every world
+shares), ``wor`` (each world's masses, pins, gravity, wind, drag and family overrides) and ``it``
+(each world's positions, velocities and the step's scratch arrays), and a few scalars.
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import cuda, float64
+
+# scalar-only numba functions of the CPU's sweep: a CUDA kernel calls them as they are (numba-cuda
+# compiles them for the device; its simulator calls the CPU's build)
+from ..integrators.vbd_contact import solve3
+from ..integrators.vbd_terms import spring_part
+
+#: threads a block, at most (a launch over fewer threads takes as many)
+BLOCK = 128
+#: threads a world in the residual's reduction (a power of two: a warp)
+REDUCE = 32
+#: threads a block at most in :func:`frames_in_blocks` (a power of two: its reductions)
+MAX_BLOCK = 1024
+#: standard gravity, the residual's unit of force per unit of mass (as on the CPU)
+G0 = 9.80665
+
+
+# --------------------------------------------------------------------------- per-vertex parts
+@cuda.jit(device=True, inline=True)
+def spring_constants(top, wor, w, q):
+    """Stiffness and damping of vertex incidence ``q`` in world ``w``: the world's family
+    override where it has one (``≥ 0``), else the model's own."""
+    f = top.fam[q]
+    k = wor.kfam[w, f]
+    c = wor.cfam[w, f]
+    if k < 0:
+        k = top.k[q]
+    if c < 0:
+        c = top.c[q]
+    return k, c
+
+
+@cuda.jit(device=True, inline=True)
+def normal_at(top, x, w, i):
+    """Vertex ``i``'s unit normal: its triangles' area-weighted normals summed (zero without
+    triangles), as :func:`cloth_sim.physics.forces.vertex_normals`."""
+    nx = ny = nz = 0.0
+    for e in range(top.tptr[i], top.tptr[i + 1]):
+        t = top.tlist[e]
+        a, b, c = top.tris[t, 0], top.tris[t, 1], top.tris[t, 2]
+        e1x, e1y, e1z = x[w, b, 0] - x[w, a, 0], x[w, b, 1] - x[w, a, 1], x[w, b, 2] - x[w, a, 2]
+        e2x, e2y, e2z = x[w, c, 0] - x[w, a, 0], x[w, c, 1] - x[w, a, 1], x[w, c, 2] - x[w, a, 2]
+        nx += e1y * e2z - e1z * e2y
+        ny += e1z * e2x - e1x * e2z
+        nz += e1x * e2y - e1y * e2x
+    nrm = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if nrm > 0.0:
+        nx, ny, nz = nx / nrm, ny / nrm, nz / nrm
+    return nx, ny, nz
+
+
+@cuda.jit(device=True, inline=True)
+def external_at(top, wor, x, w, i):
+    """Gravity's and the wind's force on vertex ``i`` (N): ``m g + (n·W) n``."""
+    m = wor.masses[w, i]
+    fx, fy, fz = m * wor.gravity[w, 0], m * wor.gravity[w, 1], m * wor.gravity[w, 2]
+    if wor.windy[w]:
+        nx, ny, nz = normal_at(top, x, w, i)
+        p = nx * wor.wind[w, 0] + ny * wor.wind[w, 1] + nz * wor.wind[w, 2]
+        fx += p * nx
+        fy += p * ny
+        fz += p * nz
+    return fx, fy, fz
+
+
+@cuda.jit(device=True, inline=True)
+def bending_at(top, x, w, i):
+    """``−(Q x)_i``: the material's bending force on vertex ``i``."""
+    bx = by = bz = 0.0
+    for e in range(top.bptr[i], top.bptr[i + 1]):
+        j = top.bidx[e]
+        q = top.bval[e]
+        bx -= q * x[w, j, 0]
+        by -= q * x[w, j, 1]
+        bz -= q * x[w, j, 2]
+    return bx, by, bz
+
+
+# --------------------------------------------------------------------------- one vertex's work
+@cuda.jit(device=True, inline=True)
+def explicit_at(top, wor, x, v, xo, vo, h, w, i):
+    """Symplectic Euler for vertex ``i`` of world ``w``: the force at ``(x, v)`` (springs and their
+    damping, bending, gravity, wind, drag), ``v' = v + h f/m`` on a free vertex (a pin keeps its
+    velocity), ``x' = x + h v'``, written to ``(xo, vo)``."""
+    xi, yi, zi = x[w, i, 0], x[w, i, 1], x[w, i, 2]
+    ux, uy, uz = v[w, i, 0], v[w, i, 1], v[w, i, 2]
+    if wor.free[w, i]:
+        fx, fy, fz = external_at(top, wor, x, w, i)
+        d = wor.drag[w]
+        fx -= d * ux
+        fy -= d * uy
+        fz -= d * uz
+        for q in range(top.inc_ptr[i], top.inc_ptr[i + 1]):
+            j = top.nbr[q]
+            dx, dy, dz = x[w, j, 0] - xi, x[w, j, 1] - yi, x[w, j, 2] - zi
+            length = math.sqrt(dx * dx + dy * dy + dz * dz)
+            if length < 1e-300:
+                continue
+            k, c = spring_constants(top, wor, w, q)
+            inv = 1.0 / length
+            ex, ey, ez = dx * inv, dy * inv, dz * inv
+            mag = k * (length - top.rest[q])
+            if c > 0.0:
+                mag += c * (
+                    (v[w, j, 0] - ux) * ex + (v[w, j, 1] - uy) * ey + (v[w, j, 2] - uz) * ez
+                )
+            fx += mag * ex
+            fy += mag * ey
+            fz += mag * ez
+        bx, by, bz = bending_at(top, x, w, i)
+        s = h / wor.masses[w, i]
+        ux += (fx + bx) * s
+        uy += (fy + by) * s
+        uz += (fz + bz) * s
+    vo[w, i, 0], vo[w, i, 1], vo[w, i, 2] = ux, uy, uz
+    xo[w, i, 0], xo[w, i, 1], xo[w, i, 2] = xi + ux * h, yi + uy * h, zi + uz * h
+
+
+@cuda.jit(device=True, inline=True)
+def copy_back_at(it, w, i):
+    """``(x, v) ← (xt, y)``: a run of an odd number of explicit steps ends in the second
+    buffers."""
+    for d in range(3):
+        it.x[w, i, d] = it.xt[w, i, d]
+        it.v[w, i, d] = it.y[w, i, d]
+
+
+@cuda.jit(device=True, inline=True)
+def start_at(it, w, i):
+    """``x^t ← x``: the step's start, which the initial guess reads (its normals included)."""
+    for d in range(3):
+        it.xt[w, i, d] = it.x[w, i, d]
+
+
+@cuda.jit(device=True, inline=True)
+def guess_at(top, wor, it, h, w, i):
+    """The inertial target ``y = x^t + h v + h² a`` (``a``: gravity and wind over the mass, on a
+    free vertex) and the adaptive initial guess: ``y`` with gravity's part of the last step's
+    acceleration clamped to ``[0, |g|]``; a pin goes to ``x^t + h v``. As the CPU's
+    ``_initial_guess``; ``x_s`` and the Chebyshev history start at the guess."""
+    free = wor.free[w, i]
+    gx, gy, gz = wor.gravity[w, 0], wor.gravity[w, 1], wor.gravity[w, 2]
+    gn = math.sqrt(gx * gx + gy * gy + gz * gz)
+    ax = ay = az = 0.0
+    along = 0.0
+    if free:
+        fx, fy, fz = external_at(top, wor, it.xt, w, i)
+        m = wor.masses[w, i]
+        ax, ay, az = fx / m, fy / m, fz / m
+        if gn > 0.0:
+            gx, gy, gz = gx / gn, gy / gn, gz / gn
+            along = it.aprev[w, i, 0] * gx + it.aprev[w, i, 1] * gy + it.aprev[w, i, 2] * gz
+            along = min(max(along, 0.0), gn)
+    hh = h * h
+    for d in range(3):
+        a = ax if d == 0 else (ay if d == 1 else az)
+        gd = gx if d == 0 else (gy if d == 1 else gz)
+        yc = it.v[w, i, d] * h + it.xt[w, i, d]
+        if free:
+            yc = yc + hh * a
+        it.y[w, i, d] = yc
+        xc = yc
+        if free and gn > 0.0:
+            xc = yc + hh * ((along - gn) * gd)
+        it.x[w, i, d] = xc
+        it.xs[w, i, d] = xc
+        it.prev2[w, i, d] = xc
+
+
+@cuda.jit(device=True, inline=True)
+def newton_at(top, wor, it, h, w, i):
+    """Vertex ``i``'s Newton step on the incremental potential ``Σ m/(2h²)|x − y|² + E(x)``: its
+    force ``r`` and 3×3 Hessian from its inertia, the drag, its springs (elastic, and their
+    damping over the step; each part of the Hessian clamped to be positive semi-definite) and its
+    bending row; ``x_i += H⁻¹ r``, and ``|r|²`` kept for the residual (the CPU's ``_sweep``
+    without contacts)."""
+    x, xt, y = it.x, it.xt, it.y
+    if not wor.free[w, i]:
+        it.stepped[w, i] = 0.0
+        return
+    inv_h = 1.0 / h
+    m_h2 = wor.masses[w, i] * inv_h * inv_h
+    drag_h = wor.drag[w] * inv_h
+    xi, yi, zi = x[w, i, 0], x[w, i, 1], x[w, i, 2]
+    mx, my, mz = xi - xt[w, i, 0], yi - xt[w, i, 1], zi - xt[w, i, 2]
+    f0 = -m_h2 * (xi - y[w, i, 0]) - drag_h * mx
+    f1 = -m_h2 * (yi - y[w, i, 1]) - drag_h * my
+    f2 = -m_h2 * (zi - y[w, i, 2]) - drag_h * mz
+    m = m_h2 + drag_h
+    h0, h1, h2, h3, h4, h5 = m, 0.0, 0.0, m, 0.0, m
+    for q in range(top.inc_ptr[i], top.inc_ptr[i + 1]):
+        j = top.nbr[q]
+        xj, yj, zj = x[w, j, 0], x[w, j, 1], x[w, j, 2]
+        dx, dy, dz = xj - xi, yj - yi, zj - zi
+        length = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if length < 1e-300:
+            continue
+        k, c = spring_constants(top, wor, w, q)
+        inv = 1.0 / length
+        ux, uy, uz = dx * inv, dy * inv, dz * inv
+        de = k * (length - top.rest[q])
+        cs = c * inv_h
+        mag = de
+        if cs > 0.0:
+            mag += cs * (
+                ((xj - xt[w, j, 0]) - mx) * ux
+                + ((yj - xt[w, j, 1]) - my) * uy
+                + ((zj - xt[w, j, 2]) - mz) * uz
+            )
+        f0, f1, f2, h0, h1, h2, h3, h4, h5 = spring_part(
+            ux, uy, uz, inv, mag, de, k, cs, f0, f1, f2, h0, h1, h2, h3, h4, h5
+        )
+    if top.bptr[i + 1] > top.bptr[i]:
+        b0, b1, b2 = bending_at(top, x, w, i)
+        f0 += b0
+        f1 += b1
+        f2 += b2
+        qd = top.bdiag[i]
+        h0 += qd
+        h3 += qd
+        h5 += qd
+    it.stepped[w, i] = f0 * f0 + f1 * f1 + f2 * f2
+    sx, sy, sz = solve3(h0, h1, h2, h3, h4, h5, f0, f1, f2)
+    x[w, i, 0] = xi + sx
+    x[w, i, 1] = yi + sy
+    x[w, i, 2] = zi + sz
+
+
+@cuda.jit(device=True, inline=True)
+def accelerate_at(wor, it, omega, extrapolate, w, i):
+    """After a sweep: Chebyshev's ``x ← ω (x − x_prev2) + x_prev2`` on a free vertex where
+    ``extrapolate``, then the history moves on (``x_prev2 ← x_s``, ``x_s ← x``: the iterate before
+    the next sweep)."""
+    go = extrapolate and wor.free[w, i]
+    for d in range(3):
+        xc = it.x[w, i, d]
+        if go:
+            xc = omega * (xc - it.prev2[w, i, d]) + it.prev2[w, i, d]
+            it.x[w, i, d] = xc
+        it.prev2[w, i, d] = it.xs[w, i, d]
+        it.xs[w, i, d] = xc
+
+
+@cuda.jit(device=True, inline=True)
+def finish_at(wor, it, h, w, i):
+    """The step's end: ``v = (x − x^t)/h`` on a free vertex (a pin keeps its velocity) and its
+    acceleration ``((x − x^t)/h − v)/h`` for the next initial guess."""
+    free = wor.free[w, i]
+    for d in range(3):
+        nv = (it.x[w, i, d] - it.xt[w, i, d]) / h
+        it.aprev[w, i, d] = (nv - it.v[w, i, d]) / h
+        if free:
+            it.v[w, i, d] = nv
+
+
+@cuda.jit(device=True, inline=True)
+def residual_part(wor, it, w, i):
+    """Vertex ``i``'s share of its world's residual: ``(|r_i|/(m_i g₀))², 1`` when it is free,
+    ``(0, 0)`` otherwise."""
+    if not wor.free[w, i]:
+        return 0.0, 0.0
+    g = wor.masses[w, i] * G0
+    return it.stepped[w, i] / (g * g), 1.0
+
+
+@cuda.jit(device=True, inline=True)
+def chebyshev_omega(k, rho, omega):
+    """Chebyshev's weight after sweep ``k`` (0-based): 1, then ``2/(2 − ρ²)``, then ``4/(4 −
+    ρ² ω)``."""
+    rho2 = rho * rho
+    if k == 0:
+        return 1.0
+    if k == 1:
+        return 2.0 / (2.0 - rho2)
+    return 4.0 / (4.0 - rho2 * omega)
+
+
+# --------------------------------------------------------------------------- a launch a stage
+@cuda.jit
+def explicit_substep(top, wor, it, h, forward):
+    """One symplectic Euler step of ``h`` for every vertex of every world (:func:`explicit_at`).
+    ``forward``: read ``(x, v)`` and write ``(xt, y)``, else the other way (two buffers, so every
+    thread reads the step's start)."""
+    t = cuda.grid(1)
+    n = wor.masses.shape[1]
+    if t >= wor.masses.shape[0] * n:
+        return
+    w = t // n
+    i = t - w * n
+    if forward:
+        explicit_at(top, wor, it.x, it.v, it.xt, it.y, h, w, i)
+    else:
+        explicit_at(top, wor, it.xt, it.y, it.x, it.v, h, w, i)
+
+
+@cuda.jit
+def copy_back(it):
+    """:func:`copy_back_at` for every vertex of every world."""
+    t = cuda.grid(1)
+    n = it.x.shape[1]
+    if t < it.x.shape[0] * n:
+        copy_back_at(it, t // n, t % n)
+
+
+@cuda.jit
+def vbd_start(it):
+    """:func:`start_at` for every vertex of every world."""
+    t = cuda.grid(1)
+    n = it.x.shape[1]
+    if t < it.x.shape[0] * n:
+        start_at(it, t // n, t % n)
+
+
+@cuda.jit
+def vbd_guess(top, wor, it, h):
+    """:func:`guess_at` for every vertex of every world."""
+    t = cuda.grid(1)
+    n = it.x.shape[1]
+    if t < it.x.shape[0] * n:
+        guess_at(top, wor, it, h, t // n, t % n)
+
+
+@cuda.jit
+def vbd_colour(top, wor, it, lo, count, h):
+    """:func:`newton_at` for one colour's vertices (``top.cverts[lo:lo + count]``) in every
+    world: no two vertices of a colour share a spring or a bending stencil, so they move at
+    once."""
+    t = cuda.grid(1)
+    if t >= wor.masses.shape[0] * count:
+        return
+    w = t // count
+    newton_at(top, wor, it, h, w, top.cverts[lo + (t - w * count)])
+
+
+@cuda.jit
+def vbd_accelerate(wor, it, omega, extrapolate):
+    """:func:`accelerate_at` for every vertex of every world."""
+    t = cuda.grid(1)
+    n = it.x.shape[1]
+    if t < it.x.shape[0] * n:
+        accelerate_at(wor, it, omega, extrapolate, t // n, t % n)
+
+
+@cuda.jit(device=True, inline=True)
+def block_sum(sums, counts, s, c):
+    """The block's sum of every thread's ``(s, c)`` (a tree in shared memory, the same order
+    every time: the same bits run to run); every thread gets it."""
+    tid = cuda.threadIdx.x
+    sums[tid] = s
+    counts[tid] = c
+    cuda.syncthreads()
+    step = cuda.blockDim.x // 2
+    while step > 0:
+        if tid < step:
+            sums[tid] += sums[tid + step]
+            counts[tid] += counts[tid + step]
+        cuda.syncthreads()
+        step //= 2
+    total, count = sums[0], counts[0]
+    cuda.syncthreads()  # (the arrays are reused by the next sum)
+    return total, count
+
+
+@cuda.jit
+def vbd_residual(wor, it, out):
+    """Each world's residual (one block a world, :data:`REDUCE` threads): the RMS over its free
+    vertices of the last sweep's ``|r_i|/(m_i g₀)``
+    (:func:`cloth_sim.integrators.vbd_residual.sweep_residual`), summed in float64."""
+    w = cuda.blockIdx.x
+    n = wor.masses.shape[1]
+    sums = cuda.shared.array(REDUCE, dtype=float64)
+    counts = cuda.shared.array(REDUCE, dtype=float64)
+    s = 0.0
+    c = 0.0
+    for i in range(cuda.threadIdx.x, n, cuda.blockDim.x):
+        a, b = residual_part(wor, it, w, i)
+        s += a
+        c += b
+    total, count = block_sum(sums, counts, s, c)
+    if cuda.threadIdx.x == 0:
+        out[w] = math.sqrt(total / count) if count > 0 else 0.0
+
+
+@cuda.jit
+def vbd_finish(wor, it, h):
+    """:func:`finish_at` for every vertex of every world."""
+    t = cuda.grid(1)
+    n = it.x.shape[1]
+    if t < it.x.shape[0] * n:
+        finish_at(wor, it, h, t // n, t % n)
+
+
+@cuda.jit
+def place(it, idx, points, worlds):
+    """``x[w, idx[k]] ← points[w, k]`` at rest, for the listed worlds (pins moved, a reset)."""
+    t = cuda.grid(1)
+    p = idx.shape[0]
+    if t >= worlds.shape[0] * p:
+        return
+    r = t // p
+    k = t - r * p
+    w = worlds[r]
+    i = idx[k]
+    for d in range(3):
+        it.x[w, i, d] = points[r, k, d]
+        it.v[w, i, d] = 0.0
+        it.aprev[w, i, d] = 0.0
+
+
+# --------------------------------------------------------------------------- a frame a launch
+@cuda.jit
+def frames_in_blocks(top, wor, it, cptr, run, out):
+    """``run.steps`` steps of every world in one launch, one thread block a world (its threads
+    share its vertices, :func:`cuda.syncthreads` between stages): symplectic Euler
+    (``run.method`` 0) or ``vbd`` (1) in ``run.substeps`` substeps of ``run.h``, each iterating
+    until the world's own residual is at most ``run.tolerance`` (measured every
+    ``run.check_every`` sweeps) or ``run.iterations`` sweeps. ``out[w]``: the last step's
+    residual (its substeps' worst), the sweeps done, the steps that ended above the tolerance
+    (as :class:`cloth_sim.integrators.vbd.VBD` counts them)."""
+    w = cuda.blockIdx.x
+    tid = cuda.threadIdx.x
+    size = cuda.blockDim.x
+    n = wor.masses.shape[1]
+    h = run.h
+    sums = cuda.shared.array(MAX_BLOCK, dtype=float64)
+    counts = cuda.shared.array(MAX_BLOCK, dtype=float64)
+    worst = 0.0
+    sweeps = 0
+    missed = 0
+    if run.method == 0:
+        for k in range(run.steps):
+            for i in range(tid, n, size):
+                if k % 2 == 0:
+                    explicit_at(top, wor, it.x, it.v, it.xt, it.y, h, w, i)
+                else:
+                    explicit_at(top, wor, it.xt, it.y, it.x, it.v, h, w, i)
+            cuda.syncthreads()
+        if run.steps % 2 == 1:
+            for i in range(tid, n, size):
+                copy_back_at(it, w, i)
+    else:
+        colours = cptr.shape[0] - 1
+        for part in range(run.steps * run.substeps):
+            if part % run.substeps == 0:
+                worst = 0.0
+            for i in range(tid, n, size):
+                start_at(it, w, i)
+            cuda.syncthreads()
+            for i in range(tid, n, size):
+                guess_at(top, wor, it, h, w, i)
+            cuda.syncthreads()
+            omega = 1.0
+            res = math.inf
+            done = 0
+            measured = -1
+            for k in range(run.iterations):
+                for c in range(colours):
+                    for q in range(cptr[c] + tid, cptr[c + 1], size):
+                        newton_at(top, wor, it, h, w, top.cverts[q])
+                    cuda.syncthreads()
+                done += 1
+                if done < run.iterations and done % run.check_every == 0:
+                    s = 0.0
+                    cnt = 0.0
+                    for i in range(tid, n, size):
+                        a, b = residual_part(wor, it, w, i)
+                        s += a
+                        cnt += b
+                    total, count = block_sum(sums, counts, s, cnt)
+                    res = math.sqrt(total / count) if count > 0 else 0.0
+                    measured = done
+                if k == run.iterations - 1 or res <= run.tolerance:
+                    break
+                if run.rho > 0.0:
+                    omega = chebyshev_omega(k, run.rho, omega)
+                    for i in range(tid, n, size):
+                        accelerate_at(wor, it, omega, k > 0, w, i)
+                    cuda.syncthreads()
+            if measured != done:  # the substep's last sweep's
+                s = 0.0
+                cnt = 0.0
+                for i in range(tid, n, size):
+                    a, b = residual_part(wor, it, w, i)
+                    s += a
+                    cnt += b
+                total, count = block_sum(sums, counts, s, cnt)
+                res = math.sqrt(total / count) if count > 0 else 0.0
+            for i in range(tid, n, size):
+                finish_at(wor, it, h, w, i)
+            cuda.syncthreads()
+            worst = max(worst, res)
+            sweeps += done
+            if part % run.substeps == run.substeps - 1 and worst > run.tolerance:
+                missed += 1
+    if tid == 0:
+        out[w, 0] = worst
+        out[w, 1] = sweeps
+        out[w, 2] = missed
+
+
+@cuda.jit(device=True, inline=True)
+def grid_residual(wor, it, partial, w, rank, size):
+    """World ``w``'s residual over the whole grid of a cooperative launch: each block's sum (in
+    shared memory, :func:`block_sum`) into ``partial[block]``, the grid synchronised, then every
+    thread adds the blocks' sums in block order (the same bits run to run, and the same answer in
+    every thread)."""
+    sums = cuda.shared.array(MAX_BLOCK, dtype=float64)
+    counts = cuda.shared.array(MAX_BLOCK, dtype=float64)
+    n = wor.masses.shape[1]
+    s = 0.0
+    c = 0.0
+    for i in range(rank, n, size):
+        a, b = residual_part(wor, it, w, i)
+        s += a
+        c += b
+    total, count = block_sum(sums, counts, s, c)
+    if cuda.threadIdx.x == 0:
+        partial[cuda.blockIdx.x, 0] = total
+        partial[cuda.blockIdx.x, 1] = count
+    cuda.cg.this_grid().sync()
+    total = 0.0
+    count = 0.0
+    for b in range(cuda.gridDim.x):
+        total += partial[b, 0]
+        count += partial[b, 1]
+    cuda.cg.this_grid().sync()  # (partial is written again by the next measure)
+    return math.sqrt(total / count) if count > 0 else 0.0
+
+
+@cuda.jit
+def frames_on_grid(top, wor, it, cptr, run, out, partial):
+    """:func:`frames_in_blocks` for worlds too large for a block: every thread of a cooperative
+    launch (as many blocks as the GPU holds at once) strides over every world's vertices, and the
+    whole grid synchronises between stages (``cuda.cg.this_grid().sync()``): one launch for the
+    run of steps however large the cloth. ``partial``: ``(blocks, 2)`` scratch for the residual's
+    sums. The worlds iterate together, until every world's residual is at most the tolerance."""
+    g = cuda.cg.this_grid()
+    rank = cuda.grid(1)
+    size = cuda.gridsize(1)
+    worlds = wor.masses.shape[0]
+    n = wor.masses.shape[1]
+    total = worlds * n
+    h = run.h
+    if run.method == 0:
+        for k in range(run.steps):
+            for t in range(rank, total, size):
+                w = t // n
+                if k % 2 == 0:
+                    explicit_at(top, wor, it.x, it.v, it.xt, it.y, h, w, t - w * n)
+                else:
+                    explicit_at(top, wor, it.xt, it.y, it.x, it.v, h, w, t - w * n)
+            g.sync()
+        if run.steps % 2 == 1:
+            for t in range(rank, total, size):
+                copy_back_at(it, t // n, t % n)
+        return
+    colours = cptr.shape[0] - 1
+    missed = 0
+    sweeps = 0
+    worst = 0.0
+    for part in range(run.steps * run.substeps):
+        if part % run.substeps == 0:
+            worst = 0.0
+        for t in range(rank, total, size):
+            start_at(it, t // n, t % n)
+        g.sync()
+        for t in range(rank, total, size):
+            guess_at(top, wor, it, h, t // n, t % n)
+        g.sync()
+        omega = 1.0
+        res = math.inf
+        done = 0
+        measured = -1
+        for k in range(run.iterations):
+            for c in range(colours):
+                lo = cptr[c]
+                count = cptr[c + 1] - lo
+                for t in range(rank, worlds * count, size):
+                    w = t // count
+                    newton_at(top, wor, it, h, w, top.cverts[lo + t - w * count])
+                g.sync()
+            done += 1
+            if done < run.iterations and done % run.check_every == 0:
+                res = 0.0
+                for w in range(worlds):
+                    res = max(res, grid_residual(wor, it, partial, w, rank, size))
+                measured = done
+            if k == run.iterations - 1 or res <= run.tolerance:
+                break
+            if run.rho > 0.0:
+                omega = chebyshev_omega(k, run.rho, omega)
+                for t in range(rank, total, size):
+                    accelerate_at(wor, it, omega, k > 0, t // n, t % n)
+                g.sync()
+        if measured != done:
+            res = 0.0
+            for w in range(worlds):
+                res = max(res, grid_residual(wor, it, partial, w, rank, size))
+        for t in range(rank, total, size):
+            finish_at(wor, it, h, t // n, t % n)
+        g.sync()
+        worst = max(worst, res)
+        sweeps += done
+        if part % run.substeps == run.substeps - 1 and worst > run.tolerance:
+            missed += 1
+    if rank < worlds:
+        out[rank, 0] = worst
+        out[rank, 1] = sweeps
+        out[rank, 2] = missed

@@ -1,0 +1,397 @@
+""":class:`cloth_sim.Simulator`'s and :class:`cloth_sim.BatchSimulator`'s faces on the CUDA device.
+
+``Simulator(model, integrator="vbd", dt=1/60, device="cuda")`` is a :class:`CudaSimulator`: one
+world of :class:`~cloth_sim.cuda.worlds.CudaWorlds`, with the CPU simulator's names for what it
+has. The state lives on the device; :attr:`CudaSimulator.positions` copies it to the host when
+asked, once a step (the node's publish asks once a tick). Asked for something the device does not
+run yet (:func:`cloth_sim.backends.refusal`), it raises ``ValueError`` naming the argument.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import cuda
+
+from .. import backends
+from ..backends import models_of
+from ..model import ClothModel
+from ..parameters import SCHEMA
+from ..state import SimulationDiverged, State
+from .worlds import CudaWorlds
+
+#: :class:`cloth_sim.Simulator`'s arguments that only tune what the device refuses (a strain
+#: limit's passes, the thickness contacts keep)
+_IGNORED = ("strain_limit_passes", "strain_limit_long_range", "strain_limit_method", "thickness")
+
+
+class CudaSimulator:
+    """One cloth on the CUDA device (see the module docstring); ``precision`` ``"float32"``
+    (default) or ``"float64"``."""
+
+    device = "cuda"
+
+    def __init__(
+        self,
+        model: ClothModel,
+        integrator: str = "symplectic_euler",
+        dt: float = 1e-3,
+        gravity=(0.0, 0.0, -9.81),
+        wind=None,
+        drag: float = 0.0,
+        max_speed: float = 1e3,
+        max_coordinate: float = 1e6,
+        integrator_options: dict | None = None,
+        precision: str = "float32",
+        launch: str = "auto",
+        block_threads: int | None = None,
+        **cpu_only,
+    ):
+        unknown = sorted(
+            set(cpu_only) - {"strain_limit", "colliders", "self_collision"} - set(_IGNORED)
+        )
+        if unknown:
+            raise TypeError(f"unexpected argument(s) {', '.join(unknown)}")
+        refused = backends.refusal(
+            "cuda",
+            integrator,
+            model,
+            strain_limit=cpu_only.get("strain_limit") is not None,
+            colliders=bool(cpu_only.get("colliders")),
+            self_collision=bool(cpu_only.get("self_collision")),
+        )
+        if refused is not None:
+            raise ValueError(refused[0])
+        self.model = model
+        self._gravity = np.asarray(gravity, np.float64)
+        self._wind = None if wind is None else np.asarray(wind, np.float64)
+        self._drag = float(drag)
+        self.max_speed, self.max_coordinate = float(max_speed), float(max_coordinate)
+        self._worlds = CudaWorlds(
+            [model],
+            integrator,
+            dt,
+            gravity,
+            wind,
+            drag,
+            integrator_options,
+            precision,
+            launch,
+            block_threads,
+        )
+        self._k = np.array(model.stiffness, dtype=np.float64)
+        self._c = np.array(model.damping, dtype=np.float64)
+        self._t_base = 0.0
+        self._checkpoint = None
+        self._host = None  # the positions and velocities copied at the last ask
+        self.steps_taken = 0
+        self._counters = dict(steps=0)
+
+    # ------------------------------------------------------------------ state
+    def _copy(self):
+        if self._host is None:
+            w = self._worlds
+            self._host = (w.positions_host()[0], w.velocities_host()[0])
+            for a in self._host:
+                a.setflags(write=False)
+        return self._host
+
+    @property
+    def positions(self) -> np.ndarray:
+        """``(n, 3)`` positions, copied from the device (once a step; read-only)."""
+        return self._copy()[0]
+
+    @positions.setter
+    def positions(self, x) -> None:
+        self._worlds.write([0], x=self._checked("positions", x)[None])
+        self._host = None
+
+    @property
+    def velocities(self) -> np.ndarray:
+        return self._copy()[1]
+
+    @velocities.setter
+    def velocities(self, v) -> None:
+        v = self._checked("velocities", v).copy()
+        v[self.model.pinned] = 0.0
+        self._worlds.write([0], v=v[None])
+        self._host = None
+
+    @property
+    def device_positions(self):
+        """The ``(n, 3)`` positions on the device (``__cuda_array_interface__``), no copy."""
+        return self._worlds.positions[0]
+
+    def _checked(self, name, a) -> np.ndarray:
+        a = np.asarray(a, np.float64)
+        if a.shape != (self.model.n_particles, 3) or not np.all(np.isfinite(a)):
+            raise ValueError(f"{name} must be finite with shape ({self.model.n_particles}, 3)")
+        return a
+
+    def move_pins(self, positions, indices=None) -> None:
+        pinned = np.flatnonzero(self.model.pinned)
+        idx = pinned if indices is None else np.asarray(indices, np.int64).ravel()
+        if not np.all(self.model.pinned[idx]):
+            raise ValueError(
+                f"move_pins: every index must be a pinned particle; pinned are {pinned.tolist()}"
+            )
+        self._worlds.place([0], idx, positions)
+        self._host = None
+
+    @property
+    def time(self) -> float:
+        return self._t_base + int(self._worlds.steps[0]) * self._worlds.dt
+
+    def set_time(self, t: float) -> None:
+        t = float(t)
+        if not (math.isfinite(t) and t >= 0):
+            raise ValueError(f"time must be a finite number >= 0, got {t!r}")
+        self._t_base, self._worlds.steps[0] = t, 0
+
+    def reset(self) -> None:
+        self._worlds.reset([0])
+        self._t_base = 0.0
+        self._host = None
+
+    def save_state(self) -> State:
+        x, v = self._copy()
+        saved = State(x, v)
+        saved.t_base, saved.method = self.time, self.integrator
+        return saved
+
+    def restore_state(self, saved: State) -> None:
+        self._worlds.write([0], x=saved.x[None], v=saved.v[None])
+        self.set_time(saved.time(self.dt))
+        self._host = None
+
+    # ------------------------------------------------------------------ parameters
+    @property
+    def dt(self) -> float:
+        return self._worlds.dt
+
+    @dt.setter
+    def dt(self, value: float) -> None:
+        t = self.time
+        self._worlds.dt = SCHEMA["dt"].check(value)
+        self.set_time(t)
+
+    @property
+    def integrator(self) -> str:
+        return self._worlds.method
+
+    @property
+    def launch_mode(self) -> str:
+        """How a run of steps is launched (:meth:`CudaWorlds.launch_mode`)."""
+        return self._worlds.launch_mode()
+
+    @property
+    def integrator_options(self) -> dict:
+        return dict(self._worlds.options)
+
+    def set_integrator(self, name: str, **options) -> None:
+        """Switch method on the device; positions and velocities carry over."""
+        x, v = self._copy()
+        t = self.time
+        old = self._worlds
+        new = CudaWorlds(
+            [self.model],
+            name,
+            self.dt,
+            self._gravity,
+            self._wind,
+            self._drag,
+            options,
+            old.precision,
+            old.launch,
+            old.block_threads,
+        )
+        self._worlds = new
+        self._apply_families()
+        self._worlds.write([0], x=x[None], v=v[None])
+        self.set_time(t)
+        self._counters = dict(steps=0)
+        self._host = None
+
+    @property
+    def integrator_stats(self) -> dict:
+        w = self._worlds
+        out = dict(self._counters, launches=w.launches, last_launches=w.last_launches)
+        if w.settings is not None:
+            res = float(w.last_residual[0])
+            out.update(
+                iterations=int(w.iterations[0]),
+                unconverged_steps=int(w.unconverged_steps[0]),
+                last_iterations=w.last_iterations,
+                last_residual=res,
+                converged=bool(res <= w.settings.tolerance),
+                tolerance=w.settings.tolerance,
+                last_substeps=w.last_substeps,
+            )
+        return out
+
+    @property
+    def gravity(self) -> np.ndarray:
+        return self._gravity.copy()
+
+    @gravity.setter
+    def gravity(self, g) -> None:
+        self._worlds.set([0], gravity=g)
+        self._gravity = np.asarray(g, np.float64)
+
+    @property
+    def wind(self):
+        return None if self._wind is None else self._wind.copy()
+
+    @wind.setter
+    def wind(self, w) -> None:
+        self._worlds.set([0], wind=np.zeros(3) if w is None else w)
+        self._wind = None if w is None else np.asarray(w, np.float64)
+
+    @property
+    def drag(self) -> float:
+        return self._drag
+
+    @drag.setter
+    def drag(self, value: float) -> None:
+        self._worlds.set([0], drag=value)
+        self._drag = float(value)
+
+    def stiffness(self, family: str) -> np.ndarray:
+        return self._k[self.model.family == self.model.family_index(family)].copy()
+
+    def set_stiffness(self, family: str, k: float) -> None:
+        self._worlds.set([0], stiffness={family: k})
+        self._k[self.model.family == self.model.family_index(family)] = float(k)
+
+    def set_damping(self, family: str, c: float) -> None:
+        self._worlds.set([0], damping={family: c})
+        self._c[self.model.family == self.model.family_index(family)] = float(c)
+
+    def _apply_families(self) -> None:
+        m = self.model
+        for f, name in enumerate(m.family_names):
+            sel = m.family == f
+            if not sel.any():
+                continue
+            k, c = self._k[sel], self._c[sel]
+            if np.any(k != m.stiffness[sel]) and np.all(k == k[0]):
+                self._worlds.set([0], stiffness={name: k[0]})
+            if np.any(c != m.damping[sel]) and np.all(c == c[0]):
+                self._worlds.set([0], damping={name: c[0]})
+
+    @property
+    def colliders(self) -> list:
+        return []
+
+    @property
+    def self_collision(self) -> bool:
+        return False
+
+    @property
+    def strain_limit(self):
+        return None
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, n: int = 1) -> None:
+        """``n`` steps of ``dt``; then the state is checked once (copied to the host: NaN, inf,
+        or past ``max_speed`` / ``max_coordinate``), and on divergence the state before these
+        ``n`` steps is restored and :class:`~cloth_sim.simulator.SimulationDiverged` raised."""
+        w = self._worlds
+        it = w.it
+        if self._checkpoint is None:
+            self._checkpoint = (cuda.device_array_like(it.x), cuda.device_array_like(it.v))
+        self._checkpoint[0].copy_to_device(it.x)
+        self._checkpoint[1].copy_to_device(it.v)
+        steps_before = int(w.steps[0])
+        w.step(n)
+        self._counters["steps"] += int(n)
+        self._host = None
+        x, v = self._copy()
+        if not (
+            np.all(np.isfinite(x))
+            and np.all(np.isfinite(v))
+            and float(np.max(np.einsum("ij,ij->i", v, v), initial=0.0)) <= self.max_speed**2
+            and float(np.max(np.abs(x), initial=0.0)) <= self.max_coordinate
+        ):
+            it.x.copy_to_device(self._checkpoint[0])
+            it.v.copy_to_device(self._checkpoint[1])
+            w.steps[0] = steps_before
+            self._host = None
+            raise SimulationDiverged(
+                f"the state left its bounds within {int(n)} step(s) of dt={self.dt} on the cuda "
+                "device; the state before them is restored"
+            )
+        self.steps_taken += int(n)
+
+    def advance(self, t: float) -> int:
+        n = max(0, math.ceil((t - self.time) / self.dt - 1e-9))
+        self.step(n)
+        return n
+
+    # ------------------------------------------------------------------ diagnostics
+    def energy(self) -> dict:
+        """Kinetic, spring (Hooke's, and the material's bending) and gravitational energy (J),
+        from the positions copied to the host."""
+        x, v = self._copy()
+        m = self.model
+        kinetic = 0.5 * float(np.sum(m.masses * np.einsum("ij,ij->i", v, v)))
+        d = x[m.springs[:, 1]] - x[m.springs[:, 0]]
+        stretch = np.linalg.norm(d, axis=1) - m.rest_lengths
+        spring = 0.5 * float(np.sum(self._k * stretch * stretch))
+        if m.bending is not None:
+            spring += m.bending.energy(x)
+        gravity = -float(np.sum(m.masses * (x @ self._gravity)))
+        return {"kinetic": kinetic, "spring": spring, "gravity": gravity}
+
+    def strains(self, limited_only: bool = False) -> np.ndarray:
+        x, _ = self._copy()
+        m = self.model
+        sel = m.strain_limited if limited_only else slice(None)
+        d = x[m.springs[sel, 1]] - x[m.springs[sel, 0]]
+        return np.linalg.norm(d, axis=1) / m.rest_lengths[sel] - 1.0
+
+    def max_strain(self) -> float:
+        s = self.strains()
+        return float(s.max()) if len(s) else 0.0
+
+
+class CudaBatchSimulator(CudaWorlds):
+    """:class:`cloth_sim.BatchSimulator` on the CUDA device: ``worlds`` copies of ``model`` (or a
+    list of models of one topology), stepped in the same launches; :meth:`set` and
+    :meth:`reset` take world indices."""
+
+    device = "cuda"
+
+    def __init__(
+        self,
+        models,
+        worlds: int | None = None,
+        integrator: str = "vbd",
+        dt: float = 1 / 60,
+        **kwargs,
+    ):
+        super().__init__(models_of(models, worlds), integrator, dt, **kwargs)
+
+    @property
+    def time(self) -> np.ndarray:
+        """Each world's simulated time (s)."""
+        return self.times()
+
+    def advance(self, t: float) -> int:
+        """Step every world until the first world's time reaches ``t``; the steps taken."""
+        n = max(0, math.ceil((t - float(self.times().min())) / self.dt - 1e-9))
+        self.step(n)
+        return n
+
+    @property
+    def integrator_stats(self) -> dict:
+        out = dict(launches=self.launches, last_launches=self.last_launches)
+        if self.settings is not None:
+            out.update(
+                last_iterations=self.last_iterations,
+                last_residual=self.last_residual.copy(),
+                tolerance=self.settings.tolerance,
+                last_substeps=self.last_substeps,
+            )
+        return out

@@ -1,0 +1,468 @@
+"""N cloths of one topology stepped together on a CUDA device: each world its own state and its
+own masses, pins, gravity, wind, drag and family stiffness and damping.
+
+A step is a few launches whatever the number of worlds (every kernel takes every world's vertices
+at once): symplectic Euler one launch a substep; ``vbd`` two to start a substep, one a colour an
+iteration, one for Chebyshev's extrapolation, one for the residual at each measure (its ``W``
+numbers come back to the host, the only copy a step makes) and one to end it. :attr:`launches`
+counts them.
+
+The same methods and defaults as the CPU (:mod:`cloth_sim.integrators.explicit`'s symplectic Euler
+and :class:`~cloth_sim.integrators.vbd.VBD`'s general sweep: substeps chosen from the cloth, a
+relative residual against ``tolerance`` measured every ``check_every`` iterations, Chebyshev's
+``rho``). What stays on the CPU for now: colliders, self-contact, the strain limit, grippers and
+Choi & Ko's nonlinear pairs (:func:`cloth_sim.backends.refusal` names them).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+from numba import cuda
+
+from .. import backends
+from ..integrators.vbd import VBD, substeps_needed
+from ..model import ClothModel
+from ..parameters import SCHEMA
+from . import kernels as K
+from . import simulated
+from .layout import Iterate, Run, Topology, Worlds, same_topology, topology
+
+#: floating point on the device: float32 (the default: half the bytes a sweep moves) or float64
+PRECISIONS = {"float32": np.float32, "float64": np.float64}
+#: how a run of steps is launched: "blocks" (one launch, a thread block a world), "grid" (one
+#: cooperative launch, the whole GPU on every world, synchronised between stages), "stages" (a
+#: launch a stage: a colour's sweep, the residual, ...), "auto" (blocks for a world of at most
+#: BLOCK_WORLD vertices, else grid)
+LAUNCHES = ("auto", "blocks", "grid", "stages")
+#: the largest world "auto" runs a block a world: 64×64 (its block's threads then take four
+#: vertices each; a larger world alone would leave all but one multiprocessor idle)
+BLOCK_WORLD = 4096
+#: threads a block of the cooperative launch
+GRID_THREADS = 256
+#: vertices a thread takes in a block where the worlds fill the GPU's multiprocessors
+VERTICES_PER_THREAD = 4
+#: ``vbd``'s options here (the CPU's others concern contacts and the node's time budget)
+VBD_OPTIONS = ("iterations", "tolerance", "check_every", "substeps", "rho")
+
+
+def _grid(total: int) -> tuple[int, int]:
+    """A launch's blocks and threads for ``total`` threads (one a vertex of a world)."""
+    threads = max(1, min(K.BLOCK, total))
+    return (total + threads - 1) // threads, threads
+
+
+class CudaWorlds:
+    """``models`` (one per world, one topology: :func:`~cloth_sim.cuda.layout.same_topology`)
+    stepped by ``integrator`` (``cloth_sim.backends.METHODS["cuda"]``) at ``dt`` on the CUDA
+    device.
+
+    ``gravity``, ``wind`` (``None`` or a 3-vector, as :class:`cloth_sim.Simulator`'s) and ``drag``
+    start the same in every world; :meth:`set` changes them per world. ``precision``: the device's
+    floating point (:data:`PRECISIONS`)."""
+
+    def __init__(
+        self,
+        models: list[ClothModel],
+        integrator: str = "vbd",
+        dt: float = 1 / 60,
+        gravity=(0.0, 0.0, -9.81),
+        wind=None,
+        drag: float = 0.0,
+        integrator_options: dict | None = None,
+        precision: str = "float32",
+        launch: str = "auto",
+        block_threads: int | None = None,
+    ):
+        if not models:
+            raise ValueError("models: at least one world")
+        same_topology(models)
+        first = models[0]
+        refused = backends.refusal("cuda", integrator, first)
+        if refused is not None:
+            raise ValueError(refused[0])
+        if precision not in PRECISIONS:
+            raise ValueError(
+                f"precision must be one of {', '.join(PRECISIONS)}, got {precision!r}"
+            )
+        if launch not in LAUNCHES:
+            raise ValueError(f"launch must be one of {', '.join(LAUNCHES)}, got {launch!r}")
+        if block_threads is not None and (
+            isinstance(block_threads, bool) or block_threads not in [2**p for p in range(11)]
+        ):
+            raise ValueError(
+                f"block_threads must be None (chosen) or a power of two in [1, {K.MAX_BLOCK}], "
+                f"got {block_threads!r}"
+            )
+        options = dict(integrator_options or {})
+        if integrator == "vbd":
+            unknown = sorted(set(options) - set(VBD_OPTIONS))
+            if unknown:
+                raise ValueError(
+                    f"vbd option(s) {', '.join(unknown)} not on the cuda device; it takes "
+                    f"{', '.join(VBD_OPTIONS)}"
+                )
+            # the CPU method checks the options and chooses what they leave open (its iterations'
+            # cap, the substeps "auto"): one set of rules on both devices
+            self.settings = VBD(first, **options)
+        elif options:
+            raise ValueError(f"{integrator} takes no options, got {sorted(options)}")
+        else:
+            self.settings = None
+        self.method = integrator
+        self.options = options
+        self.models = list(models)
+        self.precision = precision
+        real = PRECISIONS[precision]
+        self.real = real
+        worlds, n = len(models), first.n_particles
+        self.worlds, self.n = worlds, n
+        top, self._cptr = topology(first, real)
+        self._top_host = top
+        self.top = Topology(*(cuda.to_device(a) for a in top))
+        self.families = first.family_names
+        fams = len(first.family_names)
+        g = np.array(SCHEMA["gravity"].check(gravity), dtype=np.float64)
+        wind_v = np.zeros(3) if wind is None else np.asarray(wind, np.float64)
+        if wind_v.shape != (3,) or not np.all(np.isfinite(wind_v)):
+            raise ValueError(f"wind must be None or a finite 3-vector, got {wind!r}")
+        self._host = Worlds(
+            masses=np.stack([np.asarray(m.masses, real) for m in models]),
+            free=np.stack([~np.asarray(m.pinned, bool) for m in models]).astype(np.int8),
+            gravity=np.tile(g.astype(real), (worlds, 1)),
+            wind=np.tile(wind_v.astype(real), (worlds, 1)),
+            windy=np.full(worlds, wind is not None and bool(np.any(wind_v)), np.int8),
+            drag=np.full(worlds, SCHEMA["drag"].check(drag), real),
+            kfam=np.full((worlds, fams), -1.0, real),
+            cfam=np.full((worlds, fams), -1.0, real),
+        )
+        self.wor = Worlds(*(cuda.to_device(a) for a in self._host))
+        x0 = np.stack([np.asarray(m.positions, real) for m in models])
+        self._x0 = x0
+        self.it = Iterate(
+            *(
+                cuda.to_device(x0 if name == "x" else np.zeros_like(x0))
+                for name in Iterate._fields[:-1]
+            ),
+            cuda.to_device(np.zeros((worlds, n), real)),
+        )
+        self.launch = launch
+        self.block_threads = block_threads
+        self._out = cuda.device_array((worlds, 3), np.float64)
+        self._cptr_device = cuda.to_device(self._cptr.astype(np.int32))
+        self._partial = cuda.device_array((1, 2), np.float64)
+        #: each world's steps that ended above the tolerance, and the sweeps of every step
+        #: (each world's); ``last_iterations``: the sweeps of the last step (of the last run of
+        #: steps in one launch: their mean, the most any world took)
+        self.unconverged_steps = np.zeros(worlds, np.int64)
+        self.iterations = np.zeros(worlds, np.int64)
+        self.dt = SCHEMA["dt"].check(dt)
+        self.steps = np.zeros(worlds, np.int64)
+        self.launches = 0
+        self.last_launches = 0
+        self.last_residual = np.zeros(worlds)
+        self.last_iterations = 0
+        self.last_substeps = 1
+        self._residual = cuda.device_array(worlds, np.float64)
+        self._substeps_key = None
+        self._substeps = 1
+
+    # ------------------------------------------------------------------ per world
+    def _ids(self, worlds) -> np.ndarray:
+        return backends.world_ids(worlds, self.worlds)
+
+    def set(
+        self, worlds=None, *, gravity=None, wind=None, drag=None, stiffness=None, damping=None
+    ):
+        """Per-world parameters for ``worlds`` (indices; ``None``: all): ``gravity`` and ``wind``
+        (a 3-vector, or one a world), ``drag``, and ``stiffness`` / ``damping`` as ``{family:
+        value}`` (N/m, N·s/m; every spring of the family). Everything is checked before anything
+        changes."""
+        ids = self._ids(worlds)
+        h = self._host
+        new = {name: getattr(h, name).copy() for name in Worlds._fields}
+
+        def rows(name, value):
+            a = np.asarray(value, np.float64)
+            a = np.broadcast_to(a, (len(ids), 3)) if a.shape in ((3,), (len(ids), 3)) else None
+            if a is None or not np.all(np.isfinite(a)):
+                raise ValueError(
+                    f"{name} must be a finite 3-vector or one a world ({len(ids)}, 3), "
+                    f"got {value!r}"
+                )
+            return a
+
+        if gravity is not None:
+            new["gravity"][ids] = rows("gravity", gravity)
+        if wind is not None:
+            a = rows("wind", wind)
+            new["wind"][ids] = a
+            new["windy"][ids] = np.any(a != 0.0, axis=1)
+        if drag is not None:
+            new["drag"][ids] = SCHEMA["drag"].check(float(drag))
+        for name, table, given in (("stiffness", "kfam", stiffness), ("damping", "cfam", damping)):
+            for fam, value in (given or {}).items():
+                if fam not in self.families:
+                    raise ValueError(
+                        f"{name}: unknown family {fam!r}; this cloth has "
+                        f"{', '.join(self.families)}"
+                    )
+                v = float(value)
+                if not (math.isfinite(v) and v >= 0.0):
+                    raise ValueError(
+                        f"{name}[{fam!r}] must be a finite number >= 0, got {value!r}"
+                    )
+                new[table][ids, self.families.index(fam)] = v
+        self._host = Worlds(**new)
+        for name in ("gravity", "wind", "windy", "drag", "kfam", "cfam"):
+            getattr(self.wor, name).copy_to_device(getattr(self._host, name))
+
+    def reset(self, worlds=None) -> None:
+        """Back to the models' initial positions, at rest, at time 0, for ``worlds`` (``None``:
+        all); their parameters are kept."""
+        ids = self._ids(worlds)
+        if not len(ids):
+            return
+        idx = np.arange(self.n, dtype=np.int32)
+        self._place(ids, idx, self._x0[ids])
+        self.steps[ids] = 0
+
+    def _place(self, ids, idx, points) -> None:
+        total = len(ids) * len(idx)
+        K.place[_grid(total)](
+            self.it,
+            cuda.to_device(np.asarray(idx, np.int32)),
+            cuda.to_device(np.ascontiguousarray(points, self.real)),
+            cuda.to_device(np.asarray(ids, np.int32)),
+        )
+        self.launches += 1
+
+    def place(self, worlds, indices, points) -> None:
+        """Put vertices ``indices`` of ``worlds`` at ``points`` (``(worlds, p, 3)`` or ``(p, 3)``
+        for all of them), at rest."""
+        ids = self._ids(worlds)
+        idx = np.asarray(indices, np.int64).ravel()
+        if idx.size and (idx.min() < 0 or idx.max() >= self.n):
+            raise ValueError(f"indices must lie in [0, {self.n - 1}]")
+        p = np.asarray(points, np.float64)
+        if p.shape == (len(idx), 3):
+            p = np.broadcast_to(p, (len(ids), len(idx), 3))
+        if p.shape != (len(ids), len(idx), 3) or not np.all(np.isfinite(p)):
+            raise ValueError(
+                f"points must be finite, ({len(idx)}, 3) or ({len(ids)}, {len(idx)}, 3); "
+                f"got {np.shape(points)}"
+            )
+        self._place(ids, idx, p)
+
+    # ------------------------------------------------------------------ state
+    @property
+    def positions(self):
+        """``(worlds, n, 3)`` positions on the device (``__cuda_array_interface__``: torch and
+        CuPy read them without a copy)."""
+        return self.it.x
+
+    def positions_host(self) -> np.ndarray:
+        return self.it.x.copy_to_host().astype(np.float64)
+
+    def velocities_host(self) -> np.ndarray:
+        return self.it.v.copy_to_host().astype(np.float64)
+
+    def write(self, worlds, x=None, v=None) -> None:
+        """Set whole worlds' positions and/or velocities (``(len(worlds), n, 3)``) from the
+        host."""
+        ids = self._ids(worlds)
+        for name, value in (("x", x), ("v", v)):
+            if value is None:
+                continue
+            a = np.asarray(value, np.float64).reshape(len(ids), self.n, 3)
+            host = getattr(self.it, name).copy_to_host()
+            host[ids] = a
+            getattr(self.it, name).copy_to_device(host.astype(self.real))
+
+    def times(self) -> np.ndarray:
+        return self.steps * self.dt
+
+    # ------------------------------------------------------------------ stepping
+    def substeps(self) -> int:
+        """``vbd``'s substeps a step (every world takes the most any world needs)."""
+        s = self.settings
+        if s is None or s.substeps is not None:
+            return 1 if s is None else s.substeps
+        h = self._host
+        key = (self.dt, h.kfam.tobytes(), h.cfam.tobytes(), h.masses.tobytes(), h.free.tobytes())
+        if key != self._substeps_key:
+            top = self._top_host
+            worst = 1
+            for w in range(self.worlds):
+                k = np.where(h.kfam[w, top.fam] >= 0, h.kfam[w, top.fam], top.k)
+                c = np.where(h.cfam[w, top.fam] >= 0, h.cfam[w, top.fam], top.c)
+                bdiag = top.bdiag if self.models[0].bending is not None else np.zeros(0)
+                worst = max(
+                    worst,
+                    substeps_needed(
+                        top.inc_ptr,
+                        k.astype(np.float64),
+                        c.astype(np.float64),
+                        bdiag,
+                        h.masses[w].astype(np.float64),
+                        h.free[w].astype(bool),
+                        self.dt,
+                    ),
+                )
+            self._substeps_key, self._substeps = key, worst
+        return self._substeps
+
+    def launch_mode(self) -> str:
+        """How a run of steps is launched (:data:`LAUNCHES`): ``"auto"`` is ``"blocks"`` for a
+        world of at most :data:`BLOCK_WORLD` vertices, else ``"grid"``."""
+        if self.launch != "auto":
+            return self.launch
+        return "blocks" if self.n <= BLOCK_WORLD else "grid"
+
+    def threads(self) -> int:
+        """The threads of a world's block in :func:`frames_in_blocks`: ``block_threads``, or
+        the power of two that gives each thread about :data:`VERTICES_PER_THREAD` vertices (one
+        where the worlds are fewer than a GPU's multiprocessors), at most 1024."""
+        if self.block_threads is not None:
+            return self.block_threads
+        per = 1 if self.worlds < 132 else VERTICES_PER_THREAD
+        want = max(1, -(-self.n // per))
+        least = 1 if simulated() else 32  # (the simulator runs a Python thread a thread)
+        return int(min(K.MAX_BLOCK, max(least, 1 << (want - 1).bit_length())))
+
+    def step(self, n: int = 1) -> None:
+        """``n`` steps of :attr:`dt` in every world."""
+        n = int(n)
+        if n <= 0:
+            return
+        before = self.launches
+        mode = self.launch_mode()
+        if mode in ("blocks", "grid"):
+            self._run_whole(n, mode)
+        else:
+            for _ in range(n):
+                if self.method == "vbd":
+                    self._vbd_step()
+                else:
+                    self._explicit_step()
+        self.steps += n
+        self.last_launches = (self.launches - before) / n
+
+    def _run_whole(self, n: int, mode: str) -> None:
+        s = self.settings
+        vbd = self.method == "vbd"
+        parts = self.substeps()
+        run = Run(
+            h=self.real(self.dt / parts if vbd else self.dt),
+            steps=n,
+            substeps=parts,
+            method=1 if vbd else 0,
+            iterations=s.iterations if vbd else 0,
+            tolerance=s.tolerance if vbd else 0.0,
+            check_every=s.check_every if vbd else 1,
+            rho=s.rho if vbd else 0.0,
+        )
+        if mode == "blocks":
+            K.frames_in_blocks[self.worlds, self.threads()](
+                self.top, self.wor, self.it, self._cptr_device, run, self._out
+            )
+        else:
+            blocks, threads = self._grid_shape(run)
+            K.frames_on_grid[blocks, threads](
+                self.top, self.wor, self.it, self._cptr_device, run, self._out, self._partial
+            )
+        self.launches += 1
+        self.last_substeps = parts
+        if vbd:
+            out = self._out.copy_to_host()
+            self.last_residual = out[:, 0]
+            self.iterations += out[:, 1].astype(np.int64)
+            self.last_iterations = int(out[:, 1].max()) // n
+            self.unconverged_steps += out[:, 2].astype(np.int64)
+
+    def _grid_shape(self, run) -> tuple[int, int]:
+        """The cooperative launch's blocks (as many as the GPU holds at once, at most one a
+        :data:`GRID_THREADS` vertices) and threads a block; its scratch for the residual."""
+        threads = 1 if simulated() else GRID_THREADS
+        total = self.worlds * self.n
+        blocks = max(1, -(-total // threads))
+        if simulated():
+            blocks = 1  # (the simulator's cooperative grids have one block)
+        else:
+            args = (self.top, self.wor, self.it, self._cptr_device, run, self._out, self._partial)
+            sig = tuple(numba.typeof(a) for a in args)
+            K.frames_on_grid.compile(sig)
+            blocks = min(
+                blocks, K.frames_on_grid.overloads[sig].max_cooperative_grid_blocks(threads)
+            )
+        if self._partial is None or self._partial.shape[0] < blocks:
+            self._partial = cuda.device_array((blocks, 2), np.float64)
+        return blocks, threads
+
+    def _explicit_step(self) -> None:
+        total = self.worlds * self.n
+        launch = _grid(total)
+        h = self.real(self.dt)
+        K.explicit_substep[launch](self.top, self.wor, self.it, h, True)
+        K.copy_back[launch](self.it)
+        self.launches += 2
+        self.last_substeps = 1
+
+    def _vbd_step(self) -> None:
+        s = self.settings
+        parts = self.substeps()
+        iterations, worst = 0, np.zeros(self.worlds)
+        for _ in range(parts):
+            done, res = self._vbd_substep(self.dt / parts)
+            iterations += done
+            worst = np.maximum(worst, res)
+        self.last_iterations = iterations
+        self.last_substeps = parts
+        self.last_residual = worst
+        self.iterations += iterations
+        self.unconverged_steps += worst > s.tolerance
+
+    def _measure(self) -> np.ndarray:
+        K.vbd_residual[self.worlds, K.REDUCE](self.wor, self.it, self._residual)
+        self.launches += 1
+        return self._residual.copy_to_host()
+
+    def _vbd_substep(self, dt: float):
+        s = self.settings
+        top, wor, it = self.top, self.wor, self.it
+        total = self.worlds * self.n
+        launch = _grid(total)
+        h = self.real(dt)
+        K.vbd_start[launch](it)
+        K.vbd_guess[launch](top, wor, it, h)
+        self.launches += 2
+        cptr = self._cptr
+        res = np.full(self.worlds, np.inf)
+        omega = 1.0
+        done, measured = 0, -1
+        for k in range(s.iterations):
+            for c in range(len(cptr) - 1):
+                count = int(cptr[c + 1] - cptr[c])
+                K.vbd_colour[_grid(self.worlds * count)](top, wor, it, int(cptr[c]), count, h)
+            self.launches += len(cptr) - 1
+            done += 1
+            if done < s.iterations and done % s.check_every == 0:
+                res, measured = self._measure(), done
+            if k == s.iterations - 1 or np.all(res <= s.tolerance):
+                break
+            if s.rho > 0.0:
+                rho2 = s.rho * s.rho
+                omega = (
+                    1.0
+                    if k == 0
+                    else (2.0 / (2.0 - rho2) if k == 1 else 4.0 / (4.0 - rho2 * omega))
+                )
+                K.vbd_accelerate[launch](wor, it, self.real(omega), k > 0)
+                self.launches += 1
+        if measured != done:  # the step's last sweep's
+            res = self._measure()
+        K.vbd_finish[launch](wor, it, h)
+        self.launches += 1
+        return done, res

@@ -1,0 +1,95 @@
+"""The device seam (cloth_sim.backends): a device is its own axis beside the method; a device that
+cannot run here is refused with what is missing; a batch of worlds on the CPU has the GPU batch's
+names and each world's parameters."""
+
+import numpy as np
+import pytest
+
+from cloth_sim import BatchSimulator, ClothModel, Simulator, backends
+
+
+def sheet():
+    return ClothModel.grid(4, 4, 0.05, 0.01, stiffness=1e2, damping=0.05, pinned=[(0, 0), (0, 3)])
+
+
+def test_the_cpu_is_the_default_device():
+    sim = Simulator(sheet(), device="cpu")
+    assert sim.device == "cpu" and type(sim) is Simulator
+    assert Simulator(sheet()).device == "cpu"
+
+
+@pytest.mark.parametrize("device", ["gpu", "CUDA", "", 3])
+def test_an_unknown_device_is_named(device):
+    with pytest.raises(ValueError, match=r"device must be one of cpu, cuda, got "):
+        Simulator(sheet(), device=device)
+    with pytest.raises(ValueError, match=r"device must be one of cpu, cuda, got "):
+        BatchSimulator(sheet(), device=device)
+
+
+def test_cuda_runs_or_says_what_is_missing():
+    why = backends.problem("cuda")
+    if why is None:  # a machine with a GPU (or the simulator): the device's own simulator
+        assert Simulator(sheet(), device="cuda").device == "cuda"
+        return
+    assert "numba-cuda" in why or "CUDA device" in why
+    with pytest.raises(ValueError) as err:
+        Simulator(sheet(), integrator="vbd", device="cuda")
+    assert str(err.value) == why
+    with pytest.raises(ValueError) as err:
+        BatchSimulator(sheet(), worlds=4, device="cuda")
+    assert str(err.value) == why
+
+
+def test_without_numba_cuda_the_error_says_how_to_install_it(monkeypatch):
+    real = backends.importlib.util.find_spec
+    monkeypatch.setattr(
+        backends.importlib.util,
+        "find_spec",
+        lambda name: None if name == "numba_cuda" else real(name),
+    )
+    with pytest.raises(ValueError, match=r"needs numba-cuda, which is not installed: `make gpu`"):
+        Simulator(sheet(), device="cuda")
+
+
+def test_a_method_the_device_lacks_is_named():
+    backends.check_method("rk4", "cpu")
+    backends.check_method("vbd", "cuda")
+    with pytest.raises(
+        ValueError,
+        match=r"integrator 'rk4' has no cuda backend; on cuda: "
+        r"symplectic_euler, vbd",
+    ):
+        backends.check_method("rk4", "cuda")
+
+
+def test_a_cpu_batch_is_its_worlds_each_with_its_parameters():
+    m = sheet()
+    batch = BatchSimulator(m, worlds=3, integrator="symplectic_euler", dt=1e-3)
+    batch.set([1], wind=(0.0, 0.0, 1.0), drag=0.02)
+    batch.set([2], stiffness={"structural": 50.0}, gravity=(0.0, -9.81, 0.0))
+    batch.step(20)
+    alone = [Simulator(m, integrator="symplectic_euler", dt=1e-3) for _ in range(3)]
+    alone[1].wind, alone[1].drag = (0.0, 0.0, 1.0), 0.02
+    alone[2].set_stiffness("structural", 50.0)
+    alone[2].gravity = (0.0, -9.81, 0.0)
+    for s in alone:
+        s.step(20)
+    x = batch.positions_host()
+    assert x.shape == (3, m.n_particles, 3)
+    for w in range(3):
+        assert np.array_equal(x[w], alone[w].positions)
+    batch.reset([0])
+    assert np.array_equal(batch.positions[0], m.positions)
+    assert np.array_equal(batch.positions[1], x[1])
+    assert batch.time.tolist() == pytest.approx([0.0, 0.02, 0.02])
+
+
+def test_batch_arguments_are_checked():
+    m = sheet()
+    with pytest.raises(ValueError, match=r"worlds must be an integer in \[1, 1000000\]"):
+        BatchSimulator(m, worlds=0)
+    with pytest.raises(ValueError, match=r"worlds=3 but 2 models were given"):
+        BatchSimulator([m, m], worlds=3)
+    batch = BatchSimulator(m, worlds=2)
+    with pytest.raises(ValueError, match=r"worlds: indices must lie in \[0, 1\]"):
+        batch.reset([2])

@@ -1,0 +1,314 @@
+"""The CUDA backend against the CPU: the same method and options give the same cloth (float64 on
+the device: to rounding; float32: within the tolerance the docs state), per-world parameters,
+resets, and the errors for what the device does not run. Tiny cloths: on numba-cuda's simulator
+each thread is a Python thread."""
+
+import numpy as np
+import pytest
+from numba import cuda
+
+from cloth_sim import BatchSimulator, ClothModel, SimulationDiverged, Simulator
+from cloth_sim.contact.colliders import Plane
+from cloth_sim.cuda import simulated
+
+WIND = (0.3, 0.1, 0.5)
+
+
+def sheet(rows=4, cols=4, **kw):
+    kw.setdefault("stiffness", 1e2)
+    kw.setdefault("damping", 0.05)
+    return ClothModel.grid(rows, cols, 0.05, 0.01, pinned=[(0, 0), (0, cols - 1)], **kw)
+
+
+def cotton(n=4):
+    return ClothModel.grid(n, n, material="cotton", size=(0.2, 0.2), pinned=[(0, 0), (0, n - 1)])
+
+
+def test_symplectic_euler_is_the_cpus_to_rounding_in_float64():
+    m = cotton()  # springs with damping, and the material's bending
+    cpu = Simulator(m, integrator="symplectic_euler", dt=2e-4, wind=WIND, drag=0.01)
+    gpu = Simulator(
+        m,
+        integrator="symplectic_euler",
+        dt=2e-4,
+        wind=WIND,
+        drag=0.01,
+        device="cuda",
+        precision="float64",
+    )
+    assert m.bending is not None
+    cpu.step(25)
+    gpu.step(25)
+    assert gpu.device == "cuda"
+    assert np.max(np.abs(gpu.positions - cpu.positions)) < 1e-14
+    assert np.max(np.abs(gpu.velocities - cpu.velocities)) < 1e-12
+    assert gpu.time == pytest.approx(cpu.time)
+    assert np.max(np.abs(cpu.positions - m.positions)) > 1e-4  # it moved
+
+
+def test_float32_stays_within_its_rounding():
+    m = sheet()
+    cpu = Simulator(m, integrator="symplectic_euler", dt=1e-3, wind=WIND)
+    gpu = Simulator(m, integrator="symplectic_euler", dt=1e-3, wind=WIND, device="cuda")
+    cpu.step(40)
+    gpu.step(40)
+    moved = np.max(np.abs(cpu.positions - m.positions))
+    assert moved > 5e-3
+    assert np.max(np.abs(gpu.positions - cpu.positions)) < 1e-5
+
+
+def test_vbd_solves_the_same_backward_euler_step():
+    # run to convergence (tolerance 0: every iteration) on both: the same step's solution, whatever
+    # the order of the colours
+    m = cotton()
+    opts = dict(iterations=80, tolerance=0.0, substeps=1)
+    cpu = Simulator(
+        m, integrator="vbd", dt=1 / 120, wind=WIND, integrator_options=dict(opts, grid=False)
+    )
+    gpu = Simulator(
+        m,
+        integrator="vbd",
+        dt=1 / 120,
+        wind=WIND,
+        integrator_options=opts,
+        device="cuda",
+        precision="float64",
+    )
+    cpu.step(2)
+    gpu.step(2)
+    assert np.max(np.abs(cpu.positions - m.positions)) > 1e-3
+    # (the two differ by 2.6e-5 m at 20 iterations, 4.2e-8 at 40, 1.2e-13 at 80)
+    assert np.max(np.abs(gpu.positions - cpu.positions)) < 1e-11
+    assert gpu.integrator_stats["last_residual"] < 1e-9
+
+
+def test_vbd_says_whether_it_converged():
+    m = sheet(stiffness=3e3)
+    capped = Simulator(
+        m,
+        integrator="vbd",
+        dt=1 / 60,
+        device="cuda",
+        integrator_options=dict(iterations=1, tolerance=1e-2),
+    )
+    roomy = Simulator(
+        m,
+        integrator="vbd",
+        dt=1 / 60,
+        device="cuda",
+        integrator_options=dict(iterations=60, tolerance=1e-2),
+    )
+    capped.step()
+    roomy.step()
+    c, r = capped.integrator_stats, roomy.integrator_stats
+    assert c["last_residual"] > 1e-2 and c["converged"] is False
+    assert r["last_residual"] <= 1e-2 and r["converged"] is True
+    assert r["last_iterations"] < 60  # it stopped at the tolerance
+    assert r["last_iterations"] % 5 == 0  # measured every check_every iterations
+
+
+def test_vbd_defaults_choose_the_cpus_substeps():
+    m = cotton()
+    cpu = Simulator(m, integrator="vbd", dt=1 / 60)
+    gpu = Simulator(m, integrator="vbd", dt=1 / 60, device="cuda", precision="float64")
+    cpu.step()
+    gpu.step()
+    assert gpu.integrator_stats["last_substeps"] == cpu.integrator_stats["last_substeps"] > 1
+    # both converged to the default tolerance: the same cloth to what the tolerance leaves
+    assert gpu.integrator_stats["converged"] and cpu.integrator_stats["converged"]
+    assert np.max(np.abs(gpu.positions - cpu.positions)) < 1e-4
+
+
+def test_worlds_take_their_own_parameters():
+    m = sheet()
+    kw = dict(integrator="symplectic_euler", dt=1e-3)
+    gpu = BatchSimulator(m, worlds=3, device="cuda", precision="float64", **kw)
+    cpu = BatchSimulator(m, worlds=3, **kw)
+    for b in (gpu, cpu):
+        b.set([1], wind=(0.0, 0.0, 1.0), drag=0.02)
+        b.set(
+            [2], stiffness={"structural": 50.0}, damping={"shear": 0.2}, gravity=(0.0, -9.81, 0.0)
+        )
+        b.step(15)
+    x = gpu.positions_host()
+    assert x.shape == (3, m.n_particles, 3)
+    assert np.max(np.abs(x - cpu.positions_host())) < 1e-14
+    assert np.min([np.max(np.abs(x[0] - x[w])) for w in (1, 2)]) > 1e-6  # they differ
+    # the same parameters give the same bits in every world
+    same = BatchSimulator(m, worlds=2, device="cuda", **kw)
+    same.step(5)
+    y = same.positions_host()
+    assert np.array_equal(y[0], y[1])
+    # a device array, not a host copy (the simulator's stand-in carries no CUDA array interface)
+    p = same.positions
+    if simulated():
+        assert type(p).__name__ == "FakeCUDAArray"
+    else:
+        assert cuda.is_cuda_array(p) and p.shape == (2, m.n_particles, 3)
+
+
+def test_a_world_resets_alone():
+    m = sheet()
+    b = BatchSimulator(
+        m,
+        worlds=2,
+        integrator="vbd",
+        dt=1 / 60,
+        device="cuda",
+        integrator_options=dict(iterations=5),
+    )
+    b.step(2)
+    before = b.positions_host()
+    b.reset([0])
+    after = b.positions_host()
+    assert np.allclose(after[0], m.positions, atol=1e-7)
+    assert np.array_equal(after[1], before[1])
+    assert list(b.time) == pytest.approx([0.0, 2 / 60])
+
+
+def test_a_list_of_models_must_share_one_topology():
+    a, b = sheet(), sheet(rows=5)
+    with pytest.raises(ValueError, match=r"models\[1\]\.springs"):
+        BatchSimulator([a, b], device="cuda")
+    heavier = ClothModel.grid(
+        4, 4, 0.05, 0.02, stiffness=1e2, damping=0.05, pinned=[(0, 0), (0, 3)]
+    )
+    batch = BatchSimulator(
+        [a, heavier], integrator="symplectic_euler", dt=1e-3, device="cuda", precision="float64"
+    )
+    batch.step(10)
+    ref = Simulator(heavier, integrator="symplectic_euler", dt=1e-3)
+    ref.step(10)
+    assert np.max(np.abs(batch.positions_host()[1] - ref.positions)) < 1e-14
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(integrator="rk4"), r"integrator 'rk4' has no cuda backend; on cuda: "),
+        (dict(strain_limit=0.1), r"strain_limit: not on the cuda device yet \(vbd converged"),
+        (dict(self_collision=True), r"self_collision: not on the cuda device"),
+        (
+            dict(integrator="vbd", integrator_options={"collider_share": 0.4}),
+            r"vbd option\(s\) collider_share not on the cuda device",
+        ),
+        (dict(precision="float16"), r"precision must be one of float32, float64"),
+    ],
+)
+def test_what_the_device_does_not_run_is_named(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        Simulator(sheet(), device="cuda", **kwargs)
+
+
+def test_colliders_and_choi_ko_are_refused():
+    with pytest.raises(ValueError, match=r"colliders: not on the cuda device"):
+        Simulator(sheet(), device="cuda", colliders=[Plane((0, 0, 1), -1.0)])
+    choi = ClothModel.grid(4, 4, 0.05, 0.01, stiffness=1e2, model="choi_ko")
+    with pytest.raises(ValueError, match=r"model 'choi_ko': Choi & Ko's"):
+        Simulator(choi, device="cuda")
+
+
+def test_per_world_input_is_checked_before_anything_changes():
+    b = BatchSimulator(sheet(), worlds=2, integrator="symplectic_euler", dt=1e-3, device="cuda")
+    with pytest.raises(ValueError, match=r"worlds: indices must lie in \[0, 1\]"):
+        b.set([2], drag=0.1)
+    with pytest.raises(ValueError, match=r"stiffness: unknown family 'warp'"):
+        b.set([0], wind=(1.0, 0.0, 0.0), stiffness={"warp": 3.0})
+    with pytest.raises(ValueError, match=r"wind must be a finite 3-vector"):
+        b.set([0], wind=(1.0, np.nan, 0.0))
+    b.step(3)
+    y = b.positions_host()
+    assert np.array_equal(y[0], y[1])  # the refused wind never reached world 0
+
+
+@pytest.mark.filterwarnings("ignore:overflow:RuntimeWarning", "ignore:invalid:RuntimeWarning")
+def test_a_diverging_step_is_undone():
+    m = sheet(stiffness=1e5)
+    sim = Simulator(m, integrator="symplectic_euler", dt=5e-3, device="cuda")
+    sim.step(2)
+    x, t = sim.positions.copy(), sim.time
+    with pytest.raises(SimulationDiverged):
+        sim.step(200)
+    assert np.array_equal(sim.positions, x) and sim.time == t
+
+
+def test_state_set_and_read_back():
+    m = sheet()
+    sim = Simulator(
+        m, integrator="vbd", dt=1 / 60, device="cuda", integrator_options=dict(iterations=5)
+    )
+    x = m.positions + np.array([0.0, 0.0, 0.01])
+    sim.positions = x
+    assert np.allclose(sim.positions, x, atol=1e-7)
+    sim.move_pins([[0.0, 0.0, 0.1]], indices=[0])
+    assert np.allclose(sim.positions[0], [0.0, 0.0, 0.1])
+    saved = sim.save_state()
+    sim.step(2)
+    sim.restore_state(saved)
+    assert np.allclose(sim.positions, saved.x, atol=1e-7) and sim.time == 0.0
+    sim.set_integrator("symplectic_euler")
+    assert sim.integrator == "symplectic_euler"
+    assert np.allclose(sim.positions, saved.x, atol=1e-7)
+
+
+@pytest.mark.parametrize("integrator", ["symplectic_euler", "vbd"])
+def test_every_launch_gives_the_same_bits(integrator):
+    """A run of steps in one launch (a block a world, or the whole grid cooperating) or a launch a
+    stage: the same arithmetic in the same order, the same positions."""
+    m = cotton()
+    opts = dict(iterations=12, tolerance=0.0) if integrator == "vbd" else None
+    dt = 1 / 120 if integrator == "vbd" else 2e-4
+    got = {}
+    for launch in ("blocks", "grid", "stages"):
+        b = BatchSimulator(
+            m,
+            worlds=2,
+            integrator=integrator,
+            dt=dt,
+            device="cuda",
+            precision="float64",
+            integrator_options=opts,
+            launch=launch,
+        )
+        b.set([1], wind=WIND)
+        b.step(3)
+        got[launch] = b.positions_host()
+        if launch != "stages":  # three steps, one launch
+            assert b.last_launches == pytest.approx(1 / 3)
+        elif integrator == "symplectic_euler":  # a step, and the copy back from its buffers
+            assert b.last_launches == 2
+    assert np.array_equal(got["blocks"], got["stages"])
+    assert np.array_equal(got["grid"], got["stages"])
+    assert np.max(np.abs(got["stages"][1] - got["stages"][0])) > 1e-6
+
+
+def test_worlds_in_blocks_stop_at_their_own_tolerance():
+    """In a block a world, a world that converges stops sweeping while a stiffer one goes on."""
+    m = sheet(stiffness=3e3)
+    b = BatchSimulator(
+        m,
+        worlds=2,
+        integrator="vbd",
+        dt=1 / 60,
+        device="cuda",
+        integrator_options=dict(iterations=60, tolerance=1e-2),
+        launch="blocks",
+    )
+    b.set([1], stiffness={"structural": 1.0, "shear": 1.0, "bend": 1.0})
+    b.step()
+    assert (b.last_residual <= 1e-2).all()
+    assert b.iterations[1] < b.iterations[0]
+
+
+def test_the_gpu_benchmark_runs(capsys):
+    """``cloth-sim bench gpu --simulator``: the script's three tables on a tiny cloth (the figures
+    on the simulator mean nothing; the same-cloth check still holds)."""
+    from cloth_sim.bench.gpu import print_gpu_tables
+
+    figures = print_gpu_tables(seconds=0.05, simulator=True)
+    out = capsys.readouterr().out
+    assert "1. the same cloth" in out and "3. many worlds" in out
+    assert [f["precision"] for f in figures["same"]] == ["float32", "float64"]
+    assert all(f["end"] < 1e-4 for f in figures["same"])
+    assert figures["large"][0]["launch"] == "blocks" and figures["large"][0]["unconverged"] == 0
+    assert [w["worlds"] for w in figures["worlds"]] == [1, 2]
