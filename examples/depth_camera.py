@@ -13,7 +13,7 @@ import argparse
 import numpy as np
 
 from cloth_sim import settings
-from cloth_sim.camera import DepthCamera
+from cloth_sim.sensors import DepthCamera
 
 p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
 p.add_argument("--quick", action="store_true", help="0.05 s of draping and a small image")

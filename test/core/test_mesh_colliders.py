@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from cloth_sim import ClothModel, Simulator, colliders, integrators
-from cloth_sim.camera import DepthCamera
+from cloth_sim.sensors import DepthCamera
 
 G = 9.81
 H = 0.005
