@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .constraints.grippers import check_pose
 from .kinds import (  # noqa: F401 (the model's vocabulary, importable from here too)
     BUCKLING,
     GRID_FAMILIES,
@@ -22,6 +23,10 @@ from .kinds import (  # noqa: F401 (the model's vocabulary, importable from here
     STRAIN_LIMIT_METHODS,
     TENSION_ONLY,
 )
+from .materials import resolve
+from .materials.discretize import grid_material, mesh_material
+from .parameters import SCHEMA, ParameterError
+from .physics import mesh as M
 
 
 def _freeze(a: np.ndarray) -> np.ndarray:
@@ -153,7 +158,6 @@ class ClothModel:
         the grid (warp along +y, the row index), so the same fabric behaves the same at any
         ``rows``, ``cols``; its bending rigidity goes to :attr:`bending`.
         """
-        from .parameters import SCHEMA, ParameterError  # the schema imports this module
 
         try:
             rows, cols = SCHEMA["rows"].check(rows), SCHEMA["cols"].check(cols)
@@ -161,8 +165,6 @@ class ClothModel:
             raise ValueError(f"grid: rows and cols: {e}") from None
         fabric = None
         if material is not None:
-            from .materials import resolve
-
             fabric = resolve(material)
             if size is None:
                 raise ValueError("grid: a material needs the cloth's size=(width, height) in m")
@@ -264,8 +266,6 @@ class ClothModel:
 
         meta, bending = {}, None
         if fabric is not None:
-            from .materials.discretize import grid_material
-
             k, cdamp, masses, bending = grid_material(
                 fabric, rows, cols, ax, ay, springs, family, GRID_FAMILIES, pin_mask
             )
@@ -390,14 +390,9 @@ class ClothModel:
 
         A mesh that cannot be cloth raises ``ValueError`` naming the source and the element (see
         :func:`cloth_sim.physics.mesh.check_mesh`); nothing is built."""
-        from .constraints.grippers import check_pose
-        from .parameters import SCHEMA
-        from .physics import mesh as M
 
         fabric = None
         if material is not None:
-            from .materials import resolve
-
             fabric = resolve(material)
             given = [
                 n
@@ -449,8 +444,6 @@ class ClothModel:
             kind[family == 1] = BUCKLING
         bending = None
         if fabric is not None:
-            from .materials.discretize import mesh_material
-
             k, cdamp, bending = mesh_material(fabric, x, tris, springs, family)
         else:
             k = np.array([k_fam[f] for f in MESH_FAMILIES])[family]
@@ -519,7 +512,6 @@ def _grid_size(size, rows: int, cols: int) -> tuple[float, float]:
 
 
 def _per_family(name: str, value, families=GRID_FAMILIES) -> dict:
-    from .parameters import SCHEMA
 
     if isinstance(value, dict):
         unknown = set(value) - set(families)

@@ -72,10 +72,12 @@ import yaml
 from .contact.colliders import KINDS
 from .contact.self_collision import MAX_THICKNESS_FRACTION
 from .integrators.vbd import TOLERANCE as VBD_TOLERANCE
+from .materials import Fabric, get
 from .model import GRID_FAMILIES, MESH_FAMILIES, ORIENTATIONS, ClothModel
 from .motion import Motion, motion_from_dict
 from .parameters import SCHEMA, ParameterError
-from .physics.mesh import MESH_FORMATS
+from .physics.mesh import MESH_FORMATS, vertices_in_box
+from .robot import Robot
 from .simulator import Simulator
 
 EDGES = ("first_row", "last_row", "first_col", "last_col")
@@ -316,8 +318,6 @@ class Scene:
             **fams,
         )
         if self.pinned_box is not None:
-            from .physics.mesh import vertices_in_box
-
             inside = vertices_in_box(model.positions, *self.pinned_box)
             if len(inside) == 0:
                 raise ValueError(
@@ -697,7 +697,6 @@ def _robot(v: "SceneValidator", r, source: str) -> dict:
     """A scene's ``robot`` mapping: ``urdf`` (a file relative to the scene file), ``name``,
     ``position``, ``orientation``, ``joints``, ``friction``; the URDF is loaded here, so that a
     bad one is refused with the scene."""
-    from .robot import Robot
 
     if not isinstance(r, dict):
         v.fail("robot", "a mapping with urdf and optional name, position, orientation, joints", r)
@@ -915,7 +914,6 @@ def _mesh_scene(v: "SceneValidator", data: dict, source: str, name: str) -> Scen
 def _material(v: "SceneValidator", data: dict, s: Scene, source: str) -> None:
     """A scene's ``material:`` (a library name or a mapping of a fabric's fields): it replaces the
     per-family springs and masses, so those fields are refused beside it."""
-    from .materials import Fabric, get
 
     m = data.get("material")
     if m is None:

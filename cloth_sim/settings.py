@@ -20,9 +20,11 @@ from . import backends, integrators
 from .constraints.strain_limit import DEFAULT_STRAIN_LIMIT_PASSES
 from .contact.self_collision import check_thickness
 from .integrators.base import Stability
+from .materials import get
 from .parameters import REBUILD, SCHEMA, ParameterError
 from .physics import stability as stab
 from .scene import Scene, load_scene, vbd_options
+from .sensors.camera import camera_from_settings
 from .simulator import Simulator
 
 #: the rebuild parameters that shape the model (``scene`` is the other one)
@@ -136,8 +138,6 @@ def fabric(cfg: dict, scene: Scene):
     """The fabric ``cfg`` maps onto ``scene``'s cloth: the ``material`` parameter's library
     fabric, else the scene's own, else None (per-family springs)."""
     if cfg["material"]:
-        from .materials import get
-
         return get(cfg["material"])
     return scene.material
 
@@ -210,7 +210,6 @@ def camera_settings(cfg: dict) -> dict:
 def camera_reason(cfg: dict) -> str | None:
     """The reason ``cfg``'s camera cannot be built (naming the parameter), ``None`` when it can or
     is off."""
-    from .sensors.camera import camera_from_settings
 
     if not cfg["camera.enable"]:
         return None

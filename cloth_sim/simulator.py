@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 
 import numba
 import numpy as np
@@ -32,9 +33,12 @@ from .constraints.strain_limit import (
     attachment_pass_parallel,
     nearest_attachments,
 )
-from .contact.colliders import Contacts
+from .contact import colliders as col
+from .contact.colliders import Contacts, Plane
 from .contact.geometry import positive
 from .contact.self_collision import SelfCollision, Uncrossed, check_thickness
+from .integrators.explicit import combine_parallel
+from .integrators.vbd import PARALLEL_MIN_VERTICES
 from .model import ClothModel
 from .parameters import SCHEMA, ParameterError
 from .physics import stability as stab
@@ -51,6 +55,7 @@ from .physics.forces import (
     spring_strains,
 )
 from .robot.placement import Robots
+from .sensors.camera import DepthCamera
 from .state import SimulationDiverged, State
 
 
@@ -926,9 +931,6 @@ def compile_kernels() -> float:
     compiled on first use and kept in numba's on-disk cache; a real-time loop calls this before it
     starts, so that no step compiles inside a tick (what a first step compiling costs, and this
     call with the cache warm: docs/BENCHMARKS.md §7)."""
-    import time
-
-    from .integrators.explicit import combine_parallel
 
     t0 = time.perf_counter()
     for model_name in ("provot", "choi_ko"):
@@ -999,7 +1001,6 @@ def compile_kernels() -> float:
         anchor, reach = nearest_attachments(model)
         attachment_pass_parallel(x, anchor, reach, 0.1)
         # the depth camera's kernels (triangles, each collider shape)
-        from .sensors.camera import DepthCamera
 
         DepthCamera(
             width=8,
@@ -1026,7 +1027,6 @@ def compile_kernels() -> float:
 def _parallel_grid() -> ClothModel:
     """The smallest square grid at vbd.PARALLEL_MIN_VERTICES: one that runs vbd's sweeps on
     every core."""
-    from .integrators.vbd import PARALLEL_MIN_VERTICES
 
     side = int(np.ceil(np.sqrt(PARALLEL_MIN_VERTICES)))
     return ClothModel.grid(side, side, 0.02, 0.01, stiffness=100.0, pinned=[(0, 0)])
@@ -1037,7 +1037,6 @@ def compile_grid_contacts(model: ClothModel | None = None) -> None:
     ``vbd``): the colours' sweep with the contact pass, ~50 s of numba's compilation alone (their
     first tick paid it until :func:`compile_kernels` ran this). ``make install`` runs it in a
     process of its own beside ``compile_kernels``, which then finds it in the cache."""
-    from .contact.colliders import Plane
 
     model = _parallel_grid() if model is None else model
     Simulator(model, integrator="vbd", dt=1e-4, colliders=[Plane(offset=-1.0)]).step(1)
@@ -1046,7 +1045,6 @@ def compile_grid_contacts(model: ClothModel | None = None) -> None:
 def _compile_contacts(model, integrator: str) -> "Simulator":
     """Contacts with every collider shape, one of them moving, and self-collision; returns the
     simulator."""
-    from .contact import colliders as col
 
     sim = Simulator(
         model,

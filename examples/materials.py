@@ -7,8 +7,8 @@ import sys
 
 import numpy as np
 
-from cloth_sim import ClothModel, Simulator, materials
-from cloth_sim.materials import Fabric, textile
+from cloth_sim import ClothModel, Simulator, materials, textile
+from cloth_sim.materials import Fabric
 
 quick = "--quick" in sys.argv
 print("library:", ", ".join(materials.names()))

@@ -22,7 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..materials import get, textile
+from .. import textile
+from ..materials import get
 from ..materials.library import MEASURED
 from ..model import ClothModel
 from ..simulator import Simulator
@@ -166,7 +167,7 @@ def record_swing(path, seconds: float = 1.5, rate: float = 30.0, seed: int = 1) 
 
 
 def fit_rows(workers_list, generations: int = 12) -> list[dict]:
-    from ..materials import fit
+    from .. import fit
     from ..sweep.cluster import pool_map
     from ..sweep.fit import load_recording
 

@@ -1,5 +1,5 @@
 """``cloth-sim textile cantilever|drape|tensile``: the textile standard tests
-(:mod:`cloth_sim.materials.textile`), each measured value printed beside the expected one."""
+(:mod:`cloth_sim.textile`), each measured value printed beside the expected one."""
 
 from __future__ import annotations
 
@@ -35,7 +35,8 @@ def add_parser(sub) -> None:
 
 
 def _textile(args) -> int:
-    from ..materials import get, textile
+    from .. import textile
+    from ..materials import get
 
     names = args.material or list(MEASURED)
     fabrics = {n: get(n) for n in names}  # an unknown name is refused before anything runs

@@ -2,10 +2,17 @@
 (:mod:`.colliders`), self-collision (:mod:`.self_collision`) and its bounding-volume tree
 (:mod:`.collision_tree`).
 
-What users call: the colliders (``from cloth_sim.contact import Plane, Sphere, Mesh``) and the
-self-collision stage."""
+What users call, imported when first used: the colliders (``from cloth_sim.contact import Plane,
+Sphere, Mesh``) and the self-collision stage."""
 
-from .colliders import Box, Capsule, Collider, Cylinder, Mesh, Plane, Sphere
-from .self_collision import SelfCollision
+from ..lazy import exports
 
-__all__ = ["Box", "Capsule", "Collider", "Cylinder", "Mesh", "Plane", "SelfCollision", "Sphere"]
+_NAMES = {
+    **{
+        name: ".colliders"
+        for name in ("Box", "Capsule", "Collider", "Cylinder", "Mesh", "Plane", "Sphere")
+    },
+    "SelfCollision": ".self_collision",
+}
+__all__ = sorted(_NAMES)
+__getattr__, __dir__ = exports(__name__, _NAMES)

@@ -27,6 +27,7 @@ import numba
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
+from ..physics.mesh import check_indices, read_mesh
 from . import triangle_meshes
 from .geometry import (
     matrix_quaternion,
@@ -284,7 +285,6 @@ class Mesh(Collider):
         friction: float = 0.0,
         name=None,
     ):
-        from ..physics.mesh import check_indices, read_mesh
 
         factors = np.atleast_1d(np.asarray(scale, dtype=np.float64)) if _numbers(scale) else None
         if (

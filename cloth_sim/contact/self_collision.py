@@ -55,7 +55,9 @@ import math
 import numba
 import numpy as np
 
+from ..physics.mesh import half_edges
 from .colliders import SUPPORT
+from .collision_tree import TriangleTree
 from .geometry import closest_on_segments, point_triangle_distance
 
 
@@ -448,8 +450,6 @@ class SelfCollision:
         ``reach`` of each other at ``x0``
         (:meth:`cloth_sim.contact.collision_tree.TriangleTree.pairs`)."""
         if self._tree is None:
-            from .collision_tree import TriangleTree  # (it measures with this module's distances)
-
             self._tree = TriangleTree(self._tris, self.model.positions, self._features)
         return self._tree.pairs(x0, reach)
 
@@ -540,7 +540,6 @@ def _features(tris: np.ndarray, n: int):
             np.zeros(n + 1, np.int64),
             np.zeros(0, np.int64),
         )
-    from ..physics.mesh import half_edges  # the unique edges, and each half-edge's
 
     a = tris.ravel()
     edges, group, _ = half_edges(tris, n)

@@ -81,7 +81,17 @@ import numba
 import numpy as np
 
 from ..contact import triangle_meshes
-from ..contact.colliders import MESH, collider_travel, mesh_sdf, packed_between, sdf
+from ..contact.colliders import (
+    BOX,
+    CAPSULE,
+    CYLINDER,
+    MESH,
+    SPHERE,
+    collider_travel,
+    mesh_sdf,
+    packed_between,
+    sdf,
+)
 from ..contact.geometry import segment_parameters, triangle_weights
 from ..kinds import LINEAR
 from ..physics.bending import bending_row
@@ -1381,7 +1391,6 @@ class VBD(Integrator):
         """Per collider, how far in its far side is (half its thinnest dimension; ``inf`` for a
         plane, a half-space; 0 for a mesh, two-sided: a vertex may not reach its surface between
         two searches, so a moving link cannot pass through the cloth)."""
-        from ..contact.colliders import BOX, CAPSULE, CYLINDER, MESH, SPHERE
 
         kinds, geo = colliders[0], colliders[5]
         depth = np.full(len(kinds), np.inf)

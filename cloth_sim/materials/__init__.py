@@ -1,8 +1,9 @@
-"""Fabrics in SI units, their mapping onto a model, and the textile tests.
+"""Fabrics in SI units and their mapping onto a model: a layer below the model.
 
 ``materials.names()`` lists the library, ``materials.get(name)`` gives a :class:`Fabric`;
 :mod:`.discretize` maps a fabric onto a grid or a mesh (what ``ClothModel.grid(size=…,
-material=…)`` uses), :mod:`.textile` runs the standard tests on the simulator.
+material=…)`` uses). The textile standard tests (:mod:`cloth_sim.textile`) and the fit to a
+recording (:mod:`cloth_sim.fit`) run the simulator, at the edge.
 """
 
 from __future__ import annotations

@@ -33,6 +33,7 @@ import math
 import numpy as np
 
 from ..physics.bending import Bending, grid_stencils, mesh_stencils
+from ..physics.mesh import triangle_areas
 from .fabric import Fabric
 
 
@@ -133,7 +134,6 @@ def mesh_material(
 ) -> tuple[np.ndarray, np.ndarray, Bending]:
     """``(stiffness (m,), damping (m,), bending)`` of a mesh's springs (structural: its edges;
     bend: across interior edges, given stiffness 0) for ``fabric``, isotropic (module's note)."""
-    from ..physics.mesh import triangle_areas
 
     e_iso = math.sqrt(fabric.stretch[0] * fabric.stretch[1])
     area = triangle_areas(x, triangles)

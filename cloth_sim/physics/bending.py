@@ -29,6 +29,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..contact.geometry import read_only
+from .mesh import half_edges, triangle_areas
 
 
 class Bending:
@@ -186,7 +187,6 @@ def mesh_stencils(x: np.ndarray, triangles: np.ndarray, g: float):
     equilateral one 0.99). Boundary vertices have none (a free edge carries no moment). The rest
     shape is taken as flat (the module's note); ``G`` isotropic (a mesh has no warp direction
     here)."""
-    from .mesh import half_edges, triangle_areas
 
     n = len(x)
     if g <= 0 or not len(triangles):

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ..contact import colliders as shapes
+from ..physics.mesh import check_indices, read_mesh
 from . import resources
 
 #: the joint types a robot may have
@@ -307,8 +308,6 @@ def _shapes(urdf, where: str, base, roots) -> list[Shape]:
                     raise ValueError(f"{what}: {e}") from None
                 key = (str(path), tuple(scale))
                 if key not in meshes:
-                    from ..physics.mesh import check_indices, read_mesh
-
                     try:
                         v, f, name = read_mesh(str(path))
                         check_indices(v, f, name)

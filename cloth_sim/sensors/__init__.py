@@ -1,7 +1,14 @@
 """Sensors that look at the simulation: the depth camera (:mod:`.camera`).
 
-``from cloth_sim.sensors import DepthCamera`` is its public name."""
+``from cloth_sim.sensors import DepthCamera`` is its public name (imported when first used)."""
 
-from .camera import DepthCamera, Frame, camera_from_settings, look_at_orientation
+from ..lazy import exports
 
-__all__ = ["DepthCamera", "Frame", "camera_from_settings", "look_at_orientation"]
+_NAMES = {
+    "DepthCamera": ".camera",
+    "Frame": ".camera",
+    "camera_from_settings": ".camera",
+    "look_at_orientation": ".camera",
+}
+__all__ = sorted(_NAMES)
+__getattr__, __dir__ = exports(__name__, _NAMES)

@@ -1,13 +1,13 @@
 """``cloth-sim fit BAG --scene SCENE --params NAME[,NAME…] -o OUT [--workers N] [--address A]``:
-a scene's material fitted to a recorded point-cloud sequence (:mod:`cloth_sim.materials.fit`),
+a scene's material fitted to a recorded point-cloud sequence (:mod:`cloth_sim.fit`),
 the bag read here and the candidates spread on Ray's workers."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from .. import fit as core
 from ..bag.clouds import read_point_clouds
-from ..materials import fit as core
 
 
 def load_recording(bag, topic: str | None = None):

@@ -16,6 +16,8 @@ EDGE = (
     "cloth_sim.dataset",
     "cloth_sim.bench",
     "cloth_sim.cli",  # the command line: a front end over the core and the adapters
+    "cloth_sim.textile",  # the textile standard tests, run on the simulator
+    "cloth_sim.fit",  # a scene's material fitted to a recording
 )
 ROS = ("rclpy", "rcl_interfaces", "std_msgs", "sensor_msgs", "geometry_msgs", "rosgraph_msgs")
 
@@ -127,3 +129,74 @@ def test_the_checks_see_a_circle_a_private_name_and_ros():
         ("cloth_sim.y", None),
         ("rclpy", None),
     ]
+
+
+def function_imports(source: str) -> list[tuple[int, str]]:
+    """``(line, module)`` of every import of a cloth_sim module inside a function of ``source``
+    (a relative import, or an absolute one of ``cloth_sim``)."""
+    found = []
+    for fn in ast.walk(ast.parse(source)):
+        if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            continue
+        for node in ast.walk(fn):
+            if isinstance(node, ast.ImportFrom) and (
+                node.level or (node.module or "").split(".")[0] == "cloth_sim"
+            ):
+                found.append((node.lineno, "." * node.level + (node.module or "")))
+            elif isinstance(node, ast.Import):
+                found += [
+                    (node.lineno, a.name) for a in node.names if a.name.startswith("cloth_sim")
+                ]
+    return found
+
+
+#: the layers the model is built from: nothing here imports the model or anything above it
+BELOW_MODEL = {
+    "cloth_sim.kinds",
+    "cloth_sim.lazy",
+    "cloth_sim.parameters",
+    "cloth_sim.materials",
+    "cloth_sim.materials.fabric",
+    "cloth_sim.materials.library",
+    "cloth_sim.materials.discretize",
+    "cloth_sim.physics",
+    "cloth_sim.physics.mesh",
+    "cloth_sim.physics.bending",
+    "cloth_sim.contact",
+    "cloth_sim.contact.geometry",
+    "cloth_sim.constraints",
+    "cloth_sim.constraints.grippers",
+}
+
+
+def test_the_core_imports_at_the_top():
+    """An import of the package's own modules inside a function of the core is a circle dodged
+    (the core's lazy loads are third-party: a mesh reader, a URDF parser); the edges (the command
+    line, the benchmarks, the adapters) may load a subcommand's modules when it runs."""
+    known = modules()
+    found = [
+        f"{name}:{line} imports {target}"
+        for name, path in known.items()
+        if not name.startswith(EDGE)
+        for line, target in function_imports(path.read_text())
+    ]
+    assert found == []
+
+
+def test_the_model_imports_only_the_layers_below_it():
+    """``cloth_sim.model`` and everything it imports, transitively, stay below it: the model takes
+    its materials and meshes from there, never from the simulator's layers."""
+    edges = graph()[0]
+    reached, todo = set(), ["cloth_sim.model"]
+    while todo:
+        for target in edges[todo.pop()]:
+            if target not in reached:
+                reached.add(target)
+                todo.append(target)
+    assert reached <= BELOW_MODEL, sorted(reached - BELOW_MODEL)
+    assert "cloth_sim.model" not in reached
+
+
+def test_the_function_import_check_sees_one():
+    source = "def f():\n    from .model import ClothModel\n    import numpy\n"
+    assert function_imports(source) == [(2, ".model")]

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from cloth_sim import ClothModel, Simulator, materials, settings
-from cloth_sim.materials import Fabric, textile
+from cloth_sim import ClothModel, Simulator, materials, settings, textile
+from cloth_sim.materials import Fabric
 from cloth_sim.materials.discretize import grid_lattice
 from cloth_sim.materials.library import from_arcsim
 from cloth_sim.scene import SceneError, load_scene, scene_from_dict
@@ -342,7 +342,7 @@ def _record(path, factors, seconds=0.8, rate=30.0, noise=0.002, seed=1, topic="/
 
 
 def test_a_fit_recovers_the_stretch_and_bending_of_a_noisy_recording(tmp_path):
-    from cloth_sim.materials import fit
+    from cloth_sim import fit
     from cloth_sim.sweep.fit import load_recording
 
     truth = {"stretch": 1.3, "bend": 0.8}
@@ -358,9 +358,9 @@ def test_a_fit_recovers_the_stretch_and_bending_of_a_noisy_recording(tmp_path):
 
 
 def test_the_fit_refuses_a_bag_without_clouds_an_unknown_parameter_and_a_plain_scene(tmp_path):
+    from cloth_sim import fit
     from cloth_sim.bag.store import BagError, BagWriter
     from cloth_sim.cli import main
-    from cloth_sim.materials import fit
     from cloth_sim.sweep.fit import check
 
     w = BagWriter(tmp_path / "stats")

@@ -31,10 +31,11 @@ import scipy.sparse.linalg as spla
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
-from ..model import ClothModel
-from ..simulator import Simulator
-from . import resolve
-from .fabric import G_ACCEL
+from .materials import resolve
+from .materials.fabric import G_ACCEL
+from .model import ClothModel
+from .physics.bending import Bending
+from .simulator import Simulator
 
 DIRECTIONS = ("warp", "weft")
 
@@ -284,7 +285,6 @@ def disc(
 def cut(model: ClothModel, keep: np.ndarray, pinned=None) -> ClothModel:
     """The part of ``model`` on the particles ``keep`` (bool): springs, triangles and bending
     stencils wholly inside it; ``pinned(x)`` marks the new pins (default: the old ones)."""
-    from ..physics.bending import Bending
 
     new = np.full(model.n_particles, -1, np.int64)
     new[keep] = np.arange(int(keep.sum()))

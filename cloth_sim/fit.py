@@ -33,10 +33,10 @@ import numpy as np
 import yaml
 from scipy.optimize import differential_evolution, minimize
 
-from ..contact.triangle_meshes import TriangleMesh, mesh_distance, pack
-from ..scene import SceneError, load_scene
-from ..simulator import SimulationDiverged
-from . import Fabric
+from .contact.triangle_meshes import TriangleMesh, mesh_distance, pack
+from .materials import Fabric
+from .scene import SceneError, load_scene
+from .simulator import SimulationDiverged
 
 #: the material fields a fit may search
 PARAMETERS = ("stretch", "shear", "bend", "density", "damping")
