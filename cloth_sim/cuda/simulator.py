@@ -14,10 +14,12 @@ import math
 import numpy as np
 from numba import cuda
 
-from .. import backends
+from .. import backends, integrators
 from ..backends import models_of
 from ..model import ClothModel
 from ..parameters import SCHEMA
+from ..physics import stability as stab
+from ..physics.forces import Forces
 from ..state import SimulationDiverged, State
 from .worlds import CudaWorlds
 
@@ -87,6 +89,10 @@ class CudaSimulator:
         self._host = None  # the positions and velocities copied at the last ask
         self.steps_taken = 0
         self._counters = dict(steps=0)
+        self._forces = None
+        self._analysis = None
+        self.thickness = float(cpu_only.get("thickness", 0.005))
+        self.motion = None
 
     # ------------------------------------------------------------------ state
     def _copy(self):
@@ -238,6 +244,7 @@ class CudaSimulator:
     def gravity(self, g) -> None:
         self._worlds.set([0], gravity=g)
         self._gravity = np.asarray(g, np.float64)
+        self._forces = None
 
     @property
     def wind(self):
@@ -247,6 +254,7 @@ class CudaSimulator:
     def wind(self, w) -> None:
         self._worlds.set([0], wind=np.zeros(3) if w is None else w)
         self._wind = None if w is None else np.asarray(w, np.float64)
+        self._forces = None
 
     @property
     def drag(self) -> float:
@@ -256,6 +264,8 @@ class CudaSimulator:
     def drag(self, value: float) -> None:
         self._worlds.set([0], drag=value)
         self._drag = float(value)
+        self._forces = None
+        self._analysis = None
 
     def stiffness(self, family: str) -> np.ndarray:
         return self._k[self.model.family == self.model.family_index(family)].copy()
@@ -263,10 +273,14 @@ class CudaSimulator:
     def set_stiffness(self, family: str, k: float) -> None:
         self._worlds.set([0], stiffness={family: k})
         self._k[self.model.family == self.model.family_index(family)] = float(k)
+        self._forces = None
+        self._analysis = None
 
     def set_damping(self, family: str, c: float) -> None:
         self._worlds.set([0], damping={family: c})
         self._c[self.model.family == self.model.family_index(family)] = float(c)
+        self._forces = None
+        self._analysis = None
 
     def _apply_families(self) -> None:
         m = self.model
@@ -281,8 +295,28 @@ class CudaSimulator:
                 self._worlds.set([0], damping={name: c[0]})
 
     @property
+    def forces(self) -> Forces:
+        """The same forces on the host (the terms the device steps), for what reads them between
+        steps: the node's energy balance (the wind's and the pins' power)."""
+        if self._forces is None:
+            self._forces = Forces(
+                self.model, self._k, self._c, self._gravity, self._wind, self._drag
+            )
+        return self._forces
+
+    # what the device does not have (refused at construction): empty, as the CPU reports it when
+    # none is there
+    @property
     def colliders(self) -> list:
         return []
+
+    @property
+    def robots(self) -> dict:
+        return {}
+
+    @property
+    def grippers(self) -> dict:
+        return {}
 
     @property
     def self_collision(self) -> bool:
@@ -291,6 +325,46 @@ class CudaSimulator:
     @property
     def strain_limit(self):
         return None
+
+    @strain_limit.setter
+    def strain_limit(self, tau) -> None:
+        if tau:
+            raise ValueError(
+                "strain_limit: not on the cuda device yet (vbd converged holds the stretch "
+                "without one: set strain_limit to 0)"
+            )
+
+    # the strain limit's own settings, kept for when it runs (as the CPU keeps them while off)
+    strain_limit_passes = 20
+    strain_limit_method = "provot"
+
+    @property
+    def active_stages(self) -> tuple[str, ...]:
+        return ()
+
+    @property
+    def active_terms(self) -> tuple[str, ...]:
+        return self.forces.active_terms
+
+    @property
+    def contact_counts(self) -> tuple[int, int]:
+        return 0, 0
+
+    # ------------------------------------------------------------------ the method's analysis
+    @property
+    def analysis(self) -> stab.Analysis:
+        """The stability analysis of the current material (the CPU's, on the host)."""
+        if self._analysis is None:
+            self._analysis = stab.analysis_for(self.model, self._k, self._c, self._drag)
+        return self._analysis
+
+    def stable_dt(self) -> float:
+        """As :meth:`cloth_sim.simulator.Simulator.stable_dt`, for the method run here."""
+        return integrators.get(self.integrator)(self.model).stable_dt(self.analysis)
+
+    def step_is_stable(self, dt: float | None = None) -> bool:
+        method = integrators.get(self.integrator)(self.model)
+        return method.step_is_stable(self.analysis, self.dt if dt is None else float(dt))
 
     # ------------------------------------------------------------------ stepping
     def step(self, n: int = 1) -> None:

@@ -82,7 +82,8 @@ class ClothSimNode(Node):
         settle_garbage()
         self.get_logger().info(
             f"scene {session.scene.name}: {self.publishing.cloth_text()}, "
-            f"{session.sim.integrator}, dt={session.sim.dt:g} s, {session.cfg['publish_rate']:g} "
+            f"{session.sim.integrator} on the {session.sim.device}, dt={session.sim.dt:g} s, "
+            f"{session.cfg['publish_rate']:g} "
             f"Hz, terms: {', '.join(session.sim.active_terms)}; kernels ready in {kernels:.2f} s"
         )
 
