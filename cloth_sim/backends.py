@@ -84,11 +84,11 @@ def refusal(device: str, integrator: str, model: ClothModel, **features) -> tupl
         )
     for name, asked in features.items():
         if asked:
-            hint = (
-                " (vbd converged holds the stretch without one: set strain_limit to 0)"
-                if name == "strain_limit"
-                else ""
-            )
+            hint = {
+                "strain_limit": " (vbd converged holds the stretch without one: set strain_limit "
+                "to 0)",
+                "colliders": " (static planes are)",
+            }.get(name, "")
             return (
                 f"{name}: not on the {device} device yet{hint}; it runs springs, bending, "
                 "gravity, wind, drag and pins, and device='cpu' has the rest",

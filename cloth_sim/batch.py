@@ -82,6 +82,37 @@ class BatchSimulator:
             for fam, c in (damping or {}).items():
                 s.set_damping(fam, c)
 
+    def hold(self, worlds, indices, points=None) -> None:
+        """Hold vertices ``indices`` of ``worlds`` where ``points`` puts them (``(p, 3)`` or one
+        set a world; their current positions when None), at rest: a gripper a vertex on the cpu
+        (``hold:<index>``), a vertex taken out of the solve on cuda."""
+        ids = self._ids(worlds)
+        idx = np.asarray(indices, np.int64).ravel()
+        pts = None if points is None else np.asarray(points, np.float64)
+        for r, w in enumerate(ids):
+            sim = self.sims[w]
+            at = sim.positions[idx] if pts is None else (pts[r] if pts.ndim == 3 else pts)
+            for k, i in enumerate(idx):
+                x = sim.positions[i]
+                sim.grasp_box(f"hold:{i}", x, x)
+                sim.set_gripper_pose(f"hold:{i}", at[k], teleport=True)
+
+    def release(self, worlds, indices=None) -> None:
+        """Let ``worlds``' held vertices ``indices`` (all when None) go."""
+        for w in self._ids(worlds):
+            sim = self.sims[w]
+            names = [n for n in sim.grippers if n.startswith("hold:")]
+            if indices is not None:
+                wanted = {f"hold:{int(i)}" for i in np.asarray(indices).ravel()}
+                names = [n for n in names if n in wanted]
+            for name in names:
+                sim.release(name)
+
+    def held(self, world: int) -> np.ndarray:
+        """The vertices of ``world`` the solve does not move (the model's pins, what is held)."""
+        sim = self.sims[int(self._ids([world])[0])]
+        return np.flatnonzero(sim.model.pinned)
+
     def reset(self, worlds=None) -> None:
         for w in self._ids(worlds):
             self.sims[w].reset()

@@ -468,7 +468,7 @@ def device_refusal(cfg: dict, model, scene: Scene) -> tuple[str, tuple[str, ...]
         cfg["integrator"],
         model,
         strain_limit=bool(cfg["strain_limit"]),
-        colliders=bool(scene.colliders),
+        colliders=any(kind != "plane" for kind, _ in scene.colliders),
         self_collision=cfg["self_collision"],
         grippers=bool(scene.grippers),
         robot=scene.robot is not None,

@@ -26,7 +26,9 @@ from numba import cuda, float64
 
 # scalar-only numba functions of the CPU's sweep: a CUDA kernel calls them as they are (numba-cuda
 # compiles them for the device; its simulator calls the CPU's build)
-from ..integrators.vbd_contact import solve3
+from ..contact.colliders import CONTACT_TOLERANCE
+from ..integrators.vbd import EPS_V
+from ..integrators.vbd_contact import press, slide, solve3
 from ..integrators.vbd_terms import spring_part
 
 #: threads a block, at most (a launch over fewer threads takes as many)
@@ -35,6 +37,8 @@ BLOCK = 128
 REDUCE = 32
 #: threads a block at most in :func:`frames_in_blocks` (a power of two: its reductions)
 MAX_BLOCK = 1024
+#: the contact stage's march along a particle's path at most (the CPU's ``_MARCH_STEPS``)
+MARCH_STEPS = 64
 #: standard gravity, the residual's unit of force per unit of mass (as on the CPU)
 G0 = 9.80665
 
@@ -100,6 +104,80 @@ def bending_at(top, x, w, i):
     return bx, by, bz
 
 
+@cuda.jit(device=True, inline=True)
+def plane_distance(wor, w, c, x, y, z):
+    """World ``w``'s plane ``c``: its outward normal and the signed distance of ``(x, y, z)``
+    from it, in the CPU's arithmetic (:func:`cloth_sim.contact.colliders.sdf`)."""
+    nx, ny, nz = wor.planes[w, c, 0], wor.planes[w, c, 1], wor.planes[w, c, 2]
+    dx, dy, dz = x - wor.planes[w, c, 3], y - wor.planes[w, c, 4], z - wor.planes[w, c, 5]
+    return nx, ny, nz, nx * dx + ny * dy + nz * dz
+
+
+@cuda.jit(device=True, inline=True)
+def planes_stage(wor, w, sx, sy, sz, px, py, pz, ux, uy, uz, continuous):
+    """The contact stage after a step for one free particle and world ``w``'s static planes, in
+    order (:func:`cloth_sim.contact.colliders.resolve_contacts` for a plane): the path from the
+    step's start ``s`` to its end ``p`` marched to the thickness's skin (``continuous``: after a
+    method that does not keep paths off the colliders itself), the end projected out of the skin
+    with friction on the step's motion, and an approaching normal velocity removed, the
+    tangential one shrunk by μ times what was removed (static friction: removed). Returns the
+    end and the velocity."""
+    h = wor.tau[w]
+    for c in range(wor.nplanes[w]):
+        mu = wor.pmu[w, c]
+        if not continuous:
+            _, _, _, d = plane_distance(wor, w, c, px, py, pz)
+            if d >= h * (1.0 + CONTACT_TOLERANCE):
+                continue
+        if continuous:
+            _, _, _, d0 = plane_distance(wor, w, c, sx, sy, sz)
+            d0 -= h
+            ex, ey, ez = px - sx, py - sy, pz - sz
+            length = math.sqrt(ex * ex + ey * ey + ez * ez)
+            if d0 > CONTACT_TOLERANCE * h and length > d0:
+                t = 0.0
+                hit = False
+                for _ in range(MARCH_STEPS):
+                    _, _, _, d = plane_distance(wor, w, c, sx + t * ex, sy + t * ey, sz + t * ez)
+                    d -= h
+                    if d <= 1e-3 * h:
+                        hit = True
+                        break
+                    t += d / length
+                    if t >= 1.0:
+                        break
+                if not hit and t < 1.0:
+                    hit = True
+                if hit:
+                    px, py, pz = sx + t * ex, sy + t * ey, sz + t * ez
+        nx, ny, nz, d = plane_distance(wor, w, c, px, py, pz)
+        if d >= h * (1.0 + CONTACT_TOLERANCE):
+            continue
+        stuck = False
+        if d < h:
+            depth = h - d
+            px, py, pz = px + depth * nx, py + depth * ny, pz + depth * nz
+            rx, ry, rz = px - sx, py - sy, pz - sz
+            rn = rx * nx + ry * ny + rz * nz
+            tx, ty, tz = rx - rn * nx, ry - rn * ny, rz - rn * nz
+            tl = math.sqrt(tx * tx + ty * ty + tz * tz)
+            budget = mu * depth
+            stuck = tl <= budget
+            if tl > 0.0:
+                f = 1.0 if stuck else budget / tl
+                px, py, pz = px - f * tx, py - f * ty, pz - f * tz
+        vn = ux * nx + uy * ny + uz * nz
+        if vn < 0.0 or stuck:
+            tx, ty, tz = ux - vn * nx, uy - vn * ny, uz - vn * nz
+            tl = math.sqrt(tx * tx + ty * ty + tz * tz)
+            keep = 0.0
+            if tl > 0.0 and not stuck:
+                keep = max(0.0, 1.0 - mu * (-vn) / tl)
+            vn = max(vn, 0.0)
+            ux, uy, uz = vn * nx + keep * tx, vn * ny + keep * ty, vn * nz + keep * tz
+    return px, py, pz, ux, uy, uz
+
+
 # --------------------------------------------------------------------------- one vertex's work
 @cuda.jit(device=True, inline=True)
 def explicit_at(top, wor, x, v, xo, vo, h, w, i):
@@ -136,8 +214,11 @@ def explicit_at(top, wor, x, v, xo, vo, h, w, i):
         ux += (fx + bx) * s
         uy += (fy + by) * s
         uz += (fz + bz) * s
+    px, py, pz = xi + ux * h, yi + uy * h, zi + uz * h
+    if wor.free[w, i] and wor.nplanes[w]:
+        px, py, pz, ux, uy, uz = planes_stage(wor, w, xi, yi, zi, px, py, pz, ux, uy, uz, True)
     vo[w, i, 0], vo[w, i, 1], vo[w, i, 2] = ux, uy, uz
-    xo[w, i, 0], xo[w, i, 1], xo[w, i, 2] = xi + ux * h, yi + uy * h, zi + uz * h
+    xo[w, i, 0], xo[w, i, 1], xo[w, i, 2] = px, py, pz
 
 
 @cuda.jit(device=True, inline=True)
@@ -243,8 +324,42 @@ def newton_at(top, wor, it, h, w, i):
         h0 += qd
         h3 += qd
         h5 += qd
+    tau = wor.tau[w]
+    kc = wor.kc[w]
+    eps = EPS_V * h
+    for c in range(wor.nplanes[w]):
+        nx, ny, nz, d = plane_distance(wor, w, c, xi, yi, zi)
+        p = tau - d
+        if p <= 0.0:
+            continue
+        # the penalty ½ kc (τ − d)², and IPC's lagged friction on the vertex's motion over the
+        # step (the plane does not move), as the CPU's colliders_at
+        lam = kc * p
+        f0, f1, f2, h0, h1, h2, h3, h4, h5 = press(
+            lam, kc, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5
+        )
+        mu = wor.pmu[w, c]
+        if mu <= 0.0:
+            continue
+        rn = mx * nx + my * ny + mz * nz
+        tx, ty, tz = mx - rn * nx, my - rn * ny, mz - rn * nz
+        tl = math.sqrt(tx * tx + ty * ty + tz * tz)
+        g = 1.0 / tl if tl > eps else (2.0 - tl / eps) / eps
+        s = mu * lam * g
+        f0, f1, f2, h0, h1, h2, h3, h4, h5 = slide(
+            s, tx, ty, tz, s, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5
+        )
     it.stepped[w, i] = f0 * f0 + f1 * f1 + f2 * f2
     sx, sy, sz = solve3(h0, h1, h2, h3, h4, h5, f0, f1, f2)
+    for c in range(wor.nplanes[w]):
+        # a plane not yet pressed is not in the Hessian: the step stops at its onset (the CPU's
+        # onset)
+        nx, ny, nz, d = plane_distance(wor, w, c, xi, yi, zi)
+        if d < tau:
+            continue
+        over = (tau - d) - (nx * sx + ny * sy + nz * sz)
+        if over > 0.0:
+            sx, sy, sz = sx + over * nx, sy + over * ny, sz + over * nz
     x[w, i, 0] = xi + sx
     x[w, i, 1] = yi + sy
     x[w, i, 2] = zi + sz
@@ -275,6 +390,14 @@ def finish_at(wor, it, h, w, i):
         it.aprev[w, i, d] = (nv - it.v[w, i, d]) / h
         if free:
             it.v[w, i, d] = nv
+    if free and wor.nplanes[w]:  # the contact stage after the step, as on the CPU
+        px, py, pz, ux, uy, uz = planes_stage(
+            wor, w, it.xt[w, i, 0], it.xt[w, i, 1], it.xt[w, i, 2],
+            it.x[w, i, 0], it.x[w, i, 1], it.x[w, i, 2],
+            it.v[w, i, 0], it.v[w, i, 1], it.v[w, i, 2], False,
+        )  # fmt: skip
+        it.x[w, i, 0], it.x[w, i, 1], it.x[w, i, 2] = px, py, pz
+        it.v[w, i, 0], it.v[w, i, 1], it.v[w, i, 2] = ux, uy, uz
 
 
 @cuda.jit(device=True, inline=True)

@@ -6,7 +6,10 @@ host with numpy and copied to the device once.
   rows (``Q``'s CSR and diagonal), each vertex's triangles (for its normal) and the colour groups
   (no two vertices of a colour share a spring or a bending stencil).
 * :class:`Worlds`, one row a world: masses, which vertices are free, gravity, wind, drag and each
-  family's stiffness and damping where a world overrides the model's (``−1``: the model's own).
+  family's stiffness and damping where a world overrides the model's (``−1``: the model's own);
+  its static planes (``planes[w, c]``: the outward normal and a point of the plane, as the CPU's
+  packed colliders give them; ``pmu`` their friction, ``nplanes`` how many), the thickness ``tau``
+  the cloth keeps from them and ``vbd``'s contact stiffness ``kc``.
 * :class:`Iterate`, one ``(worlds, n, 3)`` array a world's positions, velocities and the step's
   scratch: the step's start ``xt``, the inertial target ``y``, the iterate before the sweep ``xs``,
   the Chebyshev history ``prev2``, the last step's acceleration ``aprev``, and each vertex's
@@ -53,6 +56,11 @@ class Worlds(NamedTuple):
     drag: np.ndarray
     kfam: np.ndarray
     cfam: np.ndarray
+    planes: np.ndarray
+    pmu: np.ndarray
+    nplanes: np.ndarray
+    tau: np.ndarray
+    kc: np.ndarray
 
 
 class Iterate(NamedTuple):

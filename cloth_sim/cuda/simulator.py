@@ -16,6 +16,7 @@ from numba import cuda
 
 from .. import backends, integrators
 from ..backends import models_of
+from ..contact.colliders import PLANE
 from ..model import ClothModel
 from ..parameters import SCHEMA
 from ..physics import stability as stab
@@ -55,12 +56,13 @@ class CudaSimulator:
         )
         if unknown:
             raise TypeError(f"unexpected argument(s) {', '.join(unknown)}")
+        colliders = list(cpu_only.get("colliders") or ())
         refused = backends.refusal(
             "cuda",
             integrator,
             model,
             strain_limit=cpu_only.get("strain_limit") is not None,
-            colliders=bool(cpu_only.get("colliders")),
+            colliders=any(c.kind != PLANE for c in colliders),
             self_collision=bool(cpu_only.get("self_collision")),
         )
         if refused is not None:
@@ -70,6 +72,8 @@ class CudaSimulator:
         self._wind = None if wind is None else np.asarray(wind, np.float64)
         self._drag = float(drag)
         self.max_speed, self.max_coordinate = float(max_speed), float(max_coordinate)
+        self.thickness = float(cpu_only.get("thickness", 0.005))
+        self.motion = None
         self._worlds = CudaWorlds(
             [model],
             integrator,
@@ -81,7 +85,10 @@ class CudaSimulator:
             precision,
             launch,
             block_threads,
+            colliders,
+            self.thickness,
         )
+        self._colliders = colliders
         self._k = np.array(model.stiffness, dtype=np.float64)
         self._c = np.array(model.damping, dtype=np.float64)
         self._t_base = 0.0
@@ -91,8 +98,6 @@ class CudaSimulator:
         self._counters = dict(steps=0)
         self._forces = None
         self._analysis = None
-        self.thickness = float(cpu_only.get("thickness", 0.005))
-        self.motion = None
 
     # ------------------------------------------------------------------ state
     def _copy(self):
@@ -211,6 +216,8 @@ class CudaSimulator:
             old.precision,
             old.launch,
             old.block_threads,
+            self._colliders,
+            self.thickness,
         )
         self._worlds = new
         self._apply_families()
@@ -308,7 +315,14 @@ class CudaSimulator:
     # none is there
     @property
     def colliders(self) -> list:
-        return []
+        """The static planes the cloth keeps ``thickness`` from (the device's only colliders)."""
+        return list(self._colliders)
+
+    def set_collider_pose(self, i, position, orientation=None, teleport=False) -> None:
+        raise ValueError(
+            "set_collider_pose: moving colliders are not on the cuda device yet (its planes are "
+            "static); device='cpu' moves them"
+        )
 
     @property
     def robots(self) -> dict:

@@ -23,6 +23,8 @@ import numpy as np
 from numba import cuda
 
 from .. import backends
+from ..contact.colliders import PLANE
+from ..contact.geometry import positive
 from ..integrators.vbd import VBD, substeps_needed
 from ..model import ClothModel
 from ..parameters import SCHEMA
@@ -54,6 +56,18 @@ def _grid(total: int) -> tuple[int, int]:
     return (total + threads - 1) // threads, threads
 
 
+def plane_rows(colliders) -> np.ndarray:
+    """``(planes, 6)``: each static plane's outward normal and a point of it, as the CPU's packed
+    colliders give them (the normal its rotation times its geometry, the point its position), so
+    that the device measures the same distances; one row of zeros for none."""
+    rows = np.zeros((max(1, len(colliders)), 6))
+    for c, plane in enumerate(colliders):
+        R, g = plane.rotation, plane.geometry
+        rows[c, :3] = [R[k, 0] * g[0] + R[k, 1] * g[1] + R[k, 2] * g[2] for k in range(3)]
+        rows[c, 3:] = plane.position
+    return rows
+
+
 class CudaWorlds:
     """``models`` (one per world, one topology: :func:`~cloth_sim.cuda.layout.same_topology`)
     stepped by ``integrator`` (``cloth_sim.backends.METHODS["cuda"]``) at ``dt`` on the CUDA
@@ -75,12 +89,17 @@ class CudaWorlds:
         precision: str = "float32",
         launch: str = "auto",
         block_threads: int | None = None,
+        colliders=None,
+        thickness: float = 0.005,
     ):
         if not models:
             raise ValueError("models: at least one world")
         same_topology(models)
         first = models[0]
-        refused = backends.refusal("cuda", integrator, first)
+        colliders = list(colliders or ())
+        refused = backends.refusal(
+            "cuda", integrator, first, colliders=any(c.kind != PLANE for c in colliders)
+        )
         if refused is not None:
             raise ValueError(refused[0])
         if precision not in PRECISIONS:
@@ -128,6 +147,7 @@ class CudaWorlds:
         wind_v = np.zeros(3) if wind is None else np.asarray(wind, np.float64)
         if wind_v.shape != (3,) or not np.all(np.isfinite(wind_v)):
             raise ValueError(f"wind must be None or a finite 3-vector, got {wind!r}")
+        planes = plane_rows(colliders)
         self._host = Worlds(
             masses=np.stack([np.asarray(m.masses, real) for m in models]),
             free=np.stack([~np.asarray(m.pinned, bool) for m in models]).astype(np.int8),
@@ -137,6 +157,13 @@ class CudaWorlds:
             drag=np.full(worlds, SCHEMA["drag"].check(drag), real),
             kfam=np.full((worlds, fams), -1.0, real),
             cfam=np.full((worlds, fams), -1.0, real),
+            planes=np.tile(planes.astype(real), (worlds, 1, 1)),
+            pmu=np.tile(np.array([c.friction for c in colliders] or [0.0], real), (worlds, 1)),
+            nplanes=np.full(worlds, len(colliders), np.int32),
+            tau=np.full(worlds, positive("thickness", thickness), real),
+            kc=np.full(
+                worlds, self.settings.contact_stiffness if self.settings is not None else 0.0, real
+            ),
         )
         self.wor = Worlds(*(cuda.to_device(a) for a in self._host))
         x0 = np.stack([np.asarray(m.positions, real) for m in models])
@@ -255,6 +282,42 @@ class CudaWorlds:
                 f"got {np.shape(points)}"
             )
         self._place(ids, idx, p)
+
+    def hold(self, worlds, indices, points=None) -> None:
+        """Hold vertices ``indices`` of ``worlds`` kinematically (a gripper's grasp, a pin added):
+        they leave the solve and stay where :meth:`place` puts them (``points``, as there; their
+        current positions when None), at rest."""
+        ids = self._ids(worlds)
+        idx = np.asarray(indices, np.int64).ravel()
+        if idx.size and (idx.min() < 0 or idx.max() >= self.n):
+            raise ValueError(f"indices must lie in [0, {self.n - 1}]")
+        if points is None:
+            points = self.positions_host()[np.ix_(ids, idx)]
+        self.place(ids, idx, points)
+        self._set_free(ids, idx, 0)
+
+    def release(self, worlds, indices=None) -> None:
+        """Let ``worlds``' held vertices ``indices`` (all of them when None) go: back into the
+        solve, at rest, except the models' own pins, which stay pinned."""
+        ids = self._ids(worlds)
+        idx = np.arange(self.n) if indices is None else np.asarray(indices, np.int64).ravel()
+        if idx.size and (idx.min() < 0 or idx.max() >= self.n):
+            raise ValueError(f"indices must lie in [0, {self.n - 1}]")
+        for w in ids:
+            pinned = np.asarray(self.models[w].pinned, bool)[idx]
+            self._set_free([w], idx[~pinned], 1)
+
+    def held(self, world: int) -> np.ndarray:
+        """The vertices of ``world`` that do not move by the solve (the model's pins and what
+        :meth:`hold` holds)."""
+        w = int(self._ids([world])[0])
+        return np.flatnonzero(self._host.free[w] == 0)
+
+    def _set_free(self, ids, idx, value: int) -> None:
+        free = self._host.free.copy()
+        free[np.ix_(np.asarray(ids), idx)] = value
+        self._host = self._host._replace(free=free)
+        self.wor.free.copy_to_device(free)
 
     # ------------------------------------------------------------------ state
     @property

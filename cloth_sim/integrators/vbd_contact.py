@@ -66,11 +66,7 @@ def slide(sf, tx, ty, tz, s, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5):
     )
 
 
-# (called, not inlined: inlined into the sweeps, this and onset took 34 s more of numba's
-# compilation of the grid's sweep with contacts from an empty cache, 169 s against 135, for
-# nothing measurable a step: table and drape at 128×128 on vbd 36-39 and 33-34 ms either way, the
-# same bits)
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def colliders_at(
     i,
     x,
@@ -187,7 +183,7 @@ def truncate(i, px, py, pz, x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, d
     return x_cd[i, 0] + t * ex, x_cd[i, 1] + t * ey, x_cd[i, 2] + t * ez, True
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def onset(i, sx, sy, sz, x, rec_ptr, rec, rec_d, pcoef, pnrm, tau, ckind, cpos, crot, cgeo, cbank):
     """Vertex ``i``'s step ``s`` with the part that would press a contact not yet pressed
     (distance at least ``τ``: not in the step's Hessian) taken off along that contact's normal, so

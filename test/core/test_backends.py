@@ -93,3 +93,23 @@ def test_batch_arguments_are_checked():
     batch = BatchSimulator(m, worlds=2)
     with pytest.raises(ValueError, match=r"worlds: indices must lie in \[0, 1\]"):
         batch.reset([2])
+
+
+def test_a_cpu_batch_holds_and_releases_vertices():
+    m = sheet()
+    corner = m.index(3, 3)
+    batch = BatchSimulator(m, worlds=2, integrator="symplectic_euler", dt=1e-3)
+    batch.hold([1], [corner], [[0.15, 0.15, 0.05]])
+    assert batch.held(1).tolist() == [0, 3, corner] and batch.held(0).tolist() == [0, 3]
+    batch.step(20)
+    pinned = ClothModel.grid(
+        4, 4, 0.05, 0.01, stiffness=1e2, damping=0.05, pinned=[(0, 0), (0, 3), (3, 3)]
+    )
+    ref = Simulator(pinned, integrator="symplectic_euler", dt=1e-3)
+    ref.move_pins([[0.15, 0.15, 0.05]], indices=[corner])
+    ref.step(20)
+    assert np.max(np.abs(batch.positions[1] - ref.positions)) < 1e-12
+    batch.release([1])
+    assert batch.held(1).tolist() == [0, 3]
+    batch.step(20)
+    assert batch.positions[1, corner, 2] < 0.05 - 1e-4

@@ -19,14 +19,19 @@ def signatures(real):
     top, _ = topology(model, real)
     w, n, f = 2, model.n_particles, len(model.family_names)
     wor = Worlds(
-        np.ones((w, n), real),
-        np.ones((w, n), np.int8),
-        np.zeros((w, 3), real),
-        np.zeros((w, 3), real),
-        np.zeros(w, np.int8),
-        np.zeros(w, real),
-        np.zeros((w, f), real),
-        np.zeros((w, f), real),
+        masses=np.ones((w, n), real),
+        free=np.ones((w, n), np.int8),
+        gravity=np.zeros((w, 3), real),
+        wind=np.zeros((w, 3), real),
+        windy=np.zeros(w, np.int8),
+        drag=np.zeros(w, real),
+        kfam=np.zeros((w, f), real),
+        cfam=np.zeros((w, f), real),
+        planes=np.zeros((w, 1, 6), real),
+        pmu=np.zeros((w, 1), real),
+        nplanes=np.zeros(w, np.int32),
+        tau=np.zeros(w, real),
+        kc=np.zeros(w, real),
     )
     x = np.zeros((w, n, 3), real)
     it = Iterate(*([x] * 7), np.zeros((w, n), real))

@@ -8,7 +8,7 @@ import pytest
 from numba import cuda
 
 from cloth_sim import BatchSimulator, ClothModel, SimulationDiverged, Simulator
-from cloth_sim.contact.colliders import Plane
+from cloth_sim.contact.colliders import Plane, Sphere
 from cloth_sim.cuda import simulated
 
 WIND = (0.3, 0.1, 0.5)
@@ -202,7 +202,7 @@ def test_what_the_device_does_not_run_is_named(kwargs, match):
 
 def test_colliders_and_choi_ko_are_refused():
     with pytest.raises(ValueError, match=r"colliders: not on the cuda device"):
-        Simulator(sheet(), device="cuda", colliders=[Plane((0, 0, 1), -1.0)])
+        Simulator(sheet(), device="cuda", colliders=[Sphere((0, 0, -1), 0.5)])
     choi = ClothModel.grid(4, 4, 0.05, 0.01, stiffness=1e2, model="choi_ko")
     with pytest.raises(ValueError, match=r"model 'choi_ko': Choi & Ko's"):
         Simulator(choi, device="cuda")
@@ -312,3 +312,57 @@ def test_the_gpu_benchmark_runs(capsys):
     assert all(f["end"] < 1e-4 for f in figures["same"])
     assert figures["large"][0]["launch"] == "blocks" and figures["large"][0]["unconverged"] == 0
     assert [w["worlds"] for w in figures["worlds"]] == [1, 2]
+
+
+def test_held_vertices_are_pins_a_world_sets():
+    """A world's held vertices move only where they are put: the same cloth as a CPU model whose
+    pins are those vertices, moved there by move_pins; released, they fall again."""
+    m = sheet()
+    corner = [m.index(3, 3)]
+    b = BatchSimulator(
+        m, worlds=2, integrator="symplectic_euler", dt=1e-3, device="cuda", precision="float64"
+    )
+    b.hold([1], corner, [[0.15, 0.15, 0.05]])
+    assert b.held(1).tolist() == sorted([0, 3, corner[0]]) and b.held(0).tolist() == [0, 3]
+    b.step(20)
+    pinned = ClothModel.grid(
+        4, 4, 0.05, 0.01, stiffness=1e2, damping=0.05, pinned=[(0, 0), (0, 3), (3, 3)]
+    )
+    ref = Simulator(pinned, integrator="symplectic_euler", dt=1e-3)
+    ref.move_pins([[0.15, 0.15, 0.05]], indices=corner)
+    ref.step(20)
+    x = b.positions_host()
+    assert np.max(np.abs(x[1] - ref.positions)) < 1e-14
+    assert np.allclose(x[1, corner[0]], [0.15, 0.15, 0.05])
+    b.release([1])
+    assert b.held(1).tolist() == [0, 3]
+    b.step(20)
+    assert b.positions_host()[1, corner[0], 2] < 0.05 - 1e-4
+
+
+def test_static_planes_are_the_cpus():
+    """A cloth falling onto a tilted plane with friction: symplectic Euler's contact stage (the
+    path marched to the skin, the projection with friction, the velocity filter) gives the CPU's
+    numbers; vbd's penalty and friction inside the iterations and the stage after them give the
+    CPU's cloth to 1e-7 m (the CPU's bounds on the vertices' motion are not on the device), both
+    resting on the plane's skin."""
+    m = ClothModel.grid(4, 4, 0.05, 0.01, stiffness=1e2, damping=0.05, origin=(0, 0, 0.02))
+    normal = np.array([0.0, 0.1, 1.0])
+    runs = (
+        ("symplectic_euler", 1e-3, 150, None, 1e-15),
+        ("vbd", 1 / 120, 30, dict(iterations=40, tolerance=0.0, substeps=1), 1e-7),
+    )
+    for integrator, dt, steps, opts, within in runs:
+        kw = dict(
+            integrator=integrator,
+            dt=dt,
+            thickness=0.005,
+            colliders=[Plane(normal, 0.0, friction=0.3)],
+        )
+        cpu = Simulator(m, integrator_options=dict(opts, grid=False) if opts else None, **kw)
+        gpu = Simulator(m, integrator_options=opts, device="cuda", precision="float64", **kw)
+        cpu.step(steps)
+        gpu.step(steps)
+        assert np.max(np.abs(gpu.positions - cpu.positions)) < within, integrator
+        skin = gpu.positions @ (normal / np.linalg.norm(normal))
+        assert skin.min() == pytest.approx(0.005, abs=1e-9), integrator
