@@ -148,9 +148,11 @@ class CudaWorlds:
         if wind_v.shape != (3,) or not np.all(np.isfinite(wind_v)):
             raise ValueError(f"wind must be None or a finite 3-vector, got {wind!r}")
         planes = plane_rows(colliders)
+        #: each world's model's own pins (what release leaves pinned)
+        self._pinned = np.stack([np.asarray(m.pinned, bool) for m in models])
         self._host = Worlds(
             masses=np.stack([np.asarray(m.masses, real) for m in models]),
-            free=np.stack([~np.asarray(m.pinned, bool) for m in models]).astype(np.int8),
+            free=(~self._pinned).astype(np.int8),
             gravity=np.tile(g.astype(real), (worlds, 1)),
             wind=np.tile(wind_v.astype(real), (worlds, 1)),
             windy=np.full(worlds, wind is not None and bool(np.any(wind_v)), np.int8),
@@ -270,9 +272,7 @@ class CudaWorlds:
         """Put vertices ``indices`` of ``worlds`` at ``points`` (``(worlds, p, 3)`` or ``(p, 3)``
         for all of them), at rest."""
         ids = self._ids(worlds)
-        idx = np.asarray(indices, np.int64).ravel()
-        if idx.size and (idx.min() < 0 or idx.max() >= self.n):
-            raise ValueError(f"indices must lie in [0, {self.n - 1}]")
+        idx = self._vertices(indices)
         p = np.asarray(points, np.float64)
         if p.shape == (len(idx), 3):
             p = np.broadcast_to(p, (len(ids), len(idx), 3))
@@ -288,24 +288,22 @@ class CudaWorlds:
         they leave the solve and stay where :meth:`place` puts them (``points``, as there; their
         current positions when None), at rest."""
         ids = self._ids(worlds)
-        idx = np.asarray(indices, np.int64).ravel()
-        if idx.size and (idx.min() < 0 or idx.max() >= self.n):
-            raise ValueError(f"indices must lie in [0, {self.n - 1}]")
+        idx = self._vertices(indices)
         if points is None:
             points = self.positions_host()[np.ix_(ids, idx)]
         self.place(ids, idx, points)
-        self._set_free(ids, idx, 0)
+        free = self._host.free.copy()
+        free[np.ix_(ids, idx)] = 0
+        self._upload_free(free)
 
     def release(self, worlds, indices=None) -> None:
         """Let ``worlds``' held vertices ``indices`` (all of them when None) go: back into the
         solve, at rest, except the models' own pins, which stay pinned."""
         ids = self._ids(worlds)
-        idx = np.arange(self.n) if indices is None else np.asarray(indices, np.int64).ravel()
-        if idx.size and (idx.min() < 0 or idx.max() >= self.n):
-            raise ValueError(f"indices must lie in [0, {self.n - 1}]")
-        for w in ids:
-            pinned = np.asarray(self.models[w].pinned, bool)[idx]
-            self._set_free([w], idx[~pinned], 1)
+        idx = np.arange(self.n) if indices is None else self._vertices(indices)
+        free = self._host.free.copy()
+        free[np.ix_(ids, idx)] = ~self._pinned[np.ix_(ids, idx)]
+        self._upload_free(free)
 
     def held(self, world: int) -> np.ndarray:
         """The vertices of ``world`` that do not move by the solve (the model's pins and what
@@ -313,11 +311,16 @@ class CudaWorlds:
         w = int(self._ids([world])[0])
         return np.flatnonzero(self._host.free[w] == 0)
 
-    def _set_free(self, ids, idx, value: int) -> None:
-        free = self._host.free.copy()
-        free[np.ix_(np.asarray(ids), idx)] = value
-        self._host = self._host._replace(free=free)
-        self.wor.free.copy_to_device(free)
+    def _vertices(self, indices) -> np.ndarray:
+        """``indices`` as an int64 array, each a vertex of the cloth."""
+        idx = np.asarray(indices, np.int64).ravel()
+        if idx.size and (idx.min() < 0 or idx.max() >= self.n):
+            raise ValueError(f"indices must lie in [0, {self.n - 1}]")
+        return idx
+
+    def _upload_free(self, free: np.ndarray) -> None:
+        self._host = self._host._replace(free=free.astype(np.int8))
+        self.wor.free.copy_to_device(self._host.free)
 
     # ------------------------------------------------------------------ state
     @property
