@@ -231,10 +231,33 @@ def copy_back_at(it, w, i):
 
 
 @cuda.jit(device=True, inline=True)
-def start_at(it, w, i):
-    """``x^t ← x``: the step's start, which the initial guess reads (its normals included)."""
+def start_at(wor, it, bdf2, w, i):
+    """The substep's start ``(sx, sv) ← (x, v)`` and ``x^t``, which the initial guess reads (its
+    normals included): ``x`` under backward Euler; under BDF2 (``bdf2``, a history, no planes:
+    as the CPU's ``VBD._substep``) ``x̂ = (4x − px)/3`` with ``v ← (4v − pv)/3`` on a free
+    vertex, and a kinematic one's ``v ← 1.5 v`` (its step of ``2h/3`` moves it by ``h v``).
+    ``bdf[w]`` says which (every thread writes the same)."""
+    bdf = bdf2 and it.past[w] != 0 and wor.nplanes[w] == 0
+    free = wor.free[w, i]
     for d in range(3):
-        it.xt[w, i, d] = it.x[w, i, d]
+        xi = it.x[w, i, d]
+        vi = it.v[w, i, d]
+        it.sx[w, i, d] = xi
+        it.sv[w, i, d] = vi
+        if bdf and free:
+            xi = (4.0 * xi - it.px[w, i, d]) / 3.0
+            it.x[w, i, d] = xi
+            it.v[w, i, d] = (4.0 * vi - it.pv[w, i, d]) / 3.0
+        elif bdf:
+            it.v[w, i, d] = 1.5 * vi
+        it.xt[w, i, d] = xi
+    it.bdf[w] = 1 if bdf else 0
+
+
+@cuda.jit(device=True, inline=True)
+def step_of(it, h, hb, w):
+    """The step world ``w``'s substep solves: ``hb`` (``2h/3``) under BDF2, else ``h``."""
+    return hb if it.bdf[w] != 0 else h
 
 
 @cuda.jit(device=True, inline=True)
@@ -381,15 +404,24 @@ def accelerate_at(wor, it, omega, extrapolate, w, i):
 
 
 @cuda.jit(device=True, inline=True)
-def finish_at(wor, it, h, w, i):
+def finish_at(wor, it, h, bdf2, w, i):
     """The step's end: ``v = (x − x^t)/h`` on a free vertex (a pin keeps its velocity) and its
-    acceleration ``((x − x^t)/h − v)/h`` for the next initial guess."""
+    acceleration ``((x − x^t)/h − v)/h`` for the next initial guess; the substep's start becomes
+    BDF2's history, which serves the next substep where ``bdf2`` (``past[w]``: every thread writes
+    the same, and none reads it in this stage)."""
     free = wor.free[w, i]
+    bdf = it.bdf[w] != 0
     for d in range(3):
         nv = (it.x[w, i, d] - it.xt[w, i, d]) / h
         it.aprev[w, i, d] = (nv - it.v[w, i, d]) / h
         if free:
             it.v[w, i, d] = nv
+        elif bdf:  # a kinematic vertex keeps its velocity
+            it.v[w, i, d] = it.sv[w, i, d]
+        # this substep's start is the next one's history
+        it.px[w, i, d] = it.sx[w, i, d]
+        it.pv[w, i, d] = it.sv[w, i, d]
+    it.past[w] = 1 if bdf2 else 0
     if free and wor.nplanes[w]:  # the contact stage after the step, as on the CPU
         px, py, pz, ux, uy, uz = planes_stage(
             wor, w, it.xt[w, i, 0], it.xt[w, i, 1], it.xt[w, i, 2],
@@ -450,25 +482,26 @@ def copy_back(it):
 
 
 @cuda.jit
-def vbd_start(it):
+def vbd_start(wor, it, bdf2):
     """:func:`start_at` for every vertex of every world."""
     t = cuda.grid(1)
     n = it.x.shape[1]
     if t < it.x.shape[0] * n:
-        start_at(it, t // n, t % n)
+        start_at(wor, it, bdf2, t // n, t % n)
 
 
 @cuda.jit
-def vbd_guess(top, wor, it, h):
+def vbd_guess(top, wor, it, h, hb):
     """:func:`guess_at` for every vertex of every world."""
     t = cuda.grid(1)
     n = it.x.shape[1]
     if t < it.x.shape[0] * n:
-        guess_at(top, wor, it, h, t // n, t % n)
+        w = t // n
+        guess_at(top, wor, it, step_of(it, h, hb, w), w, t % n)
 
 
 @cuda.jit
-def vbd_colour(top, wor, it, lo, count, h):
+def vbd_colour(top, wor, it, lo, count, h, hb):
     """:func:`newton_at` for one colour's vertices (``top.cverts[lo:lo + count]``) in every
     world: no two vertices of a colour share a spring or a bending stencil, so they move at
     once."""
@@ -476,7 +509,7 @@ def vbd_colour(top, wor, it, lo, count, h):
     if t >= wor.masses.shape[0] * count:
         return
     w = t // count
-    newton_at(top, wor, it, h, w, top.cverts[lo + (t - w * count)])
+    newton_at(top, wor, it, step_of(it, h, hb, w), w, top.cverts[lo + (t - w * count)])
 
 
 @cuda.jit
@@ -529,12 +562,13 @@ def vbd_residual(wor, it, out):
 
 
 @cuda.jit
-def vbd_finish(wor, it, h):
+def vbd_finish(wor, it, h, hb, bdf2):
     """:func:`finish_at` for every vertex of every world."""
     t = cuda.grid(1)
     n = it.x.shape[1]
     if t < it.x.shape[0] * n:
-        finish_at(wor, it, h, t // n, t % n)
+        w = t // n
+        finish_at(wor, it, step_of(it, h, hb, w), bdf2, w, t % n)
 
 
 @cuda.jit
@@ -591,10 +625,11 @@ def frames_in_blocks(top, wor, it, cptr, run, out):
             if part % run.substeps == 0:
                 worst = 0.0
             for i in range(tid, n, size):
-                start_at(it, w, i)
+                start_at(wor, it, run.bdf2, w, i)
             cuda.syncthreads()
+            hw = step_of(it, h, run.hb, w)
             for i in range(tid, n, size):
-                guess_at(top, wor, it, h, w, i)
+                guess_at(top, wor, it, hw, w, i)
             cuda.syncthreads()
             omega = 1.0
             res = math.inf
@@ -603,7 +638,7 @@ def frames_in_blocks(top, wor, it, cptr, run, out):
             for k in range(run.iterations):
                 for c in range(colours):
                     for q in range(cptr[c] + tid, cptr[c + 1], size):
-                        newton_at(top, wor, it, h, w, top.cverts[q])
+                        newton_at(top, wor, it, hw, w, top.cverts[q])
                     cuda.syncthreads()
                 done += 1
                 if done < run.iterations and done % run.check_every == 0:
@@ -633,7 +668,7 @@ def frames_in_blocks(top, wor, it, cptr, run, out):
                 total, count = block_sum(sums, counts, s, cnt)
                 res = math.sqrt(total / count) if count > 0 else 0.0
             for i in range(tid, n, size):
-                finish_at(wor, it, h, w, i)
+                finish_at(wor, it, hw, run.bdf2, w, i)
             cuda.syncthreads()
             worst = max(worst, res)
             sweeps += done
@@ -709,10 +744,11 @@ def frames_on_grid(top, wor, it, cptr, run, out, partial):
         if part % run.substeps == 0:
             worst = 0.0
         for t in range(rank, total, size):
-            start_at(it, t // n, t % n)
+            start_at(wor, it, run.bdf2, t // n, t % n)
         g.sync()
         for t in range(rank, total, size):
-            guess_at(top, wor, it, h, t // n, t % n)
+            w = t // n
+            guess_at(top, wor, it, step_of(it, h, run.hb, w), w, t - w * n)
         g.sync()
         omega = 1.0
         res = math.inf
@@ -724,7 +760,8 @@ def frames_on_grid(top, wor, it, cptr, run, out, partial):
                 count = cptr[c + 1] - lo
                 for t in range(rank, worlds * count, size):
                     w = t // count
-                    newton_at(top, wor, it, h, w, top.cverts[lo + t - w * count])
+                    hw = step_of(it, h, run.hb, w)
+                    newton_at(top, wor, it, hw, w, top.cverts[lo + t - w * count])
                 g.sync()
             done += 1
             if done < run.iterations and done % run.check_every == 0:
@@ -744,7 +781,8 @@ def frames_on_grid(top, wor, it, cptr, run, out, partial):
             for w in range(worlds):
                 res = max(res, grid_residual(wor, it, partial, w, rank, size))
         for t in range(rank, total, size):
-            finish_at(wor, it, h, t // n, t % n)
+            w = t // n
+            finish_at(wor, it, step_of(it, h, run.hb, w), run.bdf2, w, t - w * n)
         g.sync()
         worst = max(worst, res)
         sweeps += done

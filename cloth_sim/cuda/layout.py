@@ -64,6 +64,13 @@ class Worlds(NamedTuple):
 
 
 class Iterate(NamedTuple):
+    """The worlds' state and the solve's buffers, ``(worlds, n, 3)`` unless said: the state
+    ``x, v``; the substep's start ``xt`` (BDF2's ``x̂``), inertial target ``y``, the iterate's
+    copies ``xs, prev2`` (Chebyshev), the last acceleration ``aprev``, each vertex's squared
+    imbalance ``stepped`` ``(worlds, n)``; BDF2's substep start ``sx, sv`` and history ``px, pv``
+    (the last substep's start), and per world whether that history serves (``past``) and whether
+    this substep is BDF2's (``bdf``), both ``(worlds,)`` int8."""
+
     x: np.ndarray
     v: np.ndarray
     xt: np.ndarray
@@ -72,14 +79,23 @@ class Iterate(NamedTuple):
     prev2: np.ndarray
     aprev: np.ndarray
     stepped: np.ndarray
+    sx: np.ndarray
+    sv: np.ndarray
+    px: np.ndarray
+    pv: np.ndarray
+    past: np.ndarray
+    bdf: np.ndarray
 
 
 class Run(NamedTuple):
     """What :func:`~cloth_sim.cuda.kernels.frames_in_blocks` runs: ``steps`` steps of ``substeps``
     substeps of ``h`` by ``method`` (0: symplectic Euler, 1: vbd with its ``iterations``,
-    ``tolerance``, ``check_every`` and ``rho``)."""
+    ``tolerance``, ``check_every`` and ``rho``; ``bdf2`` 1 where its substeps are BDF2's, each
+    then backward Euler's of ``hb = 2h/3``)."""
 
     h: float
+    hb: float
+    bdf2: int
     steps: int
     substeps: int
     method: int

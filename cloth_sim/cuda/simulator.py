@@ -404,6 +404,7 @@ class CudaSimulator:
         ):
             it.x.copy_to_device(self._checkpoint[0])
             it.v.copy_to_device(self._checkpoint[1])
+            w.forget()
             w.steps[0] = steps_before
             self._host = None
             raise SimulationDiverged(

@@ -47,7 +47,7 @@ GRID_THREADS = 256
 #: vertices a thread takes in a block where the worlds fill the GPU's multiprocessors
 VERTICES_PER_THREAD = 4
 #: ``vbd``'s options here (the CPU's others concern contacts and the node's time budget)
-VBD_OPTIONS = ("iterations", "tolerance", "check_every", "substeps", "rho")
+VBD_OPTIONS = ("iterations", "tolerance", "check_every", "substeps", "rho", "scheme")
 
 
 def _grid(total: int) -> tuple[int, int]:
@@ -170,13 +170,20 @@ class CudaWorlds:
         self.wor = Worlds(*(cuda.to_device(a) for a in self._host))
         x0 = np.stack([np.asarray(m.positions, real) for m in models])
         self._x0 = x0
+        per_vertex = {"stepped": np.zeros((worlds, n), real)}
+        per_world = ("past", "bdf")
         self.it = Iterate(
             *(
-                cuda.to_device(x0 if name == "x" else np.zeros_like(x0))
-                for name in Iterate._fields[:-1]
-            ),
-            cuda.to_device(np.zeros((worlds, n), real)),
+                cuda.to_device(
+                    np.zeros(worlds, np.int8)
+                    if name in per_world
+                    else per_vertex.get(name, x0 if name == "x" else np.zeros_like(x0))
+                )
+                for name in Iterate._fields
+            )
         )
+        #: the substep BDF2's history was kept at (None: none yet)
+        self._past_h = None
         self.launch = launch
         self.block_threads = block_threads
         self._out = cuda.device_array((worlds, 3), np.float64)
@@ -256,7 +263,16 @@ class CudaWorlds:
             return
         idx = np.arange(self.n, dtype=np.int32)
         self._place(ids, idx, self._x0[ids])
+        self.forget(ids)
         self.steps[ids] = 0
+
+    def forget(self, worlds=None) -> None:
+        """BDF2's history of ``worlds`` (``None``: all) no longer serves: their state was set, so
+        their next substep is backward Euler's (as the CPU's ``VBD.reset``)."""
+        ids = self._ids(worlds)
+        past = self.it.past.copy_to_host()
+        past[ids] = 0
+        self.it.past.copy_to_device(past)
 
     def _place(self, ids, idx, points) -> None:
         total = len(ids) * len(idx)
@@ -346,6 +362,7 @@ class CudaWorlds:
             host = getattr(self.it, name).copy_to_host()
             host[ids] = a
             getattr(self.it, name).copy_to_device(host.astype(self.real))
+        self.forget(ids)
 
     def times(self) -> np.ndarray:
         return self.steps * self.dt
@@ -416,12 +433,26 @@ class CudaWorlds:
         self.steps += n
         self.last_launches = (self.launches - before) / n
 
+    def _substep_length(self, parts: int) -> float:
+        """``dt / parts``; a new length starts BDF2 again (its history was kept at the old)."""
+        h = self.dt / parts
+        if h != self._past_h:
+            self.forget()
+            self._past_h = h
+        return h
+
+    def _bdf2(self) -> int:
+        return int(self.settings is not None and self.settings.scheme == "bdf2")
+
     def _run_whole(self, n: int, mode: str) -> None:
         s = self.settings
         vbd = self.method == "vbd"
         parts = self.substeps()
+        h = self._substep_length(parts) if vbd else self.dt
         run = Run(
-            h=self.real(self.dt / parts if vbd else self.dt),
+            h=self.real(h),
+            hb=self.real(2.0 * h / 3.0),
+            bdf2=self._bdf2(),
             steps=n,
             substeps=parts,
             method=1 if vbd else 0,
@@ -480,8 +511,9 @@ class CudaWorlds:
         s = self.settings
         parts = self.substeps()
         iterations, worst = 0, np.zeros(self.worlds)
+        h = self._substep_length(parts)
         for _ in range(parts):
-            done, res = self._vbd_substep(self.dt / parts)
+            done, res = self._vbd_substep(h)
             iterations += done
             worst = np.maximum(worst, res)
         self.last_iterations = iterations
@@ -500,9 +532,9 @@ class CudaWorlds:
         top, wor, it = self.top, self.wor, self.it
         total = self.worlds * self.n
         launch = _grid(total)
-        h = self.real(dt)
-        K.vbd_start[launch](it)
-        K.vbd_guess[launch](top, wor, it, h)
+        h, hb, bdf2 = self.real(dt), self.real(2.0 * dt / 3.0), self._bdf2()
+        K.vbd_start[launch](wor, it, bdf2)
+        K.vbd_guess[launch](top, wor, it, h, hb)
         self.launches += 2
         cptr = self._cptr
         res = np.full(self.worlds, np.inf)
@@ -511,7 +543,9 @@ class CudaWorlds:
         for k in range(s.iterations):
             for c in range(len(cptr) - 1):
                 count = int(cptr[c + 1] - cptr[c])
-                K.vbd_colour[_grid(self.worlds * count)](top, wor, it, int(cptr[c]), count, h)
+                K.vbd_colour[_grid(self.worlds * count)](
+                    top, wor, it, int(cptr[c]), count, h, hb
+                )
             self.launches += len(cptr) - 1
             done += 1
             if done < s.iterations and done % s.check_every == 0:
@@ -529,6 +563,6 @@ class CudaWorlds:
                 self.launches += 1
         if measured != done:  # the step's last sweep's
             res = self._measure()
-        K.vbd_finish[launch](wor, it, h)
+        K.vbd_finish[launch](wor, it, h, hb, bdf2)
         self.launches += 1
         return done, res

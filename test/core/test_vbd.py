@@ -44,6 +44,88 @@ def test_a_linear_oscillator_follows_backward_eulers_recursion_exactly():
         assert sim.velocities[1, 0] == pytest.approx(v, rel=1e-9, abs=1e-15)
 
 
+def test_a_linear_oscillator_follows_bdf2s_recursion_exactly():
+    """The same particle under BDF2: after one backward-Euler step, each step is backward Euler's
+    of 2h/3 from x̂ = (4xₙ − xₙ₋₁)/3 with velocity v̂ = (4vₙ − vₙ₋₁)/3, so x and v follow
+    x = (x̂ + ĥv̂)/(1 + ω²ĥ²), v = (x − x̂)/ĥ, ĥ = 2h/3, to rounding, at any step size."""
+    for h in (1e-3, 0.05, 0.5):
+        sim = Simulator(
+            one_spring(k=100.0, m=1.0),
+            integrator="vbd",
+            dt=h,
+            gravity=NO_GRAVITY,
+            integrator_options={"iterations": 1, "rho": 0.0, "scheme": "bdf2"},
+        )
+        w2, hh = 100.0, 2.0 * h / 3.0
+        x, v = 0.1, 0.0
+        past = None
+        for _ in range(50):
+            sim.step()
+            if past is None:  # the start: backward Euler
+                new = (x + h * v) / (1 + w2 * h * h), (v - w2 * h * x) / (1 + w2 * h * h)
+            else:
+                xh, vh = (4 * x - past[0]) / 3, (4 * v - past[1]) / 3
+                nx = (xh + hh * vh) / (1 + w2 * hh * hh)
+                new = nx, (nx - xh) / hh
+            past, (x, v) = (x, v), new
+            assert sim.positions[1, 0] - 1.0 == pytest.approx(x, rel=1e-9, abs=1e-15)
+            assert sim.velocities[1, 0] == pytest.approx(v, rel=1e-9, abs=1e-15)
+
+
+def test_bdf2_is_second_order_and_the_default_where_vbd_chooses_its_work():
+    """The harmonic oscillator's error over 1 s against dt: slope 2 under BDF2 (vbd's defaults),
+    1 under backward Euler (iterations given)."""
+    dts = np.array([4e-3, 2e-3, 1e-3, 5e-4])
+    for options, order in ((None, 2), ({"iterations": 10}, 1)):
+        errs = []
+        for dt in dts:
+            sim = Simulator(
+                one_spring(),
+                integrator="vbd",
+                dt=dt,
+                gravity=NO_GRAVITY,
+                integrator_options=options,
+            )
+            err = 0.0
+            for _ in range(round(1.0 / dt)):
+                sim.step()
+                err = max(err, abs(sim.positions[1, 0] - (1.0 + 0.1 * math.cos(10.0 * sim.time))))
+            errs.append(err)
+        assert np.polyfit(np.log(dts), np.log(errs), 1)[0] == pytest.approx(order, abs=0.15)
+
+
+def test_bdf2_follows_a_fine_step_reference_closer_than_backward_euler():
+    """A 12×12 cotton sheet hanging from two corners, 1 s from flat at 1/60 s with vbd's
+    defaults: the free edge's centroid path against symplectic Euler at 0.9 of its stable step
+    (the solver issue's reference). Both converge every step; BDF2, second order and less damped,
+    keeps the path closer than backward Euler (1.3 % of the travel against 4.4 %), and neither
+    gains energy over the fall."""
+    model = ClothModel.grid(12, 12, size=(1.0, 1.0), material="cotton", pinned=[(11, 0), (11, 11)])
+
+    def path(sim):
+        out = [sim.positions[:12].mean(axis=0)]
+        for f in range(1, 61):
+            sim.advance(f / 60)
+            out.append(sim.positions[:12].mean(axis=0))
+        return np.array(out)
+
+    ref = Simulator(model, integrator="symplectic_euler", dt=1.0)
+    ref.dt = 0.9 * ref.stable_dt()
+    want = path(ref)
+    travel = np.linalg.norm(want - want[0], axis=1).max()
+    off = {}
+    for scheme in ("bdf2", "euler"):
+        sim = Simulator(model, integrator="vbd", dt=1 / 60, integrator_options={"scheme": scheme})
+        got = path(sim)
+        assert sim.integrator_stats["unconverged_steps"] == 0
+        off[scheme] = np.sqrt(((got - want) ** 2).sum(axis=1).mean()) / travel
+        e = sim.energy()
+        z0 = (model.masses * model.positions[:, 2]).sum()
+        fallen = 9.81 * (z0 - (model.masses * sim.positions[:, 2]).sum())
+        assert e["kinetic"] + e["spring"] <= fallen
+    assert off["bdf2"] < 0.5 * off["euler"], off
+
+
 def _potential(model, x, xt, y, h):
     m = model.masses[:, None]
     return float(

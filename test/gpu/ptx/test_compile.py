@@ -34,20 +34,21 @@ def signatures(real):
         kc=np.zeros(w, real),
     )
     x = np.zeros((w, n, 3), real)
-    it = Iterate(*([x] * 7), np.zeros((w, n), real))
+    flags = np.zeros(w, np.int8)
+    it = Iterate(*([x] * 7), np.zeros((w, n), real), *([x] * 4), flags, flags)
     ty = numba.typeof
     r = ty(real(1))
-    run = ty(Run(real(1e-3), 1, 1, 1, 10, 1e-2, 5, 0.8))
+    run = ty(Run(real(1e-3), real(2e-3 / 3), 1, 1, 1, 1, 10, 1e-2, 5, 0.8))
     out = numba.float64[:, ::1]
     return {
         K.explicit_substep: (ty(top), ty(wor), ty(it), r, numba.boolean),
         K.copy_back: (ty(it),),
-        K.vbd_start: (ty(it),),
-        K.vbd_guess: (ty(top), ty(wor), ty(it), r),
-        K.vbd_colour: (ty(top), ty(wor), ty(it), numba.int64, numba.int64, r),
+        K.vbd_start: (ty(wor), ty(it), numba.int64),
+        K.vbd_guess: (ty(top), ty(wor), ty(it), r, r),
+        K.vbd_colour: (ty(top), ty(wor), ty(it), numba.int64, numba.int64, r, r),
         K.vbd_accelerate: (ty(wor), ty(it), r, numba.boolean),
         K.vbd_residual: (ty(wor), ty(it), numba.float64[::1]),
-        K.vbd_finish: (ty(wor), ty(it), r),
+        K.vbd_finish: (ty(wor), ty(it), r, r, numba.int64),
         K.place: (ty(it), numba.int32[::1], numba.from_dtype(real)[:, :, ::1], numba.int32[::1]),
         K.frames_in_blocks: (ty(top), ty(wor), ty(it), numba.int32[::1], run, out),
         K.frames_on_grid: (ty(top), ty(wor), ty(it), numba.int32[::1], run, out, out),

@@ -82,6 +82,41 @@ def test_vbd_solves_the_same_backward_euler_step():
     assert gpu.integrator_stats["last_residual"] < 1e-9
 
 
+def test_bdf2_solves_the_cpus_step():
+    """vbd's BDF2 substeps (backward Euler's of 2h/3 from the extrapolated start, after one
+    backward-Euler substep) run to convergence on both devices: the same cloth, its pins (whose
+    velocity BDF2 must not touch) included; a state set from the host starts BDF2 again on both."""
+    m = cotton()
+    opts = dict(iterations=80, tolerance=0.0, substeps=1, scheme="bdf2")
+    cpu = Simulator(
+        m, integrator="vbd", dt=1 / 120, wind=WIND, integrator_options=dict(opts, grid=False)
+    )
+    gpu = Simulator(
+        m,
+        integrator="vbd",
+        dt=1 / 120,
+        wind=WIND,
+        integrator_options=opts,
+        device="cuda",
+        precision="float64",
+    )
+    for sim in (cpu, gpu):
+        sim.step(3)
+        sim.velocities = sim.velocities * 0.5  # (BDF2's history no longer serves)
+        sim.step(1)
+    euler = Simulator(
+        m,
+        integrator="vbd",
+        dt=1 / 120,
+        wind=WIND,
+        integrator_options=dict(opts, grid=False, scheme="euler"),
+    )
+    euler.step(2)
+    assert np.max(np.abs(euler.positions - cpu.positions)) > 1e-6  # BDF2 is not Euler
+    assert np.max(np.abs(gpu.positions - cpu.positions)) < 1e-11
+    assert np.max(np.abs(gpu.velocities - cpu.velocities)) < 1e-9
+
+
 def test_vbd_says_whether_it_converged():
     m = sheet(stiffness=3e3)
     capped = Simulator(
@@ -256,7 +291,8 @@ def test_every_launch_gives_the_same_bits(integrator):
     """A run of steps in one launch (a block a world, or the whole grid cooperating) or a launch a
     stage: the same arithmetic in the same order, the same positions."""
     m = cotton()
-    opts = dict(iterations=12, tolerance=0.0) if integrator == "vbd" else None
+    # (vbd: a backward-Euler substep, then BDF2's)
+    opts = dict(iterations=12, tolerance=0.0, scheme="bdf2") if integrator == "vbd" else None
     dt = 1 / 120 if integrator == "vbd" else 2e-4
     got = {}
     for launch in ("blocks", "grid", "stages"):
