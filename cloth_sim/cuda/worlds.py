@@ -543,9 +543,7 @@ class CudaWorlds:
         for k in range(s.iterations):
             for c in range(len(cptr) - 1):
                 count = int(cptr[c + 1] - cptr[c])
-                K.vbd_colour[_grid(self.worlds * count)](
-                    top, wor, it, int(cptr[c]), count, h, hb
-                )
+                K.vbd_colour[_grid(self.worlds * count)](top, wor, it, int(cptr[c]), count, h, hb)
             self.launches += len(cptr) - 1
             done += 1
             if done < s.iterations and done % s.check_every == 0:
