@@ -8,10 +8,10 @@ STAMP  := $(VENV)/.installed
 # with rosidl + cmake from the wheels: tools/build_interfaces.py
 MSGS   := build/interfaces/.built
 # numba's kernels compiled into their on-disk cache (again when the package's code changes: a
-# fraction of a second when the cache holds them; the grid's sweep with colliders, ~50 s alone, in
-# a process of its own beside the rest, on the core the interfaces and the site leave idle after
-# their first two minutes), and the package's bytecode: these machines set
-# PYTHONDONTWRITEBYTECODE=1, so without it every process (a node, a CLI, a Ray worker) compiled
+# fraction of a second when the cache holds them; from an empty cache, simulator.compile_kernels'
+# three parts each in a process of its own, since numba compiles on one core, beside the
+# interfaces and the site; then one call finds them all in the cache), and the package's
+# bytecode: these machines set PYTHONDONTWRITEBYTECODE=1, so without it every process (a node, a CLI, a Ray worker) compiled
 # the package's modules again as it imported them (0.2-0.5 s a process: docs/BENCHMARKS.md §11)
 KERNELS := $(VENV)/.kernels
 # scipy's sparse solvers and numpy's BLAS oversubscribe 2 cores badly when threaded.
@@ -46,9 +46,11 @@ $(STAMP): requirements.txt setup.py pyproject.toml
 
 $(KERNELS): $(STAMP) $(shell find cloth_sim -name '*.py')
 	$(PY) -m compileall -q cloth_sim
-	$(PY) -c "from cloth_sim.simulator import compile_grid_contacts as c; c()" & grid=$$!; \
-	$(PY) -c "from cloth_sim.simulator import compile_kernels as c; print(f'kernels compiled in {c():.1f} s')"; \
-	rest=$$?; wait $$grid && test $$rest -eq 0
+	pids=; for part in grid_contacts contacts steps; do \
+		$(PY) -c "from cloth_sim.simulator import compile_kernels as c; \
+			print(f'kernels ($$part) compiled in {c(\"$$part\"):.1f} s')" & pids="$$pids $$!"; \
+	done; for pid in $$pids; do wait $$pid || exit 1; done
+	$(PY) -c "from cloth_sim.simulator import compile_kernels as c; print(f'kernels: all in the cache, {c():.1f} s')"
 	@touch $@
 
 $(MSGS): $(STAMP) msg/Stats.msg $(wildcard srv/*.srv) CMakeLists.txt package.xml tools/build_interfaces.py \

@@ -924,15 +924,31 @@ class Simulator:
 __all__ = ["ParameterError", "SimulationDiverged", "Simulator"]
 
 
-def compile_kernels() -> float:
+def compile_kernels(part: str | None = None) -> float:
     """Run every compiled (numba) kernel once, on a 4×4 cloth: each integrator with both spring
     models, wind, drag, the strain limit (both methods), contacts with each collider shape,
     self-collision and the energy and strain reports; returns the seconds it took. The kernels are
     compiled on first use and kept in numba's on-disk cache; a real-time loop calls this before it
     starts, so that no step compiles inside a tick (what a first step compiling costs, and this
-    call with the cache warm: docs/BENCHMARKS.md §7)."""
+    call with the cache warm: docs/BENCHMARKS.md §7).
 
+    ``part`` (one of :data:`COMPILE_PARTS`) runs only that part's kernels: ``make install``
+    compiles the parts in processes of their own side by side (numba compiles on one core), then
+    calls this once more to find them all in the cache."""
+
+    if part is not None and part not in COMPILE_PARTS:
+        raise ValueError(f"part must be one of {', '.join(COMPILE_PARTS)} or None, got {part!r}")
     t0 = time.perf_counter()
+    for name in COMPILE_PARTS if part is None else (part,):
+        _COMPILERS[name]()
+    return time.perf_counter() - t0
+
+
+def _compile_steps() -> None:
+    """The integrators' steps with both spring models, the strain limit (both methods), a
+    material's bending, the parallel spring gather and fused Runge–Kutta step, the long-range
+    attachments on every core, and the energy and strain reports."""
+
     for model_name in ("provot", "choi_ko"):
         model = ClothModel.grid(
             4, 4, 0.1, 0.01, stiffness=100.0, damping=0.1, pinned=[(0, 0)], model=model_name
@@ -953,9 +969,7 @@ def compile_kernels() -> float:
             bent = Simulator(fabric, integrator=name, dt=1e-5)
             bent.step(2)
             bent.energy()
-        # contacts with every collider shape, and self-collision
-        for name in ("symplectic_euler", "vbd"):  # the contact stage; vbd's own, moving too
-            sim = _compile_contacts(model, name)
+        sim = Simulator(model, dt=1e-4)
         # the parallel gather, which only cloths above forces.PARALLEL_MIN_SPRINGS use: with the
         # state's own (writable) arrays, updating them or not, and with read-only views (reports)
         term = sim.forces.spring_term
@@ -1000,8 +1014,20 @@ def compile_kernels() -> float:
         # constraints.PARALLEL_MIN_PARTICLES on use (a 64×64 node compiled them in its first tick)
         anchor, reach = nearest_attachments(model)
         attachment_pass_parallel(x, anchor, reach, 0.1)
-        # the depth camera's kernels (triangles, each collider shape)
 
+
+def _compile_contacts_all() -> None:
+    """Contacts with every collider shape (moving too) and self-collision under both spring
+    models, on the contact stage and inside vbd; the depth camera over them; vbd's general sweep
+    on every core, and the grid's with a time budget."""
+
+    for model_name in ("provot", "choi_ko"):
+        model = ClothModel.grid(
+            4, 4, 0.1, 0.01, stiffness=100.0, damping=0.1, pinned=[(0, 0)], model=model_name
+        )
+        for name in ("symplectic_euler", "vbd"):  # the contact stage; vbd's own, moving too
+            sim = _compile_contacts(model, name)
+        # the depth camera's kernels (triangles, each collider shape)
         DepthCamera(
             width=8,
             height=6,
@@ -1020,8 +1046,19 @@ def compile_kernels() -> float:
     big = _parallel_grid()
     Simulator(big, integrator="vbd", dt=1e-4, integrator_options={"grid": False}).step(1)
     Simulator(big, integrator="vbd", dt=1e-4, integrator_options={"time_budget": 1.0}).step(1)
-    compile_grid_contacts(big)
-    return time.perf_counter() - t0
+
+
+def _compile_grid_contacts_big() -> None:
+    compile_grid_contacts(_parallel_grid())
+
+
+#: :func:`compile_kernels`' parts, each a process of its own in ``make install``
+COMPILE_PARTS = ("grid_contacts", "contacts", "steps")
+_COMPILERS = {
+    "grid_contacts": _compile_grid_contacts_big,
+    "contacts": _compile_contacts_all,
+    "steps": _compile_steps,
+}
 
 
 def _parallel_grid() -> ClothModel:

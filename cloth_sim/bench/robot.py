@@ -61,7 +61,16 @@ def mesh_against_primitive(steps: int = 400) -> None:
                 if kind == "box"
                 else colliders.Mesh((box.vertices, box.faces), friction=0.5)
             )
-            sim = Simulator(model, integrator=integrator, dt=dt, colliders=[shape], drag=0.01)
+            # (vbd: 10 iterations a step, one substep, as the node runs it)
+            options = {"iterations": 10} if integrator == "vbd" else None
+            sim = Simulator(
+                model,
+                integrator=integrator,
+                dt=dt,
+                colliders=[shape],
+                drag=0.01,
+                integrator_options=options,
+            )
             sim.step(20)
             n = steps if integrator != "vbd" else steps // 8
             t = time.perf_counter()

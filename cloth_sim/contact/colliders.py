@@ -387,7 +387,7 @@ def sdf(kind, pos, rot, geo, c, x, y, z):
     return d, nx, ny, nz
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def mesh_sdf(pos, rot, geo, c, x, y, z, bank, cutoff=math.inf):
     """:func:`sdf` of a Mesh collider ``c`` (``geo[c, 0]`` its index in ``bank``, the packed
     meshes of :func:`.triangle_meshes.pack`): signed where the mesh is closed, unsigned where it is

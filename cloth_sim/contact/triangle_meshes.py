@@ -21,6 +21,16 @@ found (Ericson, *Real-Time Collision Detection*, 6.1); the answer is exact every
 earlier version answered the root box's distance outside it, a lower bound: next to a body's box
 but far from the body that put phantom contacts on the box's faces. The kernels skip far colliders
 by their reach instead.)
+
+Near the surface a query does not walk: each mesh has a **candidate grid** in its frame, cells of
+half its median edge over its box grown by a band of two cells, and each cell lists the triangles
+whose box, grown by the band, meets the cell (built once, by rasterising each triangle's grown
+box). Every triangle within the band of a point in the cell is listed, so where the nearest listed
+triangle lies within the band, or a query's cutoff does, the cell's list is the answer; the list
+keeps the walk's order and the arithmetic is the walk's, so the answer is the walk's to the bit. A
+cell where the distance is affine (every point's nearest point inside one triangle: a face's
+interior, :func:`_planes`) keeps that plane, and a query there is one dot product, equal to the
+walk's answer to rounding (``test_mesh_colliders.py``). Elsewhere the walk answers.
 """
 
 from __future__ import annotations
@@ -35,6 +45,11 @@ from .geometry import closest_on_triangle
 
 #: triangles a leaf holds at most
 LEAF = 4
+#: a mesh's candidate grid (module docstring): at least this many cells along its longest side,
+#: at most this many cells in all, and its band (where a cell's list answers) in cells
+GRID_CELLS = 32
+MAX_CELLS = 1 << 18
+BAND_CELLS = 2
 
 
 class TriangleMesh:
@@ -42,7 +57,7 @@ class TriangleMesh:
     and its hierarchy (``left``, ``right``, ``first``, ``end``, ``order``, the nodes' boxes ``lo``,
     ``hi``)."""
 
-    def __init__(self, vertices, triangles, name: str):
+    def __init__(self, vertices, triangles, name: str, grid: bool = True):
         v = np.ascontiguousarray(vertices, dtype=np.float64)
         t = np.ascontiguousarray(triangles, dtype=np.int64)
         a, b, c = (v[t[:, k]] for k in range(3))
@@ -80,6 +95,33 @@ class TriangleMesh:
         self.first, self.end = first[pre].copy(), end[pre].copy()
         self.lo, self.hi = _boxes(v, t, self.order, self.first, self.end)
         self.closed, self.face_normals, self.vertex_normals, self.edge_normals = _solid(v, t)
+        # the candidate grid over the root box grown by the band and a cell, in the mesh's
+        # frame: cells of half the median edge (a cell lists the few triangles around it), at
+        # least GRID_CELLS along the longest side, at most MAX_CELLS in all
+        span = self.hi[0] - self.lo[0]
+        longest = max(float(span.max()), 1e-9)
+        edges = np.linalg.norm(v[t] - v[np.roll(t, 1, axis=1)], axis=2)
+        cell = max(min(longest / GRID_CELLS, 0.5 * float(np.median(edges))), longest / 1024)
+        while np.prod(np.ceil(span / cell) + 2 * (BAND_CELLS + 1)) > MAX_CELLS:
+            cell *= 1.25
+        #: the grid's first corner, its cells' side (m), its cells along x, y, z, and the band
+        #: (m) within which a cell's list answers a query
+        self.grid_band = BAND_CELLS * cell
+        self.grid_origin = self.lo[0] - (BAND_CELLS + 1) * cell
+        self.grid_cell = cell
+        self.grid_dims = (np.ceil(span / cell) + 2 * (BAND_CELLS + 1)).astype(np.int64)
+        if not grid:  # (no cell: every query walks)
+            self.grid_dims = np.zeros(3, np.int64)
+        #: each cell's candidates (positions in ``order``, in the walk's order), a CSR
+        self.cell_ptr, self.cell_list = _candidates(
+            v, t, self.order, self.grid_origin, cell, self.grid_dims, self.grid_band
+        )
+        #: each cell's plane ``(n, offset)`` where the distance is ``n·x + offset`` over the
+        #: whole cell (NaN where it is not)
+        self.cell_plane = _planes(
+            v, t, self.order, self.face_normals, self.closed, self.grid_origin, cell,
+            self.grid_dims, self.grid_band, self.cell_ptr, self.cell_list,
+        )  # fmt: skip
 
     @property
     def extent(self) -> float:
@@ -145,17 +187,182 @@ def _boxes(v, t, order, first, end):
     return lo, hi
 
 
+@numba.njit(cache=True, inline="always")
+def _triangle_d2(v, t, k, x, y, z):
+    """Triangle ``k``'s point nearest ``(x, y, z)``: the squared distance, the point and its
+    barycentric weights."""
+    a, b, c = t[k, 0], t[k, 1], t[k, 2]
+    wa, wb, wc = closest_on_triangle(
+        x, y, z, v[a, 0], v[a, 1], v[a, 2], v[b, 0], v[b, 1], v[b, 2], v[c, 0], v[c, 1], v[c, 2]
+    )
+    cx = wa * v[a, 0] + wb * v[b, 0] + wc * v[c, 0]
+    cy = wa * v[a, 1] + wb * v[b, 1] + wc * v[c, 1]
+    cz = wa * v[a, 2] + wb * v[b, 2] + wc * v[c, 2]
+    return (x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2, cx, cy, cz, wa, wb, wc
+
+
+@numba.njit(cache=True)
+def _candidates(v, t, order, origin, cell, dims, band):
+    """The candidate grid's CSR ``(ptr, positions)``: for each cell (x slowest, z fastest) the
+    positions ``q`` in ``order`` of the triangles whose box, grown by ``band``, meets the cell, in
+    the walk's order (increasing ``q``). Every triangle within ``band`` of a point of the cell is
+    listed (one that is not lies farther than ``band`` along some axis)."""
+    nx, ny, nz = dims[0], dims[1], dims[2]
+    cells = nx * ny * nz
+    lo = np.empty((len(order), 3), np.int64)
+    hi = np.empty((len(order), 3), np.int64)
+    count = np.zeros(cells + 1, np.int64)
+    for q in range(len(order)):
+        k = order[q]
+        for a in range(3):
+            a_lo = min(v[t[k, 0], a], v[t[k, 1], a], v[t[k, 2], a]) - band
+            a_hi = max(v[t[k, 0], a], v[t[k, 1], a], v[t[k, 2], a]) + band
+            lo[q, a] = max(0, int(math.floor((a_lo - origin[a]) / cell)))
+            hi[q, a] = min(dims[a] - 1, int(math.floor((a_hi - origin[a]) / cell)))
+        for ix in range(lo[q, 0], hi[q, 0] + 1):
+            for iy in range(lo[q, 1], hi[q, 1] + 1):
+                for iz in range(lo[q, 2], hi[q, 2] + 1):
+                    count[(ix * ny + iy) * nz + iz + 1] += 1
+    ptr = np.cumsum(count)
+    fill = ptr[:-1].copy()
+    out = np.empty(ptr[cells], np.int64)
+    for q in range(len(order)):
+        for ix in range(lo[q, 0], hi[q, 0] + 1):
+            for iy in range(lo[q, 1], hi[q, 1] + 1):
+                for iz in range(lo[q, 2], hi[q, 2] + 1):
+                    cid = (ix * ny + iy) * nz + iz
+                    out[fill[cid]] = q
+                    fill[cid] += 1
+    return ptr, out
+
+
+@numba.njit(cache=True, inline="always")
+def _coplanar(v, t, fn, k, tri, a):
+    """Whether triangle ``k`` lies in triangle ``tri``'s plane (``a`` one of its vertices): a point
+    whose projection on that plane is inside ``tri`` is then nearer ``tri`` than ``k``."""
+    cross = (
+        abs(fn[k, 1] * fn[tri, 2] - fn[k, 2] * fn[tri, 1])
+        + abs(fn[k, 2] * fn[tri, 0] - fn[k, 0] * fn[tri, 2])
+        + abs(fn[k, 0] * fn[tri, 1] - fn[k, 1] * fn[tri, 0])
+    )
+    if cross > 1e-12:
+        return False
+    for corner in range(3):
+        b = t[k, corner]
+        off = (
+            fn[tri, 0] * (v[b, 0] - v[a, 0])
+            + fn[tri, 1] * (v[b, 1] - v[a, 1])
+            + fn[tri, 2] * (v[b, 2] - v[a, 2])
+        )
+        if abs(off) > 1e-12:
+            return False
+    return True
+
+
+@numba.njit(cache=True)
+def _planes(v, t, order, fn, closed, origin, cell, dims, band, ptr, listed):
+    """Each cell's plane ``(nx, ny, nz, offset)`` where the distance from every point ``x`` of the
+    cell is ``n·x + offset`` (NaN elsewhere): the nearest point of each of the cell's eight
+    corners lies inside one triangle ``T`` (not on its edges), within the band, so every point of
+    the cell has its nearest point of ``T``'s plane inside ``T`` (a triangle is convex); and every
+    other listed triangle is farther from the cell's centre, less the half diagonal, than ``T``'s
+    plane is from any corner, so none is nearer anywhere in the cell (and what is not listed lies
+    beyond the band; a triangle in ``T``'s plane is farther anywhere the projection is inside
+    ``T``). The plane is ``T``'s outward one on a closed mesh (the signed distance; the
+    face's pseudonormal is its normal), and turned towards the cell on an open one, whose corners
+    must then lie on one side (or on the plane)."""
+    ny, nz = dims[1], dims[2]
+    cells = dims[0] * ny * nz
+    out = np.full((cells, 4), np.nan)
+    r = 0.5 * cell * math.sqrt(3.0)
+    for ix in range(dims[0]):
+        for iy in range(ny):
+            for iz in range(nz):
+                cid = (ix * ny + iy) * nz + iz
+                if ptr[cid + 1] == ptr[cid]:
+                    continue
+                tri = -1
+                far = 0.0
+                side = 0.0
+                ok = True
+                for corner in range(8):
+                    x = origin[0] + (ix + (corner & 1)) * cell
+                    y = origin[1] + (iy + ((corner >> 1) & 1)) * cell
+                    z = origin[2] + (iz + ((corner >> 2) & 1)) * cell
+                    best = band * band
+                    bk = -1
+                    inner = False
+                    for j in range(ptr[cid], ptr[cid + 1]):
+                        k = order[listed[j]]
+                        d2, _, _, _, wa, wb, wc = _triangle_d2(v, t, k, x, y, z)
+                        if d2 < best:
+                            best, bk = d2, k
+                            inner = wa > 1e-9 and wb > 1e-9 and wc > 1e-9
+                    if bk < 0 or not inner or (tri >= 0 and bk != tri):
+                        ok = False
+                        break
+                    tri = bk
+                    a = t[tri, 0]
+                    d = (
+                        fn[tri, 0] * (x - v[a, 0])
+                        + fn[tri, 1] * (y - v[a, 1])
+                        + fn[tri, 2] * (z - v[a, 2])
+                    )
+                    if not closed and d != 0.0:  # (a corner on the plane is on either side)
+                        s = 1.0 if d > 0.0 else -1.0
+                        if side != 0.0 and s != side:
+                            ok = False
+                            break
+                        side = s
+                    far = max(far, abs(d))
+                if not ok:
+                    continue
+                cx = origin[0] + (ix + 0.5) * cell
+                cy = origin[1] + (iy + 0.5) * cell
+                cz = origin[2] + (iz + 0.5) * cell
+                a = t[tri, 0]
+                for j in range(ptr[cid], ptr[cid + 1]):
+                    k = order[listed[j]]
+                    if k == tri or _coplanar(v, t, fn, k, tri, a):
+                        continue  # (its points are off the cell's projection: farther)
+                    if math.sqrt(_triangle_d2(v, t, k, cx, cy, cz)[0]) - r <= far:
+                        ok = False
+                        break
+                if not ok or (not closed and side == 0.0):
+                    continue
+                s = 1.0 if closed else side
+                a = t[tri, 0]
+                nx, ny_, nz_ = s * fn[tri, 0], s * fn[tri, 1], s * fn[tri, 2]
+                out[cid, 0], out[cid, 1], out[cid, 2] = nx, ny_, nz_
+                out[cid, 3] = -(nx * v[a, 0] + ny_ * v[a, 1] + nz_ * v[a, 2])
+    return out
+
+
 def pack(meshes) -> tuple:
-    """The bank the kernels read: ``(vertices, triangles, lo, hi, left, right, first, end, order,
-    root, face normals, vertex normals, edge normals, closed)`` with every mesh's arrays one after
-    the other (its nodes, triangles and vertices renumbered), ``root[m]`` mesh ``m``'s root node;
-    ``left`` a node's first child (−1: a leaf), ``right`` the node after its subtree (−1: the
-    mesh's last); ``closed[m]`` 1 where mesh ``m`` is a solid (:class:`TriangleMesh`). An empty
-    list gives empty arrays of the same types."""
+    """The bank the kernels read: ``(vertices, triangles, lo, hi, left, right, first, end,
+    order, root, face normals, vertex normals, edge normals, closed, grid origin, grid cell, grid
+    dims, grid start, cell ptr, cell list, grid band, cell plane)`` with every mesh's arrays one
+    after the other (its nodes, triangles, vertices and cells renumbered), ``root[m]`` mesh
+    ``m``'s root node; ``left`` a node's first child (−1: a leaf), ``right`` the node after its
+    subtree (−1: the mesh's last); ``closed[m]`` 1 where mesh ``m`` is a solid
+    (:class:`TriangleMesh`); mesh ``m``'s candidate grid from ``grid origin[m]`` in cells of
+    ``grid cell[m]``, ``grid dims[m]`` of them, its first cell ``grid start[m]`` in the cells'
+    CSR, its band ``grid band[m]``, each cell's plane where the distance is affine (NaN
+    elsewhere). An empty list gives empty arrays of the same types."""
     vs, ts, los, his, ls, rs, fs, es, os_, roots = [], [], [], [], [], [], [], [], [], []
     fns, vns, ens, closed = [], [], [], []
-    nv = nt = nn = 0
+    gorg, gcell, gdim, gstart, cptrs, clists, gband, planes = [], [], [], [], [], [], [], []
+    nv = nt = nn = nc = nl = 0
     for m in meshes:
+        gorg.append(m.grid_origin)
+        gcell.append(m.grid_cell)
+        gband.append(m.grid_band)
+        planes.append(m.cell_plane)
+        gdim.append(m.grid_dims)
+        gstart.append(nc)
+        cptrs.append(m.cell_ptr[:-1] + nl)
+        clists.append(m.cell_list + nt)
+        nc, nl = nc + len(m.cell_ptr) - 1, nl + len(m.cell_list)
         vs.append(m.vertices)
         ts.append(m.triangles + nv)
         los.append(m.lo)
@@ -192,6 +399,14 @@ def pack(meshes) -> tuple:
         cat(vns, (0, 3), np.float64),
         cat(ens, (0, 3, 3), np.float64),
         np.array(closed, dtype=np.int64),
+        cat(gorg, (0, 3), np.float64).reshape(-1, 3),
+        np.array(gcell, dtype=np.float64),
+        cat(gdim, (0, 3), np.int64).reshape(-1, 3),
+        np.array(gstart, dtype=np.int64),
+        np.ascontiguousarray(np.concatenate([*cptrs, [nl]]).astype(np.int64)),
+        cat(clists, (0,), np.int64),
+        np.array(gband, dtype=np.float64),
+        cat(planes, (0, 4), np.float64).reshape(-1, 4),
     )
 
 
@@ -224,15 +439,7 @@ def _nearest(bank, m, x, y, z, cutoff):
         if left[node] < 0:
             for q in range(first[node], end[node]):
                 k = order[q]
-                a, b, c = t[k, 0], t[k, 1], t[k, 2]
-                wa, wb, wc = closest_on_triangle(
-                    x, y, z, v[a, 0], v[a, 1], v[a, 2], v[b, 0], v[b, 1], v[b, 2],
-                    v[c, 0], v[c, 1], v[c, 2],
-                )  # fmt: skip
-                cx = wa * v[a, 0] + wb * v[b, 0] + wc * v[c, 0]
-                cy = wa * v[a, 1] + wb * v[b, 1] + wc * v[c, 1]
-                cz = wa * v[a, 2] + wb * v[b, 2] + wc * v[c, 2]
-                d2 = (x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2
+                d2, cx, cy, cz, wa, wb, wc = _triangle_d2(v, t, k, x, y, z)
                 if d2 < best:
                     best, px, py, pz, btri = d2, cx, cy, cz, k
                     ba, bb, bc = wa, wb, wc
@@ -240,6 +447,45 @@ def _nearest(bank, m, x, y, z, cutoff):
             continue
         node = left[node]
     return best, px, py, pz, btri, ba, bb, bc
+
+
+@numba.njit(cache=True, inline="always")
+def _cell_of(bank, m, x, y, z):
+    """The candidate grid's cell (its index in the bank) that holds ``(x, y, z)``, −1 if none."""
+    cs = bank[15][m]
+    o, dims = bank[14], bank[16]
+    ix = int(math.floor((x - o[m, 0]) / cs))
+    iy = int(math.floor((y - o[m, 1]) / cs))
+    iz = int(math.floor((z - o[m, 2]) / cs))
+    if 0 <= ix < dims[m, 0] and 0 <= iy < dims[m, 1] and 0 <= iz < dims[m, 2]:
+        return bank[17][m] + (ix * dims[m, 1] + iy) * dims[m, 2] + iz
+    return -1
+
+
+@numba.njit(cache=True, inline="always")
+def _nearest_listed(bank, m, x, y, z, cutoff, cid):
+    """:func:`_nearest` from the candidate grid's cell ``cid`` that holds ``(x, y, z)`` (−1:
+    none), where that is the answer: the nearest listed triangle lies within the band, or the
+    cutoff is within it (every triangle the cell does not list lies beyond the band). The cell
+    lists every triangle within the band in the walk's order and the arithmetic is the walk's, so
+    the answer is the walk's to the bit; elsewhere (outside the grid, nothing listed that near)
+    the walk's own."""
+    if cid >= 0:
+        ptr, listed, band = bank[18], bank[19], bank[20][m]
+        v, t, order = bank[0], bank[1], bank[8]
+        best = cutoff * cutoff
+        px = py = pz = 0.0
+        btri = -1
+        ba = bb = bc = 0.0
+        for j in range(ptr[cid], ptr[cid + 1]):
+            k = order[listed[j]]
+            d2, cx, cy, cz, wa, wb, wc = _triangle_d2(v, t, k, x, y, z)
+            if d2 < best:
+                best, px, py, pz, btri = d2, cx, cy, cz, k
+                ba, bb, bc = wa, wb, wc
+        if cutoff <= band or (btri >= 0 and best < band * band):
+            return best, px, py, pz, btri, ba, bb, bc
+    return _nearest(bank, m, x, y, z, cutoff)
 
 
 @numba.njit(cache=True, inline="always")
@@ -269,16 +515,33 @@ def _inside_box(bank, m, x, y, z):
     return lo[r, 0] <= x <= hi[r, 0] and lo[r, 1] <= y <= hi[r, 1] and lo[r, 2] <= z <= hi[r, 2]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def mesh_distance(bank, m, x, y, z, cutoff=np.inf):
     """Distance of the point ``(x, y, z)`` (in the mesh's frame) from mesh ``m`` of the bank,
     signed (negative inside) where the mesh is closed and unsigned where it is open (module
     docstring), and the distance's gradient: the unit direction from the surface to the point,
     outwards from a closed mesh's inside. With a ``cutoff``, a point at least that far from the
     surface (and outside) is answered ``(cutoff, 0, 0, 0)`` without the walk below boxes farther
-    than it; a point inside a closed mesh is answered whatever its depth."""
+    than it; a point inside a closed mesh is answered whatever its depth.
+
+    Inlined where it is called, so that a cell whose distance is affine answers without a call
+    (a call passes the bank's 22 arrays, each counted in and out: it cost more than the query)."""
+    cid = _cell_of(bank, m, x, y, z)
+    if cid >= 0:
+        plane = bank[21]
+        if not math.isnan(plane[cid, 0]):  # the distance is affine over the cell
+            d = plane[cid, 0] * x + plane[cid, 1] * y + plane[cid, 2] * z + plane[cid, 3]
+            if d >= cutoff:
+                return cutoff, 0.0, 0.0, 0.0
+            return d, plane[cid, 0], plane[cid, 1], plane[cid, 2]
+    return _listed_distance(bank, m, x, y, z, cutoff, cid)
+
+
+@numba.njit(cache=True)
+def _listed_distance(bank, m, x, y, z, cutoff, cid):
+    """:func:`mesh_distance` from the nearest point: the cell's list's or the walk's."""
     closed = bank[13][m] != 0
-    best, px, py, pz, btri, wa, wb, wc = _nearest(bank, m, x, y, z, cutoff)
+    best, px, py, pz, btri, wa, wb, wc = _nearest_listed(bank, m, x, y, z, cutoff, cid)
     if btri < 0:
         if not (closed and _inside_box(bank, m, x, y, z)):
             return cutoff, 0.0, 0.0, 0.0

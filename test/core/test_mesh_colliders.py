@@ -241,3 +241,66 @@ def test_every_integrator_keeps_a_cloth_off_a_mesh(integrator):
     )  # fmt: skip
     sim.advance(0.5)
     assert np.all(sim.positions[:, 2] >= H * (1 - 0.1))
+
+
+@pytest.mark.parametrize("shape", ["box", "mannequin", "plate"])
+def test_the_candidate_grid_answers_as_the_walk_does(shape):
+    """A query inside the mesh's candidate grid reads only its cell: where the cell lists
+    triangles, the signed distance and its gradient are the hierarchy walk's to the bit (the same
+    triangles in the walk's order); where the distance is affine over the cell (a face's
+    interior), the cell's plane gives them to rounding. Checked with and without a cutoff for
+    points near the surface, in the box and beyond the grid, against the same mesh without a grid
+    (every query walks); a cell lists a few triangles, not the mesh, and on a box or a plate,
+    whose faces are large, many queries near the surface are answered by a plane."""
+    import trimesh
+
+    from cloth_sim.contact.triangle_meshes import TriangleMesh, mesh_distance, pack
+
+    if shape == "box":
+        v, f = box_mesh((0.3, 0.3, 0.1))
+    elif shape == "plate":
+        v, f = quad(0.4)
+    else:
+        path = Path(__file__).resolve().parents[2] / "config" / "meshes" / "mannequin.obj"
+        body = trimesh.load(path, process=False)
+        v, f = np.asarray(body.vertices), np.asarray(body.faces)
+    other = TriangleMesh(np.eye(3), [[0, 1, 2]], "other")
+    mesh = TriangleMesh(v, f, shape)
+    grid = pack([other, mesh])
+    walk = pack([other, TriangleMesh(v, f, shape, grid=False)])
+    rng = np.random.default_rng(7)
+    lo, hi = mesh.lo[0], mesh.hi[0]
+    end = mesh.grid_origin + mesh.grid_cell * mesh.grid_dims
+    centres = v[f].mean(axis=1)
+    near = np.concatenate([v, centres]) + rng.normal(scale=0.01, size=(len(v) + len(f), 3))
+    inside = rng.uniform(lo, hi, size=(300, 3))
+    around = rng.uniform(2 * mesh.grid_origin - end, 2 * end - mesh.grid_origin, size=(300, 3))
+    # points over the faces, at a third of a cell (a cloth resting on them; either side of a plate)
+    w = rng.dirichlet(np.ones(3), size=300)
+    k = rng.integers(len(f), size=300)
+    e1, e2 = v[f[k, 1]] - v[f[k, 0]], v[f[k, 2]] - v[f[k, 0]]
+    normal = np.cross(e1, e2)
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    if shape == "plate":
+        normal *= rng.choice([-1.0, 1.0], size=(300, 1))
+    on = np.einsum("ij,ijk->ik", w, v[f[k]])
+    hover = on + 0.3 * mesh.grid_cell * normal
+    planes = 0
+    for n, p in enumerate(np.concatenate([hover, near, inside, around])):
+        cell = np.floor((p - mesh.grid_origin) / mesh.grid_cell).astype(int)
+        affine = False
+        if np.all((cell >= 0) & (cell < mesh.grid_dims)):
+            cid = (cell[0] * mesh.grid_dims[1] + cell[1]) * mesh.grid_dims[2] + cell[2]
+            affine = not np.isnan(mesh.cell_plane[cid, 0])
+        for cutoff in (np.inf, 0.005, 0.05):
+            got = np.array(mesh_distance(grid, 1, *p, cutoff))
+            want = np.array(mesh_distance(walk, 1, *p, cutoff))
+            if affine:
+                assert np.allclose(got, want, rtol=0, atol=1e-12), (p, cutoff, got, want)
+            else:
+                assert np.array_equal(got, want), (p, cutoff, got, want)
+        planes += affine and n < len(hover)
+    counts = np.diff(mesh.cell_ptr)
+    assert np.median(counts[counts > 0]) <= 16
+    if shape != "mannequin":  # (a body's triangles are smaller than a cell and its margins)
+        assert planes > 0.3 * len(hover)
