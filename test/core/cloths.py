@@ -1,8 +1,10 @@
 """The core tests' cloths and closed forms (shared by the test modules of this folder)."""
 
+import math
+
 import numpy as np
 
-from cloth_sim import ClothModel
+from cloth_sim import ClothModel, Simulator
 
 
 def one_spring(k=100.0, m=1.0, L=1.0, amplitude=0.1, damping=0.0):
@@ -43,3 +45,23 @@ def free_fall(sim, v0, steps):
     sim.step(steps)
     t = sim.time
     return (m * sim.positions).sum(0) / m.sum(), x0 + vc * t + 0.5 * sim.gravity * t * t, t
+
+
+def oscillator_order(name, dts, options=None) -> tuple[float, list]:
+    """The observed order of ``name`` on :func:`one_spring` without gravity: the slope of the
+    largest error of ``x(t) = L + A cos ωt`` over 1 s against ``dts`` (log–log), and the errors."""
+    errs = []
+    for dt in dts:
+        sim = Simulator(
+            one_spring(),
+            integrator=name,
+            dt=dt,
+            gravity=(0.0, 0.0, 0.0),
+            integrator_options=options,
+        )
+        err = 0.0
+        for _ in range(round(1.0 / dt)):
+            sim.step()
+            err = max(err, abs(sim.positions[1, 0] - (1.0 + 0.1 * math.cos(10.0 * sim.time))))
+        errs.append(err)
+    return float(np.polyfit(np.log(dts), np.log(errs), 1)[0]), errs

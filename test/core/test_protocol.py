@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from cloths import free_cloth, free_fall, one_spring
+from cloths import free_cloth, free_fall, one_spring, oscillator_order
 
 import cloth_sim.physics.stability as stab
 from cloth_sim import ClothModel, SimulationDiverged, Simulator, integrators
@@ -69,21 +69,7 @@ def test_declared_order_is_observed_on_the_harmonic_oscillator(name):
     # one free particle: each of vbd's iterations is a Newton step on the whole system, so 10 give
     # the errors of 200 to 12 digits (measured; 200 took 22 s of the core tests)
     options = {"iterations": 10} if name == "vbd" else EXACT.get(name)
-    errs = []
-    for dt in dts:
-        sim = Simulator(
-            one_spring(),
-            integrator=name,
-            dt=dt,
-            gravity=NO_GRAVITY,
-            integrator_options=options,
-        )
-        err = 0.0
-        for _ in range(round(1.0 / dt)):
-            sim.step()
-            err = max(err, abs(sim.positions[1, 0] - (1.0 + 0.1 * math.cos(10.0 * sim.time))))
-        errs.append(err)
-    observed = np.polyfit(np.log(dts), np.log(errs), 1)[0]
+    observed, errs = oscillator_order(name, dts, options)
     assert observed == pytest.approx(order, abs=0.15), errs
 
 

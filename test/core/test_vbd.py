@@ -12,7 +12,7 @@ import numba
 import numpy as np
 import pytest
 import scipy.optimize
-from cloths import one_spring
+from cloths import one_spring, oscillator_order
 from test_contacts import _count_crossings, _fold
 
 from cloth_sim import ClothModel, Simulator, colliders
@@ -23,45 +23,28 @@ from cloth_sim.scene import load_scene
 NO_GRAVITY = (0.0, 0.0, 0.0)
 
 
-def test_a_linear_oscillator_follows_backward_eulers_recursion_exactly():
-    """One free particle on a spring along its axis: each step solves backward Euler exactly (the
-    vertex's Newton step is exact on a quadratic energy), so x and v follow
-    (x, v)_{n+1} = [[1, h], [−ω²h, 1]] (x, v)_n / (1 + ω²h²) to rounding, at any step size."""
+@pytest.mark.parametrize("scheme", ["euler", "bdf2"])
+def test_a_linear_oscillator_follows_the_schemes_recursion_exactly(scheme):
+    """One free particle on a spring along its axis: each step solves its implicit step exactly
+    (the vertex's Newton step is exact on a quadratic energy), so x and v follow the recursion to
+    rounding, at any step size. Backward Euler: (x, v)_{n+1} = [[1, h], [−ω²h, 1]] (x, v)_n /
+    (1 + ω²h²). BDF2, after one backward-Euler step: backward Euler's of ĥ = 2h/3 from
+    x̂ = (4xₙ − xₙ₋₁)/3 with velocity v̂ = (4vₙ − vₙ₋₁)/3, so x = (x̂ + ĥv̂)/(1 + ω²ĥ²) and
+    v = (x − x̂)/ĥ."""
     for h in (1e-3, 0.05, 0.5):
         sim = Simulator(
             one_spring(k=100.0, m=1.0),
             integrator="vbd",
             dt=h,
             gravity=NO_GRAVITY,
-            integrator_options={"iterations": 1, "rho": 0.0},
-        )
-        w2 = 100.0
-        x, v = 0.1, 0.0
-        for _ in range(50):
-            sim.step()
-            x, v = (x + h * v) / (1 + w2 * h * h), (v - w2 * h * x) / (1 + w2 * h * h)
-        assert sim.positions[1, 0] - 1.0 == pytest.approx(x, rel=1e-9, abs=1e-15)
-        assert sim.velocities[1, 0] == pytest.approx(v, rel=1e-9, abs=1e-15)
-
-
-def test_a_linear_oscillator_follows_bdf2s_recursion_exactly():
-    """The same particle under BDF2: after one backward-Euler step, each step is backward Euler's
-    of 2h/3 from x̂ = (4xₙ − xₙ₋₁)/3 with velocity v̂ = (4vₙ − vₙ₋₁)/3, so x and v follow
-    x = (x̂ + ĥv̂)/(1 + ω²ĥ²), v = (x − x̂)/ĥ, ĥ = 2h/3, to rounding, at any step size."""
-    for h in (1e-3, 0.05, 0.5):
-        sim = Simulator(
-            one_spring(k=100.0, m=1.0),
-            integrator="vbd",
-            dt=h,
-            gravity=NO_GRAVITY,
-            integrator_options={"iterations": 1, "rho": 0.0, "scheme": "bdf2"},
+            integrator_options={"iterations": 1, "rho": 0.0, "scheme": scheme},
         )
         w2, hh = 100.0, 2.0 * h / 3.0
         x, v = 0.1, 0.0
         past = None
         for _ in range(50):
             sim.step()
-            if past is None:  # the start: backward Euler
+            if past is None or scheme == "euler":
                 new = (x + h * v) / (1 + w2 * h * h), (v - w2 * h * x) / (1 + w2 * h * h)
             else:
                 xh, vh = (4 * x - past[0]) / 3, (4 * v - past[1]) / 3
@@ -77,21 +60,8 @@ def test_bdf2_is_second_order_and_the_default_where_vbd_chooses_its_work():
     1 under backward Euler (iterations given)."""
     dts = np.array([4e-3, 2e-3, 1e-3, 5e-4])
     for options, order in ((None, 2), ({"iterations": 10}, 1)):
-        errs = []
-        for dt in dts:
-            sim = Simulator(
-                one_spring(),
-                integrator="vbd",
-                dt=dt,
-                gravity=NO_GRAVITY,
-                integrator_options=options,
-            )
-            err = 0.0
-            for _ in range(round(1.0 / dt)):
-                sim.step()
-                err = max(err, abs(sim.positions[1, 0] - (1.0 + 0.1 * math.cos(10.0 * sim.time))))
-            errs.append(err)
-        assert np.polyfit(np.log(dts), np.log(errs), 1)[0] == pytest.approx(order, abs=0.15)
+        observed, errs = oscillator_order("vbd", dts, options)
+        assert observed == pytest.approx(order, abs=0.15), errs
 
 
 def test_bdf2_follows_a_fine_step_reference_closer_than_backward_euler():

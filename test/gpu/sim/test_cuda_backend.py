@@ -57,23 +57,20 @@ def test_float32_stays_within_its_rounding():
     assert np.max(np.abs(gpu.positions - cpu.positions)) < 1e-5
 
 
+def converged_pair(m, opts):
+    """``vbd`` with ``opts`` at 1/120 s in the wind on the cpu (the general sweep, whose order of
+    colours is the device's kind) and on cuda in float64."""
+    kw = dict(integrator="vbd", dt=1 / 120, wind=WIND)
+    cpu = Simulator(m, integrator_options=dict(opts, grid=False), **kw)
+    gpu = Simulator(m, integrator_options=opts, device="cuda", precision="float64", **kw)
+    return cpu, gpu
+
+
 def test_vbd_solves_the_same_backward_euler_step():
     # run to convergence (tolerance 0: every iteration) on both: the same step's solution, whatever
     # the order of the colours
     m = cotton()
-    opts = dict(iterations=80, tolerance=0.0, substeps=1)
-    cpu = Simulator(
-        m, integrator="vbd", dt=1 / 120, wind=WIND, integrator_options=dict(opts, grid=False)
-    )
-    gpu = Simulator(
-        m,
-        integrator="vbd",
-        dt=1 / 120,
-        wind=WIND,
-        integrator_options=opts,
-        device="cuda",
-        precision="float64",
-    )
+    cpu, gpu = converged_pair(m, dict(iterations=80, tolerance=0.0, substeps=1))
     cpu.step(2)
     gpu.step(2)
     assert np.max(np.abs(cpu.positions - m.positions)) > 1e-3
@@ -88,18 +85,7 @@ def test_bdf2_solves_the_cpus_step():
     velocity BDF2 must not touch) included; a state set from the host starts BDF2 again on both."""
     m = cotton()
     opts = dict(iterations=80, tolerance=0.0, substeps=1, scheme="bdf2")
-    cpu = Simulator(
-        m, integrator="vbd", dt=1 / 120, wind=WIND, integrator_options=dict(opts, grid=False)
-    )
-    gpu = Simulator(
-        m,
-        integrator="vbd",
-        dt=1 / 120,
-        wind=WIND,
-        integrator_options=opts,
-        device="cuda",
-        precision="float64",
-    )
+    cpu, gpu = converged_pair(m, opts)
     for sim in (cpu, gpu):
         sim.step(3)
         sim.velocities = sim.velocities * 0.5  # (BDF2's history no longer serves)
