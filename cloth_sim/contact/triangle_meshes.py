@@ -450,42 +450,17 @@ def _nearest(bank, m, x, y, z, cutoff):
 
 
 @numba.njit(cache=True, inline="always")
-def _cell_of(bank, m, x, y, z):
-    """The candidate grid's cell (its index in the bank) that holds ``(x, y, z)``, −1 if none."""
-    cs = bank[15][m]
-    o, dims = bank[14], bank[16]
-    ix = int(math.floor((x - o[m, 0]) / cs))
-    iy = int(math.floor((y - o[m, 1]) / cs))
-    iz = int(math.floor((z - o[m, 2]) / cs))
+def _cell_of(origin, cell, dims, start, m, x, y, z):
+    """The candidate grid's cell (its index in the bank) that holds ``(x, y, z)``, −1 if none
+    (the grid's arrays, not the bank: an inlined function's tuple argument is counted in and out
+    member by member)."""
+    cs = cell[m]
+    ix = int(math.floor((x - origin[m, 0]) / cs))
+    iy = int(math.floor((y - origin[m, 1]) / cs))
+    iz = int(math.floor((z - origin[m, 2]) / cs))
     if 0 <= ix < dims[m, 0] and 0 <= iy < dims[m, 1] and 0 <= iz < dims[m, 2]:
-        return bank[17][m] + (ix * dims[m, 1] + iy) * dims[m, 2] + iz
+        return start[m] + (ix * dims[m, 1] + iy) * dims[m, 2] + iz
     return -1
-
-
-@numba.njit(cache=True, inline="always")
-def _nearest_listed(bank, m, x, y, z, cutoff, cid):
-    """:func:`_nearest` from the candidate grid's cell ``cid`` that holds ``(x, y, z)`` (−1:
-    none), where that is the answer: the nearest listed triangle lies within the band, or the
-    cutoff is within it (every triangle the cell does not list lies beyond the band). The cell
-    lists every triangle within the band in the walk's order and the arithmetic is the walk's, so
-    the answer is the walk's to the bit; elsewhere (outside the grid, nothing listed that near)
-    the walk's own."""
-    if cid >= 0:
-        ptr, listed, band = bank[18], bank[19], bank[20][m]
-        v, t, order = bank[0], bank[1], bank[8]
-        best = cutoff * cutoff
-        px = py = pz = 0.0
-        btri = -1
-        ba = bb = bc = 0.0
-        for j in range(ptr[cid], ptr[cid + 1]):
-            k = order[listed[j]]
-            d2, cx, cy, cz, wa, wb, wc = _triangle_d2(v, t, k, x, y, z)
-            if d2 < best:
-                best, px, py, pz, btri = d2, cx, cy, cz, k
-                ba, bb, bc = wa, wb, wc
-        if cutoff <= band or (btri >= 0 and best < band * band):
-            return best, px, py, pz, btri, ba, bb, bc
-    return _nearest(bank, m, x, y, z, cutoff)
 
 
 @numba.njit(cache=True, inline="always")
@@ -524,9 +499,11 @@ def mesh_distance(bank, m, x, y, z, cutoff=np.inf):
     surface (and outside) is answered ``(cutoff, 0, 0, 0)`` without the walk below boxes farther
     than it; a point inside a closed mesh is answered whatever its depth.
 
-    Inlined where it is called, so that a cell whose distance is affine answers without a call
-    (a call passes the bank's 22 arrays, each counted in and out: it cost more than the query)."""
-    cid = _cell_of(bank, m, x, y, z)
+    Inlined where it is called, so that a cell whose distance is affine answers without a call:
+    numba counts every array of a tuple in and out where a function takes it, called or inlined
+    (~10 ns an array: the bank's 22 cost 20 times the affine cell's arithmetic), so the helpers of
+    the affine path take the arrays they read."""
+    cid = _cell_of(bank[14], bank[15], bank[16], bank[17], m, x, y, z)
     if cid >= 0:
         plane = bank[21]
         if not math.isnan(plane[cid, 0]):  # the distance is affine over the cell
@@ -539,9 +516,30 @@ def mesh_distance(bank, m, x, y, z, cutoff=np.inf):
 
 @numba.njit(cache=True)
 def _listed_distance(bank, m, x, y, z, cutoff, cid):
-    """:func:`mesh_distance` from the nearest point: the cell's list's or the walk's."""
+    """:func:`mesh_distance` from the nearest point: from the candidate grid's cell ``cid`` that
+    holds ``(x, y, z)`` (−1: none) where that is the answer, the nearest listed triangle lying
+    within the band or the cutoff within it (every triangle the cell does not list lies beyond
+    the band); the cell lists every triangle within the band in the walk's order and the
+    arithmetic is the walk's, so its nearest point is the walk's to the bit. Elsewhere (outside
+    the grid, nothing listed that near) the walk's."""
     closed = bank[13][m] != 0
-    best, px, py, pz, btri, wa, wb, wc = _nearest_listed(bank, m, x, y, z, cutoff, cid)
+    found = False
+    if cid >= 0:
+        ptr, listed, band = bank[18], bank[19], bank[20][m]
+        v, t, order = bank[0], bank[1], bank[8]
+        best = cutoff * cutoff
+        px = py = pz = 0.0
+        btri = -1
+        wa = wb = wc = 0.0
+        for j in range(ptr[cid], ptr[cid + 1]):
+            k = order[listed[j]]
+            d2, cx, cy, cz, ka, kb, kc = _triangle_d2(v, t, k, x, y, z)
+            if d2 < best:
+                best, px, py, pz, btri = d2, cx, cy, cz, k
+                wa, wb, wc = ka, kb, kc
+        found = cutoff <= band or (btri >= 0 and best < band * band)
+    if not found:
+        best, px, py, pz, btri, wa, wb, wc = _nearest(bank, m, x, y, z, cutoff)
     if btri < 0:
         if not (closed and _inside_box(bank, m, x, y, z)):
             return cutoff, 0.0, 0.0, 0.0
