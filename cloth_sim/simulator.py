@@ -1048,19 +1048,6 @@ def _compile_contacts_all() -> None:
     Simulator(big, integrator="vbd", dt=1e-4, integrator_options={"time_budget": 1.0}).step(1)
 
 
-def _compile_grid_contacts_big() -> None:
-    compile_grid_contacts(_parallel_grid())
-
-
-#: :func:`compile_kernels`' parts, each a process of its own in ``make install``
-COMPILE_PARTS = ("grid_contacts", "contacts", "steps")
-_COMPILERS = {
-    "grid_contacts": _compile_grid_contacts_big,
-    "contacts": _compile_contacts_all,
-    "steps": _compile_steps,
-}
-
-
 def _parallel_grid() -> ClothModel:
     """The smallest square grid at vbd.PARALLEL_MIN_VERTICES: one that runs vbd's sweeps on
     every core."""
@@ -1072,11 +1059,20 @@ def _parallel_grid() -> ClothModel:
 def compile_grid_contacts(model: ClothModel | None = None) -> None:
     """``vbd`` on a grid's blocks with a collider and no self-contact (drape and table at
     ``vbd``): the colours' sweep with the contact pass, ~50 s of numba's compilation alone (their
-    first tick paid it until :func:`compile_kernels` ran this). ``make install`` runs it in a
-    process of its own beside ``compile_kernels``, which then finds it in the cache."""
+    first tick paid it until :func:`compile_kernels` ran this): its part ``grid_contacts``,
+    which ``make install`` compiles in a process of its own."""
 
     model = _parallel_grid() if model is None else model
     Simulator(model, integrator="vbd", dt=1e-4, colliders=[Plane(offset=-1.0)]).step(1)
+
+
+#: :func:`compile_kernels`' parts, each a process of its own in ``make install``
+COMPILE_PARTS = ("grid_contacts", "contacts", "steps")
+_COMPILERS = {
+    "grid_contacts": compile_grid_contacts,
+    "contacts": _compile_contacts_all,
+    "steps": _compile_steps,
+}
 
 
 def _compile_contacts(model, integrator: str) -> "Simulator":

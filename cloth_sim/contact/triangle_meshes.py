@@ -315,12 +315,11 @@ def _planes(v, t, order, fn, closed, origin, cell, dims, band, ptr, listed):
                             break
                         side = s
                     far = max(far, abs(d))
-                if not ok:
+                if not ok or (not closed and side == 0.0):
                     continue
                 cx = origin[0] + (ix + 0.5) * cell
                 cy = origin[1] + (iy + 0.5) * cell
                 cz = origin[2] + (iz + 0.5) * cell
-                a = t[tri, 0]
                 for j in range(ptr[cid], ptr[cid + 1]):
                     k = order[listed[j]]
                     if k == tri or _coplanar(v, t, fn, k, tri, a):
@@ -328,10 +327,9 @@ def _planes(v, t, order, fn, closed, origin, cell, dims, band, ptr, listed):
                     if math.sqrt(_triangle_d2(v, t, k, cx, cy, cz)[0]) - r <= far:
                         ok = False
                         break
-                if not ok or (not closed and side == 0.0):
+                if not ok:
                     continue
                 s = 1.0 if closed else side
-                a = t[tri, 0]
                 nx, ny_, nz_ = s * fn[tri, 0], s * fn[tri, 1], s * fn[tri, 2]
                 out[cid, 0], out[cid, 1], out[cid, 2] = nx, ny_, nz_
                 out[cid, 3] = -(nx * v[a, 0] + ny_ * v[a, 1] + nz_ * v[a, 2])

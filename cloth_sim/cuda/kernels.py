@@ -232,18 +232,20 @@ def copy_back_at(it, w, i):
 
 @cuda.jit(device=True, inline=True)
 def start_at(wor, it, bdf2, w, i):
-    """The substep's start ``(sx, sv) ← (x, v)`` and ``x^t``, which the initial guess reads (its
-    normals included): ``x`` under backward Euler; under BDF2 (``bdf2``, a history, no planes:
-    as the CPU's ``VBD._substep``) ``x̂ = (4x − px)/3`` with ``v ← (4v − pv)/3`` on a free
-    vertex, and a kinematic one's ``v ← 1.5 v`` (its step of ``2h/3`` moves it by ``h v``).
+    """The substep's start ``(sx, sv) ← (x, v)`` (kept under the ``bdf2`` scheme only) and
+    ``x^t``, which the initial guess reads (its normals included): ``x`` under backward Euler;
+    under BDF2 (``bdf2``, a history, no planes: as the CPU's ``VBD._substep``) ``x̂ = (4x −
+    px)/3`` with ``v ← (4v − pv)/3`` on a free vertex, and a kinematic one's ``v ← 1.5 v`` (its
+    step of ``2h/3`` moves it by ``h v``).
     ``bdf[w]`` says which (every thread writes the same)."""
     bdf = bdf2 and it.past[w] != 0 and wor.nplanes[w] == 0
     free = wor.free[w, i]
     for d in range(3):
         xi = it.x[w, i, d]
         vi = it.v[w, i, d]
-        it.sx[w, i, d] = xi
-        it.sv[w, i, d] = vi
+        if bdf2:  # (the history is kept under BDF2 only)
+            it.sx[w, i, d] = xi
+            it.sv[w, i, d] = vi
         if bdf and free:
             xi = (4.0 * xi - it.px[w, i, d]) / 3.0
             it.x[w, i, d] = xi
@@ -418,9 +420,9 @@ def finish_at(wor, it, h, bdf2, w, i):
             it.v[w, i, d] = nv
         elif bdf:  # a kinematic vertex keeps its velocity
             it.v[w, i, d] = it.sv[w, i, d]
-        # this substep's start is the next one's history
-        it.px[w, i, d] = it.sx[w, i, d]
-        it.pv[w, i, d] = it.sv[w, i, d]
+        if bdf2:  # this substep's start is the next one's history
+            it.px[w, i, d] = it.sx[w, i, d]
+            it.pv[w, i, d] = it.sv[w, i, d]
     it.past[w] = 1 if bdf2 else 0
     if free and wor.nplanes[w]:  # the contact stage after the step, as on the CPU
         px, py, pz, ux, uy, uz = planes_stage(

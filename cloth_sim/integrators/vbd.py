@@ -1135,13 +1135,15 @@ class VBD(Integrator):
         stages after the step correct a velocity by ``Δx/h``, backward Euler's relation (under
         BDF2 a strain-limited cloth at rest kept creeping: the correction's missing ``Δx/(2h)``
         came back every step)."""
+        if self.scheme != "bdf2":  # (no history to keep)
+            return self._solve(state, forces, h, packed, budget)
         sc, strain = self._self_collision, self._strain_limit
         staged = (
             packed is not None
             or (sc is not None and sc.active)
             or (strain is not None and strain.active)
         )
-        bdf2 = self.scheme == "bdf2" and self._past_h == h and not staged
+        bdf2 = self._past_h == h and not staged
         x, v = state.x, state.v
         start_x, start_v = self._buffer("_start_x", x), self._buffer("_start_v", v)
         if bdf2:
@@ -1155,7 +1157,7 @@ class VBD(Integrator):
         # this substep's start is the next one's history
         self._past_x, self._start_x = start_x, self._past_x
         self._past_v, self._start_v = start_v, self._past_v
-        self._past_h = h if self.scheme == "bdf2" else None
+        self._past_h = h
         return out
 
     def _solve(self, state, forces, dt, packed, budget):
