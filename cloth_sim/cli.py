@@ -3,7 +3,7 @@
 ``cloth-sim run [--scene NAME|FILE] [--duration S] [--integrator NAME] [--dt S]``
     Simulate a scene headless and print one summary line per simulated second.
 ``cloth-sim bench steps [--sizes 32 64 128] [--integrators ...]``
-    Print ms/step of integrators on the hanging cloth at several grid sizes.
+    Print ms/step of integrators on the hanging_provot cloth at several grid sizes.
 ``cloth-sim bench implicit [--sizes 32 64] [--dt 0.016667]``
     Print ms/step of the implicit methods at a large step, CG vs direct solve, CG iterations.
 ``cloth-sim bench blowup [--size 32]``

@@ -22,7 +22,7 @@ p.add_argument("-o", "--output", default=None, help="OUT (default: a temporary d
 args = p.parse_args()
 
 spec = {
-    "scene": "hanging",
+    "scene": "hanging_provot",
     "duration": 0.2 if args.quick else 2.0,
     "frames": 10,  # a bag frame every 0.1 s of simulated time
     "seed": 3,

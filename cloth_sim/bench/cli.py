@@ -178,7 +178,9 @@ def add_parser(sub) -> argparse.ArgumentParser:
     """The ``bench`` subcommand and its own subcommands, on the ``cloth-sim`` parser's ``sub``."""
     b = sub.add_parser("bench", help="benchmarks")
     bsub = b.add_subparsers(dest="bench", required=True)
-    s = bsub.add_parser("steps", help="ms/step per integrator and grid size on the hanging cloth")
+    s = bsub.add_parser(
+        "steps", help="ms/step per integrator and grid size on the hanging_provot cloth"
+    )
     s.add_argument("--sizes", type=int, nargs="+", default=[32, 64, 128])
     s.add_argument(
         "--integrators",
@@ -196,20 +198,20 @@ def add_parser(sub) -> argparse.ArgumentParser:
     i.add_argument("--seconds", type=float, default=1.0, help="wall time per measurement")
     i.set_defaults(func=_bench_implicit)
     sl = bsub.add_parser(
-        "strain", help="worst strain and cost of the strain limit on the hanging scene"
+        "strain", help="worst strain and cost of the strain limit on the hanging_provot scene"
     )
     sl.add_argument("--sizes", type=int, nargs="+", default=[32, 64])
     sl.add_argument("--seconds", type=float, default=3.0, help="simulated time per run")
     sl.set_defaults(func=_bench_strain)
     ct = bsub.add_parser(
-        "contacts", help="cost of colliders and self-collision on the hanging scene"
+        "contacts", help="cost of colliders and self-collision on the hanging_provot scene"
     )
     ct.add_argument("--sizes", type=int, nargs="+", default=[32, 64])
     ct.add_argument("--seconds", type=float, default=1.5, help="simulated time per run")
     ct.set_defaults(func=_bench_contacts)
     th = bsub.add_parser(
         "threading",
-        help="ms/step of the hanging cloth under each of numba's threading "
+        help="ms/step of the hanging_provot cloth under each of numba's threading "
         "layers (OpenMP, TBB, workqueue), each in its own process",
     )
     th.add_argument("--size", type=int, default=64)
@@ -226,7 +228,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
     pp.set_defaults(func=_bench_peers)
     vp = bsub.add_parser(
         "vbd-peers",
-        help="Newton's SolverVBD beside vbd: the hanging cloth's springs, "
+        help="Newton's SolverVBD beside vbd: the hanging_provot cloth's springs, "
         "and Newton's cloth twist (needs the optional newton: make "
         "bench-peers)",
     )
@@ -309,8 +311,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
         default=None,
         nargs="+",
         help="scenes as they ship (e.g. tshirt): self-collision off and on, instead of the "
-        "hanging scene at --sizes; with --grid N, each grid scene as the node runs it under "
-        "-p rows:=N -p cols:=N",
+        "hanging_provot scene at --sizes; with --grid N, each grid scene as the node runs it "
+        "under -p rows:=N -p cols:=N",
     )
     nb.add_argument(
         "--grid",

@@ -20,8 +20,11 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import PointCloud2
 from visualization_msgs.msg import Marker
 
-#: the hanging scene's cloth (32×32 particles of 0.01 kg): resized to N×N it keeps its 1 m side and
-#: this mass, so every size is the same cloth, finer (particle_mass = CLOTH_MASS / N²)
+#: the scene the speed tables run (the literature review's sheet on per-family springs, whose
+#: stiffness and strain-limit rows they vary; ``hanging`` is it in cotton)
+SHEET = "hanging_provot"
+#: its cloth (32×32 particles of 0.01 kg): resized to N×N it keeps its 1 m side and this mass, so
+#: every size is the same cloth, finer (particle_mass = CLOTH_MASS / N²)
 CLOTH_MASS = 10.24
 
 
@@ -36,10 +39,11 @@ def measure(
     stiffness: float | None = None,
     method: str | None = None,
 ) -> dict:
-    """The hanging scene resized to ``n``×``n`` (the same 1 m, 10.24 kg cloth), with
+    """The :data:`SHEET` scene resized to ``n``×``n`` (the same 1 m, 10.24 kg cloth), with
     ``stiffness`` (N/m) on its structural and shear springs and the strain limit's ``method`` if
     given."""
     overrides = [
+        Parameter("scene", value=SHEET),
         Parameter("rows", value=n),
         Parameter("cols", value=n),
         Parameter("spacing", value=1.0 / (n - 1)),
@@ -111,6 +115,8 @@ def measure_node(overrides: list, seconds: float, subscribe: bool) -> dict:
             "overruns": node.session.overruns - o0,
             "rss_mb": _rss_mb(),
             "worst_strain": worst[0],
+            "integrator": node.sim.integrator,  # what ran (a refused step is carried)
+            "dt": node.sim.dt,
         }
         return out
 
@@ -242,7 +248,7 @@ def print_grid_scene_table(
             True,
         )
         rows.append(dict(r, scene=scene))
-        ran = f"{integrator or s.integrator}, {dt if dt is not None else s.dt:g} s"
+        ran = f"{r['integrator']}, {r['dt']:.4g} s"
         print(
             f"| {scene} | {ran} | {r['rtf']:.3f} | {r['ms_per_step']:.3f} | "
             f"{r['tick_ms']:.2f} | {r['overruns']} | {r['worst_strain']:.4f} |",
@@ -266,7 +272,7 @@ def print_node_table(
     limiter += "" if method is None else f", strain_limit_method {method}"
     material = "" if stiffness is None else f", structural and shear stiffness {stiffness:g} N/m"
     print(
-        f"# cloth_sim_node, hanging scene resized to N×N (1 m, {CLOTH_MASS} kg), {integrator}, "
+        f"# cloth_sim_node, {SHEET} scene resized to N×N (1 m, {CLOTH_MASS} kg), {integrator}, "
         f"dt={dt:g} s, {rate:g} Hz{limiter}{material}, {seconds:g} s per row after 2 s warm-up; "
         f"{platform.machine()}, {os.cpu_count()} cores"
     )
@@ -293,14 +299,14 @@ def print_node_table(
 def print_param_load_table(size: int = 32, rate: float = 60.0) -> list[dict]:
     """What `ros2 param load` costs the ticking node: its own 26 parameters sent in one
     ``set_parameters`` request (rclpy sets them one at a time), unchanged and then with every
-    stiffness and damping ×1.1 and a new drag, the node's default scene at N×N and ``rate``.
+    stiffness and damping ×1.1 and a new drag, the :data:`SHEET` scene at N×N and ``rate``.
     Prints the largest interval between consecutive ~/stats stamps around the request, in ticks,
     and how long the request took."""
     from rcl_interfaces.msg import Parameter as ParameterMsg
     from rcl_interfaces.srv import GetParameters, ListParameters, SetParameters
 
     print(
-        f"# ros2 param load semantics on cloth_sim_node: hanging scene at {size}×{size}, "
+        f"# ros2 param load semantics on cloth_sim_node: {SHEET} scene at {size}×{size}, "
         f"{rate:g} Hz; {platform.machine()}, {os.cpu_count()} cores"
     )
     print(
@@ -309,6 +315,7 @@ def print_param_load_table(size: int = 32, rate: float = 60.0) -> list[dict]:
     print("|---|---|---|---|---|")
     rows = []
     overrides = [
+        Parameter("scene", value=SHEET),
         Parameter("rows", value=size),
         Parameter("cols", value=size),
         Parameter("spacing", value=1.0 / (size - 1)),
@@ -385,8 +392,9 @@ def _bench_domain() -> int:
 
 
 def _start_node(domain: int, size: int, params=()):
-    """``cloth_sim_node`` in its own process on ``domain`` (localhost only), its default scene
-    resized to ``size``×``size`` over the same 1 m, and ``params`` (``name:=value`` strings)."""
+    """``cloth_sim_node`` in its own process on ``domain`` (localhost only), the :data:`SHEET`
+    scene resized to ``size``×``size`` over the same 1 m, and ``params`` (``name:=value``
+    strings)."""
     import subprocess
     import sys
 
@@ -397,6 +405,8 @@ def _start_node(domain: int, size: int, params=()):
         [
             exe,
             "--ros-args",
+            "-p",
+            f"scene:={SHEET}",
             "-p",
             f"rows:={size}",
             "-p",
@@ -429,14 +439,15 @@ def _remote_client(domain: int, name: str):
 
 
 def print_lockstep_table(size: int = 32, calls: int = 300, chunks=(1, 10, 100)) -> list[dict]:
-    """Lockstep throughput: ``cloth_sim_node`` in its own process (N×N hanging scene, paused),
-    this process calling ``~/step`` with ``steps`` = each of ``chunks``, one call after the other;
-    prints steps per second and calls per second, beside the node's own stepping speed (the same
+    """Lockstep throughput: ``cloth_sim_node`` in its own process (N×N :data:`SHEET` scene,
+    paused), this process calling ``~/step`` with ``steps`` = each of ``chunks``, one call after
+    the other; prints steps per second and calls per second, beside the node's own stepping speed
+    (the same
     cloth stepped in this process without ROS)."""
     domain = _bench_domain()
     node = _start_node(domain, size)
     print(
-        f"# lockstep: ~/step from another process to cloth_sim_node ({size}×{size} hanging scene, "
+        f"# lockstep: ~/step from another process to cloth_sim_node ({size}×{size} {SHEET} scene, "
         f"symplectic Euler, dt = 1 ms); {platform.machine()}, {os.cpu_count()} cores"
     )
     print("| steps per call | calls/s | steps/s | × stepping in-process without ROS |")
@@ -471,7 +482,7 @@ def _lockstep_rows(client, ex, size, calls, chunks) -> list[dict]:
 
     clients, rows = {}, []
     call(SetBool, "/cloth_sim/pause", SetBool.Request(data=True))
-    sim = load_scene("hanging").build_simulator(rows=size, cols=size, spacing=1.0 / (size - 1))
+    sim = load_scene(SHEET).build_simulator(rows=size, cols=size, spacing=1.0 / (size - 1))
     sim.step(100)
     t = time.perf_counter()
     sim.step(1000)
@@ -556,9 +567,10 @@ def print_camera_node_table(
 ) -> list[dict]:
     """The node's real-time factor with the depth camera on (``width``×``height`` at
     ``camera_rate``), its topics unsubscribed and all five subscribed: ``cloth_sim_node`` in its
-    own process (the ``size``×``size`` hanging scene, the camera at (0.5, −0.8, 0.6) looking at the
-    cloth), this process subscribing as a viewer in another process does (raw: it counts the
-    messages without deserialising them) and reading ~/stats. The real-time factor is simulated
+    own process (the ``size``×``size`` :data:`SHEET` scene, the camera at (0.5, −0.8, 0.6)
+    looking at the cloth), this process subscribing as a viewer in another process does (raw: it
+    counts the messages without deserialising them) and reading ~/stats. The real-time factor is
+    simulated
     time over wall time between the first and last ~/stats received in each window."""
     from sensor_msgs import msg as sensor_msgs
 
@@ -574,7 +586,7 @@ def print_camera_node_table(
         "camera.look_at:=[0.5, 0.5, -0.4]",
     ]
     print(
-        f"# cloth_sim_node in its own process, hanging scene {size}×{size}, symplectic Euler, "
+        f"# cloth_sim_node in its own process, {SHEET} scene {size}×{size}, symplectic Euler, "
         f"dt = 1 ms, 60 Hz; depth camera {width}×{height} at {camera_rate:g} Hz; {seconds:g} s "
         "per "
         f"row after 3 s warm-up; {platform.machine()}, {os.cpu_count()} cores"

@@ -1,13 +1,14 @@
 """``cloth-sim bench scaling``: ms/step against grid size per integrator, with the fitted exponent
 of cost against particle count, and what skipping unused force terms buys.
 
-Sizes N = 8 … 256 (N×N particles; the hanging scene resized: 1 m square, its stiffness, damping and
-mass, strain limit off, dt = 1 ms for the explicit methods and Kang, 1/60 s for implicit Euler). An
-integrator stops growing N once one step took more than ``budget`` seconds. The exponent is the
+Sizes N = 8 … 256 (N×N particles; the hanging_provot scene resized: 1 m square, its stiffness,
+damping and mass, strain limit off, dt = 1 ms for the explicit methods and Kang, 1/60 s for
+implicit Euler). An integrator stops growing N once one step took more than ``budget`` seconds. The
+exponent is the
 least-squares slope of log(ms/step) against log(particles) over N ≥ 32 (below, fixed per-step
-overheads dominate). "Skipping" times the N = 64 hanging scene with wind, bend springs, Provot's
-strain limit and damping each switched off in turn (a term that is off is never evaluated), and the
-node's tick with and without a ~/points subscriber.
+overheads dominate). "Skipping" times the N = 64 hanging_provot scene with wind, bend springs,
+Provot's strain limit and damping each switched off in turn (a term that is off is never
+evaluated), and the node's tick with and without a ~/points subscriber.
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ FRAME_RATE = ("implicit_euler", "implicit_euler_prefactored", "liu2013", "xpbd")
 def build(
     n: int, integrator: str, *, wind=None, bend=True, strain_limit=None, damping=True
 ) -> Simulator:
-    scene = load_scene("hanging")
+    scene = load_scene("hanging_provot")
     k = dict(scene.stiffness)
     c = dict(scene.damping) if damping else {f: 0.0 for f in scene.damping}
     if not bend:
@@ -156,7 +157,7 @@ def main(out: Path, quick: bool = False) -> dict:
     exponents = {m: fit_exponent([r for r in rows if r["integrator"] == m]) for m in methods}
     dram = triad_bandwidth(768 << 20 if not quick else 96 << 20)  # far beyond any cache
 
-    # what skipping buys: N = 64 hanging scene, symplectic Euler
+    # what skipping buys: N = 64 hanging_provot scene, symplectic Euler
     n_skip = 32 if quick else 64
     full = dict(wind=(0.0, 2.0, 0.0), bend=True, strain_limit=0.1, damping=True)
     variants = [
@@ -225,7 +226,7 @@ def main(out: Path, quick: bool = False) -> dict:
         )
     ax.set_xlabel("particles n = N²")
     ax.set_ylabel("ms per step")
-    ax.set_title("hanging scene resized to N×N, strain limit off (min of 3)")
+    ax.set_title("hanging_provot scene resized to N×N, strain limit off (min of 3)")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
     se = [r for r in rows if r["integrator"] == "symplectic_euler"]
@@ -350,7 +351,7 @@ def main(out: Path, quick: bool = False) -> dict:
         "symplectic Euler, "
         f"dt = 1 ms)\n\n{skip_table}\n\n## The node with and without a ~/points subscriber (60 "
         "Hz, "
-        "dt = 1 ms, the hanging scene's strain limit 0.1; the cloud is built only when "
+        "dt = 1 ms, the hanging_provot scene's strain limit 0.1; the cloud is built only when "
         f"subscribed)\n\n{node_table}\n\n(run time {time.perf_counter() - t_start:.0f} s)\n"
     )
     (out / "scaling.md").write_text(text)

@@ -1,4 +1,4 @@
-"""ms/step of integrators on the hanging scene at several grid sizes, side by side in one
+"""ms/step of integrators on the hanging_provot scene at several grid sizes, side by side in one
 process."""
 
 from __future__ import annotations
@@ -31,9 +31,9 @@ def time_steps(sim, seconds: float = 1.0, repeats: int = 3) -> float:
 
 
 def print_step_table(sizes, names, seconds: float = 1.0) -> list[dict]:
-    scene = load_scene("hanging")
+    scene = load_scene("hanging_provot")
     print(
-        f"# hanging scene ({scene.source}) resized to N×N over 1 m; k/m as in the scene, "
+        f"# hanging_provot scene ({scene.source}) resized to N×N over 1 m; k/m as in the scene, "
         f"dt={scene.dt} s, "
         f"strain limit {scene.strain_limit} ({scene.strain_limit_method}); "
         f"{platform.processor() or platform.machine()}, "
@@ -80,14 +80,16 @@ IMPLICIT_VARIANTS = (
 
 def print_implicit_table(sizes, dt: float, seconds: float = 1.0) -> list[dict]:
     """ms/step of the implicit methods (and the linear solver behind them) at a large step, on the
-    hanging scene at N×N (the 1 m, 10.24 kg cloth: spacing 1/(N−1), mass 10.24/N², as the strain
-    and node benchmarks), each also as a multiple of a symplectic Euler step of the same cloth
-    timed in the same run (at dt = 0.1 ms, where it is stable at every size: a step's cost does not
+    hanging_provot scene at N×N (the 1 m, 10.24 kg cloth: spacing 1/(N−1), mass 10.24/N², as the
+    strain and node benchmarks), each also as a multiple of a symplectic Euler step of the same
+    cloth timed in the same run (at dt = 0.1 ms, where it is stable at every size: a step's cost
+    does not
     depend on dt; at 1 ms, 81×81 without the strain limit diverges)."""
     from ..simulator import SimulationDiverged
 
     print(
-        f"# hanging scene resized to N×N over 1 m and 10.24 kg, dt={dt:.6g} s, no strain limit; "
+        f"# hanging_provot scene resized to N×N over 1 m and 10.24 kg, dt={dt:.6g} s, no strain "
+        "limit; "
         f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores; min of 3 after "
         f"0.5 s of simulated warm-up; × a symplectic Euler step of the same cloth"
     )
@@ -138,9 +140,10 @@ def print_implicit_table(sizes, dt: float, seconds: float = 1.0) -> list[dict]:
 
 
 def print_blowup_table(size: int = 32) -> list[dict]:
-    """How long a step that blows up holds the caller, per integrator, on the hanging cloth at N×N:
-    from the call of the failing ``step()`` to its :class:`SimulationDiverged` (guard, restore of
-    the state before the step, message). The stability analysis is not known yet (a fresh model),
+    """How long a step that blows up holds the caller, per integrator, on the hanging_provot cloth
+    at N×N: from the call of the failing ``step()`` to its :class:`SimulationDiverged` (guard,
+    restore of the state before the step, message). The stability analysis is not known yet (a
+    fresh model),
     which is the worst case: the error path never computes it. Conditionally stable methods run at
     10× their stable dt (measured on a twin model), the unconditionally stable ones with the
     guard's speed bound lowered to 0.5 m/s."""
@@ -148,10 +151,10 @@ def print_blowup_table(size: int = 32) -> list[dict]:
     from ..integrators.base import Stability
     from ..simulator import SimulationDiverged
 
-    scene = load_scene("hanging")
+    scene = load_scene("hanging_provot")
     spacing = 1.0 / (size - 1)
     print(
-        f"# a blow-up's cost: hanging scene at {size}×{size}, strain limit off; "
+        f"# a blow-up's cost: hanging_provot scene at {size}×{size}, strain limit off; "
         f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores"
     )
     print(
@@ -202,8 +205,9 @@ def print_blowup_table(size: int = 32) -> list[dict]:
 
 
 def _hanging(n: int, **kw):
-    """The hanging scene at N×N: the same 1 m, 10.24 kg cloth (spacing 1/(N−1), mass 10.24/N²)."""
-    return load_scene("hanging").build_simulator(
+    """The hanging_provot scene at N×N: the same 1 m, 10.24 kg cloth (spacing 1/(N−1), mass
+    10.24/N²)."""
+    return load_scene("hanging_provot").build_simulator(
         rows=n, cols=n, spacing=1 / (n - 1), particle_mass=10.24 / n**2, **kw
     )
 
@@ -223,14 +227,15 @@ def _ms_per_step(sim, seconds: float, every_10=None) -> float:
 
 
 def print_strain_limit_table(sizes=(32, 64), seconds: float = 3.0, tau: float = 0.1) -> list[dict]:
-    """The hanging scene at N×N (the 1 m, 10.24 kg cloth: spacing 1/(N−1), mass 10.24/N²) over
-    ``seconds``: worst structural/shear strain (sampled every 10 steps) and ms/step without the
-    strain limit, with Provot's passes alone, with long-range attachments at 20 (the default), 10
+    """The hanging_provot scene at N×N (the 1 m, 10.24 kg cloth: spacing 1/(N−1), mass 10.24/N²)
+    over ``seconds``: worst structural/shear strain (sampled every 10 steps) and ms/step without
+    the strain limit, with Provot's passes alone, with long-range attachments at 20 (the default),
+    10
     and 5 passes, and with the projection method; the cost ratios to the run without, measured in
     one process."""
     print(
-        f"# strain limit τ = {tau} on the hanging scene, {seconds:g} s, symplectic Euler dt = 1 "
-        "ms; "
+        f"# strain limit τ = {tau} on the hanging_provot scene, {seconds:g} s, symplectic Euler "
+        "dt = 1 ms; "
         f"{platform.machine()}, {os.cpu_count()} cores"
     )
     print("| N | method | worst strain | ms/step | × the step without |")
@@ -279,15 +284,16 @@ def print_strain_limit_table(sizes=(32, 64), seconds: float = 3.0, tau: float = 
 
 
 def print_contacts_table(sizes=(32, 64), seconds: float = 1.5) -> list[dict]:
-    """The hanging scene at N×N (as :func:`print_strain_limit_table`), swinging against a ball and
-    onto a floor 0.7 m below its pins: ms/step without contacts, with the plane and the sphere, and
-    with self-collision as well; each a ratio to the contact-free step of the same run, with how
+    """The hanging_provot scene at N×N (as :func:`print_strain_limit_table`), swinging against a
+    ball and onto a floor 0.7 m below its pins: ms/step without contacts, with the plane and the
+    sphere, and with self-collision as well; each a ratio to the contact-free step of the same run,
+    with how
     many particles touched a collider and how many self-collision pairs the last step had."""
     from ..contact.colliders import Plane, Sphere
 
     print(
-        f"# contacts on the hanging scene, {seconds:g} s, symplectic Euler dt = 1 ms, strain "
-        "limit "
+        f"# contacts on the hanging_provot scene, {seconds:g} s, symplectic Euler dt = 1 ms, "
+        "strain limit "
         f"0.1; {platform.machine()}, {os.cpu_count()} cores"
     )
     print("| N | contacts | ms/step | × the step without | touching (last step) | self pairs |")

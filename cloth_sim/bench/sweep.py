@@ -1,8 +1,9 @@
 """What a sweep costs beyond its runs, in one process, side by side:
 
-1. ``throughput``: 100 runs of the 32×32 hanging scene, 1 s of simulated time each (the scene's
-   symplectic Euler at dt = 1 ms, its strain limit on), 30 frames per second into each run's bag —
-   a bare Python loop over :func:`cloth_sim.sweep.run.execute` (the same runs, the same files, no
+1. ``throughput``: 100 runs of the 32×32 hanging_provot scene, 1 s of simulated time each (the
+   scene's symplectic Euler at dt = 1 ms, its strain limit on), 30 frames per second into each
+   run's bag — a bare Python loop over :func:`cloth_sim.sweep.run.execute` (the same runs, the same
+   files, no
    Ray), then ``cloth-sim sweep`` on a local Ray with 1 and with 2 workers: runs per second, the
    speed-up of 2 workers over 1 and the overhead per run of 1 worker over the bare loop.
 2. ``memory``: 10,000 short runs (a 4×4 cloth, 10 steps, no bag) through Ray at 2 workers, the
@@ -37,7 +38,7 @@ def throughput(runs: int, root: Path) -> None:
     spec_path.write_text(
         yaml.safe_dump(
             {
-                "scene": "hanging",
+                "scene": "hanging_provot",
                 "duration": 1.0,
                 "frames": 30,
                 "seed": 1,
@@ -60,7 +61,7 @@ def throughput(runs: int, root: Path) -> None:
     warm.write_text(
         yaml.safe_dump(
             {
-                "scene": "hanging",
+                "scene": "hanging_provot",
                 "duration": 0.01,
                 "frames": 30,
                 "seed": 2,
@@ -92,7 +93,8 @@ def throughput(runs: int, root: Path) -> None:
         times[workers] = time.perf_counter() - t
         ray.shutdown()
     print(
-        f"# {runs} runs of the 32×32 hanging scene, 1 s each (1000 steps, 31 frames to the bag); "
+        f"# {runs} runs of the 32×32 hanging_provot scene, 1 s each (1000 steps, 31 frames to the "
+        "bag); "
         f"{os.cpu_count()} cores"
     )
     print("| how | start-up s (Ray, workers warm) | sweep wall s | runs/s | per run ms |")
@@ -120,7 +122,7 @@ def memory(runs: int, root: Path) -> None:
     spec_path.write_text(
         yaml.safe_dump(
             {
-                "scene": "hanging",
+                "scene": "hanging_provot",
                 "duration": 0.01,
                 "frames": 0,
                 "seed": 1,

@@ -1,4 +1,4 @@
-"""ms/step of the hanging cloth under each of numba's threading layers, side by side.
+"""ms/step of the hanging_provot cloth under each of numba's threading layers, side by side.
 
 numba picks its threading layer once per process, so each layer runs in its own child process
 (``NUMBA_THREADING_LAYER`` set), the layers taking turns for ``rounds`` rounds; the table gives
@@ -31,7 +31,9 @@ def _child(size: int, seconds: float) -> dict:
 
     from ..scene import load_scene
 
-    sim = load_scene("hanging").build_simulator(rows=size, cols=size, spacing=1.0 / (size - 1))
+    sim = load_scene("hanging_provot").build_simulator(
+        rows=size, cols=size, spacing=1.0 / (size - 1)
+    )
     sim.advance(0.5)
     saved = sim.save_state()
     tau = sim.strain_limit
@@ -86,8 +88,8 @@ def measure(size: int = 64, seconds: float = 1.0, rounds: int = 3, layers=LAYERS
 
 def print_table(size: int = 64, seconds: float = 1.0, rounds: int = 3) -> dict:
     print(
-        f"# hanging {size}×{size}, {seconds:g} s simulated from t = 0.5 s, with the scene's "
-        "strain "
+        f"# hanging_provot {size}×{size}, {seconds:g} s simulated from t = 0.5 s, with the "
+        "scene's strain "
         f"limit and without it; each layer in its own process, {rounds} rounds taking turns "
         f"(median); {os.cpu_count()} cores; cloth_sim's default: NUMBA_THREADING_LAYER=forksafe"
     )

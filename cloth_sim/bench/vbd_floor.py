@@ -1,8 +1,9 @@
 """``vbd``'s cost per vertex and iteration on the grid against its memory-bandwidth floor.
 
-``cloth-sim bench vbd-floor --sizes 32 64 128`` times the hanging cloth (1 m, 10.24 kg, the scene's
-springs, 1/60 s, no strain limit) at two iteration counts a step, so that the difference is the
-iterations' cost alone (the step's set-up cancels), and prints it per vertex and iteration beside
+``cloth-sim bench vbd-floor --sizes 32 64 128`` times the hanging_provot cloth (1 m, 10.24 kg, the
+scene's springs, 1/60 s, no strain limit) at two iteration counts a step, so that the difference is
+the iterations' cost alone (the step's set-up cancels), and prints it per vertex and iteration
+beside
 the floor: the bytes an iteration must stream (:meth:`~cloth_sim.integrators.vbd.VBD.
 iteration_traffic`: the model's positions, masses and springs, each once) over a STREAM triad's
 bandwidth on arrays of that size (the caches they fit in, as :mod:`cloth_sim.bench.scaling`
@@ -29,7 +30,7 @@ def _per_iteration(n: int, grid: bool) -> tuple[float, object]:
 
     costs = {}
     for iterations in (LOW, HIGH):
-        sim = load_scene("hanging").build_simulator(
+        sim = load_scene("hanging_provot").build_simulator(
             rows=n,
             cols=n,
             spacing=1.0 / (n - 1),
@@ -67,7 +68,8 @@ def measure(n: int) -> dict:
 
 def print_vbd_floor_table(sizes) -> list[dict]:
     print(
-        f"# vbd per vertex and iteration against the memory-bandwidth floor: the hanging cloth "
+        f"# vbd per vertex and iteration against the memory-bandwidth floor: the hanging_provot "
+        "cloth "
         f"(1 m, 10.24 kg), 1/60 s, {LOW} and {HIGH} iterations a step (their difference); "
         f"{platform.machine()}, {os.cpu_count()} cores"
     )

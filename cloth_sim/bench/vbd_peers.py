@@ -6,9 +6,11 @@
 side on a GPU (cloth_sim's stays on the CPU), each frame's substeps captured in a CUDA graph as
 Newton's examples do.
 
-1. **The hanging cloth, the same springs.** The hanging scene at N×N (1 m, 10.24 kg: the node's
-   cloth), its particles, masses, pins and every structural, shear and bend spring given to Newton
-   one by one (``ModelBuilder.add_spring``: Newton's VBD takes springs beside its FEM triangles),
+1. **The hanging_provot cloth, the same springs.** The hanging_provot scene at N×N (1 m, 10.24
+   kg: the speed tables' cloth), its particles, masses, pins and every structural, shear and bend
+   spring given to Newton one by one (``ModelBuilder.add_spring``: Newton's VBD takes springs
+   beside its
+   FEM triangles),
    with our general sweep's greedy colour groups (Newton colours triangles and bending edges only,
    none here; ours runs the grid's nine classes on its blocks: ``vbd_grid``), no strain limit on
    either side. Both step each 1/60 s frame in 10 substeps of 10 iterations (the numbers
@@ -54,9 +56,9 @@ def _newton():
 
 
 def hanging_sim(n: int, iterations: int, substeps: int):
-    """The hanging scene at ``n``×``n`` (the node's 1 m, 10.24 kg cloth), no strain limit, ``vbd``
-    at ``FRAME / substeps`` with ``iterations``."""
-    return load_scene("hanging").build_simulator(
+    """The hanging_provot scene at ``n``×``n`` (the speed tables' 1 m, 10.24 kg cloth), no strain
+    limit, ``vbd`` at ``FRAME / substeps`` with ``iterations``."""
+    return load_scene("hanging_provot").build_simulator(
         rows=n,
         cols=n,
         spacing=1.0 / (n - 1),
@@ -145,7 +147,7 @@ def hanging_rows(
 ):
     rows = []
     for n in sizes:
-        scene = load_scene("hanging")
+        scene = load_scene("hanging_provot")
         model = scene.build_model(
             rows=n, cols=n, spacing=1.0 / (n - 1), particle_mass=10.24 / n**2
         )
@@ -390,7 +392,8 @@ def print_vbd_peer_table(
         f"({where.name}) vs cloth_sim vbd on this CPU"
     )
     print(
-        f"## 1. hanging N×N (1 m, 10.24 kg), the same springs, no strain limit; 1/60 s frames of "
+        f"## 1. hanging_provot N×N (1 m, 10.24 kg), the same springs, no strain limit; 1/60 s "
+        "frames of "
         f"{substeps} substeps × {iterations} iterations, {seconds:g} s"
     )
     print(

@@ -294,7 +294,12 @@ def _items(
             f0, f1 = edges[f, 0], edges[f, 1]
             if f0 == e0 or f0 == e1 or f1 == e0 or f1 == e1:
                 continue
-            d = closest_on_segments(x0, e0, e1, f0, f1)[2]
+            # measured lower edge first, as the pair is listed: the same bits whichever
+            # triangle saw it (pair_list measures the kept pairs again)
+            if e < f:
+                d = closest_on_segments(x0, e0, e1, f0, f1)[2]
+            else:
+                d = closest_on_segments(x0, f0, f1, e0, e1)[2]
             if d >= r:
                 continue
             if e < f:

@@ -59,6 +59,7 @@ from ..physics.mesh import half_edges
 from .colliders import SUPPORT
 from .collision_tree import TriangleTree
 from .geometry import closest_on_segments, point_triangle_distance
+from .pair_list import PairList
 
 
 @numba.njit(cache=True)
@@ -378,6 +379,11 @@ def displacements(x, x0, out):
 #: self-collision's thickness may be at most this fraction of the shortest triangle edge at rest
 MAX_THICKNESS_FRACTION = 0.5
 
+#: the skin of the candidate pairs kept between searches (:mod:`cloth_sim.contact.pair_list`), in
+#: thicknesses: the fastest measured on the fold scene (a quarter, a half, one, one and a half and
+#: two tried; a thicker skin keeps the list more steps and makes it longer)
+SKIN = 1.0
+
 
 def thickness_limit(model) -> float:
     """The largest thickness self-collision accepts on ``model``: half its shortest triangle edge
@@ -422,7 +428,7 @@ class SelfCollision:
         self._factor = np.ones(model.n_particles)
         self._moved = np.zeros(model.n_particles)
         self._no_clearance = np.full(model.n_particles, np.inf)
-        self._tree = None  # the candidate pairs' hierarchy, built at the first step
+        self._pairs = None  # the candidate pairs' hierarchy and kept list, built at the first step
         self.last_pairs = self.last_pushed = self.last_slowed = self.last_edge_pairs = 0
 
     @property
@@ -445,13 +451,19 @@ class SelfCollision:
         """``(e, 2)``: the cloth's unique edges (the edge–edge pairs' indices)."""
         return self._features[0]
 
-    def candidates(self, x0, reach):
+    def candidates(self, x0, reach, keep: bool = False):
         """``(vf, vf_distance, ee, ee_distance)``: the particle–triangle and edge–edge pairs within
         ``reach`` of each other at ``x0``
-        (:meth:`cloth_sim.contact.collision_tree.TriangleTree.pairs`)."""
-        if self._tree is None:
-            self._tree = TriangleTree(self._tris, self.model.positions, self._features)
-        return self._tree.pairs(x0, reach)
+        (:meth:`cloth_sim.contact.collision_tree.TriangleTree.pairs`); with ``keep``, answered
+        from the pairs kept since the last such query while they cover it
+        (:mod:`cloth_sim.contact.pair_list`: the same answer, cheaper for a caller whose
+        positions move little between queries)."""
+        if self._pairs is None:
+            tree = TriangleTree(self._tris, self.model.positions, self._features)
+            self._pairs = PairList(tree, self._features[0])
+        if not keep:
+            return self._pairs.tree.pairs(x0, reach)
+        return self._pairs.pairs(x0, reach, SKIN * self.thickness)
 
     def set_enabled(self, on: bool) -> None:
         """Turn it on or off; on needs the model's triangles and a thickness it can use
@@ -488,7 +500,9 @@ class SelfCollision:
             self._tris,
             self._features,
         )
-        pairs, dist, e_pairs, e_dist = self.candidates(x0, reach)
+        # the stage's steps are small: the kept pairs answer most of them (the fold scene 2x
+        # faster; vbd's 1/60 s steps move too far between its queries to gain)
+        pairs, dist, e_pairs, e_dist = self.candidates(x0, reach, keep=True)
         free = self._inv_mass
         self.last_pushed = (
             proximity(x, x0, v, tris, pairs, inv_mass, free, clearance, h)
@@ -515,7 +529,7 @@ class SelfCollision:
         # search covered that unless the pushes moved some particle more than h / 2 further
         moved = displacements(x, x0, self._moved)
         if (moved > reach).any():
-            pairs, dist, e_pairs, e_dist = self._tree.pairs(x0, moved)
+            pairs, dist, e_pairs, e_dist = self.candidates(x0, moved, keep=True)
         self.last_pairs, self.last_edge_pairs = len(pairs), len(e_pairs)
         displacement_factors(moved, tris, pairs, dist, self._factor)
         edge_displacement_factors(moved, edges, e_pairs, e_dist, self._factor)

@@ -54,13 +54,13 @@ class GarmentEnv(ClothEnv):
 
     def _model(self) -> ClothModel:
         s = self.scene
+        cloth = (  # the scene's fabric (the T-shirt's knit), or its per-family springs
+            {"material": s.material}
+            if s.material is not None
+            else {"density": s.mesh["density"], "stiffness": s.stiffness, "damping": s.damping}
+        )
         return ClothModel.from_mesh(
-            str(s.mesh["file"]),
-            density=s.mesh["density"],
-            stiffness=s.stiffness,
-            damping=s.damping,
-            scale=s.mesh["scale"],
-            model=s.model,
+            str(s.mesh["file"]), scale=s.mesh["scale"], model=s.model, **cloth
         )
 
     def _simulator(self) -> Simulator:

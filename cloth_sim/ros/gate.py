@@ -292,11 +292,17 @@ class ParameterGate:
             if reason:
                 return SetParametersResult(successful=False, reason=reason)
         running = self.session.sim.model
+        # what the batch changes: from the running values, and on a new scene from the values it
+        # brings (a fabric's scene sets no springs: moving to it from one that has them is no
+        # change of theirs, a spring value given with it is)
+        before = self.session.cfg
+        if scene is not self.session.scene:
+            before = {**before, **P.scene_values(scene)}
         try:  # the batch whole, on the model it builds (settings.check: one pass)
             checked = settings.check(
                 scene,
                 cand,
-                changes_from=self.session.cfg,
+                changes_from=before,
                 model=self._model if rebuild else (lambda cfg, scene: running),
             )
         except settings.Refusal as e:

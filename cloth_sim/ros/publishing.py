@@ -145,13 +145,18 @@ class Publishing:
         return (model.rows, model.cols) if model.rows else (1, model.n_particles)
 
     def cloth_text(self) -> str:
-        """``32×32 provot`` or ``mesh tshirt.obj (1234 vertices, 2300 triangles) provot``."""
-        model = self.session.sim.model
+        """``32×32 provot in cotton`` or ``mesh tshirt.obj (1234 vertices, 2300 triangles) provot``
+        (the fabric named where a material maps it: a library name, or the scene's own)."""
+        model, session = self.session.sim.model, self.session
+        fabric = ""
+        if model.meta.get("material") is not None:
+            name = session.cfg["material"] or session.scene.material_name
+            fabric = f" in {name}" if name else " in the scene's fabric"
         if model.rows:
-            return f"{model.rows}×{model.cols} {model.model}"
+            return f"{model.rows}×{model.cols} {model.model}{fabric}"
         return (
-            f"mesh {self.session.scene.mesh['file'].name} ({model.n_particles} vertices, "
-            f"{len(model.triangles)} triangles) {model.model}"
+            f"mesh {session.scene.mesh['file'].name} ({model.n_particles} vertices, "
+            f"{len(model.triangles)} triangles) {model.model}{fabric}"
         )
 
     def real_time_factor(self) -> float:

@@ -2,7 +2,7 @@
 and a script of grasps and moves; checked whole before anything runs, expanded into runs lazily.
 
 ```yaml
-scene: hanging            # a scene name or file: the base of every run
+scene: hanging_provot     # a scene name or file: the base of every run
 duration: 1.0             # simulated seconds per run
 frames: 30                # frames per simulated second written to each run's bag (0: no bag)
 seed: 1                   # the random draws' seed

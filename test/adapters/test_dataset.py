@@ -334,7 +334,7 @@ def test_the_point_cloud_and_depth_observations_are_kept_lossless(tmp_path):
 #: a sweep whose runs have actions: a hanging 10 × 10 cloth's free corner grasped at gx, carried
 #: up and released; the third run's grasp finds nothing (refused: no episode)
 SWEEP = {
-    "scene": "hanging",
+    "scene": "hanging_provot",
     "duration": 0.5,
     "frames": 20,
     "seed": 3,

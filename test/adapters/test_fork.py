@@ -21,7 +21,7 @@ import numba
 import numpy as np
 from cloth_sim.scene import load_scene
 
-sim = load_scene("hanging").build_simulator(rows=48, cols=48, spacing=1.0 / 47)
+sim = load_scene("hanging_provot").build_simulator(rows=48, cols=48, spacing=1.0 / 47)
 sim.step(20)
 layer = numba.threading_layer()
 assert layer in ("tbb", "workqueue"), layer

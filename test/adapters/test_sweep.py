@@ -38,7 +38,7 @@ from cloth_sim.sweep.run import execute  # noqa: E402
 BIN = Path(sys.executable).parent
 #: 12 runs of a 10×10 cloth, 0.3 s each, 10 frames per second
 SPEC = {
-    "scene": "hanging",
+    "scene": "hanging_provot",
     "duration": 0.3,
     "frames": 10,
     "seed": 3,

@@ -5,6 +5,7 @@ import math
 import numpy as np
 
 from cloth_sim import ClothModel, Simulator
+from cloth_sim.scene import load_scene
 
 
 def one_spring(k=100.0, m=1.0, L=1.0, amplitude=0.1, damping=0.0):
@@ -25,6 +26,22 @@ def cloth16(k=1000.0, damping=0.0, model="provot"):
     pinned."""
     return ClothModel.grid(
         16, 16, 1.0 / 15, 0.01, stiffness=k, damping=damping, pinned=[(0, 0), (0, -1)], model=model
+    )
+
+
+def springy_fold(self_collision=True, **kw):
+    """The fold scene at 12×12 on the per-family springs and mass it had before it took cotton
+    (1000 N/m, bend 10; 0.04 kg particles): stiff and heavy enough to fold over itself in 1.5 s."""
+    return load_scene("fold").build_simulator(
+        rows=12,
+        cols=12,
+        spacing=1.0 / 11,
+        particle_mass=0.04,
+        material=None,
+        stiffness={"structural": 1000.0, "shear": 1000.0, "bend": 10.0},
+        damping={"structural": 0.02, "shear": 0.02, "bend": 0.005},
+        self_collision=self_collision,
+        **kw,
     )
 
 

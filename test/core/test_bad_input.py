@@ -56,7 +56,7 @@ def test_scene_names_that_cannot_be_files_are_refused():
 
 # ---------------------------------------------------------------- the defects, in the core
 def hanging(n=16, **kw):
-    return load_scene("hanging").build_simulator(rows=n, cols=n, spacing=1 / (n - 1), **kw)
+    return load_scene("hanging_provot").build_simulator(rows=n, cols=n, spacing=1 / (n - 1), **kw)
 
 
 def test_no_stiffness_at_all_is_a_cloth_that_falls():

@@ -19,7 +19,7 @@ def _run(sim, seconds):
 
 
 def _hanging(n=16, factor=1.0):
-    sim = load_scene("hanging").build_simulator(rows=n, cols=n, spacing=1.0 / (n - 1))
+    sim = load_scene("hanging_provot").build_simulator(rows=n, cols=n, spacing=1.0 / (n - 1))
     sim.dt = factor * sim.stable_dt()
     return sim
 
@@ -45,7 +45,7 @@ def test_stable_runs_are_balanced_whatever_drives_them():
     sim = load_scene("flag").build_simulator()
     balance = _run(sim, 1.5)
     assert not balance.unstable and balance.worst < 0.1
-    sim = load_scene("hanging").build_simulator(rows=12, cols=12, spacing=1.0 / 11)
+    sim = load_scene("hanging_provot").build_simulator(rows=12, cols=12, spacing=1.0 / 11)
     sim.advance(0.5)
     corner = sim.positions[-1].copy()
     sim.grasp("g", corner, 0.01)
@@ -63,7 +63,7 @@ def test_a_sweep_row_is_unstable_and_the_message_says_why(tmp_path):
 
     spec = spec_from_dict(
         {
-            "scene": "hanging",
+            "scene": "hanging_provot",
             "duration": 0.3,
             "frames": 0,
             "set": {"rows": 16, "cols": 16, "spacing": 1.0 / 15, "allow_unstable": True},

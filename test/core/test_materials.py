@@ -371,8 +371,8 @@ def test_the_fit_refuses_a_bag_without_clouds_an_unknown_parameter_and_a_plain_s
         check(tmp_path / "stats", "swing")
     with pytest.raises(ValueError, match="'thickness' is not a material parameter"):
         fit.parse_params("stretch,thickness")
-    with pytest.raises(ValueError, match="--scene hanging: it has no material"):
-        check(tmp_path / "rec", "hanging")
+    with pytest.raises(ValueError, match="--scene hanging_provot: it has no material"):
+        check(tmp_path / "rec", "hanging_provot")
     with pytest.raises(BagError, match="topic '/other' is not a PointCloud2 topic"):
         check(tmp_path / "rec", "swing", "/other")
     out = tmp_path / "x.yaml"

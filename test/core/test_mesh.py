@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cloths import springy_fold
 
 from cloth_sim import ClothModel, Simulator, integrators
 from cloth_sim.model import BUCKLING, TENSION_ONLY
@@ -390,9 +391,7 @@ def test_the_folded_cloth_keeps_its_thickness_at_its_hems_too():
     """A cloth folded over itself (the fold scene): the layers' edge particles came within 1.5–1.9
     mm of the other layer at a 5 mm thickness while only particles in front of a face were pushed.
     With the point–edge, point–point and edge–edge cases every part keeps the thickness."""
-    sim = load_scene("fold").build_simulator(
-        rows=12, cols=12, spacing=1.0 / 11, particle_mass=0.04, thickness=0.005
-    )
+    sim = springy_fold(thickness=0.005)
     sim.advance(1.5)
     structural = sim.model.springs[sim.model.family == 0]
     assert sim.positions[:, 2].max() > 2 * sim.thickness  # it did fold over itself

@@ -91,8 +91,9 @@ def test_simulator_rejects_bad_parameters_and_keeps_its_state():
 
 
 def test_shipped_scenes_load_and_run():
-    assert {"hanging", "curtain", "flag", "free_fall"} <= set(available_scenes())
-    for name in ("hanging", "curtain", "flag", "free_fall"):
+    shipped = {"hanging", "hanging_provot", "curtain", "flag", "free_fall", "table", "fold"}
+    assert shipped <= set(available_scenes())
+    for name in sorted(shipped):
         scene = load_scene(name)
         sim = scene.build_simulator()
         assert sim.dt < sim.stable_dt()
@@ -104,9 +105,19 @@ def test_shipped_scenes_load_and_run():
 
 
 def test_a_scene_given_by_size_and_density_is_the_same_cloth_at_any_resolution():
-    """fold gives its extent and mass per area: refined, the cloth keeps its size (so it still
-    fits its floor), its mass (density × area, shared equally) and so its weight."""
-    scene = load_scene("fold")
+    """A grid given by its extent and mass per area (fold's before it took a fabric): refined, the
+    cloth keeps its size (so it still fits its floor), its mass (density × area, shared equally)
+    and so its weight. fold itself, in a library fabric, keeps its size and the fabric's mass."""
+    fold = load_scene("fold")
+    scene = scene_from_dict(
+        {
+            "grid": {"rows": 24, "cols": 24, "orientation": "vertical"},
+            "size": [1.0, 1.0],
+            "density": 5.76,
+            "stiffness": {"structural": 1000.0, "shear": 1000.0, "bend": 10.0},
+        },
+        source="dense.yaml",
+    )
     w, h = scene.size
     for rows, cols in ((scene.rows, scene.cols), (64, 64), (17, 40)):
         model = scene.build_model(rows=rows, cols=cols)
@@ -114,13 +125,18 @@ def test_a_scene_given_by_size_and_density_is_the_same_cloth_at_any_resolution()
         assert extent == pytest.approx(sorted((w, h)), rel=1e-12)
         assert model.masses.sum() == pytest.approx(scene.grid_density * w * h, rel=1e-12)
         assert np.ptp(model.masses) == 0.0
+        model = fold.build_model(rows=rows, cols=cols)
+        extent = sorted(np.ptp(model.positions, axis=0))[1:]
+        assert extent == pytest.approx(sorted(fold.size), rel=1e-12)
+        area = fold.size[0] * fold.size[1]
+        assert model.masses.sum() == pytest.approx(fold.material.density * area, rel=1e-12)
     # a spacing and a particle mass given to build_model are the cloth asked for
     asked = scene.build_model(rows=12, cols=12, spacing=0.05, particle_mass=0.02)
     assert np.ptp(asked.positions[:, 0]) == pytest.approx(11 * 0.05)
     assert asked.masses.sum() == pytest.approx(144 * 0.02)
     # given by a particle mass, a grid grows with its rows and cols at its spacing instead
-    hanging = load_scene("hanging")
-    assert hanging.grid_density is None
+    hanging = load_scene("hanging_provot")
+    assert hanging.grid_density is None and hanging.material is None
     big = hanging.build_model(rows=40, cols=64)
     assert big.masses.sum() == pytest.approx(40 * 64 * hanging.particle_mass)
     assert np.ptp(big.positions[:, 0]) == pytest.approx(63 * hanging.spacing)
@@ -296,7 +312,7 @@ def test_a_scene_passes_the_simulator_options_on_and_refuses_unknown_ones():
     """``build_simulator`` forwards the strain limit's options (it once dropped them, and a
     benchmark's "Provot alone" row ran with the attachments on) and refuses a key it does not know
     instead of ignoring it."""
-    scene = load_scene("hanging")
+    scene = load_scene("hanging_provot")
     sim = scene.build_simulator(
         rows=8, cols=8, strain_limit=0.1, strain_limit_passes=3, strain_limit_long_range=False
     )

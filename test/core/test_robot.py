@@ -293,9 +293,10 @@ def test_bad_robot_input_is_refused_by_name_and_changes_nothing(tmp_path):
 
 def test_a_parallel_gripper_lifts_a_cloth_by_friction_alone_and_feels_its_weight():
     """robot_pick: two pads pinch a hanging flap's corner (no gripper attaches anything) and lift
-    the cloth 0.55 m off the shelf; over a 5 s hold the pinched cloth slips at most 1 cm against
-    the pads, and the pads' vertical force is the cloth's weight within 5 % (Coulomb friction on
-    the squeeze carries it all: the shelf feels nothing)."""
+    the cloth 0.55 m off the shelf; once it has settled in their grip (a second: the cotton's
+    pinched corner stretches up to 9 mm as the lift ends), the pinched cloth creeps at most 1 mm
+    against the pads over a 4 s hold, and the pads' vertical force is the cloth's weight within
+    5 % (Coulomb friction on the squeeze carries it all: the shelf feels nothing)."""
     from cloth_sim.scene import load_scene
 
     sim = load_scene("robot_pick").build_simulator()
@@ -307,10 +308,11 @@ def test_a_parallel_gripper_lifts_a_cloth_by_friction_alone_and_feels_its_weight
     assert len(held) >= 1
     assert sim.positions[:, 2].min() > 0.41 + sim.thickness  # all of it off the shelf
     pad = lambda: sim.link_pose("gripper", "finger_left")[0]  # noqa: E731
+    sim.advance(8.8)
     before = sim.positions[held] - pad()
     sim.advance(12.8)
     slip = np.abs(sim.positions[held] - pad() - before).max()
-    assert slip <= 0.01
+    assert slip <= 0.001
     force = sum(sim.link_wrench("gripper", f)[0] for f in ("finger_left", "finger_right"))
     weight = sim.model.masses.sum() * 9.81
     assert -force[2] == pytest.approx(weight, rel=0.05)

@@ -194,7 +194,7 @@ def test_the_same_bits_at_any_thread_count():
     for threads in (1, 2):
         numba.set_num_threads(threads)
         try:
-            sc = load_scene("hanging")
+            sc = load_scene("hanging_provot")
             sc.integrator, sc.dt = "vbd", 1 / 120
             sim = sc.build_simulator(rows=64, cols=64, spacing=1 / 63)
             sim.step(20)
@@ -405,7 +405,7 @@ def test_tethers_hold_every_particle_within_its_attachment_after_the_iterations(
 
 
 def test_a_time_budget_bounds_the_iterations():
-    sc = load_scene("hanging")
+    sc = load_scene("hanging_provot")
     sc.integrator, sc.dt = "vbd", 1 / 60
     sim = sc.build_simulator(rows=48, cols=48, spacing=1 / 47)
     sim.set_integrator("vbd", iterations=1000, time_budget=0.002)

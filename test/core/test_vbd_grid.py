@@ -184,7 +184,7 @@ def test_the_same_bits_at_any_thread_count_and_with_a_time_budget():
     for threads, budget in ((1, None), (2, None), (2, 100.0)):
         numba.set_num_threads(threads)
         try:
-            sc = load_scene("hanging")
+            sc = load_scene("hanging_provot")
             sc.integrator, sc.dt = "vbd", 1 / 60
             options = {} if budget is None else {"time_budget": budget}
             sim = sc.build_simulator(

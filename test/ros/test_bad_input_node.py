@@ -217,7 +217,7 @@ def test_malformed_scenes_are_refused_live_and_the_node_keeps_publishing(ros, tm
             name
         )
         assert SECRET not in res.reason
-    assert node.scene.name == "hanging"
+    assert node.scene.name == "hanging_provot"
     n = len(stats)
     assert ros.spin_until(lambda: len(stats) >= n + 5)
 

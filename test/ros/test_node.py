@@ -33,6 +33,7 @@ from visualization_msgs.msg import Marker  # noqa: E402
 
 from cloth_sim.msg import Stats  # noqa: E402
 from cloth_sim.parameters import SCHEMA  # noqa: E402
+from cloth_sim.scene import load_scene  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -265,7 +266,7 @@ def test_topology_changes_rebuild_and_reset(ros):
     assert ros.set_params("/cloth_sim", {"scene": "flag"})[0].successful
     assert node.scene.name == "flag" and node.sim.wind is not None
     ros.spin_for(0.3)  # the scene's own values are then reported through the parameters
-    assert node.get_parameter("wind.strength").value == pytest.approx(0.05)
+    assert node.get_parameter("wind.strength").value == load_scene("flag").wind_strength
     assert node.get_parameter("rows").value == 20
 
 
@@ -445,13 +446,37 @@ def test_a_scene_change_with_other_values_in_one_request(ros):
     assert (
         node.get_parameter("rows").value == 20 and node.get_parameter("integrator").value == "rk4"
     )
-    assert node.get_parameter("wind.strength").value == pytest.approx(0.05)
+    assert node.get_parameter("wind.strength").value == load_scene("flag").wind_strength
     assert node.sim.model.n_particles == 20 * 32
     n = len(stats)
     assert ros.spin_until(lambda: len(stats) >= n + 5)
     results = ros.set_params("/cloth_sim", {"scene": "hanging", "rows": 10, "cols": 10})
     assert all(r.successful for r in results)
     assert node.sim.model.n_particles == 100 and node.scene.name == "hanging"
+
+
+def test_the_default_scene_is_cotton_and_moving_between_fabric_and_springs_is_no_spring_change(
+    ros,
+):
+    """`make run`'s scene, hanging, is 1 m of the library's cotton: the fabric sets its masses and
+    springs, so a spring parameter is refused naming the material. Moving to the per-family sheet
+    and back changes no spring by itself (it once refused the move: the springs the scene brought
+    counted as changed by the request); a spring value sent with the move still does."""
+    node = ros.start(scene="hanging", spacing=1.0 / 11)
+    assert node.get_parameter("material").value == "cotton"
+    assert node.sim.model.masses.sum() == pytest.approx(0.276)
+    (result,) = ros.set_params("/cloth_sim", {"stiffness.structural": 500.0})
+    assert not result.successful and "set by the cloth's material (cotton)" in result.reason
+    assert all(r.successful for r in ros.set_params("/cloth_sim", {"scene": "hanging_provot"}))
+    assert node.sim.stiffness("structural")[0] == 1000.0
+    assert ros.set_params("/cloth_sim", {"stiffness.structural": 500.0})[0].successful
+    assert all(r.successful for r in ros.set_params("/cloth_sim", {"scene": "hanging"}))
+    assert node.sim.model.meta["material"] is not None and node.scene.name == "hanging"
+    (result,) = ros.set_params(
+        "/cloth_sim", {"scene": "flag", "stiffness.structural": 5.0}, atomically=True
+    )
+    assert not result.successful and "stiffness.structural" in result.reason
+    assert node.scene.name == "hanging"
 
 
 def _stats_gaps(ros, stats, during):
@@ -856,7 +881,7 @@ def test_clock_real_time_factor_and_step(ros):
     assert not r.successful and "real_time_factor" in r.reason
 
 
-def test_a_mesh_scene_publishes_an_unorganised_cloud_and_refuses_grid_parameters(ros):
+def test_a_mesh_scene_publishes_an_unorganised_cloud_and_refuses_grid_parameters(ros, tmp_path):
     node = ros.start(scene="towel")
     clouds = ros.collect(PointCloud2, "/cloth_sim/points")
     meshes = ros.collect(Marker, "/cloth_sim/mesh")
@@ -875,21 +900,36 @@ def test_a_mesh_scene_publishes_an_unorganised_cloud_and_refuses_grid_parameters
     assert result.successful and node.sim.model.masses.sum() == pytest.approx(0.8 * 0.5 * 0.8)
     # back to a grid: its own parameters apply again, density does not
     assert all(
-        r.successful for r in ros.set_params("/cloth_sim", {"scene": "hanging", "rows": 10})
+        r.successful for r in ros.set_params("/cloth_sim", {"scene": "hanging_provot", "rows": 10})
     )
     assert node.sim.model.rows == 10
     (result,) = ros.set_params("/cloth_sim", {"density": 0.3})
     assert not result.successful and "density applies to mesh scenes" in result.reason
-    # a grid given by its size and mass per area (fold): rows refine the same 1 m, 5.76 kg cloth,
+    # a grid given by its size and mass per area: rows refine the same 1 m, 5.76 kg cloth,
     # density applies and sets the particles' mass
-    assert all(r.successful for r in ros.set_params("/cloth_sim", {"scene": "fold", "rows": 10}))
+    dense = tmp_path / "dense.yaml"
+    dense.write_text(
+        "name: dense\n"
+        "grid: {rows: 24, cols: 24, orientation: vertical, origin: [0.0, 0.0, 1.05]}\n"
+        "size: [1.0, 1.0]\n"
+        "density: 5.76\n"
+        "stiffness: {structural: 1000.0, shear: 1000.0, bend: 10.0}\n"
+    )
+    assert all(
+        r.successful for r in ros.set_params("/cloth_sim", {"scene": str(dense), "rows": 10})
+    )
     model = node.sim.model
     assert model.rows == 10 and model.masses.sum() == pytest.approx(5.76)
     assert np.ptp(model.positions[:, 2]) == pytest.approx(1.0)
     (result,) = ros.set_params("/cloth_sim", {"density": 2.0})
     assert result.successful and node.sim.model.masses.sum() == pytest.approx(2.0)
     (result,) = ros.set_params("/cloth_sim", {"particle_mass": 0.02})
-    assert not result.successful and "set by scene fold's density" in result.reason
+    assert not result.successful and "set by scene dense's density" in result.reason
+    # a grid in a library fabric (fold, cotton): the fabric sets the masses
+    assert all(r.successful for r in ros.set_params("/cloth_sim", {"scene": "fold", "rows": 10}))
+    assert node.sim.model.masses.sum() == pytest.approx(0.276)
+    (result,) = ros.set_params("/cloth_sim", {"density": 3.0})
+    assert not result.successful and "set by the cloth's material" in result.reason
 
 
 def test_the_launch_file_describes_every_scene_the_package_has(monkeypatch):

@@ -476,7 +476,7 @@ def test_a_twist_keeps_a_kinematic_collider_moving_and_drags_what_rests_on_it(ro
     """set_entity_state with a twist: the table moves at that velocity, step by step (exactly
     v·n·dt after n steps), turns at its angular velocity, reports the twist, and carries the cloth
     lying on it by friction; a zero twist stops it."""
-    node = ros.start(scene="table", rows=10, cols=10, spacing=0.06)
+    node = ros.start(scene="table", rows=10, cols=10, spacing=0.06, size=[0.0, 0.0])
     set_state(ros, SimulationState.STATE_PAUSED)
     call(ros, srv.StepSimulation, "step_simulation", steps=800)  # the cloth settles on the table
     table = node.sim.colliders[0]
