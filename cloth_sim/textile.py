@@ -174,23 +174,73 @@ def _strip(
     return model, line
 
 
-def cantilever(material, grid: int = 32, across: int = 3, direction: str = "warp") -> dict:
+#: how a specimen's test reaches its rest: ``statics`` (:func:`settle`, the equilibrium itself) or
+#: ``vbd`` (simulated from its release at 1/60 s with ``vbd``'s own defaults, in air)
+METHODS = ("statics", "vbd")
+
+#: air drag on a simulated specimen, as its particles' relaxation time (s): a strip or disc of a
+#: fraction of a gram in air stops within a second or two (undamped, it swings for ever: a
+#: fabric's springs carry no damping of their own)
+AIR_RELAXATION = 0.1
+
+
+#: a simulated specimen is at rest when no particle moves faster than this (m/s)
+REST_SPEED = 1e-3
+
+
+def released(model: ClothModel, integrator: str, dt: float) -> Simulator:
+    """A simulator of ``model`` with air drag of :data:`AIR_RELAXATION` on its median particle."""
+    return Simulator(
+        model, integrator=integrator, dt=dt, drag=float(np.median(model.masses)) / AIR_RELAXATION
+    )
+
+
+def until_rest(sim: Simulator, seconds: float, rest_speed: float) -> None:
+    """Advance ``sim`` until no particle moves faster than ``rest_speed`` (m/s, checked every
+    0.25 s) or ``seconds`` have passed."""
+    while sim.time < seconds:
+        sim.advance(min(sim.time + 0.25, seconds))
+        if np.abs(sim.velocities).max() < rest_speed:
+            break
+
+
+def cantilever(
+    material,
+    grid: int = 32,
+    across: int = 3,
+    direction: str = "warp",
+    method: str = "statics",
+    seconds: float = 10.0,
+    rest_speed: float = REST_SPEED,
+) -> dict:
     """The virtual cantilever test: a strip of ``grid`` cells over its overhang ``l = 2c`` and
-    ``across`` cells over 25 mm, two lines clamped. Returns the expected bending length
-    ``(G/(w·g))^(1/3)``, the measured one (the elastica through the settled chord angle), Peirce's
-    from the same angle, the angle and the relative error."""
+    ``across`` cells over 25 mm, two lines clamped, brought to rest by ``method``
+    (:data:`METHODS`: its equilibrium by :func:`settle`, or released level and stepped by
+    ``vbd`` at 1/60 s with its defaults, in air, until :func:`until_rest` or ``seconds``).
+    Returns the expected bending length ``(G/(w·g))^(1/3)``, the measured one (the elastica
+    through the chord angle at rest), Peirce's from the same angle, the angle, the relative error,
+    and how it came to rest."""
     fabric = resolve(material)
     d = _direction(direction)
     if int(grid) != grid or grid < 4:
         raise ValueError(
             f"grid: expected an integer >= 4 (cells along the overhang), got {grid!r}"
         )
+    if method not in METHODS:
+        raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
     c = fabric.bending_length(d)
     overhang = 2.0 * c
     a = overhang / grid
     model, line = _strip(fabric, grid + 1, across, a * (grid + 1), 0.025, direction, 2)
-    sim = Simulator(model, integrator="vbd", dt=1e-3)
-    iterations = settle(sim)
+    rest = {}
+    if method == "statics":
+        sim = Simulator(model, integrator="vbd", dt=1e-3)
+        rest["newton_iterations"] = settle(sim)
+    else:
+        sim = released(model, "vbd", 1.0 / 60)
+        until_rest(sim, seconds, rest_speed)
+        rest["settled_at"] = sim.time
+        rest["speed_at_end"] = float(np.abs(sim.velocities).max())
     x = sim.positions
     root, tip = x[line(1)].mean(axis=0), x[line(grid + 1)].mean(axis=0)
     chord = tip - root
@@ -199,6 +249,7 @@ def cantilever(material, grid: int = 32, across: int = 3, direction: str = "warp
     measured = bending_length_from_angle(overhang, angle)
     return {
         "test": "cantilever",
+        "method": method,
         "direction": direction,
         "grid": f"{grid}×{across + 1}",
         "expected": c,
@@ -207,7 +258,7 @@ def cantilever(material, grid: int = 32, across: int = 3, direction: str = "warp
         "angle_deg": angle,
         "expected_angle_deg": elastica_chord_angle(2.0),
         "error": measured / c - 1.0,
-        "newton_iterations": iterations,
+        **rest,
     }
 
 
@@ -358,28 +409,25 @@ def shadow_area(
     return float(image.sum()) * pixel * pixel
 
 
-def drape(material, grid: int = 64, seconds: float = 6.0, rest_speed: float = 1e-3) -> dict:
+def drape(material, grid: int = 64, seconds: float = 6.0, rest_speed: float = REST_SPEED) -> dict:
     """The virtual Cusick drape test: the disc (:func:`disc`) released flat over its support and
     simulated with symplectic Euler at 0.9 of its stable step, with air drag of relaxation time
     0.1 s at every resolution, until no particle moves faster than ``rest_speed`` (m/s, checked
     every 0.25 s) or ``seconds`` have passed; the drape coefficient of its shadow.
 
     (Why an explicit method: a fabric's tensile stiffness against its particles' mass is so high
-    that ``vbd``'s ten to twenty iterations leave the sheet stretched by 20 % at 64×64, flapping;
-    the explicit step resolves it, and costs ~6 s per simulated second at 64×64.)"""
+    that ``vbd`` needs thousands of sweeps a frame on the specimen's 5 mm cells. With its
+    defaults, which converge every step, it gives the same coefficient, at 3.6–8× the explicit
+    step's cost: 0.3251 against 0.3198 for cotton, 0.4152 against 0.4152 for denim at 32×32.)"""
     fabric = resolve(material)
     if int(grid) != grid or grid < 8:
         raise ValueError(
             f"grid: expected an integer >= 8 (cells across the specimen), got {grid!r}"
         )
     model = disc(fabric, int(grid))
-    drag = float(np.median(model.masses)) / 0.1
-    sim = Simulator(model, integrator="symplectic_euler", dt=1e-6, drag=drag)
+    sim = released(model, "symplectic_euler", 1e-6)
     sim.dt = 0.9 * sim.stable_dt()
-    while sim.time < seconds:
-        sim.advance(min(sim.time + 0.25, seconds))
-        if np.abs(sim.velocities).max() < rest_speed:
-            break
+    until_rest(sim, seconds, rest_speed)
     area = shadow_area(sim.positions, model.triangles, SPECIMEN_RADIUS * 1.05)
     a_spec = math.pi * SPECIMEN_RADIUS**2
     a_sup = math.pi * SUPPORT_RADIUS**2

@@ -65,10 +65,9 @@ def _covers(x0, reach, x_s, reach_s, tris, edges):
 
 @numba.njit(cache=True, parallel=True)
 def _near_now(x0, reach, tris, edges, vf, ee):
-    """The kept pairs still within reach at ``x0``, in their order, with their distances: the
-    tree's tests (:func:`cloth_sim.contact.collision_tree._point_triangle` and the edge–edge test
-    of ``_items``) on each, every pair on its own (so the same at any thread count), then the
-    kept ones gathered in order."""
+    """Which kept pairs are still within reach at ``x0``, and their distances: the tree's tests
+    (:func:`cloth_sim.contact.collision_tree._point_triangle` and the edge–edge test of
+    ``_items``) on each, every pair on its own (so the same at any thread count)."""
     keep_vf, vf_d = np.zeros(vf.shape[0], np.bool_), np.empty(vf.shape[0])
     for q in numba.prange(vf.shape[0]):
         p, t = vf[q, 0], vf[q, 1]
@@ -103,22 +102,7 @@ def _near_now(x0, reach, tris, edges, vf, ee):
         if d >= r:
             continue
         keep_ee[q], ee_d[q] = True, d
-    return _gathered(vf, keep_vf, vf_d) + _gathered(ee, keep_ee, ee_d)
-
-
-@numba.njit(cache=True)
-def _gathered(pairs, keep, dist):
-    """``(pairs, distances)`` of the rows ``keep`` marks, in order."""
-    m = 0
-    for q in range(keep.shape[0]):
-        m += keep[q]
-    out, out_d = np.empty((m, 2), np.int64), np.empty(m)
-    m = 0
-    for q in range(keep.shape[0]):
-        if keep[q]:
-            out[m, 0], out[m, 1], out_d[m] = pairs[q, 0], pairs[q, 1], dist[q]
-            m += 1
-    return out, out_d
+    return keep_vf, vf_d, keep_ee, ee_d
 
 
 class PairList:
@@ -146,4 +130,7 @@ class PairList:
             self._at = (x0.copy(), grown)
             self._vf, self._ee = vf, ee
             self.searches += 1
-        return _near_now(x0, reach, self.tris, self.edges, self._vf, self._ee)
+        near_vf, vf_d, near_ee, ee_d = _near_now(
+            x0, reach, self.tris, self.edges, self._vf, self._ee
+        )
+        return self._vf[near_vf], vf_d[near_vf], self._ee[near_ee], ee_d[near_ee]
