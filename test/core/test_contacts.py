@@ -524,6 +524,8 @@ def test_the_kept_pairs_answer_as_the_tree_does_and_search_again_when_a_particle
         found[0] += len(want[0]) + len(want[2])
         return want
 
+    assert stage.keeps_pairs  # 12×12 over 1 m, 7.5 mm: the stage keeps its pairs here
+    assert not load_scene("fold").build_simulator(rows=48, cols=48)._self_collision.keeps_pairs
     stage.candidates = both
     sim.advance(1.5)
     assert found[0] > 1000  # it did pile up
