@@ -442,8 +442,7 @@ def print_lockstep_table(size: int = 32, calls: int = 300, chunks=(1, 10, 100)) 
     """Lockstep throughput: ``cloth_sim_node`` in its own process (N×N :data:`SHEET` scene,
     paused), this process calling ``~/step`` with ``steps`` = each of ``chunks``, one call after
     the other; prints steps per second and calls per second, beside the node's own stepping speed
-    (the same
-    cloth stepped in this process without ROS)."""
+    (the same cloth stepped in this process without ROS)."""
     domain = _bench_domain()
     node = _start_node(domain, size)
     print(
@@ -567,10 +566,9 @@ def print_camera_node_table(
 ) -> list[dict]:
     """The node's real-time factor with the depth camera on (``width``×``height`` at
     ``camera_rate``), its topics unsubscribed and all five subscribed: ``cloth_sim_node`` in its
-    own process (the ``size``×``size`` :data:`SHEET` scene, the camera at (0.5, −0.8, 0.6)
-    looking at the cloth), this process subscribing as a viewer in another process does (raw: it
-    counts the messages without deserialising them) and reading ~/stats. The real-time factor is
-    simulated
+    own process (the ``size``×``size`` :data:`SHEET` scene, the camera at (0.5, −0.8, 0.6) looking
+    at the cloth), this process subscribing as a viewer in another process does (raw: it counts the
+    messages without deserialising them) and reading ~/stats. The real-time factor is simulated
     time over wall time between the first and last ~/stats received in each window."""
     from sensor_msgs import msg as sensor_msgs
 

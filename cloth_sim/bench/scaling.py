@@ -4,11 +4,10 @@ of cost against particle count, and what skipping unused force terms buys.
 Sizes N = 8 … 256 (N×N particles; the hanging_provot scene resized: 1 m square, its stiffness,
 damping and mass, strain limit off, dt = 1 ms for the explicit methods and Kang, 1/60 s for
 implicit Euler). An integrator stops growing N once one step took more than ``budget`` seconds. The
-exponent is the
-least-squares slope of log(ms/step) against log(particles) over N ≥ 32 (below, fixed per-step
-overheads dominate). "Skipping" times the N = 64 hanging_provot scene with wind, bend springs,
-Provot's strain limit and damping each switched off in turn (a term that is off is never
-evaluated), and the node's tick with and without a ~/points subscriber.
+exponent is the least-squares slope of log(ms/step) against log(particles) over N ≥ 32 (below,
+fixed per-step overheads dominate). "Skipping" times the N = 64 hanging_provot scene with wind,
+bend springs, Provot's strain limit and damping each switched off in turn (a term that is off is
+never evaluated), and the node's tick with and without a ~/points subscriber.
 """
 
 from __future__ import annotations

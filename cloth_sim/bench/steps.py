@@ -83,8 +83,7 @@ def print_implicit_table(sizes, dt: float, seconds: float = 1.0) -> list[dict]:
     hanging_provot scene at N×N (the 1 m, 10.24 kg cloth: spacing 1/(N−1), mass 10.24/N², as the
     strain and node benchmarks), each also as a multiple of a symplectic Euler step of the same
     cloth timed in the same run (at dt = 0.1 ms, where it is stable at every size: a step's cost
-    does not
-    depend on dt; at 1 ms, 81×81 without the strain limit diverges)."""
+    does not depend on dt; at 1 ms, 81×81 without the strain limit diverges)."""
     from ..simulator import SimulationDiverged
 
     print(
@@ -143,10 +142,9 @@ def print_blowup_table(size: int = 32) -> list[dict]:
     """How long a step that blows up holds the caller, per integrator, on the hanging_provot cloth
     at N×N: from the call of the failing ``step()`` to its :class:`SimulationDiverged` (guard,
     restore of the state before the step, message). The stability analysis is not known yet (a
-    fresh model),
-    which is the worst case: the error path never computes it. Conditionally stable methods run at
-    10× their stable dt (measured on a twin model), the unconditionally stable ones with the
-    guard's speed bound lowered to 0.5 m/s."""
+    fresh model), which is the worst case: the error path never computes it. Conditionally stable
+    methods run at 10× their stable dt (measured on a twin model), the unconditionally stable ones
+    with the guard's speed bound lowered to 0.5 m/s."""
     from .. import integrators
     from ..integrators.base import Stability
     from ..simulator import SimulationDiverged
@@ -230,9 +228,8 @@ def print_strain_limit_table(sizes=(32, 64), seconds: float = 3.0, tau: float = 
     """The hanging_provot scene at N×N (the 1 m, 10.24 kg cloth: spacing 1/(N−1), mass 10.24/N²)
     over ``seconds``: worst structural/shear strain (sampled every 10 steps) and ms/step without
     the strain limit, with Provot's passes alone, with long-range attachments at 20 (the default),
-    10
-    and 5 passes, and with the projection method; the cost ratios to the run without, measured in
-    one process."""
+    10 and 5 passes, and with the projection method; the cost ratios to the run without, measured
+    in one process."""
     print(
         f"# strain limit τ = {tau} on the hanging_provot scene, {seconds:g} s, symplectic Euler "
         "dt = 1 ms; "
@@ -287,8 +284,8 @@ def print_contacts_table(sizes=(32, 64), seconds: float = 1.5) -> list[dict]:
     """The hanging_provot scene at N×N (as :func:`print_strain_limit_table`), swinging against a
     ball and onto a floor 0.7 m below its pins: ms/step without contacts, with the plane and the
     sphere, and with self-collision as well; each a ratio to the contact-free step of the same run,
-    with how
-    many particles touched a collider and how many self-collision pairs the last step had."""
+    with how many particles touched a collider and how many self-collision pairs the last step
+    had."""
     from ..contact.colliders import Plane, Sphere
 
     print(

@@ -3,9 +3,9 @@
 1. ``throughput``: 100 runs of the 32×32 hanging_provot scene, 1 s of simulated time each (the
    scene's symplectic Euler at dt = 1 ms, its strain limit on), 30 frames per second into each
    run's bag — a bare Python loop over :func:`cloth_sim.sweep.run.execute` (the same runs, the same
-   files, no
-   Ray), then ``cloth-sim sweep`` on a local Ray with 1 and with 2 workers: runs per second, the
-   speed-up of 2 workers over 1 and the overhead per run of 1 worker over the bare loop.
+   files, no Ray), then ``cloth-sim sweep`` on a local Ray with 1 and with 2 workers: runs per
+   second, the speed-up of 2 workers over 1 and the overhead per run of 1 worker over the bare
+   loop.
 2. ``memory``: 10,000 short runs (a 4×4 cloth, 10 steps, no bag) through Ray at 2 workers, the
    driver's resident memory sampled every 0.5 s against the runs done: it must not grow with them.
 

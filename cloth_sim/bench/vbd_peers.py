@@ -6,17 +6,15 @@
 side on a GPU (cloth_sim's stays on the CPU), each frame's substeps captured in a CUDA graph as
 Newton's examples do.
 
-1. **The hanging_provot cloth, the same springs.** The hanging_provot scene at N×N (1 m, 10.24
-   kg: the speed tables' cloth), its particles, masses, pins and every structural, shear and bend
+1. **The hanging_provot cloth, the same springs.** The hanging_provot scene at N×N (1 m, 10.24 kg:
+   the speed tables' cloth), its particles, masses, pins and every structural, shear and bend
    spring given to Newton one by one (``ModelBuilder.add_spring``: Newton's VBD takes springs
-   beside its
-   FEM triangles),
-   with our general sweep's greedy colour groups (Newton colours triangles and bending edges only,
-   none here; ours runs the grid's nine classes on its blocks: ``vbd_grid``), no strain limit on
-   either side. Both step each 1/60 s frame in 10 substeps of 10 iterations (the numbers
-   of Newton's cloth examples). Figures: wall seconds per simulated second, the worst stretch of
-   any spring and the bottom row's swing (the range of its mean y), each over the run, sampled a
-   frame.
+   beside its FEM triangles), with our general sweep's greedy colour groups (Newton colours
+   triangles and bending edges only, none here; ours runs the grid's nine classes on its blocks:
+   ``vbd_grid``), no strain limit on either side. Both step each 1/60 s frame in 10 substeps of
+   10 iterations (the numbers of Newton's cloth examples). Figures: wall seconds per simulated
+   second, the worst stretch of any spring and the bottom row's swing (the range of its mean y),
+   each over the run, sampled a frame.
 2. **Newton's twist** (``example_cloth_twist``): Newton's own set-up — its FEM cloth of 50 × 50
    vertices (Lamé μ = λ = 1000 N/m, 0.2 kg/m², bending 1e-3), the two short edges fixed and turned
    in opposite senses at π/3 rad/s about the long axis, zero gravity, self-contact at a 2 mm
