@@ -88,8 +88,8 @@ def print_implicit_table(sizes, dt: float, seconds: float = 1.0) -> list[dict]:
 
     print(
         f"# hanging_provot scene resized to N×N over 1 m and 10.24 kg, dt={dt:.6g} s, no strain "
-        "limit; "
-        f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores; min of 3 after "
+        f"limit; {platform.processor() or platform.machine()}, {os.cpu_count()} cores; min of 3 "
+        "after "
         f"0.5 s of simulated warm-up; × a symplectic Euler step of the same cloth"
     )
     print(
@@ -232,8 +232,7 @@ def print_strain_limit_table(sizes=(32, 64), seconds: float = 3.0, tau: float = 
     in one process."""
     print(
         f"# strain limit τ = {tau} on the hanging_provot scene, {seconds:g} s, symplectic Euler "
-        "dt = 1 ms; "
-        f"{platform.machine()}, {os.cpu_count()} cores"
+        f"dt = 1 ms; {platform.machine()}, {os.cpu_count()} cores"
     )
     print("| N | method | worst strain | ms/step | × the step without |")
     print("|---|---|---|---|---|")
@@ -290,8 +289,7 @@ def print_contacts_table(sizes=(32, 64), seconds: float = 1.5) -> list[dict]:
 
     print(
         f"# contacts on the hanging_provot scene, {seconds:g} s, symplectic Euler dt = 1 ms, "
-        "strain limit "
-        f"0.1; {platform.machine()}, {os.cpu_count()} cores"
+        f"strain limit 0.1; {platform.machine()}, {os.cpu_count()} cores"
     )
     print("| N | contacts | ms/step | × the step without | touching (last step) | self pairs |")
     print("|---|---|---|---|---|---|")

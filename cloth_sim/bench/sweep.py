@@ -94,8 +94,7 @@ def throughput(runs: int, root: Path) -> None:
         ray.shutdown()
     print(
         f"# {runs} runs of the 32×32 hanging_provot scene, 1 s each (1000 steps, 31 frames to the "
-        "bag); "
-        f"{os.cpu_count()} cores"
+        f"bag); {os.cpu_count()} cores"
     )
     print("| how | start-up s (Ray, workers warm) | sweep wall s | runs/s | per run ms |")
     print("|---|---|---|---|---|")

@@ -89,8 +89,8 @@ def measure(size: int = 64, seconds: float = 1.0, rounds: int = 3, layers=LAYERS
 def print_table(size: int = 64, seconds: float = 1.0, rounds: int = 3) -> dict:
     print(
         f"# hanging_provot {size}×{size}, {seconds:g} s simulated from t = 0.5 s, with the "
-        "scene's strain "
-        f"limit and without it; each layer in its own process, {rounds} rounds taking turns "
+        f"scene's strain limit and without it; each layer in its own process, {rounds} rounds "
+        "taking turns "
         f"(median); {os.cpu_count()} cores; cloth_sim's default: NUMBA_THREADING_LAYER=forksafe"
     )
     print(

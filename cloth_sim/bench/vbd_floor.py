@@ -3,8 +3,7 @@
 ``cloth-sim bench vbd-floor --sizes 32 64 128`` times the hanging_provot cloth (1 m, 10.24 kg, the
 scene's springs, 1/60 s, no strain limit) at two iteration counts a step, so that the difference is
 the iterations' cost alone (the step's set-up cancels), and prints it per vertex and iteration
-beside
-the floor: the bytes an iteration must stream (:meth:`~cloth_sim.integrators.vbd.VBD.
+beside the floor: the bytes an iteration must stream (:meth:`~cloth_sim.integrators.vbd.VBD.
 iteration_traffic`: the model's positions, masses and springs, each once) over a STREAM triad's
 bandwidth on arrays of that size (the caches they fit in, as :mod:`cloth_sim.bench.scaling`
 measures symplectic Euler's). Two cores, numba's threads. Both sweeps, in turn: the grid's blocks
@@ -68,9 +67,8 @@ def measure(n: int) -> dict:
 
 def print_vbd_floor_table(sizes) -> list[dict]:
     print(
-        f"# vbd per vertex and iteration against the memory-bandwidth floor: the hanging_provot "
-        "cloth "
-        f"(1 m, 10.24 kg), 1/60 s, {LOW} and {HIGH} iterations a step (their difference); "
+        "# vbd per vertex and iteration against the memory-bandwidth floor: the hanging_provot "
+        f"cloth (1 m, 10.24 kg), 1/60 s, {LOW} and {HIGH} iterations a step (their difference); "
         f"{platform.machine()}, {os.cpu_count()} cores"
     )
     print(
