@@ -294,18 +294,13 @@ def _items(
             f0, f1 = edges[f, 0], edges[f, 1]
             if f0 == e0 or f0 == e1 or f1 == e0 or f1 == e1:
                 continue
-            # measured lower edge first, as the pair is listed: the same bits whichever
-            # triangle saw it (pair_list measures the kept pairs again)
-            if e < f:
-                d = closest_on_segments(x0, e0, e1, f0, f1)[2]
-            else:
-                d = closest_on_segments(x0, f0, f1, e0, e1)[2]
+            # listed and measured lower edge first: the same bits whichever triangle saw it
+            # (pair_list measures the kept pairs again)
+            lo, hi = (e, f) if e < f else (f, e)
+            d = closest_on_segments(x0, edges[lo, 0], edges[lo, 1], edges[hi, 0], edges[hi, 1])[2]
             if d >= r:
                 continue
-            if e < f:
-                m_ee = _put(ee, ee_d, row_ee, m_ee, cap_ee, e, f, d)
-            else:
-                m_ee = _put(ee, ee_d, row_ee, m_ee, cap_ee, f, e, d)
+            m_ee = _put(ee, ee_d, row_ee, m_ee, cap_ee, lo, hi, d)
     return m_vf, m_ee
 
 

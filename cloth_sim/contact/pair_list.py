@@ -115,10 +115,8 @@ class PairList:
     docstring). :meth:`pairs` answers as :meth:`TriangleTree.pairs` does; ``searches`` counts the
     searches made for the list and ``queries`` the queries."""
 
-    def __init__(self, tree: TriangleTree, edges: np.ndarray):
+    def __init__(self, tree: TriangleTree):
         self.tree = tree
-        self.tris = tree.tris
-        self.edges = read_only(edges, np.int64)
         self._at = None  # (positions, reaches) of the last search
         self._vf = self._ee = None
         self.searches = self.queries = 0
@@ -129,13 +127,14 @@ class PairList:
         x0 = read_only(x0, np.float64)
         reach = read_only(reaches(radius, len(x0)), np.float64)
         self.queries += 1
-        if self._at is None or not _covers(x0, reach, *self._at, self.tris, self.edges):
+        tree = self.tree
+        if self._at is None or not _covers(x0, reach, *self._at, tree.tris, tree.edges):
             grown = reach + float(skin)
-            vf, _, ee, _ = self.tree.pairs(x0, grown)
+            vf, _, ee, _ = tree.pairs(x0, grown)
             self._at = (x0.copy(), grown)
             self._vf, self._ee = vf, ee
             self.searches += 1
         near_vf, vf_d, near_ee, ee_d = _near_now(
-            x0, reach, self.tris, self.edges, self._vf, self._ee
+            x0, reach, tree.tris, tree.edges, self._vf, self._ee
         )
         return self._vf[near_vf], vf_d[near_vf], self._ee[near_ee], ee_d[near_ee]

@@ -392,11 +392,8 @@ SKIN = 1.0
 KEEP_BELOW = 0.6
 
 
-def thickness_limit(model) -> float:
-    """The largest thickness self-collision accepts on ``model``: half its shortest triangle edge
-    at rest. A thicker skin reaches past the triangles next to a particle in a flat cloth (they
-    are about one edge away), so the search finds every neighbour of every particle (at 128×128
-    with 5 mm, 400,000 pairs a step) and a crumpled cloth is pushed apart from itself."""
+def shortest_edge(model) -> float:
+    """``model``'s shortest triangle edge at rest (0 without triangles)."""
     t = model.triangles
     if len(t) == 0:
         return 0.0
@@ -404,7 +401,15 @@ def thickness_limit(model) -> float:
     edges = np.concatenate(
         [x[t[:, 1]] - x[t[:, 0]], x[t[:, 2]] - x[t[:, 1]], x[t[:, 0]] - x[t[:, 2]]]
     )
-    return MAX_THICKNESS_FRACTION * float(np.sqrt((edges * edges).sum(axis=1)).min())
+    return float(np.sqrt((edges * edges).sum(axis=1)).min())
+
+
+def thickness_limit(model) -> float:
+    """The largest thickness self-collision accepts on ``model``: half its shortest triangle edge
+    at rest. A thicker skin reaches past the triangles next to a particle in a flat cloth (they
+    are about one edge away), so the search finds every neighbour of every particle (at 128×128
+    with 5 mm, 400,000 pairs a step) and a crumpled cloth is pushed apart from itself."""
+    return MAX_THICKNESS_FRACTION * shortest_edge(model)
 
 
 def check_thickness(model, thickness: float) -> None:
@@ -436,7 +441,7 @@ class SelfCollision:
         self._moved = np.zeros(model.n_particles)
         self._no_clearance = np.full(model.n_particles, np.inf)
         self._pairs = None  # the candidate pairs' hierarchy and kept list, built at the first step
-        self._shortest_edge = thickness_limit(model) / MAX_THICKNESS_FRACTION
+        self._shortest_edge = shortest_edge(model)
         self.last_pairs = self.last_pushed = self.last_slowed = self.last_edge_pairs = 0
 
     @property
@@ -474,7 +479,7 @@ class SelfCollision:
         positions move little between queries)."""
         if self._pairs is None:
             tree = TriangleTree(self._tris, self.model.positions, self._features)
-            self._pairs = PairList(tree, self._features[0])
+            self._pairs = PairList(tree)
         if not (keep and self.keeps_pairs):
             return self._pairs.tree.pairs(x0, reach)
         return self._pairs.pairs(x0, reach, SKIN * self.thickness)

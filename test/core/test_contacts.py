@@ -512,9 +512,7 @@ def test_the_kept_pairs_answer_as_the_tree_does_and_search_again_when_a_particle
     sim = load_scene("fold").build_simulator(rows=12, cols=12)
     stage = sim._self_collision
     tree = TriangleTree(stage.triangles, sim.model.positions, stage.features)
-    kept = PairList(
-        TriangleTree(stage.triangles, sim.model.positions, stage.features), stage.edges
-    )
+    kept = PairList(TriangleTree(stage.triangles, sim.model.positions, stage.features))
     found = [0]
 
     def both(x0, reach, keep=False):
