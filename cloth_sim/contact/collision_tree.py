@@ -29,6 +29,8 @@ docs/BENCHMARKS.md §3c).
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 
@@ -41,6 +43,56 @@ TASKS = 64
 #: items (triangles, lone particles) a leaf holds at most (the fastest search measured:
 #: docs/BENCHMARKS.md §7)
 LEAF = 8
+
+
+class Hierarchy(NamedTuple):
+    """The tree (:func:`build_hierarchy`): per node its children (−1 for a leaf), its items
+    ``order[first:end]``, how many, and its box ``lo``/``hi``; per item row ``q`` (item
+    ``order[q]``) its box ``ilo``/``ihi``. The boxes are refitted every search."""
+
+    left: np.ndarray
+    right: np.ndarray
+    first: np.ndarray
+    end: np.ndarray
+    size: np.ndarray
+    order: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    ilo: np.ndarray
+    ihi: np.ndarray
+
+
+class Primitives(NamedTuple):
+    """What a search measures: the start positions ``x0`` and each particle's ``reach``; the
+    triangles (and their reaches), the particles in none (``orphans``) and the edges (their
+    boxes and reaches at ``x0``); per triangle the corners (``own_v``) and edges (``own_e``) it
+    is the first triangle of, −1 after them."""
+
+    x0: np.ndarray
+    reach: np.ndarray
+    tris: np.ndarray
+    tri_reach: np.ndarray
+    orphans: np.ndarray
+    edges: np.ndarray
+    own_v: np.ndarray
+    own_e: np.ndarray
+    elo: np.ndarray
+    ehi: np.ndarray
+    ereach: np.ndarray
+
+
+class TaskRows(NamedTuple):
+    """Where the traversal's tasks write: task ``k``'s particle–triangle pairs (and distances)
+    from row ``k·cap_vf`` of ``vf``, its edge pairs from row ``k·cap_ee`` of ``ee``, and
+    ``counts[k]``, how many of each it found."""
+
+    vf: np.ndarray
+    vf_d: np.ndarray
+    ee: np.ndarray
+    ee_d: np.ndarray
+    counts: np.ndarray
+    cap_vf: int
+    cap_ee: int
 
 
 @numba.njit(cache=True)
@@ -132,10 +184,19 @@ def _tasks(left, right, size, least: int) -> np.ndarray:
 
 
 @numba.njit(cache=True)
-def _refit(x0, reach, tris, orphans, order, left, right, first, end, ilo, ihi, lo, hi, tri_reach):
+def _refit(prim, tree):
     """Each triangle's reach; each item's box (``ilo``/``ihi`` in leaf order: row ``q`` is item
     ``order[q]``), its primitive's box at the start grown by its reach; and every node's box, the
     union of its items' (children first)."""
+    x0, reach, tris, orphans, tri_reach = (
+        prim.x0,
+        prim.reach,
+        prim.tris,
+        prim.orphans,
+        prim.tri_reach,
+    )
+    left, right, first, end, order = tree.left, tree.right, tree.first, tree.end, tree.order
+    lo, hi, ilo, ihi = tree.lo, tree.hi, tree.ilo, tree.ihi
     n_tris = tris.shape[0]
     for t in range(n_tris):
         tri_reach[t] = max(reach[tris[t, 0]], reach[tris[t, 1]], reach[tris[t, 2]])
@@ -168,9 +229,17 @@ def _refit(x0, reach, tris, orphans, order, left, right, first, end, ilo, ihi, l
 
 
 @numba.njit(cache=True)
-def _edge_boxes(x0, reach, edges, elo, ehi, ereach):
+def _edge_boxes(prim):
     """Each edge's box at ``x0`` and its reach (the larger of its ends'): what the edge–edge test
     reads for every pair of overlapping items, made once a search."""
+    x0, reach, edges, elo, ehi, ereach = (
+        prim.x0,
+        prim.reach,
+        prim.edges,
+        prim.elo,
+        prim.ehi,
+        prim.ereach,
+    )
     for e in range(edges.shape[0]):
         e0, e1 = edges[e, 0], edges[e, 1]
         for d in range(3):
@@ -205,10 +274,11 @@ def _put(pairs, dist, row, m, cap, i, j, d):
 
 
 @numba.njit(cache=True, inline="always")
-def _point_triangle(x0, reach, tri_reach, tris, ilo, ihi, p, t, qt, vf, vf_d, row, m, cap):
-    """Particle ``p`` against triangle ``t`` (item row ``qt``): kept when within their reaches."""
+def _point_triangle(x0, reach, tri_reach, tris, ilo, ihi, p, t, qt):
+    """Particle ``p`` against triangle ``t`` (item row ``qt``): their distance where they lie
+    within their reaches, else −1."""
     if p == tris[t, 0] or p == tris[t, 1] or p == tris[t, 2]:
-        return m
+        return -1.0
     r = reach[p]
     if (
         x0[p, 0] < ilo[qt, 0] - r
@@ -218,140 +288,54 @@ def _point_triangle(x0, reach, tri_reach, tris, ilo, ihi, p, t, qt, vf, vf_d, ro
         or x0[p, 2] < ilo[qt, 2] - r
         or x0[p, 2] > ihi[qt, 2] + r
     ):
-        return m
+        return -1.0
     d = point_triangle_distance(x0, p, tris[t, 0], tris[t, 1], tris[t, 2])[0]
     if d >= r + tri_reach[t]:
-        return m
-    return _put(vf, vf_d, row, m, cap, p, t, d)
-
-
-@numba.njit(cache=True, inline="always")
-def _items(
-    x0,
-    reach,
-    tri_reach,
-    tris,
-    orphans,
-    edges,
-    own_v,
-    own_e,
-    elo,
-    ehi,
-    ereach,
-    order,
-    ilo,
-    ihi,
-    qs,
-    qt,
-    vf,
-    vf_d,
-    row_vf,
-    m_vf,
-    cap_vf,
-    ee,
-    ee_d,
-    row_ee,
-    m_ee,
-    cap_ee,
-):
-    """The primitives of items ``order[qs]`` and ``order[qt]``, whose boxes overlap (module
-    docstring); returns the two counts."""
-    n_tris = tris.shape[0]
-    s, t = order[qs], order[qt]
-    for side in range(2):  # the corners first seen in one triangle against the other
-        u, v, qv = (s, t, qt) if side == 0 else (t, s, qs)
-        if v >= n_tris:
-            continue  # against a lone particle: nothing to measure
-        for c in range(3):
-            p = own_v[u, c] if u < n_tris else (orphans[u - n_tris] if c == 0 else -1)
-            if p < 0:
-                break
-            m_vf = _point_triangle(
-                x0, reach, tri_reach, tris, ilo, ihi, p, v, qv, vf, vf_d, row_vf, m_vf, cap_vf
-            )
-    if s >= n_tris or t >= n_tris:
-        return m_vf, m_ee  # a lone particle has no edges
-    for c1 in range(3):  # the edges first seen in one triangle against the other's
-        e = own_e[s, c1]
-        if e < 0:
-            break
-        e0, e1 = edges[e, 0], edges[e, 1]
-        r_e = ereach[e]
-        for c2 in range(3):
-            f = own_e[t, c2]
-            if f < 0:
-                break
-            r = r_e + ereach[f]
-            if (
-                elo[e, 0] - ehi[f, 0] >= r
-                or elo[f, 0] - ehi[e, 0] >= r
-                or elo[e, 1] - ehi[f, 1] >= r
-                or elo[f, 1] - ehi[e, 1] >= r
-                or elo[e, 2] - ehi[f, 2] >= r
-                or elo[f, 2] - ehi[e, 2] >= r
-            ):
-                continue  # farther apart than r along an axis
-            f0, f1 = edges[f, 0], edges[f, 1]
-            if f0 == e0 or f0 == e1 or f1 == e0 or f1 == e1:
-                continue
-            # listed and measured lower edge first: the same bits whichever triangle saw it
-            # (pair_list measures the kept pairs again)
-            lo, hi = (e, f) if e < f else (f, e)
-            d = closest_on_segments(x0, edges[lo, 0], edges[lo, 1], edges[hi, 0], edges[hi, 1])[2]
-            if d >= r:
-                continue
-            m_ee = _put(ee, ee_d, row_ee, m_ee, cap_ee, lo, hi, d)
-    return m_vf, m_ee
+        return -1.0
+    return d
 
 
 @numba.njit(cache=True, parallel=True)
-def _traverse(
-    tasks,
-    left,
-    right,
-    first,
-    end,
-    size,
-    lo,
-    hi,
-    ilo,
-    ihi,
-    order,
-    stack_size,
-    x0,
-    reach,
-    tri_reach,
-    tris,
-    orphans,
-    edges,
-    own_v,
-    own_e,
-    elo,
-    ehi,
-    ereach,
-    leaf_cap,
-    cap_vf,
-    cap_ee,
-    vf,
-    vf_d,
-    ee,
-    ee_d,
-    counts,
-):
+def _traverse(tasks, tree, prim, rows, stack_size, leaf_cap):
     """Every task (:func:`_tasks`) walks its pairs of overlapping nodes depth first, and measures
     the primitives of each overlapping pair of items in two overlapping leaves (module docstring);
-    its particle–triangle pairs go to rows ``task·cap_vf`` on of ``vf``, its edge pairs to
-    ``task·cap_ee`` on of ``ee``, and ``counts[task]`` says how many (possibly more than the rows:
-    then run again). Of two different leaves, only the items whose boxes reach the other leaf's
-    box are paired (the rest can overlap none of its items), in the same order."""
+    its particle–triangle pairs go to rows ``task·cap_vf`` on of ``rows.vf``, its edge pairs to
+    ``task·cap_ee`` on of ``rows.ee``, and ``rows.counts[task]`` says how many (possibly more than
+    the rows: then run again). Of two different leaves, only the items whose boxes reach the
+    other leaf's box are paired (the rest can overlap none of its items), in the same order.
+
+    The bundles' fields are taken out before the parallel loop and the loop's body reads and
+    writes only those: a write through a bundle's field in a parallel loop's body is lost (numba
+    issues 7135 and 10338), and arrays that are the loop's own arguments are known not to alias,
+    which the walk's loads need (the same walk in a function of its own was 1.7× slower)."""
+    left, right, first, end, size = tree.left, tree.right, tree.first, tree.end, tree.size
+    lo, hi, ilo, ihi, order = tree.lo, tree.hi, tree.ilo, tree.ihi, tree.order
+    x0, reach, tri_reach, tris, orphans = (
+        prim.x0,
+        prim.reach,
+        prim.tri_reach,
+        prim.tris,
+        prim.orphans,
+    )
+    edges, own_v, own_e, elo, ehi, ereach = (
+        prim.edges,
+        prim.own_v,
+        prim.own_e,
+        prim.elo,
+        prim.ehi,
+        prim.ereach,
+    )
+    vf, vf_d, ee, ee_d, counts = rows.vf, rows.vf_d, rows.ee, rows.ee_d, rows.counts
+    cap_vf, cap_ee = rows.cap_vf, rows.cap_ee
+    n_tris = tris.shape[0]
     for k in numba.prange(tasks.shape[0]):
+        row_vf, row_ee = k * cap_vf, k * cap_ee
         stack = np.empty((stack_size, 2), np.int64)
         near_a = np.empty(leaf_cap, np.int64)
         near_b = np.empty(leaf_cap, np.int64)
         stack[0, 0], stack[0, 1] = tasks[k, 0], tasks[k, 1]
         top = 0
         m_vf = m_ee = 0
-        row_vf, row_ee = k * cap_vf, k * cap_ee
         while top >= 0:
             a, b = stack[top, 0], stack[top, 1]
             top -= 1
@@ -398,34 +382,58 @@ def _traverse(
                     qt = near_b[j]
                     if _apart(ilo, ihi, qs, ilo, ihi, qt):
                         continue
-                    m_vf, m_ee = _items(
-                        x0,
-                        reach,
-                        tri_reach,
-                        tris,
-                        orphans,
-                        edges,
-                        own_v,
-                        own_e,
-                        elo,
-                        ehi,
-                        ereach,
-                        order,
-                        ilo,
-                        ihi,
-                        qs,
-                        qt,
-                        vf,
-                        vf_d,
-                        row_vf,
-                        m_vf,
-                        cap_vf,
-                        ee,
-                        ee_d,
-                        row_ee,
-                        m_ee,
-                        cap_ee,
-                    )
+                    s, t = order[qs], order[qt]
+                    for side in range(
+                        2
+                    ):  # the corners first seen in one triangle against the other
+                        u, v, qv = (s, t, qt) if side == 0 else (t, s, qs)
+                        if v >= n_tris:
+                            continue  # against a lone particle: nothing to measure
+                        for c in range(3):
+                            p = (
+                                own_v[u, c]
+                                if u < n_tris
+                                else (orphans[u - n_tris] if c == 0 else -1)
+                            )
+                            if p < 0:
+                                break
+                            d = _point_triangle(x0, reach, tri_reach, tris, ilo, ihi, p, v, qv)
+                            if d >= 0.0:
+                                m_vf = _put(vf, vf_d, row_vf, m_vf, cap_vf, p, v, d)
+                    if s >= n_tris or t >= n_tris:
+                        continue  # a lone particle has no edges
+                    for c1 in range(3):  # the edges first seen in one triangle against the other's
+                        e = own_e[s, c1]
+                        if e < 0:
+                            break
+                        e0, e1 = edges[e, 0], edges[e, 1]
+                        r_e = ereach[e]
+                        for c2 in range(3):
+                            f = own_e[t, c2]
+                            if f < 0:
+                                break
+                            r = r_e + ereach[f]
+                            if (
+                                elo[e, 0] - ehi[f, 0] >= r
+                                or elo[f, 0] - ehi[e, 0] >= r
+                                or elo[e, 1] - ehi[f, 1] >= r
+                                or elo[f, 1] - ehi[e, 1] >= r
+                                or elo[e, 2] - ehi[f, 2] >= r
+                                or elo[f, 2] - ehi[e, 2] >= r
+                            ):
+                                continue  # farther apart than r along an axis
+                            f0, f1 = edges[f, 0], edges[f, 1]
+                            if f0 == e0 or f0 == e1 or f1 == e0 or f1 == e1:
+                                continue
+                            # listed and measured lower edge first: the same bits whichever
+                            # triangle saw it (pair_list measures the kept pairs again)
+                            e_a, e_b = (e, f) if e < f else (f, e)
+                            d = closest_on_segments(
+                                x0, edges[e_a, 0], edges[e_a, 1], edges[e_b, 0], edges[e_b, 1]
+                            )[2]
+                            if d >= r:
+                                continue
+                            m_ee = _put(ee, ee_d, row_ee, m_ee, cap_ee, e_a, e_b, d)
         counts[k, 0] = m_vf
         counts[k, 1] = m_ee
 
@@ -487,28 +495,33 @@ class TriangleTree:
         self.empty = len(centres) == 0
         if self.empty:
             return
-        self.own_v = _owned(self.tris, vertex_owner)
-        self.own_e = _owned(tri_edge, edge_owner)
-        (self.left, self.right, self.first, self.end, self.size, self.order) = build_hierarchy(
+        #: per triangle the corners and edges it is the first triangle of (:class:`Primitives`)
+        self.owned = (_owned(self.tris, vertex_owner), _owned(tri_edge, edge_owner))
+        left, right, first, end, size, order = build_hierarchy(
             np.ascontiguousarray(centres), int(leaf)
         )
-        self.tasks = _tasks(self.left, self.right, self.size, TASKS)
-        depth = np.zeros(len(self.left), np.int64)
-        for node in range(len(self.left)):  # children are numbered after their parent
-            if self.left[node] >= 0:
-                depth[self.left[node]] = depth[self.right[node]] = depth[node] + 1
+        n_nodes, n_items, n_edges = len(left), len(order), len(self.edges)
+        self.tree = Hierarchy(
+            left, right, first, end, size, order,
+            np.empty((n_nodes, 3)), np.empty((n_nodes, 3)),
+            np.empty((n_items, 3)), np.empty((n_items, 3)),
+        )  # fmt: skip
+        # the triangles' and edges' reaches and the edges' boxes, made again every search
+        self.scratch = (
+            np.empty(len(self.tris)),
+            np.empty((n_edges, 3)),
+            np.empty((n_edges, 3)),
+            np.empty(n_edges),
+        )
+        self.tasks = _tasks(left, right, size, TASKS)
+        depth = np.zeros(n_nodes, np.int64)
+        for node in range(n_nodes):  # children are numbered after their parent
+            if left[node] >= 0:
+                depth[left[node]] = depth[right[node]] = depth[node] + 1
         # depth first, a walk keeps at most two pending entries per level of a subtree against
         # itself and one per level of each side of a pair
         self.stack_size = int(6 * (depth.max() + 2) + 8)
-        self.lo = np.empty((len(self.left), 3))
-        self.hi = np.empty((len(self.left), 3))
-        self.ilo = np.empty((len(self.order), 3))
-        self.ihi = np.empty((len(self.order), 3))
-        self.tri_reach = np.empty(len(self.tris))
-        self.elo = np.empty((len(self.edges), 3))
-        self.ehi = np.empty((len(self.edges), 3))
-        self.ereach = np.empty(len(self.edges))
-        self.leaf_cap = int((self.end - self.first)[self.left < 0].max())
+        self.leaf_cap = int((end - first)[left < 0].max())
         self.caps = np.array([16, 16], np.int64)  # rows per task, grown as a cloth needs
 
     def pairs(self, x0, radius):
@@ -527,64 +540,40 @@ class TriangleTree:
                 np.empty(0),
             )
         reach = read_only(reaches(radius, len(x0)), np.float64)
-        _refit(
+        tri_reach, elo, ehi, ereach = self.scratch
+        own_v, own_e = self.owned
+        prim = Primitives(
             x0,
             reach,
             self.tris,
+            tri_reach,
             self.orphans,
-            self.order,
-            self.left,
-            self.right,
-            self.first,
-            self.end,
-            self.ilo,
-            self.ihi,
-            self.lo,
-            self.hi,
-            self.tri_reach,
+            self.edges,
+            own_v,
+            own_e,
+            elo,
+            ehi,
+            ereach,
         )
-        _edge_boxes(x0, reach, self.edges, self.elo, self.ehi, self.ereach)
+        _refit(prim, self.tree)
+        _edge_boxes(prim)
         n_tasks = len(self.tasks)
         while True:
             cap_vf, cap_ee = (int(c) for c in self.caps)
-            vf, vf_d = np.empty((n_tasks * cap_vf, 2), np.int64), np.empty(n_tasks * cap_vf)
-            ee, ee_d = np.empty((n_tasks * cap_ee, 2), np.int64), np.empty(n_tasks * cap_ee)
-            counts = np.zeros((n_tasks, 2), np.int64)
-            _traverse(
-                self.tasks,
-                self.left,
-                self.right,
-                self.first,
-                self.end,
-                self.size,
-                self.lo,
-                self.hi,
-                self.ilo,
-                self.ihi,
-                self.order,
-                self.stack_size,
-                x0,
-                reach,
-                self.tri_reach,
-                self.tris,
-                self.orphans,
-                self.edges,
-                self.own_v,
-                self.own_e,
-                self.elo,
-                self.ehi,
-                self.ereach,
-                self.leaf_cap,
+            rows = TaskRows(
+                np.empty((n_tasks * cap_vf, 2), np.int64),
+                np.empty(n_tasks * cap_vf),
+                np.empty((n_tasks * cap_ee, 2), np.int64),
+                np.empty(n_tasks * cap_ee),
+                np.zeros((n_tasks, 2), np.int64),
                 cap_vf,
                 cap_ee,
-                vf,
-                vf_d,
-                ee,
-                ee_d,
-                counts,
             )
-            most = counts.max(axis=0)
+            _traverse(self.tasks, self.tree, prim, rows, self.stack_size, self.leaf_cap)
+            most = rows.counts.max(axis=0)
             if most[0] <= cap_vf and most[1] <= cap_ee:
                 break
             self.caps = np.maximum(self.caps, most + most // 4)
-        return _join(counts[:, 0], cap_vf, vf, vf_d) + _join(counts[:, 1], cap_ee, ee, ee_d)
+        return _join(rows.counts[:, 0], cap_vf, rows.vf, rows.vf_d) + _join(
+            rows.counts[:, 1], cap_ee, rows.ee, rows.ee_d
+        )

@@ -72,7 +72,7 @@ def _covers(x0, reach, x_s, reach_s, tris, edges):
 def _near_now(x0, reach, tris, edges, vf, ee):
     """Which kept pairs are still within reach at ``x0``, and their distances: the tree's tests
     (:func:`cloth_sim.contact.collision_tree._point_triangle` and the edge–edge test of
-    ``_items``) on each, every pair on its own (so the same at any thread count)."""
+    ``_traverse``) on each, every pair on its own (so the same at any thread count)."""
     keep_vf, vf_d = np.zeros(vf.shape[0], np.bool_), np.empty(vf.shape[0])
     for q in numba.prange(vf.shape[0]):
         p, t = vf[q, 0], vf[q, 1]
