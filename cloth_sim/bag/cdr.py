@@ -15,6 +15,8 @@ import sys
 
 import numpy as np
 
+from ..tick_stats import TickStats
+
 _HEADER = b"\x00\x01\x00\x00"  # CDR_LE, no options
 
 
@@ -145,49 +147,28 @@ def camera_info(camera, frame_id: str, stamp_ns: int) -> bytes:
     return w.getvalue()
 
 
-def stats(
-    *,
-    stamp_ns: int,
-    frame_id: str,
-    integrator: str,
-    dt: float,
-    steps: int,
-    step_time_mean: float,
-    step_time_max: float,
-    tick_wall_time: float,
-    real_time_factor: float,
-    sim_time: float,
-    kinetic_energy: float,
-    potential_energy: float,
-    max_strain: float,
-    overruns: int,
-    stability_margin: float,
-    paused: bool,
-    solver_iterations: int = 0,
-    solver_residual: float = 0.0,
-    solver_converged: bool = True,
-) -> bytes:
-    """``cloth_sim/msg/Stats`` (msg/Stats.msg), field for field."""
+def stats(stamp_ns: int, frame_id: str, s: TickStats) -> bytes:
+    """``cloth_sim/msg/Stats`` (msg/Stats.msg), field for field from ``s``."""
     w = CdrWriter()
     w.header(stamp_ns, frame_id)
-    w.string(integrator)
-    w.f64(dt)
-    w.u32(steps)
+    w.string(s.integrator)
+    w.f64(s.dt)
+    w.u32(s.steps)
     for v in (
-        step_time_mean,
-        step_time_max,
-        tick_wall_time,
-        real_time_factor,
-        sim_time,
-        kinetic_energy,
-        potential_energy,
-        max_strain,
+        s.step_time_mean,
+        s.step_time_max,
+        s.tick_wall_time,
+        s.real_time_factor,
+        s.sim_time,
+        s.kinetic_energy,
+        s.potential_energy,
+        s.max_strain,
     ):
         w.f64(v)
-    w.u64(overruns)
-    w.f64(stability_margin)
-    w.boolean(paused)
-    w.u32(solver_iterations)
-    w.f64(solver_residual)
-    w.boolean(solver_converged)
+    w.u64(s.overruns)
+    w.f64(s.stability_margin)
+    w.boolean(s.paused)
+    w.u32(s.solver_iterations)
+    w.f64(s.solver_residual)
+    w.boolean(s.solver_converged)
     return w.getvalue()

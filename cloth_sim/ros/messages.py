@@ -6,6 +6,7 @@ from __future__ import annotations
 import array
 import math
 import sys
+from dataclasses import fields
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -13,6 +14,8 @@ from geometry_msgs.msg import Point
 from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
+
+from ..tick_stats import TickStats
 
 FIELDS = [
     PointField(name=n, offset=4 * i, datatype=PointField.FLOAT32, count=1)
@@ -96,56 +99,14 @@ class MeshBytes:
         )
 
 
-def stability_margin(dt: float, stable_dt: float | None) -> float:
-    """``dt / stable_dt``: 0 for an unconditionally stable method (or an unknown limit), inf when
-    no step is stable."""
-    if stable_dt is None or math.isinf(stable_dt):
-        return 0.0
-    return dt / stable_dt if stable_dt > 0 else math.inf
-
-
-def stats(
-    Stats,
-    *,
-    stamp,
-    frame_id: str,
-    integrator: str,
-    dt: float,
-    steps: int,
-    step_wall: float,
-    step_max: float,
-    tick_wall: float,
-    rtf: float,
-    sim_time: float,
-    energy: dict,
-    max_strain: float,
-    overruns: int,
-    stable_dt: float | None,
-    paused: bool,
-    solver: dict | None = None,
-):
-    """The package's ``Stats`` message (``Stats`` is the generated type); ``solver``: the
-    integrator's counters (``last_iterations`` and ``last_residual`` of an iterative method)."""
+def stats(Stats, stamp, frame_id: str, s: TickStats):
+    """The package's ``Stats`` message (``Stats`` is the generated type) of ``s``, field for
+    field."""
     msg = Stats()
     msg.header.stamp = stamp
     msg.header.frame_id = frame_id
-    msg.integrator = integrator
-    msg.dt = dt
-    msg.steps = steps
-    msg.step_time_mean = step_wall / steps if steps else 0.0
-    msg.step_time_max = step_max
-    msg.tick_wall_time = tick_wall
-    msg.real_time_factor = rtf
-    msg.sim_time = sim_time
-    msg.kinetic_energy = energy["kinetic"]
-    msg.potential_energy = energy["spring"] + energy["gravity"]
-    msg.max_strain = max_strain
-    msg.overruns = overruns
-    msg.stability_margin = stability_margin(dt, stable_dt)
-    msg.paused = paused
-    msg.solver_iterations = int((solver or {}).get("last_iterations", 0))
-    msg.solver_residual = float((solver or {}).get("last_residual", 0.0))
-    msg.solver_converged = bool((solver or {}).get("converged", True))
+    for f in fields(s):
+        setattr(msg, f.name, getattr(s, f.name))
     return msg
 
 

@@ -14,6 +14,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import PointCloud2
 from visualization_msgs.msg import Marker, MarkerArray
 
+from ..tick_stats import TickStats, stability_margin
 from . import interface, messages
 from .camera_publisher import CameraPublisher
 from .frames import Frames
@@ -106,27 +107,19 @@ class Publishing:
         self.session.history.append((wall_now, sim.time))
         while self.session.history and wall_now - self.session.history[0][0] > RTF_WINDOW:
             self.session.history.popleft()
-        self.stats_pub.publish(
-            messages.stats(
-                self.Stats,
-                stamp=stamp,
-                frame_id=frame,
-                integrator=sim.integrator,
-                dt=sim.dt,
-                steps=steps,
-                step_wall=step_wall,
-                step_max=step_max,
-                tick_wall=time.perf_counter() - t0,
-                rtf=self.real_time_factor(),
-                sim_time=sim.time,
-                energy=sim.energy() if energy is None else energy,
-                max_strain=sim.max_strain(),
-                overruns=self.session.overruns,
-                stable_dt=self.session.stable_dt,
-                paused=self.session.paused,
-                solver=sim.integrator_stats,
-            )
+        tick = TickStats.of(
+            sim,
+            steps=steps,
+            energy=energy,
+            step_time_mean=step_wall / steps if steps else 0.0,
+            step_time_max=step_max,
+            tick_wall_time=time.perf_counter() - t0,
+            real_time_factor=self.real_time_factor(),
+            overruns=self.session.overruns,
+            stability_margin=stability_margin(sim.dt, self.session.stable_dt),
+            paused=self.session.paused,
         )
+        self.stats_pub.publish(messages.stats(self.Stats, stamp, frame, tick))
         self.session.tick_costs.append((steps, step_wall, time.perf_counter() - t1))
         if wall_now - self._last_status >= STATUS_PERIOD:
             self._last_status = wall_now

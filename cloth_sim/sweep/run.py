@@ -32,6 +32,7 @@ from ..bag import cdr
 from ..bag.store import BagWriter
 from ..physics.energy_balance import EnergyBalance
 from ..simulator import SimulationDiverged
+from ..tick_stats import TickStats, stability_margin
 from .script import Script, ScriptError
 from .spec import Spec, resolve, run_id
 
@@ -173,11 +174,7 @@ class _Bag:
     def __init__(self, path: Path, sim, cfg: dict, stable_dt: float):
         self.writer = BagWriter(path)
         dt = sim.dt
-        self.margin = (
-            0.0
-            if not math.isfinite(stable_dt)
-            else (dt / stable_dt if stable_dt > 0 else math.inf)
-        )
+        self.margin = stability_margin(dt, stable_dt)
         self.frame_id = cfg["frame_id"]
         self.cfg = cfg
         self.points = self.writer.add_topic(
@@ -209,32 +206,10 @@ class _Bag:
         t = int(round(sim.time * 1e9))
         w = self.writer
         w.write(self.points, t, cdr.point_cloud(sim.positions, *self.shape, self.frame_id, t))
-        energy = sim.energy()
-        w.write(
-            self.stats,
-            t,
-            cdr.stats(
-                stamp_ns=t,
-                frame_id=self.frame_id,
-                integrator=sim.integrator,
-                dt=sim.dt,
-                steps=int(sim.steps_taken - self.last_steps),
-                step_time_mean=0.0,
-                step_time_max=0.0,
-                tick_wall_time=0.0,
-                real_time_factor=0.0,
-                sim_time=sim.time,
-                kinetic_energy=energy["kinetic"],
-                potential_energy=energy["spring"] + energy["gravity"],
-                max_strain=sim.max_strain(),
-                overruns=0,
-                stability_margin=self.margin,
-                paused=False,
-                solver_iterations=int(sim.integrator_stats.get("last_iterations", 0)),
-                solver_residual=float(sim.integrator_stats.get("last_residual", 0.0)),
-                solver_converged=bool(sim.integrator_stats.get("converged", True)),
-            ),
+        tick = TickStats.of(
+            sim, steps=sim.steps_taken - self.last_steps, stability_margin=self.margin
         )
+        w.write(self.stats, t, cdr.stats(t, self.frame_id, tick))
         self.last_steps = sim.steps_taken
         if self.camera is not None:
             f = self.camera.render(sim)

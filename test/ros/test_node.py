@@ -10,6 +10,7 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +35,7 @@ from visualization_msgs.msg import Marker  # noqa: E402
 from cloth_sim.msg import Stats  # noqa: E402
 from cloth_sim.parameters import SCHEMA  # noqa: E402
 from cloth_sim.scene import load_scene  # noqa: E402
+from cloth_sim.tick_stats import TickStats, stability_margin  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -560,28 +562,27 @@ def test_messages_are_built_by_pure_functions():
         slow = deserialize_message(serialize_message(messages.mesh(pts, t, frame, stamp)), Marker)
         assert deserialize_message(messages.mesh_bytes(pts, t, frame, stamp), Marker) == slow
         assert deserialize_message(kept(pts, t, frame, stamp), Marker) == slow
-    energy = {"kinetic": 1.0, "spring": 2.0, "gravity": -5.0}
-    common = dict(
-        stamp=stamp,
-        frame_id="base",
-        integrator="rk4",
-        dt=1e-3,
-        steps=4,
-        step_wall=2e-3,
-        step_max=1e-3,
-        tick_wall=3e-3,
-        rtf=1.0,
-        sim_time=2.0,
-        energy=energy,
-        max_strain=0.1,
-        overruns=0,
-        paused=False,
+    # the Stats message is TickStats field for field, in the message's order
+    assert list(Stats.get_fields_and_field_types())[1:] == [f.name for f in fields(TickStats)]
+    sim = load_scene("hanging_provot").build_simulator()
+    sim.step(3)
+    energy = sim.energy()
+    tick = TickStats.of(
+        sim, steps=3, step_time_mean=5e-4, stability_margin=stability_margin(1e-3, 4e-3)
     )
-    s = messages.stats(Stats, stable_dt=4e-3, **common)
-    assert s.step_time_mean == pytest.approx(5e-4) and s.potential_energy == -3.0
+    s = messages.stats(Stats, stamp, "base", tick)
+    assert (s.header.frame_id, s.integrator, s.steps, s.step_time_mean) == (
+        "base",
+        "symplectic_euler",
+        3,
+        5e-4,
+    )
+    assert s.potential_energy == energy["spring"] + energy["gravity"]
+    assert s.kinetic_energy == energy["kinetic"] and s.sim_time == sim.time
     assert s.stability_margin == pytest.approx(0.25)
-    assert messages.stats(Stats, stable_dt=math.inf, **common).stability_margin == 0.0
-    assert messages.stats(Stats, stable_dt=0.0, **common).stability_margin == math.inf
+    assert (s.solver_iterations, s.solver_converged) == (0, True)
+    assert stability_margin(1e-3, math.inf) == 0.0 and stability_margin(1e-3, None) == 0.0
+    assert stability_margin(1e-3, 0.0) == math.inf
     kw = dict(
         paused=False,
         rtf=1.0,
