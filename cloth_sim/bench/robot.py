@@ -1,7 +1,8 @@
 """Robots in the scene, measured: forward kinematics (ours against yourdfpy's), what a mesh
-collider costs against the same shape as a primitive, and the robot_sweep scene (an arm through a
-hanging 32×32 cloth): the deepest any vertex came into any link, self-crossings by the independent
-check, and the real-time factor headless. Each comparison runs side by side in one process.
+collider costs against the same shape as a primitive (a cloth resting on it, and one query), and
+the robot_sweep scene (an arm through a hanging 32×32 cloth): the deepest any vertex came into any
+link, self-crossings by the independent check, and the real-time factor headless. Each comparison
+runs side by side in one process.
 
     .venv/bin/python -m cloth_sim.bench.robot [--seconds S] [--published]
 
@@ -81,6 +82,39 @@ def mesh_against_primitive(steps: int = 400) -> None:
     print("| integrator | Box ms/step | Mesh ms/step | ratio |\n|---|---|---|---|")
     for name, a, b in rows:
         print(f"| {name} | {a * 1e3:.3f} | {b * 1e3:.3f} | {b / a:.2f} |")
+
+
+def mesh_queries(n: int = 200_000) -> None:
+    """One signed-distance query against the same box as the Box primitive and as a 12-triangle
+    mesh: points just above a face's interior (the mesh's affine cells) and points anywhere in
+    and around it (the listed triangles and the walk), the best of five runs each."""
+    import trimesh
+
+    half = (0.3, 0.3, 0.1)
+    shapes = {
+        "Box": colliders.Box(half_extents=half, friction=0.5),
+        "Mesh": colliders.Mesh(
+            (lambda m: (m.vertices, m.faces))(trimesh.creation.box(extents=2 * np.array(half))),
+            friction=0.5,
+        ),
+    }
+    rng = np.random.default_rng(0)
+    face = rng.uniform(-0.25, 0.25, (n, 3))
+    face[:, 2] = half[2] + rng.uniform(0.0, 0.01, n)
+    places = {"on a face": face, "anywhere": rng.uniform(-0.6, 0.6, (n, 3))}
+    print("one signed-distance query, ns: the Box primitive against the same box as a mesh")
+    print("| points | Box | Mesh | ratio |\n|---|---|---|---|")
+    for where, pts in places.items():
+        ns = {}
+        for name, shape in shapes.items():
+            shape.signed_distance(pts[:10])
+            best = np.inf
+            for _ in range(5):
+                t = time.perf_counter()
+                shape.signed_distance(pts)
+                best = min(best, time.perf_counter() - t)
+            ns[name] = best / n * 1e9
+        print(f"| {where} | {ns['Box']:.0f} | {ns['Mesh']:.0f} | {ns['Mesh'] / ns['Box']:.1f} |")
 
 
 def sweep(seconds: float, collider_share: float | None = None) -> None:
@@ -201,6 +235,7 @@ def main(argv=None) -> None:
     compile_kernels()
     forward_kinematics()
     mesh_against_primitive()
+    mesh_queries()
     sweep(args.seconds)
     if args.collider_share is not None:
         sweep(args.seconds, args.collider_share)

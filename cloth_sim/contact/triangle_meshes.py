@@ -336,17 +336,41 @@ def _planes(v, t, order, fn, closed, origin, cell, dims, band, ptr, listed):
     return out
 
 
+#: a bank (:func:`pack`) is the tuple ``(reals, ints, starts)``, read as ``bank[REALS]`` …
+REALS, INTS, STARTS = range(3)
+
+
+#: where each part of the bank starts: ``bank[STARTS][PART]`` in ``bank[REALS]`` (the first
+#: ten) or in ``bank[INTS]`` (the rest)
+(
+    VERTS, VNORMALS, FNORMALS, ENORMALS, BOX_LO, BOX_HI, ORIGIN, CELL, BAND, PLANES,
+    TRIS, LEFT, RIGHT, FIRST, END, ORDER, ROOT, CLOSED, DIMS, START, PTR, LISTED,
+) = range(22)  # fmt: skip
+
+
 def pack(meshes) -> tuple:
-    """The bank the kernels read: ``(vertices, triangles, lo, hi, left, right, first, end,
-    order, root, face normals, vertex normals, edge normals, closed, grid origin, grid cell, grid
-    dims, grid start, cell ptr, cell list, grid band, cell plane)`` with every mesh's arrays one
-    after the other (its nodes, triangles, vertices and cells renumbered), ``root[m]`` mesh
-    ``m``'s root node; ``left`` a node's first child (−1: a leaf), ``right`` the node after its
-    subtree (−1: the mesh's last); ``closed[m]`` 1 where mesh ``m`` is a solid
-    (:class:`TriangleMesh`); mesh ``m``'s candidate grid from ``grid origin[m]`` in cells of
-    ``grid cell[m]``, ``grid dims[m]`` of them, its first cell ``grid start[m]`` in the cells'
-    CSR, its band ``grid band[m]``, each cell's plane where the distance is affine (NaN
-    elsewhere). An empty list gives empty arrays of the same types."""
+    """The bank of ``meshes`` (:class:`TriangleMesh`) in the order given, mesh ``m`` numbered
+    ``m`` there (an empty list gives the bank of no mesh): every mesh of a simulation packed for
+    the kernels as ``(reals, ints, starts)``, two flat arrays and where each part starts in
+    them.
+
+    Three arrays, not one a part: numba counts every array a function takes in and out where the
+    function calls another, inlined or not (~5 ns an array, measured), and a contact query takes
+    the bank at every vertex near a mesh; the bank of 22 arrays this replaced cost more than the
+    query's arithmetic. A plain tuple of arrays: numba's parallel loops take neither a named
+    tuple nor one holding numbers.
+
+    ``reals`` (float64) holds, mesh after mesh: the vertices and their angle-weighted normals
+    (3 a vertex each), each triangle's face normal and its three edges' normals (3 and 9), each
+    node's box corners (3 and 3), each mesh's candidate grid's first corner (3), cell side and
+    band (m), and each cell's plane ``(n, offset)`` (4; NaN where the distance is not affine
+    there). ``ints`` (int64) holds the triangles' corners (3 a triangle), each node's first
+    child (−1: a leaf), the node after its subtree (−1: the mesh's last), its triangles
+    ``order[first:end]``, the triangles in leaf order, each mesh's root node, whether it is
+    closed (1) (:class:`TriangleMesh`), its grid's cells along x, y and z and its first cell,
+    and the cells' CSR (``ptr``, one more than the cells, and the listed positions in ``order``).
+    ``starts`` says where each part starts in its array (:data:`VERTS` …); meshes, triangles,
+    vertices, nodes and cells are numbered across the bank."""
     vs, ts, los, his, ls, rs, fs, es, os_, roots = [], [], [], [], [], [], [], [], [], []
     fns, vns, ens, closed = [], [], [], []
     gorg, gcell, gdim, gstart, cptrs, clists, gband, planes = [], [], [], [], [], [], [], []
@@ -376,36 +400,46 @@ def pack(meshes) -> tuple:
         ens.append(m.edge_normals)
         closed.append(1 if m.closed else 0)
         nv, nt, nn = nv + len(m.vertices), nt + len(m.triangles), nn + len(m.left)
+    reals = [
+        ("verts", vs),
+        ("vnormals", vns),
+        ("fnormals", fns),
+        ("enormals", ens),
+        ("box_lo", los),
+        ("box_hi", his),
+        ("origin", gorg),
+        ("cell", [np.atleast_1d(c) for c in gcell]),
+        ("band", [np.atleast_1d(b) for b in gband]),
+        ("planes", planes),
+    ]
+    ints = [
+        ("tris", ts),
+        ("left", ls),
+        ("right", rs),
+        ("first", fs),
+        ("end", es),
+        ("order", os_),
+        ("root", [np.atleast_1d(r) for r in roots]),
+        ("closed", [np.atleast_1d(c) for c in closed]),
+        ("dims", gdim),
+        ("start", [np.atleast_1d(s) for s in gstart]),
+        ("ptr", [*cptrs, np.array([nl])]),
+        ("listed", clists),
+    ]
+    at = {}
 
-    def cat(parts, shape, dtype):
-        if not parts:
-            return np.zeros(shape, dtype)
-        return np.ascontiguousarray(np.concatenate(parts).astype(dtype))
+    def flat(parts, dtype):
+        out, n = [], 0
+        for name, arrays in parts:
+            at[name] = n
+            for a in arrays:
+                out.append(np.asarray(a, dtype=dtype).ravel())
+                n += out[-1].size
+        return np.ascontiguousarray(np.concatenate(out) if out else np.zeros(0), dtype=dtype)
 
-    return (
-        cat(vs, (0, 3), np.float64),
-        cat(ts, (0, 3), np.int64),
-        cat(los, (0, 3), np.float64),
-        cat(his, (0, 3), np.float64),
-        cat(ls, (0,), np.int64),
-        cat(rs, (0,), np.int64),
-        cat(fs, (0,), np.int64),
-        cat(es, (0,), np.int64),
-        cat(os_, (0,), np.int64),
-        np.array(roots, dtype=np.int64),
-        cat(fns, (0, 3), np.float64),
-        cat(vns, (0, 3), np.float64),
-        cat(ens, (0, 3, 3), np.float64),
-        np.array(closed, dtype=np.int64),
-        cat(gorg, (0, 3), np.float64).reshape(-1, 3),
-        np.array(gcell, dtype=np.float64),
-        cat(gdim, (0, 3), np.int64).reshape(-1, 3),
-        np.array(gstart, dtype=np.int64),
-        np.ascontiguousarray(np.concatenate([*cptrs, [nl]]).astype(np.int64)),
-        cat(clists, (0,), np.int64),
-        np.array(gband, dtype=np.float64),
-        cat(planes, (0, 4), np.float64).reshape(-1, 4),
-    )
+    r, i = flat(reals, np.float64), flat(ints, np.int64)
+    starts = np.array([at[name] for name, _ in reals + ints], np.int64)
+    return (r, i, starts)
 
 
 #: the bank of no mesh
@@ -413,10 +447,28 @@ EMPTY = pack([])
 
 
 @numba.njit(cache=True, inline="always")
-def _box_distance2(lo, hi, node, x, y, z):
-    dx = max(lo[node, 0] - x, 0.0, x - hi[node, 0])
-    dy = max(lo[node, 1] - y, 0.0, y - hi[node, 1])
-    dz = max(lo[node, 2] - z, 0.0, z - hi[node, 2])
+def _bank_triangle_d2(bank, k, x, y, z):
+    """:func:`_triangle_d2` of the bank's triangle ``k`` (the same arithmetic)."""
+    r, t = bank[REALS], bank[INTS]
+    a = bank[STARTS][VERTS] + 3 * t[bank[STARTS][TRIS] + 3 * k]
+    b = bank[STARTS][VERTS] + 3 * t[bank[STARTS][TRIS] + 3 * k + 1]
+    c = bank[STARTS][VERTS] + 3 * t[bank[STARTS][TRIS] + 3 * k + 2]
+    wa, wb, wc = closest_on_triangle(
+        x, y, z, r[a], r[a + 1], r[a + 2], r[b], r[b + 1], r[b + 2], r[c], r[c + 1], r[c + 2]
+    )
+    cx = wa * r[a] + wb * r[b] + wc * r[c]
+    cy = wa * r[a + 1] + wb * r[b + 1] + wc * r[c + 1]
+    cz = wa * r[a + 2] + wb * r[b + 2] + wc * r[c + 2]
+    return (x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2, cx, cy, cz, wa, wb, wc
+
+
+@numba.njit(cache=True, inline="always")
+def _box_distance2(bank, node, x, y, z):
+    """The squared distance from ``(x, y, z)`` to node ``node``'s box (0 inside it)."""
+    r, lo, hi = bank[REALS], bank[STARTS][BOX_LO] + 3 * node, bank[STARTS][BOX_HI] + 3 * node
+    dx = max(r[lo] - x, 0.0, x - r[hi])
+    dy = max(r[lo + 1] - y, 0.0, y - r[hi + 1])
+    dz = max(r[lo + 2] - z, 0.0, z - r[hi + 2])
     return dx * dx + dy * dy + dz * dz
 
 
@@ -424,40 +476,42 @@ def _box_distance2(lo, hi, node, x, y, z):
 def _nearest(bank, m, x, y, z, cutoff):
     """The nearest point of mesh ``m`` to ``(x, y, z)`` within ``cutoff``: its squared distance,
     the point, its triangle (−1: none that near) and its barycentric weights there."""
-    v, t, lo, hi, left, right, first, end, order, root = bank[:10]
+    t = bank[INTS]
     best = cutoff * cutoff
     px = py = pz = 0.0
     btri = -1
     ba = bb = bc = 0.0
-    node = root[m]  # preorder: a node's first child is the next one, right[node] the one after
+    node = t[
+        bank[STARTS][ROOT] + m
+    ]  # preorder: a node's first child is the next one, right the one after
     while node >= 0:
-        if _box_distance2(lo, hi, node, x, y, z) >= best:
-            node = right[node]
+        if _box_distance2(bank, node, x, y, z) >= best:
+            node = t[bank[STARTS][RIGHT] + node]
             continue
-        if left[node] < 0:
-            for q in range(first[node], end[node]):
-                k = order[q]
-                d2, cx, cy, cz, wa, wb, wc = _triangle_d2(v, t, k, x, y, z)
+        if t[bank[STARTS][LEFT] + node] < 0:
+            for q in range(t[bank[STARTS][FIRST] + node], t[bank[STARTS][END] + node]):
+                k = t[bank[STARTS][ORDER] + q]
+                d2, cx, cy, cz, wa, wb, wc = _bank_triangle_d2(bank, k, x, y, z)
                 if d2 < best:
                     best, px, py, pz, btri = d2, cx, cy, cz, k
                     ba, bb, bc = wa, wb, wc
-            node = right[node]
+            node = t[bank[STARTS][RIGHT] + node]
             continue
-        node = left[node]
+        node = t[bank[STARTS][LEFT] + node]
     return best, px, py, pz, btri, ba, bb, bc
 
 
 @numba.njit(cache=True, inline="always")
-def _cell_of(origin, cell, dims, start, m, x, y, z):
-    """The candidate grid's cell (its index in the bank) that holds ``(x, y, z)``, −1 if none
-    (the grid's arrays, not the bank: an inlined function's tuple argument is counted in and out
-    member by member)."""
-    cs = cell[m]
-    ix = int(math.floor((x - origin[m, 0]) / cs))
-    iy = int(math.floor((y - origin[m, 1]) / cs))
-    iz = int(math.floor((z - origin[m, 2]) / cs))
-    if 0 <= ix < dims[m, 0] and 0 <= iy < dims[m, 1] and 0 <= iz < dims[m, 2]:
-        return start[m] + (ix * dims[m, 1] + iy) * dims[m, 2] + iz
+def _cell_of(bank, m, x, y, z):
+    """The candidate grid's cell (its index in the bank) that holds ``(x, y, z)``, −1 if none."""
+    r, t = bank[REALS], bank[INTS]
+    cs = r[bank[STARTS][CELL] + m]
+    o, d = bank[STARTS][ORIGIN] + 3 * m, bank[STARTS][DIMS] + 3 * m
+    ix = int(math.floor((x - r[o]) / cs))
+    iy = int(math.floor((y - r[o + 1]) / cs))
+    iz = int(math.floor((z - r[o + 2]) / cs))
+    if 0 <= ix < t[d] and 0 <= iy < t[d + 1] and 0 <= iz < t[d + 2]:
+        return t[bank[STARTS][START] + m] + (ix * t[d + 1] + iy) * t[d + 2] + iz
     return -1
 
 
@@ -465,27 +519,40 @@ def _cell_of(origin, cell, dims, start, m, x, y, z):
 def _pseudonormal(bank, k, wa, wb, wc):
     """The pseudonormal of the feature of triangle ``k`` that the weights ``(wa, wb, wc)`` of
     its nearest point name: a corner (a weight of 1), an edge (a weight of 0) or the face."""
-    t, fn, vn, en = bank[1], bank[10], bank[11], bank[12]
+    r, t = bank[REALS], bank[INTS]
+    corner = -1
     if wa == 1.0:
-        return vn[t[k, 0], 0], vn[t[k, 0], 1], vn[t[k, 0], 2]
-    if wb == 1.0:
-        return vn[t[k, 1], 0], vn[t[k, 1], 1], vn[t[k, 1], 2]
-    if wc == 1.0:
-        return vn[t[k, 2], 0], vn[t[k, 2], 1], vn[t[k, 2], 2]
+        corner = 0
+    elif wb == 1.0:
+        corner = 1
+    elif wc == 1.0:
+        corner = 2
+    if corner >= 0:
+        v = bank[STARTS][VNORMALS] + 3 * t[bank[STARTS][TRIS] + 3 * k + corner]
+        return r[v], r[v + 1], r[v + 2]
+    edge = -1
     if wc == 0.0:
-        return en[k, 0, 0], en[k, 0, 1], en[k, 0, 2]
-    if wa == 0.0:
-        return en[k, 1, 0], en[k, 1, 1], en[k, 1, 2]
-    if wb == 0.0:
-        return en[k, 2, 0], en[k, 2, 1], en[k, 2, 2]
-    return fn[k, 0], fn[k, 1], fn[k, 2]
+        edge = 0
+    elif wa == 0.0:
+        edge = 1
+    elif wb == 0.0:
+        edge = 2
+    if edge >= 0:
+        e = bank[STARTS][ENORMALS] + 9 * k + 3 * edge
+        return r[e], r[e + 1], r[e + 2]
+    f = bank[STARTS][FNORMALS] + 3 * k
+    return r[f], r[f + 1], r[f + 2]
 
 
 @numba.njit(cache=True)
 def _inside_box(bank, m, x, y, z):
-    lo, hi, root = bank[2], bank[3], bank[9]
-    r = root[m]
-    return lo[r, 0] <= x <= hi[r, 0] and lo[r, 1] <= y <= hi[r, 1] and lo[r, 2] <= z <= hi[r, 2]
+    """Whether ``(x, y, z)`` lies inside mesh ``m``'s root box."""
+    r = bank[REALS]
+    lo, hi = (
+        bank[STARTS][BOX_LO] + 3 * bank[INTS][bank[STARTS][ROOT] + m],
+        bank[STARTS][BOX_HI] + 3 * bank[INTS][bank[STARTS][ROOT] + m],
+    )
+    return r[lo] <= x <= r[hi] and r[lo + 1] <= y <= r[hi + 1] and r[lo + 2] <= z <= r[hi + 2]
 
 
 @numba.njit(cache=True, inline="always")
@@ -497,18 +564,16 @@ def mesh_distance(bank, m, x, y, z, cutoff=np.inf):
     surface (and outside) is answered ``(cutoff, 0, 0, 0)`` without the walk below boxes farther
     than it; a point inside a closed mesh is answered whatever its depth.
 
-    Inlined where it is called, so that a cell whose distance is affine answers without a call:
-    numba counts every array of a tuple in and out where a function takes it, called or inlined
-    (~10 ns an array: the bank's 22 cost 20 times the affine cell's arithmetic), so the helpers of
-    the affine path take the arrays they read."""
-    cid = _cell_of(bank[14], bank[15], bank[16], bank[17], m, x, y, z)
+    Inlined where it is called, so that a cell whose distance is affine answers without a
+    call."""
+    cid = _cell_of(bank, m, x, y, z)
     if cid >= 0:
-        plane = bank[21]
-        if not math.isnan(plane[cid, 0]):  # the distance is affine over the cell
-            d = plane[cid, 0] * x + plane[cid, 1] * y + plane[cid, 2] * z + plane[cid, 3]
+        r, p = bank[REALS], bank[STARTS][PLANES] + 4 * cid
+        if not math.isnan(r[p]):  # the distance is affine over the cell
+            d = r[p] * x + r[p + 1] * y + r[p + 2] * z + r[p + 3]
             if d >= cutoff:
                 return cutoff, 0.0, 0.0, 0.0
-            return d, plane[cid, 0], plane[cid, 1], plane[cid, 2]
+            return d, r[p], r[p + 1], r[p + 2]
     return _listed_distance(bank, m, x, y, z, cutoff, cid)
 
 
@@ -520,18 +585,18 @@ def _listed_distance(bank, m, x, y, z, cutoff, cid):
     the band); the cell lists every triangle within the band in the walk's order and the
     arithmetic is the walk's, so its nearest point is the walk's to the bit. Elsewhere (outside
     the grid, nothing listed that near) the walk's."""
-    closed = bank[13][m] != 0
+    t = bank[INTS]
+    closed = t[bank[STARTS][CLOSED] + m] != 0
     found = False
     if cid >= 0:
-        ptr, listed, band = bank[18], bank[19], bank[20][m]
-        v, t, order = bank[0], bank[1], bank[8]
+        band = bank[REALS][bank[STARTS][BAND] + m]
         best = cutoff * cutoff
         px = py = pz = 0.0
         btri = -1
         wa = wb = wc = 0.0
-        for j in range(ptr[cid], ptr[cid + 1]):
-            k = order[listed[j]]
-            d2, cx, cy, cz, ka, kb, kc = _triangle_d2(v, t, k, x, y, z)
+        for j in range(t[bank[STARTS][PTR] + cid], t[bank[STARTS][PTR] + cid + 1]):
+            k = t[bank[STARTS][ORDER] + t[bank[STARTS][LISTED] + j]]
+            d2, cx, cy, cz, ka, kb, kc = _bank_triangle_d2(bank, k, x, y, z)
             if d2 < best:
                 best, px, py, pz, btri = d2, cx, cy, cz, k
                 wa, wb, wc = ka, kb, kc
@@ -553,5 +618,5 @@ def _listed_distance(bank, m, x, y, z, cutoff, cid):
     if d > 1e-12:
         return sign * d, sign * (x - px) / d, sign * (y - py) / d, sign * (z - pz) / d
     # on the surface: the face's normal (outwards where the mesh is closed)
-    fn = bank[10]
-    return 0.0, fn[btri, 0], fn[btri, 1], fn[btri, 2]
+    f = bank[STARTS][FNORMALS] + 3 * btri
+    return 0.0, bank[REALS][f], bank[REALS][f + 1], bank[REALS][f + 2]
