@@ -71,7 +71,7 @@ import yaml
 
 from .contact.colliders import KINDS
 from .contact.self_collision import MAX_THICKNESS_FRACTION
-from .integrators.vbd import TOLERANCE as VBD_TOLERANCE
+from .integrators.vbd_options import TOLERANCE as VBD_TOLERANCE
 from .materials import Fabric, get
 from .model import GRID_FAMILIES, MESH_FAMILIES, ORIENTATIONS, ClothModel
 from .motion import Motion, motion_from_dict

@@ -100,6 +100,7 @@ from .base import Integrator, Stability
 from .registry import register
 from .vbd_contact import colliders_at, onset, solve3, truncate, within
 from .vbd_grid import GridLayout
+from .vbd_options import VBDOptions
 from .vbd_residual import sweep_residual
 from .vbd_terms import local_energy, self_contacts_at, springs_at
 
@@ -122,17 +123,10 @@ REUSE_OVER = 0.02
 FAR = 4.0
 #: IPC's friction smoothing: relative tangential motion below EPS_V·h (m) is static
 EPS_V = 1e-3
-#: the relative residual a step iterates down to by default (:mod:`.vbd_residual`: the force
-#: imbalance over the weight, RMS over the free vertices)
-TOLERANCE = 1e-2
-#: iterations between two measures of the residual
-CHECK_EVERY = 5
 #: where ``substeps`` is not given, a step is cut into substeps until every vertex's
 #: stiffness-to-inertia ratio over a substep is at most this (measured: the fewest sweeps a
 #: frame on cotton hanging at 32×32 and 64×64 at ratios of 10–30; docs/convergence.md)
 SUBSTEP_RATIO = 25.0
-#: the implicit step a substep solves: ``bdf2`` (second order) or backward ``euler``
-SCHEMES = ("bdf2", "euler")
 #: the most substeps a step is cut into where they are chosen
 MAX_SUBSTEPS = 64
 #: the iterations a step may take when none are given
@@ -782,9 +776,10 @@ class VBD(Integrator):
     colour groups, Chebyshev-accelerated, with collider contact and self-contact inside the
     iterations (module docstring).
 
-    Options: ``iterations`` per step at most (default :data:`MAX_ITERATIONS`); ``tolerance``
-    (default :data:`TOLERANCE`): the relative residual at which a step stops (0: every iteration
-    runs); ``check_every`` (default :data:`CHECK_EVERY`): iterations between two measures;
+    Options (:class:`.vbd_options.VBDOptions`, each checked there): ``iterations`` per step at
+    most (default :data:`MAX_ITERATIONS`); ``tolerance`` (default 1e-2): the relative residual at
+    which a step stops (0: every iteration runs); ``check_every`` (default 5): iterations between
+    two measures;
     ``substeps`` ('auto' where neither it nor ``iterations`` is given, else 1): backward-Euler
     steps a step is cut into, 'auto' from the cloth's stiffness over its inertia
     (:meth:`substeps_for`); ``collider_share`` (default None, off): a step whose colliders'
@@ -851,106 +846,32 @@ class VBD(Integrator):
     handles = frozenset({"self_collision"})
     keeps_paths_off_colliders = True
 
-    def __init__(
-        self,
-        model,
-        iterations: int | None = None,
-        rho: float = 0.8,
-        tolerance: float = TOLERANCE,
-        check_every: int = CHECK_EVERY,
-        substeps: int | str | None = None,
-        collider_share: float | None = None,
-        contact_stiffness: float = 1e4,
-        collision_interval: int = 5,
-        time_budget: float | None = None,
-        self_friction: float = 0.5,
-        tethers: bool = False,
-        grid: bool = True,
-        scheme: str | None = None,
-    ):
+    def __init__(self, model, **options):
         super().__init__(model)
+        o = VBDOptions.of(options)
+        iterations = o.iterations
         self.chosen_iterations = iterations is None
-        if scheme is not None and scheme not in SCHEMES:
-            raise ValueError(
-                f"scheme must be one of {', '.join(SCHEMES)}, or None (bdf2 where iterations is "
-                f"not given, else euler): the implicit step a substep solves, got {scheme!r}"
-            )
-        if scheme is None:  # a capped step is no BDF2 step, and can gain energy
-            scheme = "bdf2" if self.chosen_iterations else "euler"
-        self.scheme = scheme
+        # a capped step is no BDF2 step, and can gain energy
+        self.scheme = o.scheme or ("bdf2" if self.chosen_iterations else "euler")
         #: BDF2's where the substeps solve it (the class's 1 is backward Euler's)
-        self.order = 2 if scheme == "bdf2" else 1
-        if iterations is None:
-            iterations = MAX_ITERATIONS
-        for name, value, hi in (
-            ("iterations", iterations, 100_000),
-            ("collision_interval", collision_interval, 10_000),
-            ("check_every", check_every, 10_000),
-        ):
-            if isinstance(value, bool) or int(value) != value or not 1 <= value <= hi:
-                raise ValueError(f"{name} must be an integer in [1, {hi}], got {value!r}")
-        if isinstance(tolerance, bool) or not (
-            isinstance(tolerance, (int, float)) and 0.0 <= tolerance < math.inf
-        ):
-            raise ValueError(
-                "tolerance must be a number >= 0 (the relative residual: the force imbalance over "
-                f"the weight, RMS over the vertices; 0 runs every iteration), got {tolerance!r}"
-            )
-        self.tolerance = float(tolerance)
-        self.check_every = int(check_every)
+        self.order = 2 if self.scheme == "bdf2" else 1
+        self.tolerance = float(o.tolerance)
+        self.check_every = int(o.check_every)
+        substeps = o.substeps
         if substeps is None:  # the work is chosen where neither is given
             substeps = "auto" if self.chosen_iterations else 1
-        if substeps != "auto" and (
-            isinstance(substeps, (bool, str))
-            or not isinstance(substeps, (int, float))
-            or int(substeps) != substeps
-            or not 1 <= substeps <= 10_000
-        ):
-            raise ValueError(
-                "substeps must be 'auto' (chosen from the cloth and dt), None (auto where "
-                f"iterations is not given, else 1) or an integer in [1, 10000], got {substeps!r}"
-            )
         self.substeps = None if substeps == "auto" else int(substeps)
-        if collider_share is not None and (
-            isinstance(collider_share, bool)
-            or not isinstance(collider_share, (int, float))
-            or not 0.0 < collider_share < math.inf
-        ):
-            raise ValueError(
-                "collider_share must be None (off) or a number > 0 (the share of the thickness "
-                f"a collider may travel in a substep), got {collider_share!r}"
-            )
-        self.collider_share = None if collider_share is None else float(collider_share)
+        self.collider_share = None if o.collider_share is None else float(o.collider_share)
         self._substeps_of, self._substeps_n = None, 1
-        if not (isinstance(rho, (int, float)) and 0.0 <= rho < 1.0):
-            raise ValueError(f"rho must be a number in [0, 1), got {rho!r}")
-        if not (isinstance(contact_stiffness, (int, float)) and 0 < contact_stiffness < math.inf):
-            raise ValueError(
-                f"contact_stiffness must be a positive number (N/m), got {contact_stiffness!r}"
-            )
-        if time_budget is not None and not (
-            isinstance(time_budget, (int, float)) and 0 < time_budget < math.inf
-        ):
-            raise ValueError(
-                f"time_budget must be None or a positive number of seconds, got {time_budget!r}"
-            )
-        if not (isinstance(self_friction, (int, float)) and 0.0 <= self_friction < math.inf):
-            raise ValueError(
-                f"self_friction must be a number >= 0 (Coulomb's μ), got {self_friction!r}"
-            )
-        self.self_friction = float(self_friction)
-        if not isinstance(tethers, bool):
-            raise ValueError(f"tethers must be true or false, got {tethers!r}")
-        self.tethers = tethers
-        if not isinstance(grid, bool):
-            raise ValueError(f"grid must be true or false, got {grid!r}")
-        self.grid = grid
+        self.self_friction = float(o.self_friction)
+        self.tethers = o.tethers
+        self.grid = o.grid
         self._strain_limit = None
-        self.iterations = int(iterations)
-        self.rho = float(rho)
-        self.contact_stiffness = float(contact_stiffness)
-        self.collision_interval = int(collision_interval)
-        self.time_budget = None if time_budget is None else float(time_budget)
+        self.iterations = int(MAX_ITERATIONS if iterations is None else iterations)
+        self.rho = float(o.rho)
+        self.contact_stiffness = float(o.contact_stiffness)
+        self.collision_interval = int(o.collision_interval)
+        self.time_budget = None if o.time_budget is None else float(o.time_budget)
         self.free = ~np.asarray(model.pinned, bool)
         self._layout_of = None
         self._colours_of = None

@@ -239,7 +239,6 @@ LONG_SIGNATURES = {
     "cloth_sim.contact.self_collision:proximity_features": 15,
     "cloth_sim.integrators.vbd_contact:truncate": 14,
     "cloth_sim.integrators.vbd_contact:press": 14,
-    "cloth_sim.integrators.vbd:VBD.__init__": 14,
     "cloth_sim.physics.forces:spring_jacobian_blocks": 13,
     "cloth_sim.physics.forces:_spring_force": 13,
     "cloth_sim.integrators.vbd_grid:GridLayout.contact": 13,

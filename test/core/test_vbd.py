@@ -358,6 +358,9 @@ def test_counters_report_iterations_and_the_residual():
         ({"collision_interval": 1.5}, "collision_interval"),
         ({"time_budget": 0.0}, "time_budget"),
         ({"tethers": 1}, "tethers"),
+        ({"substeps": "many"}, "substeps"),
+        ({"scheme": "bdf3"}, "scheme"),
+        ({"iteration": 10}, "no option 'iteration'; its options: iterations, rho"),
     ],
 )
 def test_bad_options_are_refused_naming_them(bad, words):
