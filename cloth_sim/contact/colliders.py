@@ -22,6 +22,7 @@ Contact response: :class:`Contacts`, a post-step stage (see
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -495,31 +496,23 @@ def carried(p_old, R_old, p_new, R_new, c, x, y, z):
 _MARCH_STEPS = 64
 
 
+class ContactResults(NamedTuple):
+    """What the contact stage's kernel writes (:func:`resolve_contacts`): per particle whether it
+    touches a collider and how far above the nearest collider's skin it ends (``inf``: none); per
+    collider the impulse the particles gave it (N·s) and its moment about the collider's
+    position."""
+
+    touching: np.ndarray
+    clearance: np.ndarray
+    push: np.ndarray
+    turn: np.ndarray
+
+
 @numba.njit(cache=True)
-def resolve_contacts(
-    x,
-    v,
-    x0,
-    pinned,
-    kinds,
-    pos,
-    rot,
-    pos0,
-    rot0,
-    geo,
-    mu,
-    reach,
-    bank,
-    h,
-    dt,
-    touching,
-    clearance,
-    masses,
-    push,
-    turn,
-    continuous,
-):
-    """The contact stage's kernel, per particle in index order (each particle is independent).
+def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
+    """The contact stage's kernel, per particle in index order (each particle is independent):
+    the colliders ``co`` (:class:`PackedColliders`), its results written to ``out``
+    (:class:`ContactResults`).
 
     For each collider, in order: (1) continuous detection: the particle's path over the step, seen
     from the collider (its start carried by the collider's motion), is marched by sphere tracing on
@@ -536,6 +529,9 @@ def resolve_contacts(
     collider's position. A collider whose ``reach`` (every point of it within that of its
     position) keeps the particle's whole path beyond ``h·(1 + CONTACT_TOLERANCE)`` is passed over:
     it could do nothing (only its clearance is left unmeasured, far above any skin)."""
+    kinds, pos, rot, pos0, rot0, geo = co.kinds, co.pos, co.rot, co.pos0, co.rot0, co.geo
+    mu, reach, bank = co.mu, co.reach, (co.reals, co.ints, co.starts)
+    touching, clearance, push, turn = out.touching, out.clearance, out.push, out.turn
     n = x.shape[0]
     count = 0
     edge = h * (1.0 + CONTACT_TOLERANCE) * (1.0 + 1e-9)
@@ -707,6 +703,46 @@ def _crease(x, p, kinds, pos, rot, geo, bank, h):
             return
 
 
+class PackedColliders(NamedTuple):
+    """The colliders as the contact kernels read them (:meth:`Contacts.packed`): per collider its
+    kind, position and rotation at the step's end and at its start (``pos0``, ``rot0``), its
+    geometry (:attr:`Collider.geometry`), friction and ``reach`` (every point of it within that of
+    its position; ``inf`` for a plane); then the bank of its meshes
+    (:func:`.triangle_meshes.pack`), its three arrays flat beside the rest: numba's parallel loops
+    take a tuple of arrays, not one holding another (a kernel reads the bank as
+    ``(co.reals, co.ints, co.starts)``)."""
+
+    kinds: np.ndarray
+    pos: np.ndarray
+    rot: np.ndarray
+    pos0: np.ndarray
+    rot0: np.ndarray
+    geo: np.ndarray
+    mu: np.ndarray
+    reach: np.ndarray
+    reals: np.ndarray
+    ints: np.ndarray
+    starts: np.ndarray
+
+    @property
+    def bank(self) -> tuple:
+        """The meshes' bank, ``(reals, ints, starts)``."""
+        return (self.reals, self.ints, self.starts)
+
+
+NO_COLLIDERS = PackedColliders(
+    np.zeros(0, np.int64),
+    np.zeros((0, 3)),
+    np.zeros((0, 3, 3)),
+    np.zeros((0, 3)),
+    np.zeros((0, 3, 3)),
+    np.zeros((0, 4)),
+    np.zeros(0),
+    np.zeros(0),
+    *triangle_meshes.EMPTY,
+)
+
+
 class Contacts:
     """The post-step stage that keeps the cloth ``thickness`` away from its colliders (see
     :func:`resolve_contacts` for the method). Active when there is at least one collider.
@@ -863,16 +899,12 @@ class Contacts:
             state.v,
             start.x,
             self._pinned,
-            *self.packed()[:8],
-            self._bank,
+            self._masses,
+            self.packed(),
             self.thickness,
             dt,
-            self.touching,
-            self.clearance,
-            self._masses,
-            self._push,
-            self._turn,
             self.continuous,
+            ContactResults(self.touching, self.clearance, self._push, self._turn),
         )
         self.end_step()
 
@@ -881,14 +913,10 @@ class Contacts:
         np.copyto(self._pos0, self._pos)
         np.copyto(self._rot0, self._rot)
 
-    def packed(self) -> tuple:
-        """``(kinds, positions, rotations, positions at the step's start, rotations there,
-        geometry, friction, reach, *meshes)``: the colliders as the contact kernels read them (an
-        integrator that resolves contacts inside its step reads them here); ``reach`` bounds each
-        shape from its position (``inf`` for a plane); ``packed()[8:]`` is the bank of
-        :func:`.triangle_meshes.pack` (flat: numba's parallel loops take a tuple of arrays, not a
-        tuple holding one)."""
-        return (
+    def packed(self) -> PackedColliders:
+        """The colliders as the contact kernels read them (an integrator that resolves contacts
+        inside its step reads them here)."""
+        return PackedColliders(
             self._kinds,
             self._pos,
             self._rot,
@@ -901,12 +929,12 @@ class Contacts:
         )
 
 
-def packed_between(packed: tuple, s0: float, s1: float) -> tuple:
+def packed_between(packed: PackedColliders, s0: float, s1: float) -> PackedColliders:
     """:meth:`Contacts.packed` over the part ``[s0, s1]`` of the step (``0 ≤ s0 < s1 ≤ 1``): each
     collider's pose at ``s0`` as the start and at ``s1`` as the end, its position interpolated
     linearly and its rotation by spherical interpolation between the step's two poses (a
     substep of an integrator that steps the step's motion in parts)."""
-    kinds, pos, rot, pos0, rot0 = packed[:5]
+    kinds, pos, rot, pos0, rot0 = packed.kinds, packed.pos, packed.rot, packed.pos0, packed.rot0
     if not len(kinds):
         return packed
 
@@ -923,14 +951,15 @@ def packed_between(packed: tuple, s0: float, s1: float) -> tuple:
         return p, r
 
     start, end = at(s0), at(s1)
-    return (kinds, *end, *start, *packed[5:])
+    return packed._replace(pos=end[0], rot=end[1], pos0=start[0], rot0=start[1])
 
 
-def collider_travel(packed: tuple) -> float:
+def collider_travel(packed: PackedColliders) -> float:
     """The farthest any point within a collider's reach travels over the step (``packed``:
     :meth:`Contacts.packed`): its position's move plus its reach times the angle it turned (a
     half-space's turn is not counted: its reach is unbounded)."""
-    kinds, pos, rot, pos0, rot0, _, _, reach = packed[:8]
+    kinds, pos, rot, pos0, rot0 = packed.kinds, packed.pos, packed.rot, packed.pos0, packed.rot0
+    reach = packed.reach
     if not len(kinds):
         return 0.0
     moved = np.linalg.norm(pos - pos0, axis=1)

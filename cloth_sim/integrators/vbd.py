@@ -80,12 +80,12 @@ import time
 import numba
 import numpy as np
 
-from ..contact import triangle_meshes
 from ..contact.colliders import (
     BOX,
     CAPSULE,
     CYLINDER,
     MESH,
+    NO_COLLIDERS,
     SPHERE,
     collider_travel,
     mesh_sdf,
@@ -342,8 +342,16 @@ def _sweep(
     cost more than the vertex's work.)"""
     inc_ptr, nbr, rest, k, c, kind, tab, nonsmooth, bptr, bidx, bval, bdiag = sp
     bend = (bptr, bidx, bval, bdiag)
-    ckind, cpos, crot, cpos0, crot0, cgeo, cmu = co[:7]
-    cbank = co[8:]
+    ckind, cpos, crot, cpos0, crot0, cgeo, cmu = (
+        co.kinds,
+        co.pos,
+        co.rot,
+        co.pos0,
+        co.rot0,
+        co.geo,
+        co.mu,
+    )
+    cbank = (co.reals, co.ints, co.starts)
     rec_ptr, rec, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d, colour = sc
     for q in range(lo, hi):
         i = verts[q]
@@ -911,17 +919,7 @@ class VBD(Integrator):
             np.zeros(0),
         )
         self._rec = self._no_rec
-        self._no_colliders = (
-            np.zeros(0, np.int64),
-            np.zeros((0, 3)),
-            np.zeros((0, 3, 3)),
-            np.zeros((0, 3)),
-            np.zeros((0, 3, 3)),
-            np.zeros((0, 4)),
-            np.zeros(0),
-            np.zeros(0),
-            *triangle_meshes.EMPTY,
-        )
+        self._no_colliders = NO_COLLIDERS
 
     # ------------------------------------------------------------------ protocol
     def attach(self, contacts, self_collision, strain_limit=None) -> None:
@@ -1118,9 +1116,12 @@ class VBD(Integrator):
             tau = sc.thickness
         x_cd = self._buffer("_x_cd", x)
         allow = self._allow
-        if len(colliders[0]):  # what a moving collider overtook starts on its skin
-            _overtaken(x, free, *colliders[:6], colliders[7], colliders[8:], tau)
-        if self_contact or len(colliders[0]):
+        co = colliders
+        if len(co.kinds):  # what a moving collider overtook starts on its skin
+            _overtaken(
+                x, free, co.kinds, co.pos, co.rot, co.pos0, co.rot0, co.geo, co.reach, co.bank, tau
+            )
+        if self_contact or len(co.kinds):
             # the initial guess, not the inertia: a layer resting on another or on a collider
             # is not going where gravity alone would take it
             if not self._detection_holds(x, colliders, tau, self_contact):
@@ -1159,12 +1160,12 @@ class VBD(Integrator):
             and strain is not None
             and strain.active
             and not self_contact
-            and not len(colliders[0])
+            and not len(colliders.kinds)
         )
         grid = None if self_contact or tether else self._grid_layout(forces)
         if grid is not None:
             contact = None
-            if len(colliders[0]):
+            if len(colliders.kinds):
                 xm = self._buffer("_xm", x)
                 contact = grid.contact(
                     xm, xt, self._near, touch, cut, x_cd, allow, GAMMA, tau, kc, eps, colliders,
@@ -1329,12 +1330,12 @@ class VBD(Integrator):
             x,
             allowance,
             self_contact,
-            colliders[0],
-            colliders[1],
-            colliders[2],
-            colliders[5],
-            colliders[7],
-            colliders[8:],
+            colliders.kinds,
+            colliders.pos,
+            colliders.rot,
+            colliders.geo,
+            colliders.reach,
+            colliders.bank,
             self.depths(colliders),
             tau,
             self._allow,
@@ -1343,7 +1344,7 @@ class VBD(Integrator):
         self._allow[~self.free] = np.inf
         c["last_contacts"] = self._energy_pairs
         self._candidates = self_contact
-        self._cd_colliders = (colliders[1].copy(), colliders[2].copy(), tau)
+        self._cd_colliders = (colliders.pos.copy(), colliders.rot.copy(), tau)
 
     def _detection_holds(self, y, colliders, tau, self_contact) -> bool:
         """Whether the last candidate search serves this step too: it was made for self-contact,
@@ -1357,8 +1358,8 @@ class VBD(Integrator):
         pos, rot, tau0 = self._cd_colliders
         if (
             tau0 != tau
-            or pos.shape != colliders[1].shape
-            or not (np.array_equal(pos, colliders[1]) and np.array_equal(rot, colliders[2]))
+            or pos.shape != colliders.pos.shape
+            or not (np.array_equal(pos, colliders.pos) and np.array_equal(rot, colliders.rot))
         ):
             return False
         free = self.free
@@ -1404,7 +1405,7 @@ class VBD(Integrator):
         plane, a half-space; 0 for a mesh, two-sided: a vertex may not reach its surface between
         two searches, so a moving link cannot pass through the cloth)."""
 
-        kinds, geo = colliders[0], colliders[5]
+        kinds, geo = colliders.kinds, colliders.geo
         depth = np.full(len(kinds), np.inf)
         for c, kind in enumerate(kinds):
             if kind == SPHERE:

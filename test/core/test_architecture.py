@@ -225,7 +225,6 @@ LONG_SIGNATURES = {
     "cloth_sim.integrators.vbd:_iterate_parallel": 24,
     "cloth_sim.integrators.vbd_grid:_sweeps": 23,
     "cloth_sim.integrators.vbd_contact:colliders_at": 23,
-    "cloth_sim.contact.colliders:resolve_contacts": 21,
     "cloth_sim.integrators.vbd_terms:springs_at": 20,
     "cloth_sim.constraints.strain_projection:_solve": 19,
     "cloth_sim.integrators.vbd_terms:local_energy": 18,

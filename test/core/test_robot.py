@@ -207,7 +207,7 @@ def test_a_fast_link_is_taken_in_parts_of_a_share_of_the_thickness():
     tip ~9 mm) is taken in substeps in none of which any vertex of its mesh forearm moves more
     than the share of the thickness; collider_travel, which sets their number, is a position's
     move plus the reach times the angle turned."""
-    from cloth_sim.contact.colliders import BOX, collider_travel
+    from cloth_sim.contact.colliders import BOX, NO_COLLIDERS, collider_travel
 
     n, h, share = 8, 0.005, 0.4
     model = ClothModel.grid(n, n, 0.05, 0.001, stiffness=100.0, pinned=[(n - 1, 0)])
@@ -227,8 +227,11 @@ def test_a_fast_link_is_taken_in_parts_of_a_share_of_the_thickness():
     # a box of reach 0.3 m moved 4 mm and turned 0.01 rad about z: 4 mm + 3 mm
     turn = np.array([[math.cos(0.01), -math.sin(0.01), 0], [math.sin(0.01), math.cos(0.01), 0],
                      [0, 0, 1]])  # fmt: skip
-    packed = (np.array([BOX]), np.array([[0.004, 0.0, 0.0]]), turn[None], np.zeros((1, 3)),
-              np.eye(3)[None], np.zeros((1, 4)), np.zeros(1), np.array([0.3]))  # fmt: skip
+    packed = NO_COLLIDERS._replace(
+        kinds=np.array([BOX]), pos=np.array([[0.004, 0.0, 0.0]]), rot=turn[None],
+        pos0=np.zeros((1, 3)), rot0=np.eye(3)[None], geo=np.zeros((1, 4)), mu=np.zeros(1),
+        reach=np.array([0.3]),
+    )  # fmt: skip
     assert collider_travel(packed) == pytest.approx(0.004 + 0.3 * 0.01, rel=1e-9)
 
 

@@ -207,25 +207,25 @@ def test_a_moving_collider_is_taken_in_parts_over_the_substeps():
     sphere (half of a quarter turn about z is an eighth turn)."""
     from scipy.spatial.transform import Rotation
 
-    from cloth_sim.contact.colliders import BOX, packed_between
+    from cloth_sim.contact.colliders import BOX, NO_COLLIDERS, packed_between
 
     turn = Rotation.from_euler("z", 90, degrees=True).as_matrix()
-    packed = (
-        np.array([BOX]),
-        np.array([[0.4, 0.0, 0.2]]),
-        turn[None].copy(),
-        np.zeros((1, 3)),
-        np.eye(3)[None].copy(),
-        np.array([[0.1, 0.1, 0.1, 0.0]]),
-        np.array([0.5]),
-        np.array([0.2]),
+    packed = NO_COLLIDERS._replace(
+        kinds=np.array([BOX]),
+        pos=np.array([[0.4, 0.0, 0.2]]),
+        rot=turn[None].copy(),
+        pos0=np.zeros((1, 3)),
+        rot0=np.eye(3)[None].copy(),
+        geo=np.array([[0.1, 0.1, 0.1, 0.0]]),
+        mu=np.array([0.5]),
+        reach=np.array([0.2]),
     )
     whole = packed_between(packed, 0.0, 1.0)
     for a, b in zip(whole, packed):
         np.testing.assert_array_equal(a, b)
     first, second = packed_between(packed, 0.0, 0.5), packed_between(packed, 0.5, 1.0)
-    np.testing.assert_array_equal(first[1], second[3])
-    np.testing.assert_array_equal(first[2], second[4])
-    np.testing.assert_allclose(first[1][0], (0.2, 0.0, 0.1), atol=1e-15)
-    angle = Rotation.from_matrix(first[2][0]).as_euler("xyz", degrees=True)
+    np.testing.assert_array_equal(first.pos, second.pos0)
+    np.testing.assert_array_equal(first.rot, second.rot0)
+    np.testing.assert_allclose(first.pos[0], (0.2, 0.0, 0.1), atol=1e-15)
+    angle = Rotation.from_matrix(first.rot[0]).as_euler("xyz", degrees=True)
     np.testing.assert_allclose(angle, (0.0, 0.0, 45.0), atol=1e-9)
