@@ -516,18 +516,9 @@ class StrainLimit(Stage):
             self._w = np.ascontiguousarray(w / top if top > 0 else w)
             self._scratch = strain_projection.Scratch(self._springs, model.positions)
         sp = strain_projection
+        settings = sp.Settings(self.tau, max_outer=self.passes)
         return sp.project(
-            x,
-            self._springs,
-            self._rest,
-            self._w,
-            self.tau,
-            sp.TOLERANCE,
-            self.passes,
-            sp.MAX_CG_ITERATIONS,
-            sp.REGULARISATION,
-            sp.CG_TOLERANCE,
-            *self._scratch.arrays(),
+            x, self._springs, self._rest, self._w, settings, self._scratch.workspace()
         )
 
     def apply(self, state, start, dt, velocity_follow):

@@ -58,6 +58,8 @@ moves) is kept. It runs on one core in a fixed order: the same bits at any threa
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 
@@ -106,11 +108,24 @@ def _scatter(g, q, k, ea, eb, nrm, lam):
 
 
 @numba.njit(cache=True)
-def _solve(k, q, ea, eb, wl, nrm, low, dinv, c, lam, eps, rel_tol, max_it, r, z, p, ap, y, g):
+def _solve(k, q, work, eps, rel_tol, max_it):
     """CG for ``(J W Jᵀ + ε) λ = c`` from ``λ = 0``, preconditioned by the chains' blocks ``M``
     factored as ``L D Lᵀ`` (``low``: ``L``'s subdiagonal, 0 where a chain starts; ``dinv``:
     ``D⁻¹``; the set is numbered chain by chain); returns its iterations. ``z = M⁻¹ r`` is a
     forward pass (``y``, beside the residual's update) and a backward one (beside ``r·z``)."""
+    ea, eb, wl, nrm, g = work.ea, work.eb, work.wl, work.nrm, work.g
+    sp = work.spring
+    c, low, dinv, lam, r, z, p, ap, y = (
+        sp[0],
+        sp[1],
+        sp[2],
+        sp[3],
+        sp[4],
+        sp[5],
+        sp[6],
+        sp[7],
+        sp[8],
+    )
     r0 = 0.0
     prev = 0.0
     for a in range(k):
@@ -280,6 +295,50 @@ def chain_neighbours(springs, positions, inc_ptr, inc, straight):
     return nb
 
 
+class Workspace(NamedTuple):
+    """The arrays :func:`project` works in (:class:`Scratch` makes them once per spring set):
+    each particle's springs (CSR ``inc_ptr``, ``inc``), each spring's chain neighbours ``nb``,
+    the last call's set ``prev`` (the warm start), the active set and its chains, the set's
+    springs' ends and directions, ``spring``'s nine rows (c, L's subdiagonal, D⁻¹, λ, r, z, p,
+    Ap, y), the set's particles with their local numbers and inverse masses, ``g = Jᵀλ``, and
+    ``stats``: the last call's (iterations, CG iterations, active springs, worst excess strain
+    left)."""
+
+    inc_ptr: np.ndarray
+    inc: np.ndarray
+    seen: np.ndarray
+    cand: np.ndarray
+    prev: np.ndarray
+    inset: np.ndarray
+    act: np.ndarray
+    nb: np.ndarray
+    mark: np.ndarray
+    order: np.ndarray
+    link: np.ndarray
+    ea: np.ndarray
+    eb: np.ndarray
+    nrm: np.ndarray
+    spring: np.ndarray
+    pl: np.ndarray
+    loc: np.ndarray
+    wl: np.ndarray
+    g: np.ndarray
+    stats: np.ndarray
+
+
+class Settings(NamedTuple):
+    """How far :func:`project` goes: the strain limit ``tau``, the worst excess it stops at
+    (``tol``), its most linearisations, the most CG iterations a solve, the regularisation
+    ``eps`` and the CG's relative tolerance."""
+
+    tau: float
+    tol: float = TOLERANCE
+    max_outer: int = 20
+    max_cg: int = MAX_CG_ITERATIONS
+    eps: float = REGULARISATION
+    cg_tol: float = CG_TOLERANCE
+
+
 class Scratch:
     """The arrays :func:`project` works in, made once per spring set (a step allocates none), and
     the preconditioner's chains, paired by the springs' directions at ``positions`` (the model's
@@ -322,8 +381,8 @@ class Scratch:
         #: the last call's (iterations, CG iterations, active springs, worst excess strain left)
         self.stats = np.zeros(4)
 
-    def arrays(self):
-        return (
+    def workspace(self) -> Workspace:
+        return Workspace(
             self.inc_ptr,
             self.inc,
             self.seen,
@@ -348,56 +407,29 @@ class Scratch:
 
 
 @numba.njit(cache=True)
-def project(
-    x,
-    springs,
-    rest,
-    w,
-    tau,
-    tol,
-    max_outer,
-    max_cg,
-    eps,
-    cg_tol,
-    inc_ptr,
-    inc,
-    seen,
-    cand,
-    prev,
-    inset,
-    act,
-    nb,
-    mark,
-    order,
-    link,
-    ea,
-    eb,
-    nrm,
-    spring,
-    pl,
-    loc,
-    wl,
-    g,
-    stats,
-):
+def project(x, springs, rest, w, settings, work):
     """Shorten every spring of ``springs`` (``(m, 2)``, rest lengths ``rest``) to at most
-    ``(1 + tau)·rest``, to within ``tol`` of strain, by fast projection (module docstring), moving
-    ``x`` in place; ``w`` the particles' inverse masses (0: pinned), scaled so a free particle's
-    are about 1. The rest are :class:`Scratch`'s arrays; ``prev`` (the last call's set) is read and
-    then replaced by this call's. Returns the iterations (linearise and solve) it took; ``stats``:
-    those, the CG iterations, the active springs and the worst excess strain left."""
-    m = springs.shape[0]
-    c, low, dinv, lam, r, z, p, ap, y = (
-        spring[0],
-        spring[1],
-        spring[2],
-        spring[3],
-        spring[4],
-        spring[5],
-        spring[6],
-        spring[7],
-        spring[8],
+    ``(1 + tau)·rest``, to within ``tol`` of strain (``settings``: :class:`Settings`), by fast
+    projection (module docstring), moving ``x`` in place; ``w`` the particles' inverse masses (0:
+    pinned), scaled so a free particle's are about 1. ``work``: :class:`Scratch`'s arrays
+    (:class:`Workspace`); its ``prev`` (the last call's set) is read and then replaced by this
+    call's. Returns the iterations (linearise and solve) it took; ``work.stats``: those, the CG
+    iterations, the active springs and the worst excess strain left."""
+    tau, tol, max_outer = settings.tau, settings.tol, settings.max_outer
+    max_cg, eps, cg_tol = settings.max_cg, settings.eps, settings.cg_tol
+    inc_ptr, inc, seen, cand, prev = work.inc_ptr, work.inc, work.seen, work.cand, work.prev
+    inset, act, nb, mark, order, link = (
+        work.inset,
+        work.act,
+        work.nb,
+        work.mark,
+        work.order,
+        work.link,
     )
+    ea, eb, nrm, pl, loc, wl, g = work.ea, work.eb, work.nrm, work.pl, work.loc, work.wl, work.g
+    stats, spring = work.stats, work.spring
+    m = springs.shape[0]
+    c, low, dinv, lam = spring[0], spring[1], spring[2], spring[3]
     for s in range(m):
         inset[s] = 0
         seen[s] = -1
@@ -500,9 +532,7 @@ def project(
                 low[a] = off * dinv[a - 1]
                 d -= low[a] * off
             dinv[a] = 1.0 / d
-        cg_total += _solve(
-            k, q, ea, eb, wl, nrm, low, dinv, c, lam, eps, cg_tol, max_cg, r, z, p, ap, y, g
-        )
+        cg_total += _solve(k, q, work, eps, cg_tol, max_cg)
         _scatter(g, q, k, ea, eb, nrm, lam)
         for t in range(q):
             pp = pl[t]

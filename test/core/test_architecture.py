@@ -214,7 +214,6 @@ MOST_PARAMETERS = 12
 #: that needs fewer arrays (issue 67's "bank as a few arrays")
 LONG_SIGNATURES = {
     "cloth_sim.integrators.vbd_grid:_terms": 30,
-    "cloth_sim.constraints.strain_projection:project": 30,
     "cloth_sim.integrators.vbd_grid:_spring": 29,
     "cloth_sim.integrators.vbd_grid:solve": 27,
     "cloth_sim.physics.forces:runge_kutta_fused": 26,
@@ -226,7 +225,6 @@ LONG_SIGNATURES = {
     "cloth_sim.integrators.vbd_grid:_sweeps": 23,
     "cloth_sim.integrators.vbd_contact:colliders_at": 23,
     "cloth_sim.integrators.vbd_terms:springs_at": 20,
-    "cloth_sim.constraints.strain_projection:_solve": 19,
     "cloth_sim.integrators.vbd_terms:local_energy": 18,
     "cloth_sim.integrators.vbd_grid:_advance": 18,
     "cloth_sim.simulator:Simulator.__init__": 17,

@@ -101,19 +101,9 @@ def project(x, springs, rest, w, tau=0.1, cg_tol=strain_projection.CG_TOLERANCE,
     iterations, active springs, worst excess left."""
     springs = np.asarray(springs, np.uint32)
     scratch = strain_projection.Scratch(springs, x)
-    strain_projection.project(
-        x,
-        springs,
-        np.asarray(rest, float),
-        np.asarray(w, float),
-        tau,
-        strain_projection.TOLERANCE,
-        outer,
-        strain_projection.MAX_CG_ITERATIONS,
-        strain_projection.REGULARISATION,
-        cg_tol,
-        *scratch.arrays(),
-    )
+    settings = strain_projection.Settings(tau, max_outer=outer, cg_tol=cg_tol)
+    rest, w = np.asarray(rest, float), np.asarray(w, float)
+    strain_projection.project(x, springs, rest, w, settings, scratch.workspace())
     return scratch.stats.copy()
 
 
