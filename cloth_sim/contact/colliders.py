@@ -724,11 +724,6 @@ class PackedColliders(NamedTuple):
     ints: np.ndarray
     starts: np.ndarray
 
-    @property
-    def bank(self) -> tuple:
-        """The meshes' bank, ``(reals, ints, starts)``."""
-        return (self.reals, self.ints, self.starts)
-
 
 NO_COLLIDERS = PackedColliders(
     np.zeros(0, np.int64),

@@ -700,12 +700,12 @@ def keep_kinematic(v, start_v, free):
 
 
 @numba.njit(cache=True)
-def collider_allowances(
-    x, allowance, bounded, ckind, cpos, crot, cgeo, creach, cbank, cdepth, tau, allow, near
-):
+def collider_allowances(x, allowance, bounded, co, cdepth, tau, allow, near):
     """How far each vertex may move from ``x`` before the next search (``allow``) and whether it
     can come within the thickness of a collider meanwhile (``near``: the iterations look at the
-    colliders only for those).
+    colliders only for those); ``co``: the colliders
+    (:class:`~cloth_sim.contact.colliders.PackedColliders`), ``cdepth`` how far in each one's far
+    side is (:meth:`VBD.depths`).
 
     ``bounded`` (self-contact): ``allowance`` is each vertex's bound whatever the pairs found,
     kept short of the far side of any collider near it. Otherwise ``allowance`` is only the
@@ -715,6 +715,8 @@ def collider_allowances(
     reach a skin within the step) and is not near: the iterations then skip the colliders' terms
     for it (on a 128×128 cloth over the ball and its floor, every vertex was near, and those
     terms were most of the iterations' time; docs/BENCHMARKS.md §11)."""
+    ckind, cpos, crot, cgeo, creach = co.kinds, co.pos, co.rot, co.geo, co.reach
+    cbank = (co.reals, co.ints, co.starts)
     for i in range(x.shape[0]):
         b = allowance[i] if bounded else math.inf
         nearest = math.inf
@@ -742,11 +744,13 @@ def collider_allowances(
 
 
 @numba.njit(cache=True)
-def _overtaken(x, free, ckind, cpos, crot, cpos0, crot0, cgeo, creach, cbank, tau):
-    """The initial guess of each free vertex that a moving collider overtook over the step
-    (closer than ``τ`` to its new pose) put on its skin, ``τ`` out along its normal; returns how
-    many. Without it a vertex in front of a link sweeping many thicknesses a step starts the
+def _overtaken(x, free, co, tau):
+    """The initial guess of each free vertex that a moving collider of ``co`` overtook over the
+    step (closer than ``τ`` to its new pose) put on its skin, ``τ`` out along its normal; returns
+    how many. Without it a vertex in front of a link sweeping many thicknesses a step starts the
     iterations inside the link, where its bounds let it out by a fraction of ``τ`` a search."""
+    ckind, cpos, crot, cpos0, crot0 = co.kinds, co.pos, co.rot, co.pos0, co.rot0
+    cgeo, creach, cbank = co.geo, co.reach, (co.reals, co.ints, co.starts)
     moved = 0
     for c in range(ckind.shape[0]):
         still = True
@@ -1118,9 +1122,7 @@ class VBD(Integrator):
         allow = self._allow
         co = colliders
         if len(co.kinds):  # what a moving collider overtook starts on its skin
-            _overtaken(
-                x, free, co.kinds, co.pos, co.rot, co.pos0, co.rot0, co.geo, co.reach, co.bank, tau
-            )
+            _overtaken(x, free, co, tau)
         if self_contact or len(co.kinds):
             # the initial guess, not the inertia: a layer resting on another or on a collider
             # is not going where gravity alone would take it
@@ -1330,12 +1332,7 @@ class VBD(Integrator):
             x,
             allowance,
             self_contact,
-            colliders.kinds,
-            colliders.pos,
-            colliders.rot,
-            colliders.geo,
-            colliders.reach,
-            colliders.bank,
+            colliders,
             self.depths(colliders),
             tau,
             self._allow,

@@ -239,7 +239,6 @@ LONG_SIGNATURES = {
     "cloth_sim.physics.forces:spring_jacobian_blocks": 13,
     "cloth_sim.physics.forces:_spring_force": 13,
     "cloth_sim.integrators.vbd_grid:GridLayout.contact": 13,
-    "cloth_sim.integrators.vbd:collider_allowances": 13,
     "cloth_sim.envs.cloth_env:ClothEnv.__init__": 13,
     "cloth_sim.cuda.simulator:CudaSimulator.__init__": 13,
     "cloth_sim.contact.self_collision:_separate": 13,

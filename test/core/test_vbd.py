@@ -295,8 +295,7 @@ def test_a_vertex_far_from_every_collider_skips_their_terms_and_cannot_reach_the
     d = np.min([c.signed_distance(x) for c in shapes], axis=0)
     for bounded in (False, True):
         allow, near = np.empty(len(x)), np.empty(len(x), np.bool_)
-        args = (co.kinds, co.pos, co.rot, co.geo, co.reach, co.bank, VBD.depths(co))
-        args = (*args, tau, allow, near)
+        args = (co, VBD.depths(co), tau, allow, near)
         collider_allowances(x, allowance, bounded, *args)
         if bounded:  # its allowance, or less near the thin box (its far side)
             assert (allow <= allowance).all() and (allow < allowance).any()
