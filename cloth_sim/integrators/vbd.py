@@ -342,16 +342,8 @@ def _sweep(
     cost more than the vertex's work.)"""
     inc_ptr, nbr, rest, k, c, kind, tab, nonsmooth, bptr, bidx, bval, bdiag = sp
     bend = (bptr, bidx, bval, bdiag)
-    ckind, cpos, crot, cpos0, crot0, cgeo, cmu = (
-        co.kinds,
-        co.pos,
-        co.rot,
-        co.pos0,
-        co.rot0,
-        co.geo,
-        co.mu,
-    )
-    cbank = (co.reals, co.ints, co.starts)
+    ckind, cpos, crot, cgeo, cmu = co.kinds, co.pos, co.rot, co.geo, co.mu
+    cpos0, crot0, cbank = co.pos0, co.rot0, (co.reals, co.ints, co.starts)
     rec_ptr, rec, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d, colour = sc
     for q in range(lo, hi):
         i = verts[q]

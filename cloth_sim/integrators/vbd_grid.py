@@ -524,16 +524,8 @@ def _sweeps_touching(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH
     contact, and commits."""
     (vof, xm, xt, near, touch, cut, x_cd, allow, gamma, tau, kc, eps, co, sc, fh) = contact
     F0, F1, F2, H0, H1, H2, H3, H4, H5 = fh
-    ckind, cpos, crot, cpos0, crot0, cgeo, cmu = (
-        co.kinds,
-        co.pos,
-        co.rot,
-        co.pos0,
-        co.rot0,
-        co.geo,
-        co.mu,
-    )
-    cbank = (co.reals, co.ints, co.starts)
+    ckind, cpos, crot, cgeo, cmu = co.kinds, co.pos, co.rot, co.geo, co.mu
+    cpos0, crot0, cbank = co.pos0, co.rot0, (co.reals, co.ints, co.starts)
     rec_ptr, rec, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d = sc
     X0, X1, X2 = A
     B0, B1, B2 = B

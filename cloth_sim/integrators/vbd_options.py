@@ -21,9 +21,7 @@ def _is_number(x) -> bool:
 
 
 def _integer(name: str, value, hi: int) -> None:
-    if isinstance(value, bool) or not _is_number(value) or int(value) != value:
-        raise ValueError(f"{name} must be an integer in [1, {hi}], got {value!r}")
-    if not 1 <= value <= hi:
+    if not (_is_number(value) and int(value) == value and 1 <= value <= hi):
         raise ValueError(f"{name} must be an integer in [1, {hi}], got {value!r}")
 
 
