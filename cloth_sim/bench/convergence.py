@@ -24,7 +24,7 @@ import time
 
 import numpy as np
 
-from ..integrators.vbd import TOLERANCE
+from ..integrators.vbd_options import TOLERANCE
 from ..model import ClothModel
 from ..simulator import Simulator
 
