@@ -383,9 +383,8 @@ def _traverse(tasks, tree, prim, rows, stack_size, leaf_cap):
                     if _apart(ilo, ihi, qs, ilo, ihi, qt):
                         continue
                     s, t = order[qs], order[qt]
-                    for side in range(
-                        2
-                    ):  # the corners first seen in one triangle against the other
+                    # the corners first seen in one triangle against the other
+                    for side in range(2):
                         u, v, qv = (s, t, qt) if side == 0 else (t, s, qs)
                         if v >= n_tris:
                             continue  # against a lone particle: nothing to measure
@@ -495,8 +494,6 @@ class TriangleTree:
         self.empty = len(centres) == 0
         if self.empty:
             return
-        #: per triangle the corners and edges it is the first triangle of (:class:`Primitives`)
-        self.owned = (_owned(self.tris, vertex_owner), _owned(tri_edge, edge_owner))
         left, right, first, end, size, order = build_hierarchy(
             np.ascontiguousarray(centres), int(leaf)
         )
@@ -506,12 +503,21 @@ class TriangleTree:
             np.empty((n_nodes, 3)), np.empty((n_nodes, 3)),
             np.empty((n_items, 3)), np.empty((n_items, 3)),
         )  # fmt: skip
-        # the triangles' and edges' reaches and the edges' boxes, made again every search
-        self.scratch = (
-            np.empty(len(self.tris)),
-            np.empty((n_edges, 3)),
-            np.empty((n_edges, 3)),
-            np.empty(n_edges),
+        # what a search measures but the positions and reaches it is given: the topology, the
+        # corners and edges each triangle is the first of, and the triangles' and edges' reaches
+        # and the edges' boxes, made again every search
+        self.prim = Primitives(
+            x0=None,
+            reach=None,
+            tris=self.tris,
+            tri_reach=np.empty(len(self.tris)),
+            orphans=self.orphans,
+            edges=self.edges,
+            own_v=_owned(self.tris, vertex_owner),
+            own_e=_owned(tri_edge, edge_owner),
+            elo=np.empty((n_edges, 3)),
+            ehi=np.empty((n_edges, 3)),
+            ereach=np.empty(n_edges),
         )
         self.tasks = _tasks(left, right, size, TASKS)
         depth = np.zeros(n_nodes, np.int64)
@@ -540,21 +546,7 @@ class TriangleTree:
                 np.empty(0),
             )
         reach = read_only(reaches(radius, len(x0)), np.float64)
-        tri_reach, elo, ehi, ereach = self.scratch
-        own_v, own_e = self.owned
-        prim = Primitives(
-            x0,
-            reach,
-            self.tris,
-            tri_reach,
-            self.orphans,
-            self.edges,
-            own_v,
-            own_e,
-            elo,
-            ehi,
-            ereach,
-        )
+        prim = self.prim._replace(x0=x0, reach=reach)
         _refit(prim, self.tree)
         _edge_boxes(prim)
         n_tasks = len(self.tasks)

@@ -192,13 +192,19 @@ def _triangle_d2(v, t, k, x, y, z):
     """Triangle ``k``'s point nearest ``(x, y, z)``: the squared distance, the point and its
     barycentric weights."""
     a, b, c = t[k, 0], t[k, 1], t[k, 2]
-    wa, wb, wc = closest_on_triangle(
+    return _corners_d2(
         x, y, z, v[a, 0], v[a, 1], v[a, 2], v[b, 0], v[b, 1], v[b, 2], v[c, 0], v[c, 1], v[c, 2]
     )
-    cx = wa * v[a, 0] + wb * v[b, 0] + wc * v[c, 0]
-    cy = wa * v[a, 1] + wb * v[b, 1] + wc * v[c, 1]
-    cz = wa * v[a, 2] + wb * v[b, 2] + wc * v[c, 2]
-    return (x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2, cx, cy, cz, wa, wb, wc
+
+
+@numba.njit(cache=True, inline="always")
+def _corners_d2(x, y, z, ax, ay, az, bx, by, bz, cx, cy, cz):
+    """:func:`_triangle_d2` of the triangle of corners ``a``, ``b``, ``c``."""
+    wa, wb, wc = closest_on_triangle(x, y, z, ax, ay, az, bx, by, bz, cx, cy, cz)
+    px = wa * ax + wb * bx + wc * cx
+    py = wa * ay + wb * by + wc * cy
+    pz = wa * az + wb * bz + wc * cz
+    return (x - px) ** 2 + (y - py) ** 2 + (z - pz) ** 2, px, py, pz, wa, wb, wc
 
 
 @numba.njit(cache=True)
@@ -357,8 +363,9 @@ def pack(meshes) -> tuple:
     Three arrays, not one a part: numba counts every array a function takes in and out where the
     function calls another, inlined or not (~5 ns an array, measured), and a contact query takes
     the bank at every vertex near a mesh; the bank of 22 arrays this replaced cost more than the
-    query's arithmetic. A plain tuple of arrays: numba's parallel loops take neither a named
-    tuple nor one holding numbers.
+    query's arithmetic. A plain tuple, spread flat into the colliders' record
+    (:class:`~cloth_sim.contact.colliders.PackedColliders`): numba's parallel loops refuse a tuple
+    held in another.
 
     ``reals`` (float64) holds, mesh after mesh: the vertices and their angle-weighted normals
     (3 a vertex each), each triangle's face normal and its three edges' normals (3 and 9), each
@@ -453,13 +460,9 @@ def _bank_triangle_d2(bank, k, x, y, z):
     a = bank[STARTS][VERTS] + 3 * t[bank[STARTS][TRIS] + 3 * k]
     b = bank[STARTS][VERTS] + 3 * t[bank[STARTS][TRIS] + 3 * k + 1]
     c = bank[STARTS][VERTS] + 3 * t[bank[STARTS][TRIS] + 3 * k + 2]
-    wa, wb, wc = closest_on_triangle(
+    return _corners_d2(
         x, y, z, r[a], r[a + 1], r[a + 2], r[b], r[b + 1], r[b + 2], r[c], r[c + 1], r[c + 2]
     )
-    cx = wa * r[a] + wb * r[b] + wc * r[c]
-    cy = wa * r[a + 1] + wb * r[b + 1] + wc * r[c + 1]
-    cz = wa * r[a + 2] + wb * r[b + 2] + wc * r[c + 2]
-    return (x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2, cx, cy, cz, wa, wb, wc
 
 
 @numba.njit(cache=True, inline="always")
@@ -481,9 +484,8 @@ def _nearest(bank, m, x, y, z, cutoff):
     px = py = pz = 0.0
     btri = -1
     ba = bb = bc = 0.0
-    node = t[
-        bank[STARTS][ROOT] + m
-    ]  # preorder: a node's first child is the next one, right the one after
+    # preorder: a node's first child is the next one, RIGHT the one after its subtree
+    node = t[bank[STARTS][ROOT] + m]
     while node >= 0:
         if _box_distance2(bank, node, x, y, z) >= best:
             node = t[bank[STARTS][RIGHT] + node]
@@ -547,11 +549,8 @@ def _pseudonormal(bank, k, wa, wb, wc):
 @numba.njit(cache=True)
 def _inside_box(bank, m, x, y, z):
     """Whether ``(x, y, z)`` lies inside mesh ``m``'s root box."""
-    r = bank[REALS]
-    lo, hi = (
-        bank[STARTS][BOX_LO] + 3 * bank[INTS][bank[STARTS][ROOT] + m],
-        bank[STARTS][BOX_HI] + 3 * bank[INTS][bank[STARTS][ROOT] + m],
-    )
+    r, root = bank[REALS], bank[INTS][bank[STARTS][ROOT] + m]
+    lo, hi = bank[STARTS][BOX_LO] + 3 * root, bank[STARTS][BOX_HI] + 3 * root
     return r[lo] <= x <= r[hi] and r[lo + 1] <= y <= r[hi + 1] and r[lo + 2] <= z <= r[hi + 2]
 
 

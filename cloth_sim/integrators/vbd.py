@@ -1112,10 +1112,9 @@ class VBD(Integrator):
             tau = sc.thickness
         x_cd = self._buffer("_x_cd", x)
         allow = self._allow
-        co = colliders
-        if len(co.kinds):  # what a moving collider overtook starts on its skin
-            _overtaken(x, free, co, tau)
-        if self_contact or len(co.kinds):
+        if len(colliders.kinds):  # what a moving collider overtook starts on its skin
+            _overtaken(x, free, colliders, tau)
+        if self_contact or len(colliders.kinds):
             # the initial guess, not the inertia: a layer resting on another or on a collider
             # is not going where gravity alone would take it
             if not self._detection_holds(x, colliders, tau, self_contact):

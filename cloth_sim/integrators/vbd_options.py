@@ -20,8 +20,14 @@ def _is_number(x) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool)
 
 
+def _is_count(x, hi: int) -> bool:
+    """Whether ``x`` is a whole number in ``[1, hi]`` (an int or an integral float; not inf or
+    NaN, which ``int()`` would raise on)."""
+    return _is_number(x) and math.isfinite(x) and int(x) == x and 1 <= x <= hi
+
+
 def _integer(name: str, value, hi: int) -> None:
-    if not (_is_number(value) and int(value) == value and 1 <= value <= hi):
+    if not _is_count(value, hi):
         raise ValueError(f"{name} must be an integer in [1, {hi}], got {value!r}")
 
 
@@ -89,7 +95,7 @@ class VBDOptions:
                 f"the weight, RMS over the vertices; 0 runs every iteration), got {tol!r}"
             )
         s = self.substeps
-        if s not in (None, "auto") and (not _is_number(s) or int(s) != s or not 1 <= s <= 10_000):
+        if s not in (None, "auto") and not _is_count(s, 10_000):
             raise ValueError(
                 "substeps must be 'auto' (chosen from the cloth and dt), None (auto where "
                 f"iterations is not given, else 1) or an integer in [1, 10000], got {s!r}"

@@ -359,6 +359,8 @@ def test_counters_report_iterations_and_the_residual():
         ({"time_budget": 0.0}, "time_budget"),
         ({"tethers": 1}, "tethers"),
         ({"substeps": "many"}, "substeps"),
+        ({"iterations": float("inf")}, "iterations"),
+        ({"substeps": float("nan")}, "substeps"),
         ({"scheme": "bdf3"}, "scheme"),
         ({"iteration": 10}, "no option 'iteration'; its options: iterations, rho"),
     ],
