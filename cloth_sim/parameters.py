@@ -11,8 +11,10 @@ parameter, the value and what is accepted.
 ``apply`` says what a change does: ``live`` (the running simulation takes it and keeps its state),
 ``rebuild`` (the cloth is rebuilt from the scene and reset) or ``node`` (the node's own settings).
 
-To add a parameter: one :class:`Param` here (``scene_key`` if scene files may set it), then the
-code that uses it (``Simulator`` for a live value, ``Scene.build_model`` for a rebuild one).
+To add a parameter: one :class:`Param` here (``scene_key`` if scene files may set it; for a live
+value ``simulator``, the :class:`~cloth_sim.simulator.Simulator` option it feeds, which
+:mod:`cloth_sim.simulator_options` reads to build and change simulators), then the code that uses
+it (the ``Simulator`` property for a live value, ``Scene.build_model`` for a rebuild one).
 """
 
 from __future__ import annotations
@@ -62,7 +64,10 @@ class Param:
     three floats). Numbers and vector components lie in ``[lo, hi]`` (``(lo, hi]`` with
     ``lo_open``); strings in ``choices`` when given, and non-empty when ``nonempty``.
     ``scene_key`` is the field's path in a scene file (``grid.rows``), ``None`` for parameters only
-    the node has.
+    the node has. ``simulator`` is the :class:`~cloth_sim.simulator.Simulator` option the value
+    feeds (its keyword and settable attribute; several values may feed one, as wind's strength and
+    direction feed ``wind``): :mod:`cloth_sim.simulator_options` builds and changes a simulator
+    from there alone.
     """
 
     name: str
@@ -76,6 +81,7 @@ class Param:
     choices: tuple[str, ...] | None = None
     nonempty: bool = False
     scene_key: str | None = None
+    simulator: str | None = None
 
     # ------------------------------------------------------------------ text
     def range_text(self) -> str:
@@ -184,6 +190,7 @@ def _schema() -> dict[str, Param]:
             "Time integrator; switching keeps positions and velocities.",
             choices=INTEGRATORS,
             scene_key="integrator",
+            simulator="integrator",
         ),
         P(
             "dt",
@@ -194,6 +201,7 @@ def _schema() -> dict[str, Param]:
             lo=1e-7,
             hi=1.0,
             scene_key="dt",
+            simulator="dt",
         ),
         P("allow_unstable", bool, "", "Accept a dt above the method's stable_dt.", apply="node"),
         P(
@@ -206,6 +214,7 @@ def _schema() -> dict[str, Param]:
             lo=1,
             hi=10_000,
             scene_key="vbd.iterations",
+            simulator="integrator_options",
         ),
         P(
             "vbd.tolerance",
@@ -218,6 +227,7 @@ def _schema() -> dict[str, Param]:
             lo=0.0,
             hi=10.0,
             scene_key="vbd.tolerance",
+            simulator="integrator_options",
         ),
         P(
             "vbd.substeps",
@@ -229,6 +239,7 @@ def _schema() -> dict[str, Param]:
             lo=0,
             hi=10_000,
             scene_key="vbd.substeps",
+            simulator="integrator_options",
         ),
         P(
             "vbd.fit_tick",
@@ -239,6 +250,7 @@ def _schema() -> dict[str, Param]:
             "node keeps real time, and its results depend on the machine. Off: the same bits "
             "anywhere.",
             apply="node",
+            simulator="integrator_options",
         ),
         P(
             "publish_rate",
@@ -329,6 +341,7 @@ def _schema() -> dict[str, Param]:
             lo=-1e3,
             hi=1e3,
             scene_key="gravity",
+            simulator="gravity",
         ),
         P(
             "wind.direction",
@@ -338,6 +351,7 @@ def _schema() -> dict[str, Param]:
             lo=-1e3,
             hi=1e3,
             scene_key="wind.direction",
+            simulator="wind",
         ),
         P(
             "wind.strength",
@@ -347,6 +361,7 @@ def _schema() -> dict[str, Param]:
             lo=0.0,
             hi=1e3,
             scene_key="wind.strength",
+            simulator="wind",
         ),
         P(
             "drag",
@@ -356,6 +371,7 @@ def _schema() -> dict[str, Param]:
             lo=0.0,
             hi=1e3,
             scene_key="drag",
+            simulator="drag",
         ),
         P(
             "strain_limit",
@@ -365,6 +381,7 @@ def _schema() -> dict[str, Param]:
             lo=0.0,
             hi=10.0,
             scene_key="strain_limit",
+            simulator="strain_limit",
         ),
         P(
             "strain_limit_passes",
@@ -375,6 +392,7 @@ def _schema() -> dict[str, Param]:
             "more.",
             lo=1,
             hi=100,
+            simulator="strain_limit_passes",
         ),
         P(
             "strain_limit_method",
@@ -387,6 +405,7 @@ def _schema() -> dict[str, Param]:
             "strain_limit_passes bounds its iterations).",
             choices=STRAIN_LIMIT_METHODS,
             scene_key="strain_limit_method",
+            simulator="strain_limit_method",
         ),
         P(
             "rows",
@@ -461,6 +480,7 @@ def _schema() -> dict[str, Param]:
             lo=0.0,
             hi=1000.0,
             apply="node",
+            simulator="integrator_options",
         ),
         P(
             "camera.enable",
@@ -613,6 +633,7 @@ def _schema() -> dict[str, Param]:
             lo_open=True,
             hi=1.0,
             scene_key="thickness",
+            simulator="thickness",
         ),
         P(
             "self_collision",
@@ -620,6 +641,7 @@ def _schema() -> dict[str, Param]:
             "",
             "Keep the cloth from passing through itself (off: no self-collision code runs).",
             scene_key="self_collision",
+            simulator="self_collision",
         ),
         P(
             "device",
@@ -632,6 +654,7 @@ def _schema() -> dict[str, Param]:
             "device does not have (colliders, a strain limit, self-collision, grippers).",
             apply="rebuild",
             choices=DEVICES,
+            simulator="device",
         ),
     ]
     return {p.name: p for p in params}

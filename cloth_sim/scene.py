@@ -79,6 +79,8 @@ from .parameters import SCHEMA, ParameterError
 from .physics.mesh import MESH_FORMATS, vertices_in_box
 from .robot import Robot
 from .simulator import Simulator
+from .simulator_options import FED_BY, integrator_options, vbd_options
+from .simulator_options import options as simulator_options
 
 EDGES = ("first_row", "last_row", "first_col", "last_col")
 #: the depth camera's settings when a scene does not give them (scene key ``camera``)
@@ -98,12 +100,6 @@ CAMERA_DEFAULTS = {
 
 class SceneError(ValueError):
     """A scene file that cannot be used; the message names the file and the field."""
-
-
-def vbd_options(iterations: int, tolerance: float, substeps: int) -> dict:
-    """The vbd integrator's options from a scene's or the node's values (``vbd.iterations``,
-    ``vbd.tolerance``, ``vbd.substeps``: 0 for as many as the cloth asks, ``"auto"``)."""
-    return {"iterations": iterations, "tolerance": tolerance, "substeps": substeps or "auto"}
 
 
 @dataclass
@@ -331,21 +327,51 @@ class Scene:
             model = dataclasses.replace(model, pinned=mask)
         return model
 
-    SIMULATOR_OPTIONS = (
-        "integrator",
-        "dt",
-        "gravity",
-        "wind",
-        "strain_limit",
-        "strain_limit_passes",
-        "strain_limit_long_range",
-        "strain_limit_method",
-        "drag",
-        "integrator_options",
-        "colliders",
-        "thickness",
-        "self_collision",
-    )
+    #: what :meth:`build_simulator` passes on to the simulator: the options the parameters feed
+    #: (:mod:`cloth_sim.simulator_options`) and those only code sets
+    SIMULATOR_OPTIONS = (*FED_BY, "strain_limit_long_range", "colliders")
+
+    def parameter_values(self) -> dict:
+        """The parameter values (:data:`~cloth_sim.parameters.SCHEMA`'s names) this scene
+        implies (a grid's size and mass or a mesh's density; the parameters of the other kind are
+        left out)."""
+        values = {
+            "integrator": self.integrator,
+            "dt": float(self.dt),
+            "gravity": [float(g) for g in self.gravity],
+            "wind.direction": [float(w) for w in self.wind_direction],
+            "wind.strength": float(self.wind_strength),
+            "drag": float(self.drag),
+            "strain_limit": float(self.strain_limit or 0.0),
+            "strain_limit_method": self.strain_limit_method,
+            "model": self.model,
+            "thickness": float(self.thickness),
+            "self_collision": bool(self.self_collision),
+            "vbd.iterations": int(self.vbd_iterations),
+            "vbd.tolerance": float(self.vbd_tolerance),
+            "vbd.substeps": int(self.vbd_substeps),
+            "material": self.material_name,
+        }
+        if self.mesh is not None:
+            values["density"] = float(self.mesh["density"])
+        else:
+            values.update(
+                {
+                    "rows": int(self.rows),
+                    "cols": int(self.cols),
+                    "spacing": float(self.spacing),
+                    "particle_mass": float(self.particle_mass),
+                    "size": [float(x) for x in self.size] if self.size else [0.0, 0.0],
+                }
+            )
+            if self.grid_density is not None:
+                values["density"] = float(self.grid_density)
+        for k, value in self.camera.items():  # (the scene's camera, or the default one)
+            values[f"camera.{k}"] = [float(x) for x in value] if isinstance(value, list) else value
+        for f in self.families:
+            values[f"stiffness.{f}"] = float(self.stiffness[f])
+            values[f"damping.{f}"] = float(self.damping[f])
+        return values
 
     def vbd_options(self) -> dict:
         """The vbd integrator's options this scene sets (:func:`vbd_options`)."""
@@ -354,23 +380,14 @@ class Scene:
     def build_simulator(self, **override) -> Simulator:
         """A simulator of the scene; ``override`` takes :meth:`build_model`'s keys and the
         simulator's options in :attr:`SIMULATOR_OPTIONS`; any other key is a ``TypeError``."""
-        sim_kw = {
-            "integrator": self.integrator,
-            "dt": self.dt,
-            "gravity": self.gravity,
-            "wind": self.wind,
-            "strain_limit": self.strain_limit,
-            "strain_limit_method": self.strain_limit_method,
-            "drag": self.drag,
-            "colliders": self.make_colliders(),
-            "thickness": self.thickness,
-            "self_collision": self.self_collision,
-        }
-        for key in self.SIMULATOR_OPTIONS:
-            if key in override:
-                sim_kw[key] = override.pop(key)
-        if sim_kw["integrator"] == "vbd" and "integrator_options" not in sim_kw:
-            sim_kw["integrator_options"] = self.vbd_options()
+        values = self.parameter_values()
+        sim_kw = {**simulator_options(values), "colliders": self.make_colliders()}
+        given = {key: override.pop(key) for key in self.SIMULATOR_OPTIONS if key in override}
+        if "integrator" in given and "integrator_options" not in given:  # (vbd's are the scene's)
+            sim_kw["integrator_options"] = integrator_options(
+                {**values, "integrator": given["integrator"]}
+            )
+        sim_kw.update(given)
         sim = Simulator(self.build_model(**override), **sim_kw)
         if self.robot is not None:
             self.add_robot(sim)

@@ -23,9 +23,10 @@ from .integrators.base import Stability
 from .materials import get
 from .parameters import REBUILD, SCHEMA, ParameterError
 from .physics import stability as stab
-from .scene import Scene, load_scene, vbd_options
+from .scene import Scene, load_scene
 from .sensors.camera import camera_from_settings
 from .simulator import Simulator
+from .simulator_options import options as simulator_options
 
 #: the rebuild parameters that shape the model (``scene`` is the other one)
 MODEL_KEYS = tuple(name for name in REBUILD if name != "scene")
@@ -68,48 +69,6 @@ CAMERA_SETTINGS = (
 )
 
 
-def scene_values(scene: Scene) -> dict:
-    """The parameter values a scene implies (a grid's size and mass or a mesh's density; the
-    parameters of the other kind are left out)."""
-    values = {
-        "integrator": scene.integrator,
-        "dt": float(scene.dt),
-        "gravity": [float(g) for g in scene.gravity],
-        "wind.direction": [float(w) for w in scene.wind_direction],
-        "wind.strength": float(scene.wind_strength),
-        "drag": float(scene.drag),
-        "strain_limit": float(scene.strain_limit or 0.0),
-        "strain_limit_method": scene.strain_limit_method,
-        "model": scene.model,
-        "thickness": float(scene.thickness),
-        "self_collision": bool(scene.self_collision),
-        "vbd.iterations": int(scene.vbd_iterations),
-        "vbd.tolerance": float(scene.vbd_tolerance),
-        "vbd.substeps": int(scene.vbd_substeps),
-        "material": scene.material_name,
-    }
-    if scene.mesh is not None:
-        values["density"] = float(scene.mesh["density"])
-    else:
-        values.update(
-            {
-                "rows": int(scene.rows),
-                "cols": int(scene.cols),
-                "spacing": float(scene.spacing),
-                "particle_mass": float(scene.particle_mass),
-                "size": [float(x) for x in scene.size] if scene.size else [0.0, 0.0],
-            }
-        )
-        if scene.grid_density is not None:
-            values["density"] = float(scene.grid_density)
-    for k, value in scene.camera.items():  # (the scene's camera, or the default one)
-        values[f"camera.{k}"] = [float(x) for x in value] if isinstance(value, list) else value
-    for f in scene.families:
-        values[f"stiffness.{f}"] = float(scene.stiffness[f])
-        values[f"damping.{f}"] = float(scene.damping[f])
-    return values
-
-
 def defaults(scene: Scene) -> dict:
     """Every parameter's value on ``scene`` before anything is set."""
     values = {
@@ -130,7 +89,7 @@ def defaults(scene: Scene) -> dict:
         "device": "cpu",
     }
     values.update(UNUSED_VALUES)
-    values.update(scene_values(scene))
+    values.update(scene.parameter_values())
     return values
 
 
@@ -230,12 +189,6 @@ def material(model, cfg: dict) -> tuple[np.ndarray, np.ndarray]:
     return k, c
 
 
-def wind(cfg: dict):
-    """The wind vector of ``cfg`` (strength × direction), ``None`` when it is off."""
-    w = cfg["wind.strength"] * np.asarray(cfg["wind.direction"], dtype=float)
-    return w if np.any(w) else None
-
-
 def build_model(cfg: dict, scene: Scene):
     """``scene``'s model with ``cfg``'s size or density, spring model and material."""
     size = (
@@ -259,32 +212,13 @@ def build_model(cfg: dict, scene: Scene):
     )
 
 
-def integrator_options(cfg: dict) -> dict:
-    """The options of ``cfg``'s integrator that parameters set (vbd's iterations, tolerance and
-    substeps; the node adds a time budget under ``vbd.fit_tick``)."""
-    if cfg["integrator"] != "vbd":
-        return {}
-    return vbd_options(cfg["vbd.iterations"], cfg["vbd.tolerance"], cfg["vbd.substeps"])
-
-
 def build_simulator(cfg: dict, model, scene: Scene) -> Simulator:
     """A simulator of ``model`` (built for ``scene``) with ``cfg``'s live values, the scene's
     colliders and grippers."""
     sim = Simulator(
         model,
-        integrator=cfg["integrator"],
-        dt=cfg["dt"],
-        gravity=cfg["gravity"],
-        integrator_options=integrator_options(cfg),
-        wind=wind(cfg),
-        drag=cfg["drag"],
-        strain_limit=cfg["strain_limit"] or None,
-        strain_limit_passes=cfg["strain_limit_passes"],
-        strain_limit_method=cfg["strain_limit_method"],
+        **simulator_options(cfg),
         colliders=scene.make_colliders(),
-        thickness=cfg["thickness"],
-        self_collision=cfg["self_collision"],
-        device=cfg["device"],
     )
     if scene.robot is not None:
         scene.add_robot(sim)

@@ -15,7 +15,7 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.exceptions import ParameterException
 from rclpy.parameter import Parameter
 
-from .. import settings
+from .. import settings, simulator_options
 from ..parameters import SCHEMA, VECTORS
 from ..scene import SceneError, load_scene
 from ..settings import MODEL_KEYS
@@ -24,8 +24,6 @@ from .session import Session
 
 #: a publish_rate is refused only when the measured cost exceeds the time available this many times
 RATE_REFUSAL_LOAD = 10.0
-#: the share of a step's part of the tick that vbd's iterations may take under vbd.fit_tick
-FIT_SHARE = 0.6
 
 
 def _startup_value(name, value):
@@ -122,7 +120,6 @@ class ParameterGate:
             node.set_parameters([Parameter("device", value=cfg["device"])])
         self.session = Session(scene, cfg, settings.build(checked), checked.stable_dt)
         self._rates_run = {cfg["publish_rate"]}  # rates the node has run with: never refused
-        self._fit_solver(cfg)
 
     def _carry(self, scene, values: dict, refused: settings.Refusal) -> settings.Checked:
         """The scene's own step refused for the cloth asked for (a material, a finer grid: the
@@ -186,19 +183,6 @@ class ParameterGate:
             self._models[key] = model
         return model
 
-    def _fit_solver(self, cfg: dict) -> None:
-        """vbd's options from ``cfg``: its iterations, and under ``vbd.fit_tick`` a time budget a
-        step (:data:`FIT_SHARE` of a step's share of the tick at the target real-time factor; the
-        rest of the step, its stages and the publishing take the other part)."""
-        sim = self.session.sim
-        if sim.integrator != "vbd":
-            return
-        options = settings.integrator_options(cfg)
-        if cfg["vbd.fit_tick"] and cfg["real_time_factor"] > 0:
-            options["time_budget"] = FIT_SHARE * cfg["dt"] / cfg["real_time_factor"]
-        if options != sim.integrator_options:
-            sim.set_integrator("vbd", **options)
-
     def pre_set(self, parameters: list[Parameter]) -> list[Parameter]:
         """The gate every value passes first (it runs before rclpy's own type and range checks,
         whose refusals do not name the parameter): a value the schema refuses is noted, and stands
@@ -236,7 +220,7 @@ class ParameterGate:
             return parameters  # the on-set callback refuses it with the reason
         named = {p.name for p in parameters}
         return list(parameters) + [
-            Parameter(k, value=v) for k, v in P.scene_values(new).items() if k not in named
+            Parameter(k, value=v) for k, v in new.parameter_values().items() if k not in named
         ]
 
     def _gate(self, p: Parameter) -> str | None:
@@ -297,7 +281,7 @@ class ParameterGate:
         # change of theirs, a spring value given with it is)
         before = self.session.cfg
         if scene is not self.session.scene:
-            before = {**before, **P.scene_values(scene)}
+            before = {**before, **scene.parameter_values()}
         try:  # the batch whole, on the model it builds (settings.check: one pass)
             checked = settings.check(
                 scene,
@@ -352,13 +336,12 @@ class ParameterGate:
                     self.session.sim.time,
                     self.session.sim.save_state(),
                 )
-            self._apply_live(cand)
+            simulator_options.apply(self.session.sim, cand, self.session.cfg)
             # what the energy means may have changed (stiffness, gravity)
             self.session.balance.restart()
         if cand["real_time_factor"] != self.session.cfg["real_time_factor"]:
             self.session.carry = 0.0  # a backlog owed at the old pace is not owed at the new one
             self.session.history.clear()
-        self._fit_solver(cand)
         self._rates_run.add(cand["publish_rate"])
         rate_changed = cand["publish_rate"] != self.session.cfg["publish_rate"]
         self.session.cfg = cand
@@ -367,37 +350,6 @@ class ParameterGate:
         self.robot_state.configure(cand)
         if rate_changed:
             self.ticker.set_rate(cand["publish_rate"])
-
-    def _apply_live(self, cand: dict) -> None:
-        sim, cur = self.session.sim, self.session.cfg
-        for f in sim.model.family_names:
-            if cand[f"stiffness.{f}"] != cur[f"stiffness.{f}"]:
-                sim.set_stiffness(f, cand[f"stiffness.{f}"])
-            if cand[f"damping.{f}"] != cur[f"damping.{f}"]:
-                sim.set_damping(f, cand[f"damping.{f}"])
-        if cand["integrator"] != sim.integrator:
-            sim.set_integrator(cand["integrator"])
-        if cand["dt"] != sim.dt:
-            sim.dt = cand["dt"]
-        if cand["gravity"] != cur["gravity"]:
-            sim.gravity = cand["gravity"]
-        if (cand["wind.strength"], cand["wind.direction"]) != (
-            cur["wind.strength"],
-            cur["wind.direction"],
-        ):
-            sim.wind = settings.wind(cand)
-        if cand["drag"] != cur["drag"]:
-            sim.drag = cand["drag"]
-        if cand["strain_limit"] != cur["strain_limit"]:
-            sim.strain_limit = cand["strain_limit"] or None
-        if cand["strain_limit_passes"] != cur["strain_limit_passes"]:
-            sim.strain_limit_passes = cand["strain_limit_passes"]
-        if cand["strain_limit_method"] != cur["strain_limit_method"]:
-            sim.strain_limit_method = cand["strain_limit_method"]
-        if cand["thickness"] != cur["thickness"]:
-            sim.thickness = cand["thickness"]
-        if cand["self_collision"] != cur["self_collision"]:
-            sim.self_collision = cand["self_collision"]
 
     def _check_rate(self, cand: dict) -> str | None:
         """A rate is refused only when the measured cost of stepping and publishing exceeds the

@@ -1,5 +1,5 @@
 """The node's parameters: ROS descriptors made from :data:`cloth_sim.parameters.SCHEMA`, and the
-values a scene implies. The bounds live in the schema only."""
+the node's defaults. The bounds live in the schema only."""
 
 from __future__ import annotations
 
@@ -62,6 +62,6 @@ def check_value(name: str, value):
 
 
 # the plain-value parts live in the core (the sweeps use them too)
-from ..settings import defaults, scene_values  # noqa: E402
+from ..settings import defaults  # noqa: E402
 
-__all__ = ["check_value", "defaults", "descriptor", "scene_values", "type_name"]
+__all__ = ["check_value", "defaults", "descriptor", "type_name"]
