@@ -338,7 +338,7 @@ def newton_at(top, wor, it, h, w, i):
                 + ((zj - xt[w, j, 2]) - mz) * uz
             )
         f0, f1, f2, h0, h1, h2, h3, h4, h5 = spring_part(
-            ux, uy, uz, inv, mag, de, k, cs, f0, f1, f2, h0, h1, h2, h3, h4, h5
+            (ux, uy, uz), inv, mag, de, k, cs, (f0, f1, f2, h0, h1, h2, h3, h4, h5)
         )
     if top.bptr[i + 1] > top.bptr[i]:
         b0, b1, b2 = bending_at(top, x, w, i)
@@ -361,7 +361,7 @@ def newton_at(top, wor, it, h, w, i):
         # step (the plane does not move), as the CPU's colliders_at
         lam = kc * p
         f0, f1, f2, h0, h1, h2, h3, h4, h5 = press(
-            lam, kc, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5
+            lam, kc, (nx, ny, nz), (f0, f1, f2, h0, h1, h2, h3, h4, h5)
         )
         mu = wor.pmu[w, c]
         if mu <= 0.0:
@@ -372,7 +372,7 @@ def newton_at(top, wor, it, h, w, i):
         g = 1.0 / tl if tl > eps else (2.0 - tl / eps) / eps
         s = mu * lam * g
         f0, f1, f2, h0, h1, h2, h3, h4, h5 = slide(
-            s, tx, ty, tz, s, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5
+            s, (tx, ty, tz), s, (nx, ny, nz), (f0, f1, f2, h0, h1, h2, h3, h4, h5)
         )
     it.stepped[w, i] = f0 * f0 + f1 * f1 + f2 * f2
     sx, sy, sz = solve3(h0, h1, h2, h3, h4, h5, f0, f1, f2)

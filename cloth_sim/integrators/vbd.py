@@ -341,39 +341,22 @@ def _sweep(
     unpacked per vertex, or passed one by one to a function per vertex, their reference counting
     cost more than the vertex's work.)"""
     inc_ptr, nbr, rest, k, c, kind, tab, nonsmooth, bptr, bidx, bval, bdiag = sp
+    springs = (inc_ptr, nbr, rest, k, c, kind, tab)
     bend = (bptr, bidx, bval, bdiag)
     ckind, cpos, crot, cgeo, cmu = co.kinds, co.pos, co.rot, co.geo, co.mu
     cpos0, crot0, cbank = co.pos0, co.rot0, (co.reals, co.ints, co.starts)
     rec_ptr, rec, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d, colour = sc
+    records = (rec_ptr, rec, pidx, pcoef, pnrm, rec_d)
+    law, self_law = (tau, kc, eps), (tau, ks, mu_self, eps)
     for q in range(lo, hi):
         i = verts[q]
         m = m_h2[i] + drag_h  # the inertia's m/h², and the drag's d/h
         f0 = -m_h2[i] * (x[i, 0] - y[i, 0]) - drag_h * (x[i, 0] - xt[i, 0])
         f1 = -m_h2[i] * (x[i, 1] - y[i, 1]) - drag_h * (x[i, 1] - xt[i, 1])
         f2 = -m_h2[i] * (x[i, 2] - y[i, 2]) - drag_h * (x[i, 2] - xt[i, 2])
-        h0, h1, h2, h3, h4, h5 = m, 0.0, 0.0, m, 0.0, m
-        f0, f1, f2, h0, h1, h2, h3, h4, h5, rough = springs_at(
-            i,
-            x,
-            xt,
-            inc_ptr,
-            nbr,
-            rest,
-            k,
-            c,
-            kind,
-            tab,
-            inv_h,
-            f0,
-            f1,
-            f2,
-            h0,
-            h1,
-            h2,
-            h3,
-            h4,
-            h5,
-        )
+        # the vertex's block: its force and Hessian (vbd_terms)
+        fh, rough = springs_at(i, x, xt, springs, inv_h, (f0, f1, f2, m, 0.0, 0.0, m, 0.0, m))
+        f0, f1, f2, h0, h1, h2, h3, h4, h5 = fh
         if bdiag.shape[0]:
             # the material's bending, quadratic: −(Q x)_i, and Q_ii on the Hessian's diagonal
             b0, b1, b2 = bending_row(x, bptr, bidx, bval, i)
@@ -384,63 +367,19 @@ def _sweep(
             h0 += qd
             h3 += qd
             h5 += qd
+        fh = (f0, f1, f2, h0, h1, h2, h3, h4, h5)
         touch[i] = 0
         if ckind.shape[0] and near[i]:
             f0, f1, f2, h0, h1, h2, h3, h4, h5, touched = colliders_at(
-                i,
-                x,
-                xt,
-                ckind,
-                cpos,
-                crot,
-                cpos0,
-                crot0,
-                cgeo,
-                cmu,
-                cbank,
-                tau,
-                kc,
-                eps,
-                f0,
-                f1,
-                f2,
-                h0,
-                h1,
-                h2,
-                h3,
-                h4,
-                h5,
+                i, x, xt, ckind, cpos, crot, cpos0, crot0, cgeo, cmu, cbank, law, fh
             )
+            fh = (f0, f1, f2, h0, h1, h2, h3, h4, h5)
             if touched:
                 touch[i] = 1
         if rec_ptr[i + 1] > rec_ptr[i]:
             touch[i] = 1
-            f0, f1, f2, h0, h1, h2, h3, h4, h5 = self_contacts_at(
-                i,
-                x,
-                xs,
-                xt,
-                colour,
-                rec_ptr,
-                rec,
-                pidx,
-                pcoef,
-                pnrm,
-                tau,
-                ks,
-                mu_self,
-                eps,
-                rec_d,
-                f0,
-                f1,
-                f2,
-                h0,
-                h1,
-                h2,
-                h3,
-                h4,
-                h5,
-            )
+            fh = self_contacts_at(i, x, xs, xt, colour, records, self_law, fh)
+        f0, f1, f2, h0, h1, h2, h3, h4, h5 = fh
         stepped[i] = f0 * f0 + f1 * f1 + f2 * f2  # its imbalance as the sweep found it
         sx, sy, sz = solve3(h0, h1, h2, h3, h4, h5, f0, f1, f2)
         if touch[i] or near[i]:
@@ -449,9 +388,7 @@ def _sweep(
             # stops at its onset, where the next iteration sees it
             sx, sy, sz = onset(
                 i,
-                sx,
-                sy,
-                sz,
+                (sx, sy, sz),
                 x,
                 rec_ptr,
                 rec,
@@ -471,44 +408,19 @@ def _sweep(
             # Backtrack (halving, at most 8 times) until the vertex's energy does not rise, so each
             # vertex step, and so each iteration, descends
             e0 = local_energy(
-                i,
-                x[i, 0],
-                x[i, 1],
-                x[i, 2],
-                x,
-                xt,
-                y,
-                m_h2,
-                drag_h,
-                inc_ptr,
-                nbr,
-                rest,
-                k,
-                c,
-                kind,
-                tab,
-                inv_h,
-                bend,
+                i, (x[i, 0], x[i, 1], x[i, 2]), x, xt, y, m_h2, drag_h, springs, inv_h, bend
             )
             tries = 0
             while (
                 local_energy(
                     i,
-                    x[i, 0] + sx,
-                    x[i, 1] + sy,
-                    x[i, 2] + sz,
+                    (x[i, 0] + sx, x[i, 1] + sy, x[i, 2] + sz),
                     x,
                     xt,
                     y,
                     m_h2,
                     drag_h,
-                    inc_ptr,
-                    nbr,
-                    rest,
-                    k,
-                    c,
-                    kind,
-                    tab,
+                    springs,
                     inv_h,
                     bend,
                 )
@@ -525,7 +437,7 @@ def _sweep(
         )
         if not settled:
             nx, ny, nz, was_cut = truncate(
-                i, nx, ny, nz, x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, gamma
+                i, (nx, ny, nz), x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, gamma
             )
         if was_cut:
             cut[i] = 1
@@ -626,7 +538,7 @@ def _chebyshev(x, x_prev2, omega, free, x_cd, allow, gamma, sc, cut, touch):
         )
         if not settled:
             px, py, pz, was_cut = truncate(
-                i, px, py, pz, x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, gamma
+                i, (px, py, pz), x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, gamma
             )
         x[i, 0], x[i, 1], x[i, 2] = px, py, pz
         if was_cut:

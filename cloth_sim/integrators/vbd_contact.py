@@ -35,8 +35,12 @@ def solve3(a, b, c, d, e, f, fx, fy, fz):
 
 
 @numba.njit(cache=True, inline="always")
-def press(mag, s, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5):
-    """A contact's force ``mag·n`` and stiffness ``s·n nᵀ`` added to a vertex's."""
+def press(mag, s, n, fh):
+    """A contact's force ``mag·n`` and stiffness ``s·n nᵀ`` (``n``: its unit normal, three
+    numbers) added to a vertex's block ``fh`` (:mod:`~cloth_sim.integrators.vbd_terms`: its force
+    and Hessian, nine numbers)."""
+    nx, ny, nz = n
+    f0, f1, f2, h0, h1, h2, h3, h4, h5 = fh
     return (
         f0 + mag * nx,
         f1 + mag * ny,
@@ -51,8 +55,12 @@ def press(mag, s, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5):
 
 
 @numba.njit(cache=True, inline="always")
-def slide(sf, tx, ty, tz, s, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5):
-    """Friction's force ``−sf·t`` and its stiffness ``s (I − n nᵀ)`` (the normal held) added."""
+def slide(sf, t, s, n, fh):
+    """Friction's force ``−sf·t`` (``t``: the tangential motion) and its stiffness ``s (I − n
+    nᵀ)`` (the normal held) added to a vertex's block ``fh``."""
+    tx, ty, tz = t
+    nx, ny, nz = n
+    f0, f1, f2, h0, h1, h2, h3, h4, h5 = fh
     return (
         f0 - sf * tx,
         f1 - sf * ty,
@@ -67,33 +75,14 @@ def slide(sf, tx, ty, tz, s, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5):
 
 
 @numba.njit(cache=True, inline="always")
-def colliders_at(
-    i,
-    x,
-    xt,
-    ckind,
-    cpos,
-    crot,
-    cpos0,
-    crot0,
-    cgeo,
-    cmu,
-    cbank,
-    tau,
-    kc,
-    eps,
-    f0,
-    f1,
-    f2,
-    h0,
-    h1,
-    h2,
-    h3,
-    h4,
-    h5,
-):
-    """Vertex ``i``'s collider contacts: the penalty, and IPC's lagged friction on its motion over
-    the step relative to the collider's point under it; and whether it touches one."""
+def colliders_at(i, x, xt, ckind, cpos, crot, cpos0, crot0, cgeo, cmu, cbank, law, fh):
+    """Vertex ``i``'s collider contacts added to its block ``fh``: the penalty, and IPC's lagged
+    friction on its motion over the step relative to the collider's point under it; returns the
+    block's nine numbers and whether it touches one, flat (a tuple in a tuple, unpacked in a
+    parallel loop, fails numba's array analysis). ``law``: ``(τ, the penalty's stiffness,
+    friction's ε)``. (The colliders' arrays one by one: in a bundle, the calls inside that are not
+    inlined, the mesh's search, would count the bundle's references on every call.)"""
+    tau, kc, eps = law
     touched = False
     for c in range(ckind.shape[0]):
         if ckind[c] == MESH:
@@ -105,9 +94,7 @@ def colliders_at(
             continue
         touched = True
         lam = kc * p
-        f0, f1, f2, h0, h1, h2, h3, h4, h5 = press(
-            lam, kc, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5
-        )
+        fh = press(lam, kc, (nx, ny, nz), fh)
         mu = cmu[c]
         if mu <= 0.0:
             continue
@@ -119,9 +106,8 @@ def colliders_at(
         tl = math.sqrt(tx * tx + ty * ty + tz * tz)
         g = 1.0 / tl if tl > eps else (2.0 - tl / eps) / eps
         s = mu * lam * g
-        f0, f1, f2, h0, h1, h2, h3, h4, h5 = slide(
-            s, tx, ty, tz, s, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5
-        )
+        fh = slide(s, (tx, ty, tz), s, (nx, ny, nz), fh)
+    f0, f1, f2, h0, h1, h2, h3, h4, h5 = fh
     return f0, f1, f2, h0, h1, h2, h3, h4, h5, touched
 
 
@@ -149,19 +135,20 @@ def within(px, py, pz, cx, cy, cz, allow_i, dmin_i, gamma):
 
 
 @numba.njit(cache=True, inline="always")
-def truncate(i, px, py, pz, x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, gamma):
-    """Vertex ``i`` moved to ``p``, held within its bounds from where the last search was made
-    (``x_cd``): its displacement scaled down (whole: every bound is linear in it) so that it moves
-    at most ``allow[i]`` (the pairs the search did not find, the far side of a collider) and, for
-    each pair the search found (its records ``grec``), approaches the pair's other side along the
-    pair's normal by at most ``γ`` times their distance (Newton's planar truncation of the paper's
-    bound: moving away, or sideways, costs nothing). Both sides of a pair approach by at most
-    ``γ·d`` each, ``γ < ½``, and the normal separates them by ``d`` at the search (the nearest
-    points' direction: every point of the one primitive is at least ``d`` from every point of the
-    other along it), so no pair crosses. ``dmin``: each vertex's nearest pair at the search (a
-    displacement below ``γ·dmin`` needs no look at its pairs). Called where :func:`within`, which
-    answers every vertex that needs no look at its pairs, was not settled. Returns the position
-    and whether it was cut."""
+def truncate(i, p, x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, gamma):
+    """Vertex ``i`` moved to ``p`` (three numbers), held within its bounds from where the last
+    search was made (``x_cd``): its displacement scaled down (whole: every bound is linear in it)
+    so that it moves at most ``allow[i]`` (the pairs the search did not find, the far side of a
+    collider) and, for each pair the search found (its records ``grec``), approaches the pair's
+    other side along the pair's normal by at most ``γ`` times their distance (Newton's planar
+    truncation of the paper's bound: moving away, or sideways, costs nothing). Both sides of a pair
+    approach by at most ``γ·d`` each, ``γ < ½``, and the normal separates them by ``d`` at the
+    search (the nearest points' direction: every point of the one primitive is at least ``d`` from
+    every point of the other along it), so no pair crosses. ``dmin``: each vertex's nearest pair at
+    the search (a displacement below ``γ·dmin`` needs no look at its pairs). Called where
+    :func:`within`, which answers every vertex that needs no look at its pairs, was not settled.
+    Returns the position and whether it was cut."""
+    px, py, pz = p
     ex, ey, ez = px - x_cd[i, 0], py - x_cd[i, 1], pz - x_cd[i, 2]
     t = 1.0
     el = math.sqrt(ex * ex + ey * ey + ez * ez)
@@ -184,12 +171,13 @@ def truncate(i, px, py, pz, x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, d
 
 
 @numba.njit(cache=True, inline="always")
-def onset(i, sx, sy, sz, x, rec_ptr, rec, rec_d, pcoef, pnrm, tau, ckind, cpos, crot, cgeo, cbank):
+def onset(i, s, x, rec_ptr, rec, rec_d, pcoef, pnrm, tau, ckind, cpos, crot, cgeo, cbank):
     """Vertex ``i``'s step ``s`` with the part that would press a contact not yet pressed
     (distance at least ``τ``: not in the step's Hessian) taken off along that contact's normal, so
     that it stops at its onset (the next iteration sees it); the motion along the surface stays.
     The self-contact pairs by their linear distance, the colliders by their signed distance along
-    their normal."""
+    their normal. ``s``: three numbers, and so is what it returns."""
+    sx, sy, sz = s
     for q in range(rec_ptr[i], rec_ptr[i + 1]):
         d = rec_d[q]  # (its distance as _self_contacts_at found it for this step)
         if d < tau:

@@ -527,6 +527,7 @@ def _sweeps_touching(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH
     ckind, cpos, crot, cgeo, cmu = co.kinds, co.pos, co.rot, co.geo, co.mu
     cpos0, crot0, cbank = co.pos0, co.rot0, (co.reals, co.ints, co.starts)
     rec_ptr, rec, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d = sc
+    law = (tau, kc, eps)
     X0, X1, X2 = A
     B0, B1, B2 = B
     T0, T1, T2 = T
@@ -565,13 +566,13 @@ def _sweeps_touching(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH
                     a0, b, c, dd, e, ff = H0[t], H1[t], H2[t], H3[t], H4[t], H5[t]
                     xm[v, 0], xm[v, 1], xm[v, 2] = xi, yi, zi
                     f0, f1, f2, a0, b, c, dd, e, ff, touched = colliders_at(
-                        v, xm, xt, ckind, cpos, crot, cpos0, crot0, cgeo, cmu, cbank, tau, kc,
-                        eps, f0, f1, f2, a0, b, c, dd, e, ff,
+                        v, xm, xt, ckind, cpos, crot, cpos0, crot0, cgeo, cmu, cbank, law,
+                        (f0, f1, f2, a0, b, c, dd, e, ff),
                     )  # fmt: skip
                     if touched:
                         touch[v] = 1
                     sx, sy, sz = _solve(a0, b, c, dd, e, ff, f0, f1, f2, 1.0)
-                    sx, sy, sz = onset(v, sx, sy, sz, xm, rec_ptr, rec, rec_d, pcoef, pnrm, tau,
+                    sx, sy, sz = onset(v, (sx, sy, sz), xm, rec_ptr, rec, rec_d, pcoef, pnrm, tau,
                                        ckind, cpos, crot, cgeo, cbank)  # fmt: skip
                     x0, x1, x2 = xi + sx, yi + sy, zi + sz
                     stepped[t] = f0 * f0 + f1 * f1 + f2 * f2
@@ -579,7 +580,7 @@ def _sweeps_touching(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH
                                                       x_cd[v, 2], allow[v], dmin[v],
                                                       gamma)  # fmt: skip
                 if not settled:
-                    x0, x1, x2, was_cut = truncate(v, x0, x1, x2, x_cd, allow, gptr, grec, pidx,
+                    x0, x1, x2, was_cut = truncate(v, (x0, x1, x2), x_cd, allow, gptr, grec, pidx,
                                                    pcoef, pnrm, pdist, dmin, gamma)  # fmt: skip
                 if was_cut:
                     cut[v] = 1
@@ -590,7 +591,7 @@ def _sweeps_touching(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH
                                                           x_cd[v, 2], allow[v], dmin[v],
                                                           gamma)  # fmt: skip
                     if not settled:
-                        b0, b1, b2, was_cut = truncate(v, b0, b1, b2, x_cd, allow, gptr, grec,
+                        b0, b1, b2, was_cut = truncate(v, (b0, b1, b2), x_cd, allow, gptr, grec,
                                                        pidx, pcoef, pnrm, pdist, dmin,
                                                        gamma)  # fmt: skip
                     B0[t], B1[t], B2[t] = b0, b1, b2

@@ -1,9 +1,13 @@
 """The per-vertex terms of :mod:`~cloth_sim.integrators.vbd`'s incremental potential that are not
 contacts with colliders (those: :mod:`~cloth_sim.integrators.vbd_contact`): a vertex's springs
 (elastic and their damping), its part of the potential for a line search, and its self-contacts.
-Each adds the vertex's force ``(f0, f1, f2)`` and symmetric Hessian ``(h0 … h5) = (xx, xy, xz, yy,
-yz, zz)`` to those it is given and returns them, for the sweeps
-(:func:`cloth_sim.integrators.vbd._sweep`).
+Each adds its part to a vertex's **block** ``fh = (f0, f1, f2, h0, …, h5)``, the vertex's force
+and symmetric Hessian ``(xx, xy, xz, yy, yz, zz)`` as nine numbers, and returns it, for the sweeps
+(:func:`cloth_sim.integrators.vbd._sweep`). A vertex's springs are one bundle, ``springs =
+(inc_ptr, nbr, rest, k, c, kind, tab)`` (CSR: each vertex's springs' other ends, rest lengths,
+stiffnesses, dampings and kinds, and Choi–Ko's table); its self-contact records another, ``records
+= (rec_ptr, rec, pidx, pcoef, pnrm, rec_d)``. (Bundles of arrays cost nothing in these functions:
+they are inlined and call nothing that is not.)
 """
 
 from __future__ import annotations
@@ -17,15 +21,16 @@ from ..physics.forces import axial
 from .vbd_contact import press, slide
 
 
-# A vertex's force is (f0, f1, f2) and its symmetric Hessian (h0 … h5) = (xx, xy, xz, yy, yz, zz);
-# each term takes them and returns them with its own part added.
 @numba.njit(cache=True, inline="always")
-def spring_part(ux, uy, uz, inv, mag, de, d2e, cs, f0, f1, f2, h0, h1, h2, h3, h4, h5):
-    """One spring's share of a vertex's Newton step, along the unit vector ``u`` to the other end
-    (``inv``: one over the length): the force ``mag·u``, and the Hessian ``E'' u uᵀ + (E'/l)(I −
-    u uᵀ)``, each part clamped at 0 (positive semi-definite), plus the damping's ``(c/h) u uᵀ``
-    (``de``, ``d2e``: ``E'``, ``E''``; ``cs``: ``c/h``). Scalars only: the CUDA kernels call it
-    too (:func:`cloth_sim.cuda.kernels.newton_at`)."""
+def spring_part(u, inv, mag, de, d2e, cs, fh):
+    """One spring's share of a vertex's Newton step added to its block ``fh``, along the unit
+    vector ``u`` (three numbers) to the other end (``inv``: one over the length): the force
+    ``mag·u``, and the Hessian ``E'' u uᵀ + (E'/l)(I − u uᵀ)``, each part clamped at 0 (positive
+    semi-definite), plus the damping's ``(c/h) u uᵀ`` (``de``, ``d2e``: ``E'``, ``E''``; ``cs``:
+    ``c/h``). Numbers only: the CUDA kernels call it too
+    (:func:`cloth_sim.cuda.kernels.newton_at`)."""
+    ux, uy, uz = u
+    f0, f1, f2, h0, h1, h2, h3, h4, h5 = fh
     f0 += mag * ux
     f1 += mag * uy
     f2 += mag * uz
@@ -42,11 +47,11 @@ def spring_part(ux, uy, uz, inv, mag, de, d2e, cs, f0, f1, f2, h0, h1, h2, h3, h
 
 
 @numba.njit(cache=True, inline="always")
-def springs_at(
-    i, x, xt, inc_ptr, nbr, rest, k, c, kind, tab, inv_h, f0, f1, f2, h0, h1, h2, h3, h4, h5
-):
-    """Vertex ``i``'s springs: elastic, and damping along the spring; and whether one of them is a
-    compressed Choi–Ko buckling pair (the step is then checked against the energy)."""
+def springs_at(i, x, xt, springs, inv_h, fh):
+    """Vertex ``i``'s springs added to its block: elastic, and damping along the spring; returns
+    the block and whether one of them is a compressed Choi–Ko buckling pair (the step is then
+    checked against the energy)."""
+    inc_ptr, nbr, rest, k, c, kind, tab = springs
     rough = False
     xi, yi, zi = x[i, 0], x[i, 1], x[i, 2]
     # the vertex's own motion over the step, for the damping
@@ -79,19 +84,18 @@ def springs_at(
                 + ((yj - xt[j, 1]) - my) * uy
                 + ((zj - xt[j, 2]) - mz) * uz
             )
-        f0, f1, f2, h0, h1, h2, h3, h4, h5 = spring_part(
-            ux, uy, uz, inv, mag, de, d2e, cs, f0, f1, f2, h0, h1, h2, h3, h4, h5
-        )
-    return f0, f1, f2, h0, h1, h2, h3, h4, h5, rough
+        fh = spring_part((ux, uy, uz), inv, mag, de, d2e, cs, fh)
+    return fh, rough
 
 
 @numba.njit(cache=True, inline="always")
-def local_energy(
-    i, px, py, pz, x, xt, y, m_h2, drag_h, inc_ptr, nbr, rest, k, c, kind, tab, inv_h, bend
-):
-    """The part of the incremental potential that depends on vertex ``i`` placed at ``p``: its
+def local_energy(i, p, x, xt, y, m_h2, drag_h, springs, inv_h, bend):
+    """The part of the incremental potential that depends on vertex ``i`` placed at ``p`` (three
+    numbers): its
     inertia and drag, its springs' energy and their damping potential, the bending's ``½Q_ii|p|²
     + p·Σ_j Q_ij x_j`` (contacts left out)."""
+    px, py, pz = p
+    inc_ptr, nbr, rest, k, c, kind, tab = springs
     ax, ay, az = px - y[i, 0], py - y[i, 1], pz - y[i, 2]
     bx, by, bz = px - xt[i, 0], py - xt[i, 1], pz - xt[i, 2]
     e = 0.5 * m_h2[i] * (ax * ax + ay * ay + az * az) + 0.5 * drag_h * (
@@ -134,32 +138,7 @@ def pick(x, xs, colour, i, p):
 
 
 @numba.njit(cache=True, inline="always")
-def self_contacts_at(
-    i,
-    x,
-    xs,
-    xt,
-    colour,
-    rec_ptr,
-    rec,
-    pidx,
-    pcoef,
-    pnrm,
-    tau,
-    ks,
-    mu,
-    eps,
-    rec_d,
-    f0,
-    f1,
-    f2,
-    h0,
-    h1,
-    h2,
-    h3,
-    h4,
-    h5,
-):
+def self_contacts_at(i, x, xs, xt, colour, records, law, fh):
     """Vertex ``i``'s self-contacts: ``½ k (τ − d)²`` on each pair's distance ``d`` along the
     normal the search found, ``d = n·Σ_k w_k x_k`` over the pair's four vertices
     (:func:`~cloth_sim.integrators.vbd.contact_pairs`: the normal and the nearest points'
@@ -167,7 +146,10 @@ def self_contacts_at(
     slot``); and friction ``μ`` between the two
     sides as on a collider (IPC's smoothed, lagged friction on their relative tangential motion
     over the step, ``Σ_k w_k (x_k − x_k^t)``, with the pressing force of the iterate). The
-    partners' positions by :func:`pick`."""
+    partners' positions by :func:`pick`. ``law``: ``(τ, the penalty's stiffness, μ, friction's
+    ε)``; returns the block."""
+    rec_ptr, rec, pidx, pcoef, pnrm, rec_d = records
+    tau, ks, mu, eps = law
     for q in range(rec_ptr[i], rec_ptr[i + 1]):
         r = rec[q]
         pair = r // 4
@@ -189,9 +171,7 @@ def self_contacts_at(
             continue
         # ∂d/∂x_i = w n: the force pushes the pair apart along n
         lam = ks * (tau - d)
-        f0, f1, f2, h0, h1, h2, h3, h4, h5 = press(
-            lam * w, ks * w * w, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5
-        )
+        fh = press(lam * w, ks * w * w, (nx, ny, nz), fh)
         if mu <= 0.0:
             continue
         un = ux * nx + uy * ny + uz * nz
@@ -199,7 +179,5 @@ def self_contacts_at(
         tl = math.sqrt(tx * tx + ty * ty + tz * tz)
         g = 1.0 / tl if tl > eps else (2.0 - tl / eps) / eps
         sf = mu * lam * g
-        f0, f1, f2, h0, h1, h2, h3, h4, h5 = slide(
-            sf * w, tx, ty, tz, sf * w * w, nx, ny, nz, f0, f1, f2, h0, h1, h2, h3, h4, h5
-        )
-    return f0, f1, f2, h0, h1, h2, h3, h4, h5
+        fh = slide(sf * w, (tx, ty, tz), sf * w * w, (nx, ny, nz), fh)
+    return fh
