@@ -110,9 +110,7 @@ def proximity(x, x0, v, tris, pairs, held_inv_mass, free_inv_mass, clearance, h)
             (1.0, 0.0, 0.0),
             (a, b, c),
             (wa, wb, wc),
-            nx,
-            ny,
-            nz,
+            (nx, ny, nz),
             min(h - sd, 2.0 * h),
         ):
             continue
@@ -142,13 +140,15 @@ def displacement_factors(disp, tris, pairs, start_distance, factor):
 
 
 @numba.njit(cache=True, inline="always")
-def _separate(x, v, held_inv_mass, free_inv_mass, clearance, s1, w1, s2, w2, nx, ny, nz, push):
-    """Push side 1 (the points ``Σ w1·x[s1]``) along ``+n`` and side 2 along ``−n`` by ``push`` in
+def _separate(x, v, held_inv_mass, free_inv_mass, clearance, s1, w1, s2, w2, n, push):
+    """Push side 1 (the points ``Σ w1·x[s1]``) along ``+n`` (three numbers) and side 2 along ``−n``
+    by ``push`` in
     all, shared by their inverse masses (each side moved as a whole, held particles staying), and
     remove an approaching velocity along ``n`` alike. ``s1, s2``: 3 particle indices each, ``w1,
     w2`` their weights (0 for an unused slot). A side held by a collider (``held_inv_mass`` 0)
     stays; when both are, the side farther above the colliders (``clearance``) moves alone, by its
     own masses. Returns whether anything could move."""
+    nx, ny, nz = n
     inv_mass = held_inv_mass
     i1 = w1[0] * inv_mass[s1[0]] + w1[1] * inv_mass[s1[1]] + w1[2] * inv_mass[s1[2]]
     i2 = w2[0] * inv_mass[s2[0]] + w2[1] * inv_mass[s2[1]] + w2[2] * inv_mass[s2[2]]
@@ -227,25 +227,12 @@ def _adjacent(p, q, adj_ptr, adj):
 
 @numba.njit(cache=True)
 def proximity_features(
-    x,
-    x0,
-    v,
-    tris,
-    pairs,
-    held_inv_mass,
-    free_inv_mass,
-    clearance,
-    h,
-    tri_edge,
-    edge_owner,
-    edge_tris,
-    vertex_owner,
-    adj_ptr,
-    adj,
+    x, x0, v, tris, pairs, held_inv_mass, free_inv_mass, clearance, h, features
 ):
     """The point–edge and point–point cases of the proximity pass (module docstring): candidate
     pairs whose nearest point on the triangle is on an edge or a corner; returns how many were
-    pushed."""
+    pushed. ``features``: the cloth's topology (:attr:`SelfCollision.features`)."""
+    _, tri_edge, edge_owner, edge_tris, vertex_owner, adj_ptr, adj = features
     pushed = 0
     for q in range(pairs.shape[0]):
         p, i = pairs[q, 0], pairs[q, 1]
@@ -283,9 +270,7 @@ def proximity_features(
             (1.0, 0.0, 0.0),
             s2,
             w2,
-            nx,
-            ny,
-            nz,
+            (nx, ny, nz),
             min(h - d, 2.0 * h),
         ):
             pushed += 1
@@ -326,9 +311,7 @@ def proximity_edges(x, x0, v, edges, pairs, held_inv_mass, free_inv_mass, cleara
             (1.0 - sv, sv, 0.0),
             (c, d, d),
             (1.0 - tv, tv, 0.0),
-            nx / nl,
-            ny / nl,
-            nz / nl,
+            (nx / nl, ny / nl, nz / nl),
             min(h - dist, 2.0 * h),
         ):
             pushed += 1
@@ -515,10 +498,7 @@ class SelfCollision:
         if not np.isfinite(moved).all():
             return  # a diverged step: the simulator's check after the stages restores the state
         reach = 0.5 * h + moved
-        tris, (edges, tri_edge, edge_owner, edge_tris, vertex_owner, adj_ptr, adj) = (
-            self._tris,
-            self._features,
-        )
+        tris, edges = self._tris, self._features[0]
         # the stage's steps are small: the kept pairs answer most of them where the cloth is
         # coarse against its thickness (keeps_pairs: the fold scene 1.6x faster at 24x24); vbd's
         # 1/60 s steps move too far between its queries to gain
@@ -527,21 +507,7 @@ class SelfCollision:
         self.last_pushed = (
             proximity(x, x0, v, tris, pairs, inv_mass, free, clearance, h)
             + proximity_features(
-                x,
-                x0,
-                v,
-                tris,
-                pairs,
-                inv_mass,
-                free,
-                clearance,
-                h,
-                tri_edge,
-                edge_owner,
-                edge_tris,
-                vertex_owner,
-                adj_ptr,
-                adj,
+                x, x0, v, tris, pairs, inv_mass, free, clearance, h, self._features
             )
             + proximity_edges(x, x0, v, edges, e_pairs, inv_mass, free, clearance, h)
         )

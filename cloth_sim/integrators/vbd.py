@@ -1073,7 +1073,7 @@ class VBD(Integrator):
             if len(colliders.kinds):
                 xm = self._buffer("_xm", x)
                 contact = grid.contact(
-                    xm, xt, self._near, touch, cut, x_cd, allow, GAMMA, tau, kc, eps, colliders,
+                    xm, xt, self._near, touch, cut, x_cd, allow, GAMMA, (tau, kc, eps), colliders,
                     self._rec,
                 )  # fmt: skip
             done = self._iterate_grid(grid, x, xt, y, m_h2, 1.0 / h, drag_h, budget_end, contact)

@@ -220,14 +220,15 @@ class GridLayout:
             contact,
         )
 
-    def contact(self, xm, xt, near, touch, cut, x_cd, allow, gamma, tau, kc, eps, colliders, rec):
+    def contact(self, xm, xt, near, touch, cut, x_cd, allow, gamma, law, colliders, rec):
         """What the sweep with colliders reads besides the blocks (:func:`_sweeps_touching`):
         each slot's particle (``−1`` for a ghost), a scratch ``(n, 3)`` for the vertices it
-        takes again, the step's start, the general sweep's per-vertex arrays and colliders, and
-        nine scratch rows for the springs' force and Hessian a slot."""
+        takes again, the step's start, the general sweep's per-vertex arrays, the contact law
+        ``(τ, the penalty's stiffness, friction's ε)`` and the colliders, and nine scratch rows
+        for the springs' force and Hessian a slot."""
         if self._fh is None:
             self._fh = tuple(np.zeros(self.size) for _ in range(9))
-        rows = (self.vof, xm, xt, near, touch, cut, x_cd, allow, gamma, tau, kc, eps)
+        rows = (self.vof, xm, xt, near, touch, cut, x_cd, allow, gamma, *law)
         return (*rows, colliders, rec, self._fh)
 
     def swap(self) -> None:

@@ -768,7 +768,7 @@ class SpringTerm:
         m = len(self.springs)
         if out is None:
             out = np.empty((m, 3, 3)), np.empty((m, 3, 3)), np.empty((m, 3, 3))
-        kx, dx, cv = out
+        out = tuple(out)
         spring_jacobian_blocks(
             np.ascontiguousarray(x, dtype=np.float64),
             np.ascontiguousarray(v, dtype=np.float64),
@@ -780,11 +780,9 @@ class SpringTerm:
             BUCKLE_TABLE,
             clamp,
             position_damping,
-            kx,
-            dx,
-            cv,
+            out,
         )
-        return kx, dx, cv
+        return out
 
 
 class GravityTerm:
@@ -1096,10 +1094,9 @@ def _stiffness_coefficients(l, L, k, kind, tab, clamp):
 
 
 @numba.njit(cache=True, parallel=True)
-def spring_jacobian_blocks(
-    x, v, springs, rest, k, c, kind, tab, clamp, position_damping, kx, dx, cv
-):
-    """Per-spring 3×3 blocks of the force Jacobians, as ``∂f_i/∂x_j`` and ``∂f_i/∂v_j``:
+def spring_jacobian_blocks(x, v, springs, rest, k, c, kind, tab, clamp, position_damping, out):
+    """Per-spring 3×3 blocks of the force Jacobians, as ``∂f_i/∂x_j`` and ``∂f_i/∂v_j``, into
+    ``out = (kx, dx, cv)`` (three ``(m, 3, 3)`` arrays):
 
     * ``kx[s]`` — elastic ``E''·uuᵀ + (E'/l)·(I − uuᵀ)`` (symmetric),
     * ``dx[s]`` — the damping force's dependence on positions, ``(c/l)·(u (P r)ᵀ + (r·u) P)`` with
@@ -1109,7 +1106,10 @@ def spring_jacobian_blocks(
     The other blocks follow: ``∂f_i/∂x_i = ∂f_j/∂x_j = −block``, ``∂f_j/∂x_i = blockᵀ`` (the
     damping blocks ``dx`` change sign with ``r``: ``∂f_j/∂x_i = dx``, as ``f_j = −f_i``).
     Without ``position_damping`` ``dx`` stays zero (Baraff–Witkin leave it out of their matrix).
-    Springs on every core (each writes only its own blocks)."""
+    Springs on every core (each writes only its own blocks; the three arrays taken out of
+    ``out`` before the parallel loop, whose body would lose writes through a tuple's items:
+    docs/contributing.md)."""
+    kx, dx, cv = out
     for s in numba.prange(springs.shape[0]):
         i = springs[s, 0]
         j = springs[s, 1]

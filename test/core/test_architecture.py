@@ -226,15 +226,11 @@ LONG_SIGNATURES = {
     "cloth_sim.simulator:Simulator.__init__": 17,
     "cloth_sim.integrators.vbd_grid:_commit": 16,
     "cloth_sim.constraints.strain_limit:provot_passes": 16,
-    "cloth_sim.contact.self_collision:proximity_features": 15,
     "cloth_sim.integrators.vbd_contact:onset": 14,
     "cloth_sim.integrators.vbd_contact:colliders_at": 13,
-    "cloth_sim.physics.forces:spring_jacobian_blocks": 13,
     "cloth_sim.physics.forces:_spring_force": 13,
-    "cloth_sim.integrators.vbd_grid:GridLayout.contact": 13,
     "cloth_sim.envs.cloth_env:ClothEnv.__init__": 13,
     "cloth_sim.cuda.simulator:CudaSimulator.__init__": 13,
-    "cloth_sim.contact.self_collision:_separate": 13,
 }
 
 
