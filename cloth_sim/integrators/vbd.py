@@ -306,40 +306,30 @@ def _nearest(ptr, rec, dist):
 
 # ---------------------------------------------------------------------------- the iteration
 @numba.njit(cache=True, error_model="numpy")
-def _sweep(
-    verts,
-    lo,
-    hi,
-    x,
-    xt,
-    y,
-    xs,
-    m_h2,
-    sp,
-    inv_h,
-    drag_h,
-    co,
-    tau,
-    kc,
-    eps,
-    sc,
-    ks,
-    mu_self,
-    x_cd,
-    allow,
-    gamma,
-    near,
-    stepped,
-    cut,
-    touch,
-):
+def _sweep(verts, lo, hi, state, inertia, sp, co, sc, law, bounds, out):
     """The Newton steps of vertices ``verts[lo:hi]`` in order, each on the incremental potential,
-    written to its row of ``x``, within its bounds (:func:`.truncate`). ``sp``: each vertex's
-    springs (CSR: the other end, rest length, k, c, kind, in the vertex's order) and Choi–Ko's
-    table; ``co``: the colliders (:meth:`~cloth_sim.contact.colliders.Contacts.packed`); ``sc``:
-    the self-contact records, pairs and topology. (The arrays are unpacked here, once a chunk:
-    unpacked per vertex, or passed one by one to a function per vertex, their reference counting
-    cost more than the vertex's work.)"""
+    written to its row of ``x``, within its bounds (:func:`.truncate`). The bundles:
+
+    * ``state = (x, xt, y, xs)``: the iterate (written), the step's start, the inertial target,
+      the iterate as this iteration began (what a vertex reads of its own colour's);
+    * ``inertia = (m_h2, inv_h, drag_h)``: each vertex's ``m/h²``, ``1/h``, the drag's ``d/h``;
+    * ``sp``: each vertex's springs (CSR: the other end, rest length, k, c, kind, in the vertex's
+      order), Choi–Ko's table, whether any is not smooth, and the bending's rows;
+    * ``co``: the colliders (:class:`~cloth_sim.contact.colliders.PackedColliders`); ``sc``: the
+      self-contact records, pairs and the colouring;
+    * ``law = (τ, the colliders' penalty stiffness, friction's ε, self-contact's stiffness and
+      μ, γ)``; ``bounds = (x_cd, allow, near)``: where the last search was made, each vertex's
+      allowance, and whether it may touch a collider;
+    * ``out = (stepped, cut, touch)``: each vertex's squared force, whether its step was cut and
+      whether it touches something (written).
+
+    (The arrays are unpacked here, once a chunk: unpacked per vertex, or passed one by one to a
+    function per vertex, their reference counting cost more than the vertex's work.)"""
+    x, xt, y, xs = state
+    m_h2, inv_h, drag_h = inertia
+    tau, kc, eps, ks, mu_self, gamma = law
+    x_cd, allow, near = bounds
+    stepped, cut, touch = out
     inc_ptr, nbr, rest, k, c, kind, tab, nonsmooth, bptr, bidx, bval, bdiag = sp
     springs = (inc_ptr, nbr, rest, k, c, kind, tab)
     bend = (bptr, bidx, bval, bdiag)
@@ -454,32 +444,7 @@ CHUNKS = 16
 
 
 @numba.njit(cache=True, parallel=True)
-def _iterate_parallel(
-    verts,
-    cptr,
-    x,
-    xt,
-    y,
-    xs,
-    m_h2,
-    sp,
-    inv_h,
-    drag_h,
-    co,
-    tau,
-    kc,
-    eps,
-    sc,
-    ks,
-    mu_self,
-    x_cd,
-    allow,
-    gamma,
-    near,
-    stepped,
-    cut,
-    touch,
-):
+def _iterate_parallel(verts, cptr, state, inertia, sp, co, sc, law, bounds, out):
     """One iteration: the colours in order, each colour's vertices at once, in chunks (each vertex
     writes only its own row; a colour reads other colours' rows and, for contacts, ``xs``)."""
     for col in range(cptr.shape[0] - 1):
@@ -487,33 +452,7 @@ def _iterate_parallel(
         size = (hi - lo + CHUNKS - 1) // CHUNKS
         for b in numba.prange(CHUNKS):
             a = lo + b * size
-            _sweep(
-                verts,
-                a,
-                min(a + size, hi),
-                x,
-                xt,
-                y,
-                xs,
-                m_h2,
-                sp,
-                inv_h,
-                drag_h,
-                co,
-                tau,
-                kc,
-                eps,
-                sc,
-                ks,
-                mu_self,
-                x_cd,
-                allow,
-                gamma,
-                near,
-                stepped,
-                cut,
-                touch,
-            )
+            _sweep(verts, a, min(a + size, hi), state, inertia, sp, co, sc, law, bounds, out)
 
 
 def _iterate_serial(verts, cptr, *args):
@@ -1092,28 +1031,14 @@ class VBD(Integrator):
             run(
                 verts,
                 cptr,
-                x,
-                xt,
-                y,
-                xs,
-                m_h2,
+                (x, xt, y, xs),
+                (m_h2, 1.0 / h, drag_h),
                 sp,
-                1.0 / h,
-                drag_h,
                 colliders,
-                tau,
-                kc,
-                eps,
                 sc_arrays,
-                ks,
-                self.self_friction,
-                x_cd,
-                allow,
-                GAMMA,
-                self._near,
-                stepped,
-                cut,
-                touch,
+                (tau, kc, eps, ks, self.self_friction, GAMMA),
+                (x_cd, allow, self._near),
+                (stepped, cut, touch),
             )
             if tether:
                 # the long-range attachments after each sweep: the pins' pull reaches the far
