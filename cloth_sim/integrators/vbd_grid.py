@@ -323,11 +323,14 @@ def _spring(
 
 
 @numba.njit(cache=True, inline="always")
-def _advance(t, xi, yi, zi, f0, f1, f2, a0, b, c, dd, e, ff, free, N0, N1, N2, stepped):
-    """Slot ``t``'s Newton step (:func:`_solve`): the new position into ``N``, its squared force
-    (the imbalance the step answers) into ``stepped``. (Calls of more than 30 arguments compile
-    to a tuple and ``*args``, which numba cannot inline: hence the springs' terms and this step
-    are two calls.)"""
+def _advance(t, p, fh, free, N0, N1, N2, stepped):
+    """Slot ``t``'s Newton step (:func:`_solve`) from ``p``, its position, and ``fh``, its block
+    (force and Hessian, nine numbers: :mod:`~cloth_sim.integrators.vbd_terms`): the new position
+    into ``N``, its squared force (the imbalance the step answers) into ``stepped``. (A call of
+    more than 30 arguments compiles to a tuple and ``*args``, which numba cannot inline: hence
+    the springs' terms, :func:`_terms`, and this step are two calls.)"""
+    xi, yi, zi = p
+    f0, f1, f2, a0, b, c, dd, e, ff = fh
     sx, sy, sz = _solve(a0, b, c, dd, e, ff, f0, f1, f2, free)
     N0[t], N1[t], N2[t] = xi + sx, yi + sy, zi + sz
     stepped[t] = f0 * f0 + f1 * f1 + f2 * f2  # its imbalance as the sweep found it
@@ -502,7 +505,7 @@ def _sweeps(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE, 
                     t, n0, n1, n2, n3, n4, n5, n6, n7, n8, n9, n10, n11, X0, X1, X2, T0, T1, T2,
                     Y0, Y1, Y2, K, REST, C, QO, QD, MH2, inv_h, drag_h,
                 )  # fmt: skip
-                _advance(t, xi, yi, zi, f0, f1, f2, a0, b, c, dd, e, ff, FREE[t], N0, N1, N2,
+                _advance(t, (xi, yi, zi), (f0, f1, f2, a0, b, c, dd, e, ff), FREE[t], N0, N1, N2,
                          stepped)  # fmt: skip
             for t in range(lo_, hi_):
                 move = FREE[t] != 0.0
@@ -546,7 +549,7 @@ def _sweeps_touching(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH
                     t, n0, n1, n2, n3, n4, n5, n6, n7, n8, n9, n10, n11, X0, X1, X2, T0, T1, T2,
                     Y0, Y1, Y2, K, REST, C, QO, QD, MH2, inv_h, drag_h,
                 )  # fmt: skip
-                _advance(t, xi, yi, zi, f0, f1, f2, a0, b, c, dd, e, ff, FREE[t], N0, N1, N2,
+                _advance(t, (xi, yi, zi), (f0, f1, f2, a0, b, c, dd, e, ff), FREE[t], N0, N1, N2,
                          stepped)  # fmt: skip
                 # the springs' force and Hessian, for the vertices the second pass takes again
                 F0[t], F1[t], F2[t] = f0, f1, f2

@@ -220,7 +220,6 @@ LONG_SIGNATURES = {
     "cloth_sim.physics.forces:spring_forces_gather": 25,
     "cloth_sim.integrators.vbd_grid:_sweeps_touching": 24,
     "cloth_sim.integrators.vbd_grid:_sweeps": 23,
-    "cloth_sim.integrators.vbd_grid:_advance": 18,
     "cloth_sim.simulator:Simulator.__init__": 17,
     "cloth_sim.integrators.vbd_grid:_commit": 16,
     "cloth_sim.constraints.strain_limit:provot_passes": 16,
