@@ -192,11 +192,6 @@ class Scene:
         """Fresh collider objects (each simulator moves its own)."""
         return [KINDS[kind](**kw) for kind, kw in self.colliders]
 
-    @property
-    def wind(self):
-        w = self.wind_strength * np.asarray(self.wind_direction, dtype=float)
-        return None if not np.any(w) else w
-
     def pinned_cells(self, rows: int | None = None, cols: int | None = None) -> list:
         """``(row, col)`` pins for a grid of the given size (pins outside it are dropped)."""
         rows = self.rows if rows is None else rows
