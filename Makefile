@@ -9,9 +9,8 @@ STAMP  := $(VENV)/.installed
 MSGS   := build/interfaces/.built
 # numba's kernels compiled into their on-disk cache (again when the package's code changes: a
 # fraction of a second when the cache holds them; from an empty cache, simulator.compile_kernels'
-# three parts in two processes, since numba compiles on one core: the two contact parts together,
-# which share ~120 s of compilation, and the steps beside the interfaces and the site; then one
-# call finds them all in the cache), and the package's
+# three parts each in a process of its own, since numba compiles on one core, beside the
+# interfaces and the site; then one call finds them all in the cache), and the package's
 # bytecode: these machines set PYTHONDONTWRITEBYTECODE=1, so without it every process (a node, a CLI, a Ray worker) compiled
 # the package's modules again as it imported them (0.2-0.5 s a process: docs/BENCHMARKS.md §11)
 KERNELS := $(VENV)/.kernels
@@ -47,10 +46,9 @@ $(STAMP): requirements.txt setup.py pyproject.toml
 
 $(KERNELS): $(STAMP) $(shell find cloth_sim -name '*.py')
 	$(PY) -m compileall -q cloth_sim
-	pids=; for parts in grid_contacts,contacts steps; do \
-		$(PY) -c "import sys; from cloth_sim.simulator import compile_kernels as c; \
-			print(f'kernels ({sys.argv[1]}) compiled in ' \
-			f'{sum(c(p) for p in sys.argv[1].split(\",\")):.1f} s')" $$parts & pids="$$pids $$!"; \
+	pids=; for part in grid_contacts contacts steps; do \
+		$(PY) -c "from cloth_sim.simulator import compile_kernels as c; \
+			print(f'kernels ($$part) compiled in {c(\"$$part\"):.1f} s')" & pids="$$pids $$!"; \
 	done; for pid in $$pids; do wait $$pid || exit 1; done
 	$(PY) -c "from cloth_sim.simulator import compile_kernels as c; print(f'kernels: all in the cache, {c():.1f} s')"
 	@touch $@

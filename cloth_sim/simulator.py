@@ -933,8 +933,7 @@ def compile_kernels(part: str | None = None) -> float:
     call with the cache warm: docs/BENCHMARKS.md §7).
 
     ``part`` (one of :data:`COMPILE_PARTS`) runs only that part's kernels: ``make install``
-    compiles them in two processes side by side (numba compiles on one core; the two contact parts
-    in one, as they share ~120 s of compilation), then
+    compiles the parts in processes of their own side by side (numba compiles on one core), then
     calls this once more to find them all in the cache."""
 
     if part is not None and part not in COMPILE_PARTS:
@@ -1061,14 +1060,13 @@ def compile_grid_contacts(model: ClothModel | None = None) -> None:
     """``vbd`` on a grid's blocks with a collider and no self-contact (drape and table at
     ``vbd``): the colours' sweep with the contact pass, ~50 s of numba's compilation alone (their
     first tick paid it until :func:`compile_kernels` ran this): its part ``grid_contacts``,
-    which ``make install`` compiles beside ``contacts`` in a process of their own."""
+    which ``make install`` compiles in a process of its own."""
 
     model = _parallel_grid() if model is None else model
     Simulator(model, integrator="vbd", dt=1e-4, colliders=[Plane(offset=-1.0)]).step(1)
 
 
-#: :func:`compile_kernels`' parts (``make install`` runs the two contact parts in one process and
-#: the steps in another)
+#: :func:`compile_kernels`' parts, each a process of its own in ``make install``
 COMPILE_PARTS = ("grid_contacts", "contacts", "steps")
 _COMPILERS = {
     "grid_contacts": compile_grid_contacts,
