@@ -53,11 +53,16 @@ def _strain_limit(values: dict):
     return values["strain_limit"] or None  # (0: off)
 
 
-#: the options that are not one parameter's value as it is
+#: the options that are not one parameter's value as it is: how each is made, and the values it
+#: needs (the integrator's options read the method and the step too; ``vbd.fit_tick`` and
+#: ``real_time_factor``, the node's own, may be missing: no time budget)
 _COMPOSED = {
-    "wind": wind,
-    "strain_limit": _strain_limit,
-    "integrator_options": integrator_options,
+    "wind": (wind, ("wind.strength", "wind.direction")),
+    "strain_limit": (_strain_limit, ("strain_limit",)),
+    "integrator_options": (
+        integrator_options,
+        ("integrator", "dt", "vbd.iterations", "vbd.tolerance", "vbd.substeps"),
+    ),
 }
 
 #: option → the parameters that feed it, in the schema's order
@@ -71,16 +76,11 @@ LIVE = tuple(o for o, names in FED_BY.items() if any(SCHEMA[n].apply == "live" f
 
 def options(values: dict) -> dict:
     """The simulator's options that ``values`` (parameter name → checked value) set: each option
-    whose parameters are all in ``values`` (``vbd.fit_tick`` and ``real_time_factor``, the node's
-    own, may be missing: no time budget)."""
+    whose values are all there (:data:`_COMPOSED` says which a composed option needs)."""
     out = {}
     for option, names in FED_BY.items():
-        if option == "integrator_options":
-            needed = ("integrator", "dt", "vbd.iterations", "vbd.tolerance", "vbd.substeps")
-        else:
-            needed = names
+        compose, needed = _COMPOSED.get(option, (None, names))
         if all(n in values for n in needed):
-            compose = _COMPOSED.get(option)
             out[option] = compose(values) if compose else values[names[0]]
     return out
 

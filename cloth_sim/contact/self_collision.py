@@ -142,12 +142,11 @@ def displacement_factors(disp, tris, pairs, start_distance, factor):
 @numba.njit(cache=True, inline="always")
 def _separate(x, v, held_inv_mass, free_inv_mass, clearance, s1, w1, s2, w2, n, push):
     """Push side 1 (the points ``Σ w1·x[s1]``) along ``+n`` (three numbers) and side 2 along ``−n``
-    by ``push`` in
-    all, shared by their inverse masses (each side moved as a whole, held particles staying), and
-    remove an approaching velocity along ``n`` alike. ``s1, s2``: 3 particle indices each, ``w1,
-    w2`` their weights (0 for an unused slot). A side held by a collider (``held_inv_mass`` 0)
-    stays; when both are, the side farther above the colliders (``clearance``) moves alone, by its
-    own masses. Returns whether anything could move."""
+    by ``push`` in all, shared by their inverse masses (each side moved as a whole, held particles
+    staying), and remove an approaching velocity along ``n`` alike. ``s1, s2``: 3 particle
+    indices each, ``w1, w2`` their weights (0 for an unused slot). A side held by a collider
+    (``held_inv_mass`` 0) stays; when both are, the side farther above the colliders
+    (``clearance``) moves alone, by its own masses. Returns whether anything could move."""
     nx, ny, nz = n
     inv_mass = held_inv_mass
     i1 = w1[0] * inv_mass[s1[0]] + w1[1] * inv_mass[s1[1]] + w1[2] * inv_mass[s1[2]]

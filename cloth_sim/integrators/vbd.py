@@ -337,7 +337,7 @@ def _sweep(verts, lo, hi, state, inertia, sp, co, sc, law, bounds, out):
     cpos0, crot0, cbank = co.pos0, co.rot0, (co.reals, co.ints, co.starts)
     rec_ptr, rec, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d, colour = sc
     records = (rec_ptr, rec, pidx, pcoef, pnrm, rec_d)
-    law, self_law = (tau, kc, eps), (tau, ks, mu_self, eps)
+    collider_law, self_law = (tau, kc, eps), (tau, ks, mu_self, eps)
     for q in range(lo, hi):
         i = verts[q]
         m = m_h2[i] + drag_h  # the inertia's m/h², and the drag's d/h
@@ -361,7 +361,7 @@ def _sweep(verts, lo, hi, state, inertia, sp, co, sc, law, bounds, out):
         touch[i] = 0
         if ckind.shape[0] and near[i]:
             f0, f1, f2, h0, h1, h2, h3, h4, h5, touched = colliders_at(
-                i, x, xt, ckind, cpos, crot, cpos0, crot0, cgeo, cmu, cbank, law, fh
+                i, x, xt, ckind, cpos, crot, cpos0, crot0, cgeo, cmu, cbank, collider_law, fh
             )
             fh = (f0, f1, f2, h0, h1, h2, h3, h4, h5)
             if touched:

@@ -228,8 +228,8 @@ class GridLayout:
         for the springs' force and Hessian a slot."""
         if self._fh is None:
             self._fh = tuple(np.zeros(self.size) for _ in range(9))
-        rows = (self.vof, xm, xt, near, touch, cut, x_cd, allow, gamma, *law)
-        return (*rows, colliders, rec, self._fh)
+        return (self.vof, xm, xt, near, touch, cut, x_cd, allow, gamma, law, colliders, rec,
+                self._fh)  # fmt: skip
 
     def swap(self) -> None:
         """The two position arrays take turns (what :func:`solve` did inside, once)."""
@@ -526,12 +526,12 @@ def _sweeps_touching(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH
     and every extrapolation within the vertex's bounds (:func:`~.vbd_contact.within`,
     :func:`~.vbd_contact.truncate`: what the last search lets it move), extrapolates no vertex in
     contact, and commits."""
-    (vof, xm, xt, near, touch, cut, x_cd, allow, gamma, tau, kc, eps, co, sc, fh) = contact
+    (vof, xm, xt, near, touch, cut, x_cd, allow, gamma, law, co, sc, fh) = contact
+    tau = law[0]
     F0, F1, F2, H0, H1, H2, H3, H4, H5 = fh
     ckind, cpos, crot, cgeo, cmu = co.kinds, co.pos, co.rot, co.geo, co.mu
     cpos0, crot0, cbank = co.pos0, co.rot0, (co.reals, co.ints, co.starts)
     rec_ptr, rec, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d = sc
-    law = (tau, kc, eps)
     X0, X1, X2 = A
     B0, B1, B2 = B
     T0, T1, T2 = T

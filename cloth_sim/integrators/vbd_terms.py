@@ -91,9 +91,8 @@ def springs_at(i, x, xt, springs, inv_h, fh):
 @numba.njit(cache=True, inline="always")
 def local_energy(i, p, x, xt, y, m_h2, drag_h, springs, inv_h, bend):
     """The part of the incremental potential that depends on vertex ``i`` placed at ``p`` (three
-    numbers): its
-    inertia and drag, its springs' energy and their damping potential, the bending's ``½Q_ii|p|²
-    + p·Σ_j Q_ij x_j`` (contacts left out)."""
+    numbers): its inertia and drag, its springs' energy and their damping potential, the
+    bending's ``½Q_ii|p|² + p·Σ_j Q_ij x_j`` (contacts left out)."""
     px, py, pz = p
     inc_ptr, nbr, rest, k, c, kind, tab = springs
     ax, ay, az = px - y[i, 0], py - y[i, 1], pz - y[i, 2]

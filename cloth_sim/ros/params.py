@@ -1,5 +1,5 @@
 """The node's parameters: ROS descriptors made from :data:`cloth_sim.parameters.SCHEMA`, and the
-the node's defaults. The bounds live in the schema only."""
+node's defaults. The bounds live in the schema only."""
 
 from __future__ import annotations
 
