@@ -25,7 +25,16 @@ setup(
     install_requires=["setuptools"],
     # the versions are pinned in requirements.txt; `pip install .[envs]` names what the tasks need
     extras_require={
-        "envs": ["gymnasium>=1.2,<2", "numpy", "scipy", "numba", "pyyaml", "trimesh", "cholespy"]
+        "envs": [
+            "gymnasium>=1.2,<2",
+            "numpy",
+            "scipy",
+            "numba",
+            "pyyaml",
+            "trimesh",
+            "cholespy",
+            "qdldl",
+        ]
     },
     zip_safe=False,
     maintainer="cloth_sim developers",

@@ -136,9 +136,11 @@ def _bench_vbd_floor(args) -> int:
 
 
 def _bench_convergence(args) -> int:
-    from .convergence import print_accuracy_table, print_convergence_table
+    from .convergence import print_accuracy_table, print_convergence_table, print_rest_table
 
-    if args.accuracy:
+    if args.rest:
+        print_rest_table(args.material.split(","), tuple(args.sizes), args.seconds or 10.0)
+    elif args.accuracy:
         print_accuracy_table(args.material.split(","), tuple(args.sizes), args.seconds or 2.0)
     else:
         print_convergence_table(args.material, tuple(args.sizes), args.seconds or 1.0)
@@ -269,6 +271,12 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "--accuracy",
         action="store_true",
         help="vbd's defaults at 1/60 s against a fine-step reference (the solver issue's targets)",
+    )
+    cv.add_argument(
+        "--rest",
+        action="store_true",
+        help="vbd's defaults at 1/60 s in air until the sheet is at rest: its free edge's height "
+        "at each size (10 s at most)",
     )
     cv.set_defaults(func=_bench_convergence)
     gp = bsub.add_parser(

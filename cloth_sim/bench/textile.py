@@ -33,10 +33,12 @@ def add_parser(sub) -> None:
     )
     t.add_argument(
         "--method",
-        choices=("statics", "vbd"),
-        default="statics",
-        help="cantilever: the strip's equilibrium (Newton on its energy), or the strip released "
-        "and stepped by vbd at 1/60 s with its defaults, in air, until at rest (default: statics)",
+        choices=("vbd", "statics", "explicit"),
+        default=None,
+        help="cantilever: the strip released and stepped by vbd at 1/60 s with its defaults, in "
+        "air, until at rest (vbd, the default), or its equilibrium (statics: Newton on its "
+        "energy); drape: symplectic Euler at 0.9 of its stable step (explicit, the default) or "
+        "vbd at 1/60 s with its defaults",
     )
     t.set_defaults(func=_textile)
 
@@ -51,14 +53,25 @@ def _textile(args) -> int:
     for g in grids:
         if g < 4:
             raise ValueError(f"--grid: expected integers >= 4, got {g}")
+    accepted = {
+        "cantilever": textile.METHODS,
+        "drape": textile.DRAPE_METHODS,
+        "tensile": ("statics",),
+    }[args.test]
+    method = args.method or accepted[0]
+    if method not in accepted:
+        raise ValueError(
+            f"--method: {args.test} accepts {', '.join(accepted)}, got {args.method!r}"
+        )
     if args.test == "drape":
+        print(f"drape ({method}): the drape coefficient DC")
         print(
             f"{'material':20s} {'grid':>9s} {'c (cm)':>7s} {'DC':>7s} {'settled':>8s} {'wall':>7s}"
         )
         for n, f in fabrics.items():
             for g in grids:
                 t = time.perf_counter()
-                r = textile.drape(f, grid=g)
+                r = textile.drape(f, grid=g, method=method)
                 print(
                     f"{n:20s} {r['grid']:>9s} {100 * r['bending_length']:7.3f} "
                     f"{r['drape_coefficient']:7.4f} {r['settled_at']:7.2f}s "
@@ -67,7 +80,7 @@ def _textile(args) -> int:
                 )
         return 0
     cantilever = args.test == "cantilever"
-    dynamic = cantilever and args.method == "vbd"
+    dynamic = cantilever and method == "vbd"
     unit, scale = ("cm", 100.0) if cantilever else ("N/m", 1.0)
     head = "bending length" if cantilever else "tensile stiffness"
     how = (
@@ -87,7 +100,7 @@ def _textile(args) -> int:
             for g in grids:
                 t = time.perf_counter()
                 if cantilever:
-                    r = textile.cantilever(f, grid=g, direction=d, method=args.method)
+                    r = textile.cantilever(f, grid=g, direction=d, method=method)
                 else:
                     r = textile.tensile(f, grid=g, direction=d)
                 extra = f" {r['angle_deg']:6.2f}° {scale * r['peirce']:8.3f}" if cantilever else ""
@@ -104,7 +117,7 @@ def _textile(args) -> int:
                 )
     if dynamic:
         print(
-            f"# at rest: no particle faster than {1e3 * textile.REST_SPEED:g} mm/s; '!' marks a "
-            "strip still moving when its simulated time ran out (10 s)"
+            f"# at rest: no particle faster than {1e3 * textile.REST_SPEED:g} mm/s at two checks "
+            "0.25 s apart; '!' marks a strip still moving when its simulated time ran out (10 s)"
         )
     return 0

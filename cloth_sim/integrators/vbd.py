@@ -100,6 +100,7 @@ from .base import Integrator, Stability
 from .registry import register
 from .vbd_contact import colliders_at, onset, solve3, truncate, within
 from .vbd_grid import GridLayout
+from .vbd_newton import NewtonSolve, applies, direct_is_cheaper
 from .vbd_options import VBDOptions
 from .vbd_residual import sweep_residual
 from .vbd_terms import local_energy, self_contacts_at, springs_at
@@ -178,8 +179,8 @@ def colour_groups(springs: np.ndarray, n: int, free: np.ndarray) -> tuple[np.nda
     return cptr, np.ascontiguousarray(verts, dtype=np.int64)
 
 
-def substeps_needed(ptr, k, c, bdiag, masses, free, dt) -> int:
-    """The fewest substeps (at most :data:`MAX_SUBSTEPS`) of a step of ``dt`` in which every free
+def substeps_needed(ptr, k, c, bdiag, masses, free, dt, cap: int = MAX_SUBSTEPS) -> int:
+    """The fewest substeps (at most ``cap``) of a step of ``dt`` in which every free
     vertex's ``(h²·Σk + h·Σc + h²·Q_ii)/m`` is at most :data:`SUBSTEP_RATIO`: ``ptr`` the
     vertices' springs (CSR), ``k``, ``c`` their stiffness and damping in that order, ``bdiag`` the
     bending's diagonal (empty for none). What :meth:`VBD.substeps_for` chooses, and the CUDA
@@ -193,7 +194,7 @@ def substeps_needed(ptr, k, c, bdiag, masses, free, dt) -> int:
     ratio = (dt * dt * ks + dt * cs)[free] / masses[free]
     worst = float(ratio.max()) if len(ratio) else 0.0
     steps = math.ceil(math.sqrt(worst / SUBSTEP_RATIO)) if worst > SUBSTEP_RATIO else 1
-    return min(MAX_SUBSTEPS, steps)
+    return min(cap, steps)
 
 
 def _csr(owner: np.ndarray, item: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -664,6 +665,13 @@ class VBD(Integrator):
     can gain energy (a 16×16 sheet at 1/30 s and 3 iterations a step: its kinetic energy 26 J
     above the fall's after 10 s), which backward Euler's descent cannot; converged, it did not.
     A substep with colliders, self-contact or a strain limit active is backward Euler.
+    ``direct`` (None: chosen where ``iterations`` and ``substeps`` are not given): solve each
+    step whole by Newton's method with the Hessian factorised
+    (:mod:`~cloth_sim.integrators.vbd_newton`) instead of sweeps, where it applies (no colliders,
+    self-contact or tethers; springs without damping); chosen where its cost model says it is
+    cheaper: a small cloth whose vertices are light beside its springs (a cantilever strip of a
+    real fabric rests in 3 s of wall time where its capped sweeps never brought polyester's to
+    rest; docs/convergence.md).
 
     Second order (BDF2) where the substeps solve it, else first order (backward Euler); no step
     limit; any iteration count gives a usable state.
@@ -691,6 +699,7 @@ class VBD(Integrator):
         "last_contacts",
         "truncated",
         "grid_steps",
+        "direct_steps",
     )
     #: the post-step stages resolved inside the iterations. Self-contact, and with it every
     #: self-collision pass, is; the colliders' contacts are in the iterations too, and their stage
@@ -717,10 +726,13 @@ class VBD(Integrator):
             substeps = "auto" if self.chosen_iterations else 1
         self.substeps = None if substeps == "auto" else int(substeps)
         self.collider_share = None if o.collider_share is None else float(o.collider_share)
-        self._substeps_of, self._substeps_n = None, 1
+        self._substeps_of, self._substeps_n, self._substeps_wanted = None, 1, 1
         self.self_friction = float(o.self_friction)
         self.tethers = o.tethers
         self.grid = o.grid
+        self.direct = o.direct
+        self._newton = None
+        self._direct = False  # whether this step is solved directly (step() decides)
         self._strain_limit = None
         self.iterations = int(MAX_ITERATIONS if iterations is None else iterations)
         self.rho = float(o.rho)
@@ -848,20 +860,30 @@ class VBD(Integrator):
         with that ratio (docs/convergence.md)."""
         if self.substeps is not None:
             return self.substeps
+        self._chosen_substeps(forces, dt)
+        return self._substeps_n
+
+    def _chosen_substeps(self, forces, dt) -> None:
+        """The substeps chosen for ``forces`` and ``dt``, and those the sweeps would need without
+        :data:`MAX_SUBSTEPS` (kept until either changes)."""
         key = (forces, float(dt))
         if self._substeps_of != key:
             sp, _ = self._layout(forces)
-            n = substeps_needed(sp[0], sp[3], sp[4], sp[11], self.model.masses, self.free, dt)
-            self._substeps_of, self._substeps_n = key, n
-        return self._substeps_n
+            wanted = substeps_needed(
+                sp[0], sp[3], sp[4], sp[11], self.model.masses, self.free, dt, cap=2**62
+            )
+            self._substeps_of, self._substeps_n = key, min(MAX_SUBSTEPS, wanted)
+            self._substeps_wanted = wanted
 
     def step(self, state, forces, dt):
         """One step of ``dt`` in :meth:`substeps_for` substeps, each a backward-Euler step of its
         own (the colliders' motion over the step taken in as many parts); the counters add the
         substeps' iterations and keep their worst residual."""
-        n = self.substeps_for(forces, dt)
         contacts = self._contacts
         packed = contacts.packed() if contacts is not None and contacts.active else None
+        direct = self._direct = self._direct_for(forces, packed, dt)
+        # a direct solve needs no substeps for its convergence
+        n = 1 if direct and self.substeps is None else self.substeps_for(forces, dt)
         share = self.collider_share
         if packed is not None and share is not None:  # a collider moves ≤ share·τ a substep
             parts = math.ceil(collider_travel(packed) / (share * contacts.thickness))
@@ -883,9 +905,35 @@ class VBD(Integrator):
         c["last_iterations"] = iterations
         c["last_substeps"] = n
         c["grid_steps"] += 1 if on_grid else 0
+        c["direct_steps"] += 1 if direct else 0
         c["last_residual"] = worst
         c["converged"] = bool(worst <= self.tolerance)
         c["unconverged_steps"] += 0 if worst <= self.tolerance else 1
+
+    def _direct_for(self, forces, packed, dt) -> bool:
+        """Whether a step of ``dt`` is solved directly (:mod:`~cloth_sim.integrators.vbd_newton`):
+        the ``direct`` option, or where it was not given and ``vbd`` chooses its work, where the
+        direct solve costs less than the sweeps would
+        (:func:`~cloth_sim.integrators.vbd_newton.direct_is_cheaper`: a small specimen of a real
+        fabric, whose vertices' inertia is tiny beside its springs); in either case only a step
+        without contacts (``packed``: the colliders, or None), self-contact or tethers, whose
+        springs carry no damping."""
+        if self.direct is False:
+            return False
+        if self.direct is None:
+            if not (self.chosen_iterations and self.substeps is None):
+                return False
+            self._chosen_substeps(forces, dt)
+            grid = self._grid_layout(forces) is not None
+            if not direct_is_cheaper(int(self.free.sum()), self._substeps_wanted, grid):
+                return False
+        sc, strain = self._self_collision, self._strain_limit
+        return (
+            packed is None
+            and not (sc is not None and sc.active)
+            and not (self.tethers and strain is not None and strain.active)
+            and applies(forces)
+        )
 
     def _substep(self, state, forces, h, packed, budget):
         """A substep of ``h`` (``packed``: the colliders over it, or None; ``budget``: its wall
@@ -948,6 +996,12 @@ class VBD(Integrator):
         gh = g / gn if gn > 0 else g
         along = np.clip(self._a_prev @ gh, 0.0, gn) if gn > 0 else self._a_prev[:, 0]
         _initial_guess(x, y, xt, v, a, free, h, along, gn, gh, gn > 0)
+        if self._direct:
+            if self._newton is None:
+                self._newton = NewtonSolve(model, free)
+            done, res = self._newton.solve(forces, x, xt, v, y, h, self.tolerance, self.iterations)
+            _velocities(x, xt, v, free, h, self._a_prev)
+            return done, res, False
         m_h2 = model.masses / (h * h)
         drag_h = forces.drag / h
         # contacts handled here: colliders, and self-contact's candidates and bounds

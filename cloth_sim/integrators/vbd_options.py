@@ -62,6 +62,9 @@ class VBDOptions:
     tethers: bool = False
     #: the grid's block sweeps where the cloth is a grid of Hooke springs
     grid: bool = True
+    #: solve each step whole by Newton's method with a sparse factorisation (None: where vbd
+    #: chooses its work, on a small cloth; either way only without contacts and spring damping)
+    direct: bool | None = None
     #: 'bdf2' or 'euler' (None: bdf2 where ``iterations`` is not given, else euler)
     scheme: str | None = None
 
@@ -121,6 +124,11 @@ class VBDOptions:
         if not (_is_number(self.self_friction) and 0.0 <= self.self_friction < math.inf):
             raise ValueError(
                 f"self_friction must be a number >= 0 (Coulomb's μ), got {self.self_friction!r}"
+            )
+        if self.direct is not None and not isinstance(self.direct, bool):
+            raise ValueError(
+                "direct must be true, false or None (chosen: on a small cloth where iterations "
+                f"is not given), got {self.direct!r}"
             )
         for name in ("tethers", "grid"):
             if not isinstance(getattr(self, name), bool):

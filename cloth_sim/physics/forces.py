@@ -1020,6 +1020,16 @@ class Forces:
         )
         self.evaluations += len(b)
 
+    def implicit_force(self, x: np.ndarray, v: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """The force of the terms :meth:`jacobians` differentiates, into ``out``: the springs
+        (elastic and damping), the bending and the drag; without gravity and the wind, which the
+        implicit methods take at the step's start."""
+        out[:] = 0.0
+        for term in self.terms:
+            if not isinstance(term, (GravityTerm, WindTerm)):
+                term.add_force(x, v, out)
+        return out
+
     def spring_energy(self, x: np.ndarray) -> float:
         """The elastic energy: the springs' and, with a material's bending, the bending's."""
         e = self.spring_term.energy(x)

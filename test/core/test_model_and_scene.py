@@ -210,6 +210,7 @@ def test_core_imports_no_ros():
         "numba",
         "yaml",
         "cholespy",
+        "qdldl",
         "trimesh",
         "yourdfpy",
         "lxml",
@@ -263,6 +264,7 @@ def test_package_xml_declares_every_runtime_dependency():
         "python3-numba",
         "python3-yaml",
         "python3-cholespy-pip",
+        "python3-qdldl-pip",
     } <= deps
     # the keys rosdistro lacks are defined by the package's own rosdep file
     rules = yaml.safe_load((ROOT / "rosdep" / "cloth_sim.yaml").read_text())
