@@ -216,8 +216,6 @@ LONG_SIGNATURES = {
     "cloth_sim.integrators.vbd_grid:_terms": 30,
     "cloth_sim.integrators.vbd_grid:_spring": 29,
     "cloth_sim.integrators.vbd_grid:solve": 27,
-    "cloth_sim.physics.forces:runge_kutta_fused": 26,
-    "cloth_sim.physics.forces:spring_forces_gather": 25,
     "cloth_sim.integrators.vbd_grid:_sweeps_touching": 24,
     "cloth_sim.integrators.vbd_grid:_sweeps": 23,
     "cloth_sim.simulator:Simulator.__init__": 17,
@@ -225,7 +223,6 @@ LONG_SIGNATURES = {
     "cloth_sim.constraints.strain_limit:provot_passes": 16,
     "cloth_sim.integrators.vbd_contact:onset": 14,
     "cloth_sim.integrators.vbd_contact:colliders_at": 13,
-    "cloth_sim.physics.forces:_spring_force": 13,
     "cloth_sim.envs.cloth_env:ClothEnv.__init__": 13,
     "cloth_sim.cuda.simulator:CudaSimulator.__init__": 13,
 }
