@@ -999,7 +999,10 @@ class VBD(Integrator):
         if self._direct:
             if self._newton is None:
                 self._newton = NewtonSolve(model, free)
-            done, res = self._newton.solve(forces, x, xt, v, y, h, self.tolerance, self.iterations)
+            deadline = None if budget is None else time.perf_counter() + budget
+            done, res = self._newton.solve(
+                forces, x, xt, v, y, h, self.tolerance, self.iterations, deadline
+            )
             _velocities(x, xt, v, free, h, self._a_prev)
             return done, res, False
         m_h2 = model.masses / (h * h)

@@ -32,6 +32,8 @@ none), so :func:`applies` says no and the sweeps solve it.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import qdldl
 import scipy.sparse as sp
@@ -213,11 +215,12 @@ class NewtonSolve:
         return dx if np.all(np.isfinite(dx)) else None
 
     def solve(
-        self, forces, x, xt, v, y, h, tolerance: float, iterations: int
+        self, forces, x, xt, v, y, h, tolerance: float, iterations: int, deadline=None
     ) -> tuple[int, float]:
         """Newton's iterations on the step, in place in ``x``, from ``x^t + h v``, until the
-        relative residual is at or below ``tolerance``, ``iterations`` are done or no step
-        descends; returns the iterations and the last residual."""
+        relative residual is at or below ``tolerance``, ``iterations`` are done, no step
+        descends or (after one iteration) the clock passes ``deadline`` (``time.perf_counter()``'s
+        seconds; None: none); returns the iterations and the last residual."""
         np.multiply(v, h, out=x)
         x += xt
         r, res = self.residual(forces, x, xt, y, h)
@@ -226,6 +229,8 @@ class NewtonSolve:
         flat = x.reshape(-1)
         exact = True
         while done < iterations and res > tolerance:
+            if done and deadline is not None and time.perf_counter() >= deadline:
+                break
             rf = np.ascontiguousarray(r.reshape(-1)[self.dofs])
             dx = None
             if exact:  # the exact Hessian while its step descends

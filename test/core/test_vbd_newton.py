@@ -149,3 +149,12 @@ def test_a_released_cantilever_comes_to_rest_at_its_bending_length_on_vbds_defau
 def test_the_direct_option_is_checked():
     with pytest.raises(ValueError, match="direct must be true, false or None"):
         Simulator(_strip(), integrator="vbd", dt=1 / 60, integrator_options={"direct": "yes"})
+
+
+def test_a_direct_step_keeps_its_time_budget():
+    """A budget far below one factorisation's time: one Newton iteration a step, as the sweeps
+    take at least one."""
+    sim = _released(_strip(), direct=True, tolerance=1e-12, iterations=50, time_budget=1e-9)
+    sim.step(3)
+    stats = sim.integrator_stats
+    assert stats["direct_steps"] == 3 and stats["iterations"] == 3 and not stats["converged"]
