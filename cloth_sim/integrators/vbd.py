@@ -321,8 +321,9 @@ def _sweep(verts, lo, hi, state, inertia, sp, co, sc, law, bounds, out):
     * ``law = (τ, the colliders' penalty stiffness, friction's ε, self-contact's stiffness and
       μ, γ)``; ``bounds = (x_cd, allow, near)``: where the last search was made, each vertex's
       allowance, and whether it may touch a collider;
-    * ``out = (stepped, cut, touch)``: each vertex's squared force, whether its step was cut and
-      whether it touches something (written).
+    * ``out = (stepped, cut, touch, seen)``: each vertex's squared force, whether its step was
+      cut, whether it touches something, and each collider's distance and normal at it
+      (:func:`.colliders_at`; written).
 
     (The arrays are unpacked here, once a chunk: unpacked per vertex, or passed one by one to a
     function per vertex, their reference counting cost more than the vertex's work.)"""
@@ -330,12 +331,13 @@ def _sweep(verts, lo, hi, state, inertia, sp, co, sc, law, bounds, out):
     m_h2, inv_h, drag_h = inertia
     tau, kc, eps, ks, mu_self, gamma = law
     x_cd, allow, near = bounds
-    stepped, cut, touch = out
+    stepped, cut, touch, seen = out
     inc_ptr, nbr, rest, k, c, kind, tab, nonsmooth, bptr, bidx, bval, bdiag = sp
     springs = (inc_ptr, nbr, rest, k, c, kind, tab)
     bend = (bptr, bidx, bval, bdiag)
     ckind, cpos, crot, cgeo, cmu = co.kinds, co.pos, co.rot, co.geo, co.mu
     cpos0, crot0, cbank = co.pos0, co.rot0, (co.reals, co.ints, co.starts)
+    pose, pose0, shapes = (cpos, crot), (cpos0, crot0), (ckind, cpos, crot, cgeo)
     rec_ptr, rec, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d, colour = sc
     records = (rec_ptr, rec, pidx, pcoef, pnrm, rec_d)
     collider_law, self_law = (tau, kc, eps), (tau, ks, mu_self, eps)
@@ -362,7 +364,7 @@ def _sweep(verts, lo, hi, state, inertia, sp, co, sc, law, bounds, out):
         touch[i] = 0
         if ckind.shape[0] and near[i]:
             f0, f1, f2, h0, h1, h2, h3, h4, h5, touched = colliders_at(
-                i, x, xt, ckind, cpos, crot, cpos0, crot0, cgeo, cmu, cbank, collider_law, fh
+                i, x, xt, ckind, pose, pose0, cgeo, cmu, cbank, collider_law, fh, seen
             )
             fh = (f0, f1, f2, h0, h1, h2, h3, h4, h5)
             if touched:
@@ -387,11 +389,9 @@ def _sweep(verts, lo, hi, state, inertia, sp, co, sc, law, bounds, out):
                 pcoef,
                 pnrm,
                 tau,
-                ckind if near[i] else ckind[:0],
-                cpos,
-                crot,
-                cgeo,
-                cbank,
+                ckind.shape[0] if near[i] else 0,  # where colliders_at looked
+                shapes,
+                seen,
             )
         if rough or nonsmooth:
             # Choi–Ko's energies are not smooth at the rest length (a buckling pair's force jumps
@@ -758,6 +758,7 @@ class VBD(Integrator):
         self._cut = np.zeros(n, np.int8)
         self._touch = np.zeros(n, np.int8)  # in contact in the last iteration: not extrapolated
         self._no_touch = np.zeros(n, np.int8)
+        self._seen = np.zeros((n, 1, 4))
         self._allow = np.full(n, np.inf)  # how far each vertex may move from the last search
         self._near = np.ones(n, np.bool_)  # may touch a collider before the next search
         self._candidates = False  # whether the last search's pairs serve self-contact
@@ -1063,6 +1064,10 @@ class VBD(Integrator):
             and not self_contact
             and not len(colliders.kinds)
         )
+        # each collider's distance and normal at a vertex, as colliders_at saw them for onset
+        seen = self._seen
+        if seen.shape[0] != len(x) or seen.shape[1] < len(colliders.kinds):
+            seen = self._seen = np.zeros((len(x), max(1, len(colliders.kinds)), 4))
         grid = None if self_contact or tether else self._grid_layout(forces)
         if grid is not None:
             contact = None
@@ -1070,7 +1075,7 @@ class VBD(Integrator):
                 xm = self._buffer("_xm", x)
                 contact = grid.contact(
                     xm, xt, self._near, touch, cut, x_cd, allow, GAMMA, (tau, kc, eps), colliders,
-                    self._rec,
+                    self._rec, seen,
                 )  # fmt: skip
             done = self._iterate_grid(grid, x, xt, y, m_h2, 1.0 / h, drag_h, budget_end, contact)
         else:  # the general sweep's buffers: the iterate's copy and the one two iterations back
@@ -1095,7 +1100,7 @@ class VBD(Integrator):
                 sc_arrays,
                 (tau, kc, eps, ks, self.self_friction, GAMMA),
                 (x_cd, allow, self._near),
-                (stepped, cut, touch),
+                (stepped, cut, touch, seen),
             )
             if tether:
                 # the long-range attachments after each sweep: the pins' pull reaches the far

@@ -75,18 +75,26 @@ def slide(sf, t, s, n, fh):
 
 
 @numba.njit(cache=True, inline="always")
-def colliders_at(i, x, xt, ckind, cpos, crot, cpos0, crot0, cgeo, cmu, cbank, law, fh):
+def colliders_at(i, x, xt, ckind, pose, pose0, cgeo, cmu, cbank, law, fh, seen):
     """Vertex ``i``'s collider contacts added to its block ``fh``: the penalty, and IPC's lagged
     friction on its motion over the step relative to the collider's point under it; returns the
     block's nine numbers and whether it touches one, flat (a tuple in a tuple, unpacked in a
-    parallel loop, fails numba's array analysis). ``law``: ``(τ, the penalty's stiffness,
-    friction's ε)``. (The colliders' arrays one by one: in a bundle, the calls inside that are not
-    inlined, the mesh's search, would count the bundle's references on every call.)"""
+    parallel loop, fails numba's array analysis). ``pose``, ``pose0``: the colliders' positions
+    and rotations now and at the step's start; ``law``: ``(τ, the penalty's stiffness, friction's
+    ε)``. A mesh collider's signed distance and normal at ``x[i]`` go to ``seen[i, c]``, for
+    :func:`onset` at the same point: a mesh's query costs several times a primitive's, which
+    :func:`onset` asks again (cheaper than storing them, measured on robot_sweep's eight links).
+    (The arrays that
+    the calls inside that are not inlined, the mesh's search, take are passed as they are: in a
+    bundle of more, those calls would count the bundle's references on every call.)"""
     tau, kc, eps = law
+    cpos, crot = pose
+    cpos0, crot0 = pose0
     touched = False
     for c in range(ckind.shape[0]):
         if ckind[c] == MESH:
             d, nx, ny, nz = mesh_sdf(cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2], cbank)
+            seen[i, c, 0], seen[i, c, 1], seen[i, c, 2], seen[i, c, 3] = d, nx, ny, nz
         else:
             d, nx, ny, nz = sdf(ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2])
         p = tau - d
@@ -171,12 +179,14 @@ def truncate(i, p, x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, gamm
 
 
 @numba.njit(cache=True, inline="always")
-def onset(i, s, x, rec_ptr, rec, rec_d, pcoef, pnrm, tau, ckind, cpos, crot, cgeo, cbank):
-    """Vertex ``i``'s step ``s`` with the part that would press a contact not yet pressed
-    (distance at least ``τ``: not in the step's Hessian) taken off along that contact's normal, so
-    that it stops at its onset (the next iteration sees it); the motion along the surface stays.
-    The self-contact pairs by their linear distance, the colliders by their signed distance along
-    their normal. ``s``: three numbers, and so is what it returns."""
+def onset(i, s, x, rec_ptr, rec, rec_d, pcoef, pnrm, tau, colliders, shapes, seen):
+    """Vertex ``i``'s step ``s`` from ``x[i]`` with the part that would press a contact not yet
+    pressed (distance at least ``τ``: not in the step's Hessian) taken off along that contact's
+    normal, so that it stops at its onset (the next iteration sees it); the motion along the
+    surface stays. The self-contact pairs by their linear distance, the first ``colliders``
+    colliders by their signed distance along their normal: a primitive's asked again (``shapes =
+    (kinds, positions, rotations, geometry)``), a mesh's as :func:`colliders_at` left it in
+    ``seen[i]`` for the same point. ``s``: three numbers, and so is what it returns."""
     sx, sy, sz = s
     for q in range(rec_ptr[i], rec_ptr[i + 1]):
         d = rec_d[q]  # (its distance as _self_contacts_at found it for this step)
@@ -190,9 +200,10 @@ def onset(i, s, x, rec_ptr, rec, rec_d, pcoef, pnrm, tau, ckind, cpos, crot, cge
         if over > 0.0:
             f = over / (nx * nx + ny * ny + nz * nz)
             sx, sy, sz = sx + f * nx, sy + f * ny, sz + f * nz
-    for c in range(ckind.shape[0]):
+    ckind, cpos, crot, cgeo = shapes
+    for c in range(colliders):
         if ckind[c] == MESH:
-            d, nx, ny, nz = mesh_sdf(cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2], cbank)
+            d, nx, ny, nz = seen[i, c, 0], seen[i, c, 1], seen[i, c, 2], seen[i, c, 3]
         else:
             d, nx, ny, nz = sdf(ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2])
         if d < tau:

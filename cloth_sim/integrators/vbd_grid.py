@@ -220,16 +220,17 @@ class GridLayout:
             contact,
         )
 
-    def contact(self, xm, xt, near, touch, cut, x_cd, allow, gamma, law, colliders, rec):
+    def contact(self, xm, xt, near, touch, cut, x_cd, allow, gamma, law, colliders, rec, seen):
         """What the sweep with colliders reads besides the blocks (:func:`_sweeps_touching`):
         each slot's particle (``−1`` for a ghost), a scratch ``(n, 3)`` for the vertices it
         takes again, the step's start, the general sweep's per-vertex arrays, the contact law
-        ``(τ, the penalty's stiffness, friction's ε)`` and the colliders, and nine scratch rows
-        for the springs' force and Hessian a slot."""
+        ``(τ, the penalty's stiffness, friction's ε)`` and the colliders, nine scratch rows
+        for the springs' force and Hessian a slot, and the colliders' distances and normals a
+        vertex (:func:`~.vbd_contact.colliders_at`)."""
         if self._fh is None:
             self._fh = tuple(np.zeros(self.size) for _ in range(9))
         return (self.vof, xm, xt, near, touch, cut, x_cd, allow, gamma, law, colliders, rec,
-                self._fh)  # fmt: skip
+                self._fh, seen)  # fmt: skip
 
     def swap(self) -> None:
         """The two position arrays take turns (what :func:`solve` did inside, once)."""
@@ -526,11 +527,12 @@ def _sweeps_touching(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH
     and every extrapolation within the vertex's bounds (:func:`~.vbd_contact.within`,
     :func:`~.vbd_contact.truncate`: what the last search lets it move), extrapolates no vertex in
     contact, and commits."""
-    (vof, xm, xt, near, touch, cut, x_cd, allow, gamma, law, co, sc, fh) = contact
+    (vof, xm, xt, near, touch, cut, x_cd, allow, gamma, law, co, sc, fh, seen) = contact
     tau = law[0]
     F0, F1, F2, H0, H1, H2, H3, H4, H5 = fh
-    ckind, cpos, crot, cgeo, cmu = co.kinds, co.pos, co.rot, co.geo, co.mu
-    cpos0, crot0, cbank = co.pos0, co.rot0, (co.reals, co.ints, co.starts)
+    ckind, cgeo, cmu = co.kinds, co.geo, co.mu
+    pose, pose0, cbank = (co.pos, co.rot), (co.pos0, co.rot0), (co.reals, co.ints, co.starts)
+    shapes = (ckind, co.pos, co.rot, cgeo)
     rec_ptr, rec, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d = sc
     X0, X1, X2 = A
     B0, B1, B2 = B
@@ -570,14 +572,14 @@ def _sweeps_touching(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH
                     a0, b, c, dd, e, ff = H0[t], H1[t], H2[t], H3[t], H4[t], H5[t]
                     xm[v, 0], xm[v, 1], xm[v, 2] = xi, yi, zi
                     f0, f1, f2, a0, b, c, dd, e, ff, touched = colliders_at(
-                        v, xm, xt, ckind, cpos, crot, cpos0, crot0, cgeo, cmu, cbank, law,
-                        (f0, f1, f2, a0, b, c, dd, e, ff),
+                        v, xm, xt, ckind, pose, pose0, cgeo, cmu, cbank, law,
+                        (f0, f1, f2, a0, b, c, dd, e, ff), seen,
                     )  # fmt: skip
                     if touched:
                         touch[v] = 1
                     sx, sy, sz = _solve(a0, b, c, dd, e, ff, f0, f1, f2, 1.0)
                     sx, sy, sz = onset(v, (sx, sy, sz), xm, rec_ptr, rec, rec_d, pcoef, pnrm, tau,
-                                       ckind, cpos, crot, cgeo, cbank)  # fmt: skip
+                                       ckind.shape[0], shapes, seen)  # fmt: skip
                     x0, x1, x2 = xi + sx, yi + sy, zi + sz
                     stepped[t] = f0 * f0 + f1 * f1 + f2 * f2
                 x0, x1, x2, was_cut, settled = within(x0, x1, x2, x_cd[v, 0], x_cd[v, 1],
