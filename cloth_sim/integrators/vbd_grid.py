@@ -263,39 +263,17 @@ def _gather(X, slot, x):
 
 
 @numba.njit(cache=True, inline="always")
-def _spring(
-    X0,
-    X1,
-    X2,
-    T0,
-    T1,
-    T2,
-    j,
-    t,
-    o,
-    K,
-    REST,
-    C,
-    QO,
-    inv_h,
-    xi,
-    yi,
-    zi,
-    mx,
-    my,
-    mz,
-    f0,
-    f1,
-    f2,
-    h0,
-    h1,
-    h2,
-    h3,
-    h4,
-    h5,
-):
+def _spring(X0, X1, X2, T0, T1, T2, j, t, o, K, REST, C, QO, inv_h, p, m, fh):
     """Particle ``t``'s spring and bending coupling to its neighbour ``j`` (slot ``o``): the
-    general sweep's spring terms (:func:`cloth_sim.integrators.vbd._springs_at`)."""
+    general sweep's spring terms (:func:`cloth_sim.integrators.vbd._springs_at`): ``p`` the
+    particle's position, ``m`` its motion over the step, ``fh`` its block (nine numbers), each a
+    tuple of numbers. The arrays one by one: a tuple of arrays, built in the colour's parallel
+    loop or captured by it, cost the loop its SIMD lanes (numba's reference counting: packed
+    square roots 12 → 0, ``test_the_grid_sweep_runs_in_simd_lanes``); tuples of numbers compile
+    to the same code."""
+    xi, yi, zi = p
+    mx, my, mz = m
+    f0, f1, f2, h0, h1, h2, h3, h4, h5 = fh
     xj, yj, zj = X0[j], X1[j], X2[j]
     dx, dy, dz = xj - xi, yj - yi, zj - zi
     l = np.sqrt(dx * dx + dy * dy + dz * dz)
@@ -349,13 +327,11 @@ def next_omega(it, rho, omega):
 
 
 @numba.njit(cache=True, inline="always")
-def _terms(
-    t, n0, n1, n2, n3, n4, n5, n6, n7, n8, n9, n10, n11, X0, X1, X2, T0, T1, T2, Y0, Y1, Y2, K,
-    REST, C, QO, QD, MH2, inv_h, drag_h,
-):  # fmt: skip
+def _terms(t, n, X0, X1, X2, T0, T1, T2, Y0, Y1, Y2, K, REST, C, QO, QD, MH2, inv_h, drag_h):
     """Slot ``t``'s position, and its force and Hessian (six entries) of the incremental
-    potential from its inertia, drag, bending diagonal and twelve springs (``n0 … n11``: its
-    colour's shifts): the general sweep's terms (:func:`cloth_sim.integrators.vbd._sweep`)."""
+    potential from its inertia, drag, bending diagonal and twelve springs (``n``: its colour's
+    twelve shifts, a tuple): the general sweep's terms (:func:`cloth_sim.integrators.vbd._sweep`).
+    (The arrays one by one, as :func:`_spring` says.)"""
     xi, yi, zi = X0[t], X1[t], X2[t]
     mx, my, mz = xi - T0[t], yi - T1[t], zi - T2[t]
     m = MH2[t]
@@ -364,22 +340,24 @@ def _terms(
     f0 = -m * (xi - Y0[t]) - drag_h * mx - qd * xi
     f1 = -m * (yi - Y1[t]) - drag_h * my - qd * yi
     f2 = -m * (zi - Y2[t]) - drag_h * mz - qd * zi
-    a0, b, c, dd, e, ff = d, 0.0, 0.0, d, 0.0, d
+    fh = (f0, f1, f2, d, 0.0, 0.0, d, 0.0, d)
+    p, mo = (xi, yi, zi), (mx, my, mz)
     # the twelve springs, one a line
     # fmt: off
-    f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n0, t, 0, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
-    f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n1, t, 1, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
-    f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n2, t, 2, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
-    f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n3, t, 3, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
-    f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n4, t, 4, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
-    f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n5, t, 5, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
-    f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n6, t, 6, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
-    f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n7, t, 7, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
-    f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n8, t, 8, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
-    f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n9, t, 9, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
-    f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n10, t, 10, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
-    f0, f1, f2, a0, b, c, dd, e, ff = _spring(X0, X1, X2, T0, T1, T2, t + n11, t, 11, K, REST, C, QO, inv_h, xi, yi, zi, mx, my, mz, f0, f1, f2, a0, b, c, dd, e, ff)  # noqa: E501
+    fh = _spring(X0, X1, X2, T0, T1, T2, t + n[0], t, 0, K, REST, C, QO, inv_h, p, mo, fh)  # noqa: E501
+    fh = _spring(X0, X1, X2, T0, T1, T2, t + n[1], t, 1, K, REST, C, QO, inv_h, p, mo, fh)  # noqa: E501
+    fh = _spring(X0, X1, X2, T0, T1, T2, t + n[2], t, 2, K, REST, C, QO, inv_h, p, mo, fh)  # noqa: E501
+    fh = _spring(X0, X1, X2, T0, T1, T2, t + n[3], t, 3, K, REST, C, QO, inv_h, p, mo, fh)  # noqa: E501
+    fh = _spring(X0, X1, X2, T0, T1, T2, t + n[4], t, 4, K, REST, C, QO, inv_h, p, mo, fh)  # noqa: E501
+    fh = _spring(X0, X1, X2, T0, T1, T2, t + n[5], t, 5, K, REST, C, QO, inv_h, p, mo, fh)  # noqa: E501
+    fh = _spring(X0, X1, X2, T0, T1, T2, t + n[6], t, 6, K, REST, C, QO, inv_h, p, mo, fh)  # noqa: E501
+    fh = _spring(X0, X1, X2, T0, T1, T2, t + n[7], t, 7, K, REST, C, QO, inv_h, p, mo, fh)  # noqa: E501
+    fh = _spring(X0, X1, X2, T0, T1, T2, t + n[8], t, 8, K, REST, C, QO, inv_h, p, mo, fh)  # noqa: E501
+    fh = _spring(X0, X1, X2, T0, T1, T2, t + n[9], t, 9, K, REST, C, QO, inv_h, p, mo, fh)  # noqa: E501
+    fh = _spring(X0, X1, X2, T0, T1, T2, t + n[10], t, 10, K, REST, C, QO, inv_h, p, mo, fh)  # noqa: E501
+    fh = _spring(X0, X1, X2, T0, T1, T2, t + n[11], t, 11, K, REST, C, QO, inv_h, p, mo, fh)  # noqa: E501
     # fmt: on
+    f0, f1, f2, a0, b, c, dd, e, ff = fh
     return xi, yi, zi, f0, f1, f2, a0, b, c, dd, e, ff
 
 
@@ -441,7 +419,8 @@ def solve(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE, in
 @numba.njit(cache=True, inline="always")
 def _colour(shift, cb, PQ, lo, hi, chunks):
     """Colour ``cb``'s range ``[a, b)``, its chunks' size and its twelve shifts (scalars: a row
-    of ``shift`` would be a view)."""
+    of ``shift`` would be a view; flat: numba's array analysis fails on a tuple in a tuple
+    returned by a helper)."""
     a, b = cb * PQ + lo, cb * PQ + hi
     return (
         a, b, (b - a + chunks - 1) // chunks,
@@ -499,12 +478,13 @@ def _sweeps(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE, 
         a, bb, size, n0, n1, n2, n3, n4, n5, n6, n7, n8, n9, n10, n11 = _colour(
             shift, cb, PQ, lo, hi, chunks
         )
+        n = (n0, n1, n2, n3, n4, n5, n6, n7, n8, n9, n10, n11)
         for ch in numba.prange(chunks):
             lo_, hi_ = _chunk(a, bb, size, ch)
             for t in range(lo_, hi_):
                 xi, yi, zi, f0, f1, f2, a0, b, c, dd, e, ff = _terms(
-                    t, n0, n1, n2, n3, n4, n5, n6, n7, n8, n9, n10, n11, X0, X1, X2, T0, T1, T2,
-                    Y0, Y1, Y2, K, REST, C, QO, QD, MH2, inv_h, drag_h,
+                    t, n, X0, X1, X2, T0, T1, T2, Y0, Y1, Y2, K, REST, C, QO, QD, MH2, inv_h,
+                    drag_h,
                 )  # fmt: skip
                 _advance(t, (xi, yi, zi), (f0, f1, f2, a0, b, c, dd, e, ff), FREE[t], N0, N1, N2,
                          stepped)  # fmt: skip
@@ -544,12 +524,13 @@ def _sweeps_touching(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH
         a, bb, size, n0, n1, n2, n3, n4, n5, n6, n7, n8, n9, n10, n11 = _colour(
             shift, cb, PQ, lo, hi, chunks
         )
+        n = (n0, n1, n2, n3, n4, n5, n6, n7, n8, n9, n10, n11)
         for ch in numba.prange(chunks):
             lo_, hi_ = _chunk(a, bb, size, ch)
             for t in range(lo_, hi_):
                 xi, yi, zi, f0, f1, f2, a0, b, c, dd, e, ff = _terms(
-                    t, n0, n1, n2, n3, n4, n5, n6, n7, n8, n9, n10, n11, X0, X1, X2, T0, T1, T2,
-                    Y0, Y1, Y2, K, REST, C, QO, QD, MH2, inv_h, drag_h,
+                    t, n, X0, X1, X2, T0, T1, T2, Y0, Y1, Y2, K, REST, C, QO, QD, MH2, inv_h,
+                    drag_h,
                 )  # fmt: skip
                 _advance(t, (xi, yi, zi), (f0, f1, f2, a0, b, c, dd, e, ff), FREE[t], N0, N1, N2,
                          stepped)  # fmt: skip

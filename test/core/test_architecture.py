@@ -213,8 +213,8 @@ MOST_PARAMETERS = 12
 #: reference count each (measured 1.7× on the self-collision tree), so these wait for a layout
 #: that needs fewer arrays (issue 67's "bank as a few arrays")
 LONG_SIGNATURES = {
-    "cloth_sim.integrators.vbd_grid:_terms": 30,
-    "cloth_sim.integrators.vbd_grid:_spring": 29,
+    "cloth_sim.integrators.vbd_grid:_terms": 19,
+    "cloth_sim.integrators.vbd_grid:_spring": 17,
     "cloth_sim.integrators.vbd_grid:solve": 27,
     "cloth_sim.integrators.vbd_grid:_sweeps_touching": 24,
     "cloth_sim.integrators.vbd_grid:_sweeps": 23,
