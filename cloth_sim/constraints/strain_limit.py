@@ -211,8 +211,8 @@ def _attach_all(x, anchor, reach, tau, moved):
 
 
 @numba.njit(cache=True)
-def provot_passes(x, springs, rest, limit, pinned, passes, share, incidence, tethers, clock,
-                  by_spring, by_particle):  # fmt: skip
+def provot_passes(x, springs, rest, tau, tol, pinned, passes, share, inc_ptr, inc, anchor, reach,
+                  attach, clock, by_spring, by_particle):  # fmt: skip
     """What :meth:`StrainLimit.correct` does with Provot's passes: with ``attach``, the long-range
     attachments first; then up to ``passes`` of :func:`provot_pass`, stopping after one that
     shortens nothing, each followed by the attachments if it shortened something; returns how
@@ -226,17 +226,12 @@ def provot_passes(x, springs, rest, limit, pinned, passes, share, incidence, tet
     over the limit after a step and takes 20 passes, each of which visited all 64,000 springs
     (docs/BENCHMARKS.md §11).
 
-    ``limit = (τ, tol)``: the strain limit and its tolerance; ``incidence = (inc_ptr, inc)``: each
-    particle's springs (CSR); ``tethers = (anchor, reach, attach)``: the long-range attachments
-    (:func:`nearest_attachments`) and whether to apply them; ``clock`` (one entry); ``by_spring``
-    (3 rows: the heap, the next pass's springs, and the stamps of those queued) and
-    ``by_particle`` (4 rows: the stamps of those listed as moved, the last spring that moved each
-    in the pass, the lists of the moved and of those the attachments moved): the stamps kept from
-    call to call (:class:`_PassScratch`), the rest scratch. (Twenty arguments of these types
-    made numba's dispatcher keep 400 bytes a call, never freed.)"""
-    tau, tol = limit
-    inc_ptr, inc = incidence
-    anchor, reach, attach = tethers
+    ``inc_ptr, inc``: each particle's springs (CSR); ``clock`` (one entry); ``by_spring`` (3 rows:
+    the heap, the next pass's springs, and the stamps of those queued) and ``by_particle`` (4
+    rows: the stamps of those listed as moved, the last spring that moved each in the pass, the
+    lists of the moved and of those the attachments moved): the stamps kept from call to call
+    (:class:`_PassScratch`), the rest scratch. (Twenty arguments of these types made numba's
+    dispatcher keep 400 bytes a call, never freed.)"""
     heap, nxt, queued = by_spring[0], by_spring[1], by_spring[2]
     listed, last = by_particle[0], by_particle[1]
     n_springs = springs.shape[0]
@@ -499,16 +494,15 @@ class StrainLimit(Stage):
             x,
             self._springs,
             self._rest,
-            (self.tau, STRAIN_LIMIT_TOLERANCE),
+            self.tau,
+            STRAIN_LIMIT_TOLERANCE,
             self._pinned,
             self.passes,
             FULL_PASS_SHARE,
-            self._passes.topology,
-            (
-                self._anchor if lra else _NO_ANCHOR,
-                self._reach if lra else _NO_REACH,
-                lra and self._attach is not _no_attachments,
-            ),
+            *self._passes.topology,
+            self._anchor if lra else _NO_ANCHOR,
+            self._reach if lra else _NO_REACH,
+            lra and self._attach is not _no_attachments,
             *self._passes.arrays,
         )
         self.last_passes = used

@@ -220,6 +220,7 @@ LONG_SIGNATURES = {
     "cloth_sim.integrators.vbd_grid:_sweeps": 23,
     "cloth_sim.simulator:Simulator.__init__": 17,
     "cloth_sim.integrators.vbd_grid:_commit": 16,
+    "cloth_sim.constraints.strain_limit:provot_passes": 16,
     "cloth_sim.envs.cloth_env:ClothEnv.__init__": 13,
     "cloth_sim.cuda.simulator:CudaSimulator.__init__": 13,
 }
