@@ -35,7 +35,6 @@ exactly ``12 k_b/L²``.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -144,13 +143,11 @@ def axial(l, L, k, kind, tab):
 
 
 @numba.njit(cache=True, inline="always")
-def _spring_force(d, l, w, rest, k, c, kind, tab, with_damping):
-    """The force on a spring's first end, from ``d = x_j − x_i`` (three numbers) of length
-    ``l > 0`` and ``w = v_j − v_i`` (read only ``with_damping``): :func:`axial`'s ``dE/dl`` plus
-    the damping along the spring, times the unit vector. (Inlined: measured as fast as the lines
-    written out, docs/BENCHMARKS.md §7; tuples of numbers inline to the same arithmetic.)"""
-    dx, dy, dz = d
-    wx, wy, wz = w
+def _spring_force(dx, dy, dz, l, wx, wy, wz, rest, k, c, kind, tab, with_damping):
+    """The force on a spring's first end, from ``x_j − x_i`` = (dx, dy, dz) of length ``l > 0`` and
+    ``v_j − v_i`` = (wx, wy, wz) (read only ``with_damping``): :func:`axial`'s ``dE/dl`` plus the
+    damping along the spring, times the unit vector. (Inlined: measured as fast as the lines
+    written out, docs/BENCHMARKS.md §7.)"""
     inv = 1.0 / l
     ux, uy, uz = dx * inv, dy * inv, dz * inv
     _, de, _ = axial(l, rest, k, kind, tab)
@@ -170,9 +167,13 @@ def spring_forces(x, v, springs, rest, k, c, kind, tab, with_damping, f):
         if l < 1e-300:
             continue
         fx, fy, fz = _spring_force(
-            (dx, dy, dz),
+            dx,
+            dy,
+            dz,
             l,
-            (v[j, 0] - v[i, 0], v[j, 1] - v[i, 1], v[j, 2] - v[i, 2]),
+            v[j, 0] - v[i, 0],
+            v[j, 1] - v[i, 1],
+            v[j, 2] - v[i, 2],
             rest[s],
             k[s],
             c[s],
@@ -279,22 +280,47 @@ def _block_forces(d, rest, k, c, kind, tab, with_damping, fx, fy, fz):
         if l < 1e-300 or l >= rest[t]:  # Hooke's law above is this spring's force
             continue
         fx[t], fy[t], fz[t] = _spring_force(
-            (dx, dy, dz), l, (wx[t], wy[t], wz[t]), rest[t], k[t], c[t], kind[t], tab, with_damping
+            dx, dy, dz, l, wx[t], wy[t], wz[t], rest[t], k[t], c[t], kind[t], tab, with_damping
         )
 
 
 @numba.njit(cache=True, parallel=True)
-def spring_forces_gather(x, v, sp, bend, base, f, inv_mass, dt, mode, xo, vo, stage):
+def spring_forces_gather(
+    x,
+    v,
+    springs,
+    rest,
+    k,
+    c,
+    kind,
+    tab,
+    with_damping,
+    ptr,
+    adj,
+    sign,
+    fs,
+    qptr,
+    qidx,
+    qval,
+    fb,
+    base,
+    f,
+    inv_mass,
+    dt,
+    mode,
+    xo,
+    vo,
+    stage,
+):
     """:func:`spring_forces` on every core, deterministically: each spring's force into ``fs`` (one
     spring per iteration), then each particle gathers its springs' forces in increasing spring
     order (``ptr``/``adj``/``sign``: :func:`incidence`) — the order the serial loop adds them in,
     so the result is bit-identical to it at any thread count (no racy scatter). Each particle's sum
     starts from ``base`` (``f`` itself to add to it, or gravity's force: no pass to copy it first).
-    ``sp`` (:class:`GatherSprings`) and ``bend`` (:class:`GatherBending`) are
-    :func:`gather_arrays`' (32-bit indices, ``fs`` by coordinate, (3, springs)). A material's
-    bending (the rows of its ``Q``, with an (n, 3) scratch; ``ptr`` of length 1 without) is summed
-    into the scratch ``fb`` in a pass of its own before the gather, which starts each particle's
-    sum from ``base + fb``.
+    The arrays are :func:`gather_arrays`' (32-bit indices, ``fs`` by coordinate, (3, springs)).
+    A material's bending (``qptr``, ``qidx``, ``qval``: the rows of its ``Q``, ``fb`` (n, 3)
+    scratch; ``qptr`` of length 1 without) is summed into ``fb`` in a pass of its own before the
+    gather, which starts each particle's sum from ``base + fb``.
 
     The springs go in blocks of :data:`GATHER_BLOCK` in :func:`spring_layout`'s order: their ends'
     differences gathered into a small array, then :func:`_block_forces` in SIMD. What each of these
@@ -311,11 +337,7 @@ def spring_forces_gather(x, v, sp, bend, base, f, inv_mass, dt, mode, xo, vo, st
     update, and ``xo``, ``vo`` are then :data:`_NO_STATE`; ``inv_mass``: (n, 1), 0 on pins), the
     operations of :func:`kick_drift` in its order. No particle's position is read after the first
     loop, and each core updates the particles whose forces it summed, while they are in its cache
-    (a separate serial pass cost most of what the second core saved: docs/BENCHMARKS.md §7).
-    (The bundles are unpacked before the parallel loops, whose bodies would lose writes through a
-    tuple's items: docs/contributing.md.)"""
-    springs, rest, k, c, kind, tab, with_damping, ptr, adj, sign, fs = sp
-    qptr, qidx, qval, fb = bend
+    (a separate serial pass cost most of what the second core saved: docs/BENCHMARKS.md §7)."""
     m = springs.shape[0]
     for b in numba.prange((m + GATHER_BLOCK - 1) // GATHER_BLOCK):
         lo = b * GATHER_BLOCK
@@ -386,15 +408,40 @@ def spring_forces_gather(x, v, sp, bend, base, f, inv_mass, dt, mode, xo, vo, st
 
 
 @numba.njit(cache=True)
-def runge_kutta_fused(x, v, A, b, dt, scratch, sp, bend, base, inv_mass):
+def runge_kutta_fused(
+    x,
+    v,
+    A,
+    b,
+    dt,
+    kx,
+    kv,
+    xs,
+    coef,
+    springs,
+    rest,
+    k,
+    c,
+    kind,
+    tab,
+    with_damping,
+    ptr,
+    adj,
+    sign,
+    fs,
+    qptr,
+    qidx,
+    qval,
+    fb,
+    base,
+    inv_mass,
+):
     """A whole explicit Runge–Kutta step of tableau ``(A, b)`` in place on ``x``, ``v``, each stage
     one pass of :func:`spring_forces_gather` in :data:`GATHER_RK_STAGE` (its forces, the division
     by the mass and the next stage's state, or in the last stage the step's update): the operations
     of the stage-by-stage Python loop in
     :class:`~cloth_sim.integrators.explicit.ExplicitRungeKutta`, in one call instead of one per
-    stage. ``scratch``: ``(kx, kv, xs, coef)``, the stages (stages, n, 3) twice, a state (n, 3)
-    and the stage's coefficients (stages,); ``sp``, ``bend``: :func:`gather_arrays`'."""
-    kx, kv, xs, coef = scratch
+    stage. ``kx``, ``kv`` (stages, n, 3), ``xs`` (n, 3) and ``coef`` (stages,) are scratch."""
     stages = b.shape[0]
     for p in range(x.shape[0]):
         for d in range(3):
@@ -407,8 +454,21 @@ def runge_kutta_fused(x, v, A, b, dt, scratch, sp, bend, base, inv_mass):
         spring_forces_gather(
             x if i == 0 else xs,
             kx[i],
-            sp,
-            bend,
+            springs,
+            rest,
+            k,
+            c,
+            kind,
+            tab,
+            with_damping,
+            ptr,
+            adj,
+            sign,
+            fs,
+            qptr,
+            qidx,
+            qval,
+            fb,
             base,
             kv[i],
             inv_mass,
@@ -557,71 +617,43 @@ def spring_layout(springs: np.ndarray, n: int) -> tuple:
     )
 
 
-class GatherSprings(NamedTuple):
-    """The springs as :func:`spring_forces_gather` reads them, in :func:`spring_layout`'s order."""
-
-    ends: np.ndarray  #: (m, 2) uint32
-    rest: np.ndarray
-    k: np.ndarray
-    c: np.ndarray
-    kind: np.ndarray
-    tab: np.ndarray  #: :data:`BUCKLE_TABLE`
-    with_damping: bool
-    ptr: np.ndarray  #: the incidence (:func:`incidence`), 32-bit
-    adj: np.ndarray
-    sign: np.ndarray
-    fs: np.ndarray  #: the per-spring force scratch by coordinate, (3, m)
-
-
-class GatherBending(NamedTuple):
-    """A material's bending ``Q`` as the gather reads it: its CSR rows (32-bit indices) and an
-    (n, 3) scratch; ``ptr`` of length 1 for none (:data:`NO_BENDING_ROWS`)."""
-
-    ptr: np.ndarray
-    idx: np.ndarray
-    val: np.ndarray
-    fb: np.ndarray
-
-
 #: no bending in the gather: an empty CSR (its ``ptr`` of length 1) and no scratch
-NO_BENDING_ROWS = GatherBending(
-    np.zeros(1, np.uint32), np.zeros(0, np.uint32), np.zeros(0), np.zeros((0, 3))
-)
+NO_BENDING_ROWS = (np.zeros(1, np.uint32), np.zeros(0, np.uint32), np.zeros(0), np.zeros((0, 3)))
 
 
 def gather_arrays(
     springs, rest, k, c, kind, with_damping: bool, n: int, layout=None, bending=None
-) -> tuple[GatherSprings, GatherBending]:
-    """The bundles :func:`spring_forces_gather` takes before ``base``, for these springs and
+) -> tuple:
+    """The arguments :func:`spring_forces_gather` takes before ``base``, for these springs and
     their material: their ends and material in :func:`spring_layout`'s order, the Choi–Ko table,
-    the incidence and the per-spring force scratch (:class:`GatherSprings`), and the rows of a
-    material's bending ``Q`` with their scratch (:class:`GatherBending`; :data:`NO_BENDING_ROWS`
-    without). ``layout``: the springs' :func:`spring_layout`, if already at hand."""
+    the incidence, the per-spring force scratch by coordinate (3, springs), and the rows of a
+    material's bending ``Q`` with their scratch (:data:`NO_BENDING_ROWS` without). ``layout``: the
+    springs' :func:`spring_layout`, if already at hand."""
     order, ends, ptr, adj, sign = spring_layout(springs, n) if layout is None else layout
     if bending is None:
         rows = NO_BENDING_ROWS
     else:
         qptr, qidx, qval = bending.csr
-        rows = GatherBending(  # 32-bit indices, as the springs' (their loads cost the gather)
+        rows = (  # 32-bit indices, as the springs' (their loads cost the gather)
             qptr.astype(np.uint32),
             qidx.astype(np.uint32),
             qval,
             np.empty((n, 3)),
         )
-    spr = GatherSprings(
+    return (
         ends,
         rest[order],
         k[order],
         c[order],
         kind[order],
         BUCKLE_TABLE,
-        bool(with_damping),
+        with_damping,
         ptr,
         adj,
         sign,
         np.empty((3, len(springs))),
+        *rows,
     )
-    return spr, rows
 
 
 def _layout_of(model: ClothModel, live: np.ndarray):
@@ -677,9 +709,7 @@ class SpringTerm:
                 _layout_of(model, live),
                 self.bending,
             )
-            gathered, _ = self._gather_args
-            self._incidence, self._fs = (gathered.ptr, gathered.adj, gathered.sign), gathered.fs
-            self._ends = gathered.ends
+            self._incidence, self._fs = self._gather_args[7:10], self._gather_args[10]
             if self.bending is not None:
                 self.labels = (*self.labels, "bending")
 
@@ -693,7 +723,7 @@ class SpringTerm:
         lists and its per-spring force array, written and read back). For the memory-bandwidth
         bound of :mod:`cloth_sim.bench.scaling`."""
         read = sum(a.nbytes for a in (self.rest, self.k, self.c, self.kind))
-        read += (self._ends if self.parallel else self.springs).nbytes
+        read += (self._gather_args[0] if self.parallel else self.springs).nbytes
         written = 0
         if self.parallel:
             read += sum(a.nbytes for a in self._incidence) + self._fs.nbytes
@@ -980,7 +1010,10 @@ class Forces:
             A,
             b,
             dt,
-            (kx, kv, xs, coef),
+            kx,
+            kv,
+            xs,
+            coef,
             *self.spring_term._gather_args,
             self._gather_base,
             self.inv_mass,
