@@ -732,7 +732,6 @@ class VBD(Integrator):
         self.grid = o.grid
         self.direct = o.direct
         self._newton = None
-        self._direct = False  # whether this step is solved directly (step() decides)
         self._strain_limit = None
         self.iterations = int(MAX_ITERATIONS if iterations is None else iterations)
         self.rho = float(o.rho)
@@ -882,7 +881,7 @@ class VBD(Integrator):
         substeps' iterations and keep their worst residual."""
         contacts = self._contacts
         packed = contacts.packed() if contacts is not None and contacts.active else None
-        direct = self._direct = self._direct_for(forces, packed, dt)
+        direct = self._direct_for(forces, packed, dt)
         # a direct solve needs no substeps for its convergence
         n = 1 if direct and self.substeps is None else self.substeps_for(forces, dt)
         share = self.collider_share
@@ -896,7 +895,7 @@ class VBD(Integrator):
             colliders = packed
             if n > 1 and packed is not None:
                 colliders = packed_between(packed, part / n, (part + 1) / n)
-            done, res, blocks = self._substep(state, forces, dt / n, colliders, budget)
+            done, res, blocks = self._substep(state, forces, dt / n, colliders, budget, direct)
             iterations += done
             worst = max(worst, res)
             on_grid = on_grid or blocks
@@ -936,9 +935,10 @@ class VBD(Integrator):
             and applies(forces)
         )
 
-    def _substep(self, state, forces, h, packed, budget):
+    def _substep(self, state, forces, h, packed, budget, direct):
         """A substep of ``h`` (``packed``: the colliders over it, or None; ``budget``: its wall
-        time, s, or None) by :attr:`scheme`; returns what :meth:`_solve` does.
+        time, s, or None; ``direct``: solved directly, :meth:`_direct_for`) by :attr:`scheme`;
+        returns what :meth:`_solve` does.
 
         BDF2 is backward Euler's step of ``ĥ = 2h/3`` from ``x̂ = (4xₙ − xₙ₋₁)/3`` with velocity
         ``v̂ = (4vₙ − vₙ₋₁)/3`` (``xₙ₋₁, vₙ₋₁``: the last substep's start): its step
@@ -951,7 +951,7 @@ class VBD(Integrator):
         BDF2 a strain-limited cloth at rest kept creeping: the correction's missing ``Δx/(2h)``
         came back every step)."""
         if self.scheme != "bdf2":  # (no history to keep)
-            return self._solve(state, forces, h, packed, budget)
+            return self._solve(state, forces, h, packed, budget, direct)
         sc, strain = self._self_collision, self._strain_limit
         staged = (
             packed is not None
@@ -963,22 +963,23 @@ class VBD(Integrator):
         start_x, start_v = self._buffer("_start_x", x), self._buffer("_start_v", v)
         if bdf2:
             bdf2_start(x, v, self._past_x, self._past_v, self.free, start_x, start_v)
-            out = self._solve(state, forces, 2.0 * h / 3.0, packed, budget)
+            out = self._solve(state, forces, 2.0 * h / 3.0, packed, budget, direct)
             keep_kinematic(v, start_v, self.free)
         else:
             np.copyto(start_x, x)
             np.copyto(start_v, v)
-            out = self._solve(state, forces, h, packed, budget)
+            out = self._solve(state, forces, h, packed, budget, direct)
         # this substep's start is the next one's history
         self._past_x, self._start_x = start_x, self._past_x
         self._past_v, self._start_v = start_v, self._past_v
         self._past_h = h
         return out
 
-    def _solve(self, state, forces, dt, packed, budget):
+    def _solve(self, state, forces, dt, packed, budget, direct):
         """A backward-Euler step of ``dt`` from the state (``packed``: the colliders over it, or
-        None; ``budget``: its wall time, s, or None); returns the iterations done, the residual of
-        its last sweep and whether they ran on the grid's blocks."""
+        None; ``budget``: its wall time, s, or None; ``direct``: by
+        :mod:`~cloth_sim.integrators.vbd_newton` instead of the sweeps); returns the iterations
+        done, the residual of its last sweep and whether they ran on the grid's blocks."""
         x, v = state.x, state.v
         model = self.model
         sp, (cptr, verts) = self._layout(forces)
@@ -997,7 +998,7 @@ class VBD(Integrator):
         gh = g / gn if gn > 0 else g
         along = np.clip(self._a_prev @ gh, 0.0, gn) if gn > 0 else self._a_prev[:, 0]
         _initial_guess(x, y, xt, v, a, free, h, along, gn, gh, gn > 0)
-        if self._direct:
+        if direct:
             if self._newton is None:
                 self._newton = NewtonSolve(model, free)
             deadline = None if budget is None else time.perf_counter() + budget
