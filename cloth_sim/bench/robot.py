@@ -7,7 +7,8 @@ runs side by side in one process.
     .venv/bin/python -m cloth_sim.bench.robot [--seconds S] [--published]
 
 ``--published`` adds a Franka Panda and a UR5 from their published descriptions with their
-collision meshes (example-robot-data: ``make bench-robots`` installs it and runs this).
+collision meshes (example-robot-data: ``make bench-robots`` installs it and runs this), through
+robot_sweep's cloth and through the robots issue's sheet (:func:`sweep_sheet`).
 """
 
 from __future__ import annotations
@@ -219,6 +220,108 @@ def sweep_published(name: str, share, seconds: float = 2.0, speed: float = 1.5) 
     )
 
 
+#: the robots issue's sweep (test/core/test_published_robots.py measures the same depth
+#: independently): the robot's base, the joints it holds, the joint it swings from −0.9 to +0.9 rad
+#: in 0.5 s, and the 0.6 m sheet's top-left corner
+SHEET_SWEEPS = {
+    "panda": ((0.0, 0.0, 0.0), PUBLISHED["panda"][0], (0.0, 0.35, 0.7)),
+    "ur5": ((0.0, 0.0, 0.3), PUBLISHED["ur5"][0], (0.15, 0.35, 0.8)),
+}
+SHEET_JOINTS = {
+    "panda": ({"panda_joint2": 0.6, "panda_joint4": -1.6, "panda_joint6": 2.2}, "panda_joint1"),
+    "ur5": ({"shoulder_lift_joint": -0.3, "elbow_joint": 0.6}, "shoulder_pan_joint"),
+}
+
+
+def sweep_sheet(name: str, share, options: dict | None = None) -> None:
+    """The robots issue's sweep: a 32×32 sheet (0.6 m, 0.3 kg, springs 300 N/m) hanging from its
+    top corners 0.35 m in front of the robot, its first joint swung from −0.9 to +0.9 rad in 0.5 s
+    and 30 steps more, ``vbd`` at 1/240 s × 5 iterations (and ``options``), thickness 5 mm,
+    self-contact on: the deepest vertex inside a link by the links' own signed distances (closed
+    meshes are solids), the self-crossings by the independent check, the time a step."""
+    base, urdf, corner = SHEET_SWEEPS[name]
+    held, swing = SHEET_JOINTS[name]
+    robot = Robot.from_urdf(share / "example-robot-data" / "robots" / urdf, package_paths=[share])
+    model = ClothModel.grid(
+        32, 32, size=(0.6, 0.6), particle_mass=0.3 / 1024, stiffness=300.0,
+        pinned=[(0, 0), (0, -1)], orientation="vertical", origin=corner,
+    )  # fmt: skip
+    sim = Simulator(
+        model, integrator="vbd", dt=1 / 240, thickness=0.005, self_collision=True,
+        integrator_options={"iterations": 5, **(options or {})},
+    )  # fmt: skip
+    sim.add_robot(robot, name=name, position=base, joints={**held, swing: -0.9})
+    links, tris = list(sim.colliders), sim.model.triangles
+    worst, crossed, wall, prev = np.inf, 0, 0.0, sim.positions.copy()
+    for k in range(150):
+        sim.set_joint_positions(name, {swing: -0.9 + 1.8 * min(1.0, (k + 1) / 120)})
+        t = time.perf_counter()
+        sim.step()
+        wall += time.perf_counter() - t
+        worst = min(worst, min(float(c.signed_distance(sim.positions).min()) for c in links))
+        crossed += len(crossings(prev, sim.positions, tris))
+        prev = sim.positions.copy()
+    print(
+        f"{name} swung through the issue's 32x32 sheet (vbd 1/240 s x 5, self-contact, "
+        f"{options or 'defaults'}): deepest inside a link {max(0.0, -worst) * 1e3:.2f} mm "
+        f"({max(0.0, -worst) / 0.005:.0%} of the thickness), self-crossings {crossed}, "
+        f"{wall / 150 * 1e3:.1f} ms a step"
+    )
+
+
+def pinch_sheet(share, gap: float) -> None:
+    """The Panda's hand, pointing down with its fingers across a hanging 0.2 m sheet (16×16, the
+    issue's cloth per area), closes in 8 steps to a fingertip gap of ``gap`` on the middle of its
+    top edge and drags it 0.21 m aside in 0.5 s, then 30 steps more: the sheet, pinned at its top
+    corners, folds out of its plane, held by friction (μ 1) alone. The deepest vertex in a link,
+    the self-crossings, and how far the pinched vertex ends from the fingertips' centre. A gap
+    below the thickness traps the vertex between two skins that cannot both be met."""
+    robot = Robot.from_urdf(
+        share / "example-robot-data" / "robots" / PUBLISHED["panda"][0], package_paths=[share]
+    )
+    joints = {
+        "panda_joint1": 0.5, "panda_joint2": 0.6, "panda_joint4": -1.6, "panda_joint6": 2.2,
+        "panda_joint7": 1.285, "panda_finger_joint1": 0.04, "panda_finger_joint2": 0.04,
+    }  # fmt: skip
+    start = robot.link_transforms(joints)["panda_hand_tcp"][:3, 3]
+    n, width, tau = 16, 0.2, 0.005
+    model = ClothModel.grid(
+        n, n, size=(width, width), particle_mass=0.3 / 0.36 * width**2 / n**2, stiffness=300.0,
+        pinned=[(0, 0), (0, -1)], orientation="vertical",
+        origin=(start[0] - (n // 2) * width / (n - 1), start[1], start[2] + 0.006),
+    )  # fmt: skip
+    sim = Simulator(
+        model, integrator="vbd", dt=1 / 240, thickness=tau, self_collision=True,
+        integrator_options={"iterations": 5},
+    )  # fmt: skip
+    sim.add_robot(robot, name="panda", joints=joints, friction=1.0)
+    links, tris = list(sim.colliders), sim.model.triangles
+    worst, crossed, wall, prev = np.inf, 0, 0.0, sim.positions.copy()
+    for k in range(8 + 120 + 30):
+        finger = 0.04 + (gap / 2 - 0.04) * min(1.0, (k + 1) / 8)
+        q = {
+            "panda_joint1": 0.5 + 0.3 * min(1.0, max(0.0, (k + 1 - 8) / 120)),
+            "panda_finger_joint1": finger,
+            "panda_finger_joint2": finger,
+        }
+        sim.set_joint_positions("panda", q)
+        t = time.perf_counter()
+        sim.step()
+        wall += time.perf_counter() - t
+        worst = min(worst, min(float(c.signed_distance(sim.positions).min()) for c in links))
+        crossed += len(crossings(prev, sim.positions, tris))
+        prev = sim.positions.copy()
+    tip = robot.link_transforms({**joints, **q})["panda_hand_tcp"][:3, 3]
+    held = float(np.linalg.norm(sim.positions[n // 2] - tip))
+    print(
+        f"panda hand closing to a {gap * 1e3:.0f} mm gap on a hanging sheet's edge and dragging "
+        f"it 0.21 m into a fold: deepest inside a link {max(0.0, -worst) * 1e3:.2f} mm "
+        f"({max(0.0, -worst) / tau:.0%} of the thickness), self-crossings {crossed}, the pinched "
+        f"vertex {held * 1e3:.1f} mm from the fingertips at the end "
+        f"({'held' if held < 2 * tau else 'slipped out'}), {wall / (k + 1) * 1e3:.1f} ms a step"
+    )
+
+
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--seconds", type=float, default=4.6, help="robot_sweep's simulated time")
@@ -245,6 +348,11 @@ def main(argv=None) -> None:
             raise SystemExit("example-robot-data is not installed: make bench-robots installs it")
         for name in PUBLISHED:
             sweep_published(name, share)
+        for name in SHEET_SWEEPS:  # as it ships, beside a search every fifth iteration
+            sweep_sheet(name, share, {"collision_interval": 5})
+            sweep_sheet(name, share)
+        for gap in (0.005, 0.002, 0.0):  # one thickness, and a vertex trapped between two skins
+            pinch_sheet(share, gap)
 
 
 if __name__ == "__main__":

@@ -555,6 +555,13 @@ def _inside_box(bank, m, x, y, z):
 
 
 @numba.njit(cache=True, inline="always")
+def mesh_closed(bank, m):
+    """Whether mesh ``m`` of the bank is closed: a solid, its distance signed (module
+    docstring)."""
+    return bank[INTS][bank[STARTS][CLOSED] + m] != 0
+
+
+@numba.njit(cache=True, inline="always")
 def mesh_distance(bank, m, x, y, z, cutoff=np.inf):
     """Distance of the point ``(x, y, z)`` (in the mesh's frame) from mesh ``m`` of the bank,
     signed (negative inside) where the mesh is closed and unsigned where it is open (module
@@ -585,7 +592,7 @@ def _listed_distance(bank, m, x, y, z, cutoff, cid):
     arithmetic is the walk's, so its nearest point is the walk's to the bit. Elsewhere (outside
     the grid, nothing listed that near) the walk's."""
     t = bank[INTS]
-    closed = t[bank[STARTS][CLOSED] + m] != 0
+    closed = mesh_closed(bank, m)
     found = False
     if cid >= 0:
         band = bank[REALS][bank[STARTS][BAND] + m]

@@ -42,7 +42,8 @@ Contacts inside the solve (when the simulator lets the method handle them, :attr
   distance the search found between its primitives (itself, its triangles, its edges) and any
   other, and at most its allowance; so two primitives that were ``d`` apart stay ``(1 − 2γ)·d > 0``
   apart, those not found stay beyond ``τ``, and no vertex passes through the cloth or a collider
-  (its allowance is also kept below the distance to the far side of the thinnest collider near it).
+  (its allowance is also kept below the distance to the far side of the thinnest collider near it;
+  one within a solid's skin, a closed mesh's, may reach the skin along the outward normal).
   Over a whole step the cloth never crosses itself.
 
 The self-collision stage does not run after the method (:attr:`VBD.handles`); the contact stage
@@ -93,6 +94,7 @@ from ..contact.colliders import (
     sdf,
 )
 from ..contact.geometry import segment_parameters, triangle_weights
+from ..contact.triangle_meshes import mesh_closed
 from ..kinds import LINEAR
 from ..physics.bending import bending_row
 from ..physics.forces import BUCKLE_TABLE, incidence
@@ -107,6 +109,13 @@ from .vbd_terms import local_energy, self_contacts_at, springs_at
 
 #: the share of the nearest found distance a vertex may move between two candidate searches
 GAMMA = 0.45
+#: iterations between two candidate searches where a vertex met its bound (the option
+#: ``collision_interval`` where it is not given), and while a collider moves: a link pushing the
+#: cloth drives the vertices in front of it into their bounds iteration after iteration, and
+#: pressed layers each move only γ of their gap a search (the Panda and the UR5 swung through a
+#: sheet at 5 iterations a step: vertices 13-32 mm inside a link searched every fifth iteration,
+#: none every other, at 0.97-1.27 times the step's time; docs/robots.md)
+COLLISION_INTERVAL, MOVING_COLLISION_INTERVAL = 5, 2
 #: how far a vertex may move between two searches besides that bound: (a, b) for a·τ + b·|its
 #: motion to the step's initial guess| (a search then serves the next steps while they stay
 #: within). The guess, not the inertia: a vertex lying on the table or on another layer has
@@ -578,7 +587,13 @@ def collider_allowances(x, allowance, bounded, co, cdepth, tau, allow, near):
                 d = sdf(ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2])[0]
             nearest = min(nearest, d)
             if cdepth[c] < math.inf:
-                b = min(b, max(d, 0.0) + 0.9 * cdepth[c])
+                reach = max(d, 0.0) + 0.9 * cdepth[c]
+                if d < tau and ckind[c] == MESH and mesh_closed(cbank, int(cgeo[c, 0])):
+                    # a solid's skin is reached along its outward normal: a vertex a link
+                    # overtook gets out on the side it came from (held where it is, the link
+                    # carried it on inside, and out of its far side)
+                    reach = max(reach, tau - d)
+                b = min(b, reach)
         if not bounded:
             room = nearest - tau * 1.01
             if room > FAR * allowance[i]:
@@ -647,8 +662,9 @@ class VBD(Integrator):
     0.8), the Chebyshev acceleration's spectral radius estimate, 0 for none (measured on the
     swinging 48×48 cloth: 0.8 is the best of 0.5, 0.8, 0.9 and 0.95 at 1/240 s, 15× closer to the
     converged step than none after 10 iterations; docs/BENCHMARKS.md); ``contact_stiffness`` (N/m,
-    default 1e4); ``collision_interval`` (default 5): iterations between candidate searches when
-    the cloth self-collides and a vertex met its bound; ``self_friction`` (default 0.5): Coulomb's
+    default 1e4); ``collision_interval`` (default None: 5, and 2 while a collider moves,
+    :data:`COLLISION_INTERVAL`): iterations between candidate searches when the cloth
+    self-collides and a vertex met its bound; ``self_friction`` (default 0.5): Coulomb's
     μ between the cloth's own layers; ``time_budget`` (s, default None): when set, iterate until
     that much wall time has passed (at least one iteration, at most ``iterations``) — a node that
     must keep its tick, whose results then depend on the machine; ``tethers`` (default False): with
@@ -736,7 +752,9 @@ class VBD(Integrator):
         self.iterations = int(MAX_ITERATIONS if iterations is None else iterations)
         self.rho = float(o.rho)
         self.contact_stiffness = float(o.contact_stiffness)
-        self.collision_interval = int(o.collision_interval)
+        #: None: :data:`COLLISION_INTERVAL`, :data:`MOVING_COLLISION_INTERVAL` while a collider
+        #: moves
+        self.collision_interval = o.collision_interval
         self.time_budget = None if o.time_budget is None else float(o.time_budget)
         self.free = ~np.asarray(model.pinned, bool)
         self._layout_of = None
@@ -1084,8 +1102,15 @@ class VBD(Integrator):
             prev2 = self._buffer("_prev2", x)
             np.copyto(prev2, x)
             run = _iterate_parallel if len(verts) >= PARALLEL_MIN_VERTICES else _iterate_serial
+        interval = self.collision_interval
+        if interval is None:
+            moving = len(colliders.kinds) and not (
+                np.array_equal(colliders.pos, colliders.pos0)
+                and np.array_equal(colliders.rot, colliders.rot0)
+            )
+            interval = MOVING_COLLISION_INTERVAL if moving else COLLISION_INTERVAL
         for it in range(0 if grid is not None else self.iterations):
-            if self_contact and it > 0 and it % self.collision_interval == 0 and cut.any():
+            if self_contact and it > 0 and it % interval == 0 and cut.any():
                 # a vertex hit its bound: search again from here, for room to move on
                 self._detect(x, y, colliders, tau, self_contact, x_cd)
                 cut[:] = 0
@@ -1290,8 +1315,9 @@ class VBD(Integrator):
     @staticmethod
     def depths(colliders):
         """Per collider, how far in its far side is (half its thinnest dimension; ``inf`` for a
-        plane, a half-space; 0 for a mesh, two-sided: a vertex may not reach its surface between
-        two searches, so a moving link cannot pass through the cloth)."""
+        plane, a half-space; 0 for a mesh: a vertex may not reach its surface between two
+        searches, so a moving link cannot pass through the cloth; one already within a closed
+        mesh's skin may get out to it, :func:`collider_allowances`)."""
 
         kinds, geo = colliders.kinds, colliders.geo
         depth = np.full(len(kinds), np.inf)

@@ -52,8 +52,9 @@ class VBDOptions:
     collider_share: float | None = None
     #: the contact penalty's stiffness (N/m)
     contact_stiffness: float = 1e4
-    #: iterations between candidate searches for self-contact
-    collision_interval: int = 5
+    #: iterations between candidate searches for self-contact (None: chosen, fewer while a
+    #: collider moves)
+    collision_interval: int | None = None
     #: wall seconds a step may iterate (None: no budget)
     time_budget: float | None = None
     #: Coulomb's μ between layers of the cloth
@@ -89,7 +90,8 @@ class VBDOptions:
             )
         if self.iterations is not None:
             _integer("iterations", self.iterations, 100_000)
-        _integer("collision_interval", self.collision_interval, 10_000)
+        if self.collision_interval is not None:
+            _integer("collision_interval", self.collision_interval, 10_000)
         _integer("check_every", self.check_every, 10_000)
         tol = self.tolerance
         if not (_is_number(tol) and 0.0 <= tol < math.inf):
