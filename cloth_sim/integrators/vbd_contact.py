@@ -79,19 +79,29 @@ def colliders_at(i, x, xt, ckind, pose, pose0, cgeo, cmu, cbank, law, fh, seen):
     """Vertex ``i``'s collider contacts added to its block ``fh``: the penalty, and IPC's lagged
     friction on its motion over the step relative to the collider's point under it; returns the
     block's nine numbers and whether it touches one, flat (a tuple in a tuple, unpacked in a
-    parallel loop, fails numba's array analysis). ``pose``, ``pose0``: the colliders' positions
-    and rotations now and at the step's start; ``law``: ``(τ, the penalty's stiffness, friction's
-    ε)``. A mesh collider's signed distance and normal at ``x[i]`` go to ``seen[i, c]``, for
-    :func:`onset` at the same point: a mesh's query costs several times a primitive's, which
-    :func:`onset` asks again (cheaper than storing them, measured on robot_sweep's eight links).
-    (The arrays that
-    the calls inside that are not inlined, the mesh's search, take are passed as they are: in a
-    bundle of more, those calls would count the bundle's references on every call.)"""
+    parallel loop, fails numba's array analysis). ``pose``: the colliders' positions, rotations
+    and reaches now; ``pose0``: their positions and rotations at the step's start; ``law``:
+    ``(τ, the penalty's stiffness, friction's ε)``. A mesh collider's signed distance and normal
+    at ``x[i]`` go to ``seen[i, c]``, for :func:`onset` at the same point (beyond its reach by
+    the thickness: that lower bound and no normal, unasked): a mesh's query costs several times
+    a primitive's, which :func:`onset` asks again (cheaper than storing them, measured on
+    robot_sweep's eight links). (The arrays that the calls inside that are not inlined, the
+    mesh's search, take are passed as they are: in a bundle of more, those calls would count the
+    bundle's references on every call.)"""
     tau, kc, eps = law
-    cpos, crot = pose
+    cpos, crot, creach = pose
     cpos0, crot0 = pose0
     touched = False
     for c in range(ckind.shape[0]):
+        if creach[c] < math.inf:
+            # beyond its reach (every point of it within that of its position) by the thickness:
+            # no contact, without the query (a robot's links each asked by every vertex near any
+            # of them: most of a Franka Panda's step); a mesh's lower bound kept for onset
+            far = (x[i, 0] - cpos[c, 0]) ** 2 + (x[i, 1] - cpos[c, 1]) ** 2
+            far = math.sqrt(far + (x[i, 2] - cpos[c, 2]) ** 2) - creach[c]
+            if far >= tau:
+                seen[i, c, 0], seen[i, c, 1], seen[i, c, 2], seen[i, c, 3] = far, 0.0, 0.0, 0.0
+                continue
         if ckind[c] == MESH:
             d, nx, ny, nz = mesh_sdf(cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2], cbank)
             seen[i, c, 0], seen[i, c, 1], seen[i, c, 2], seen[i, c, 3] = d, nx, ny, nz
@@ -185,8 +195,10 @@ def onset(i, s, x, rec_ptr, rec, rec_d, pcoef, pnrm, tau, colliders, shapes, see
     normal, so that it stops at its onset (the next iteration sees it); the motion along the
     surface stays. The self-contact pairs by their linear distance, the first ``colliders``
     colliders by their signed distance along their normal: a primitive's asked again (``shapes =
-    (kinds, positions, rotations, geometry)``), a mesh's as :func:`colliders_at` left it in
-    ``seen[i]`` for the same point. ``s``: three numbers, and so is what it returns."""
+    (kinds, positions, rotations, geometry, and the mesh bank's reals, ints and starts)``), a
+    mesh's as :func:`colliders_at` left it in ``seen[i]`` for the same point (asked here only
+    where that left its reach's lower bound and the step is longer than the bound's room).
+    ``s``: three numbers, and so is what it returns."""
     sx, sy, sz = s
     for q in range(rec_ptr[i], rec_ptr[i + 1]):
         d = rec_d[q]  # (its distance as _self_contacts_at found it for this step)
@@ -200,10 +212,17 @@ def onset(i, s, x, rec_ptr, rec, rec_d, pcoef, pnrm, tau, colliders, shapes, see
         if over > 0.0:
             f = over / (nx * nx + ny * ny + nz * nz)
             sx, sy, sz = sx + f * nx, sy + f * ny, sz + f * nz
-    ckind, cpos, crot, cgeo = shapes
+    ckind, cpos, crot, cgeo, reals, ints, starts = shapes
     for c in range(colliders):
         if ckind[c] == MESH:
             d, nx, ny, nz = seen[i, c, 0], seen[i, c, 1], seen[i, c, 2], seen[i, c, 3]
+            if nx == 0.0 and ny == 0.0 and nz == 0.0:
+                # beyond its reach by d ≥ τ (colliders_at did not ask it): a step shorter than
+                # d − τ stops short of the onset whatever the normal; a longer one asks
+                if d - tau >= math.sqrt(sx * sx + sy * sy + sz * sz) * (1.0 + 1e-9):
+                    continue
+                bank = (reals, ints, starts)
+                d, nx, ny, nz = mesh_sdf(cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2], bank)
         else:
             d, nx, ny, nz = sdf(ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2])
         if d < tau:

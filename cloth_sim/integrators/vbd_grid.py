@@ -511,8 +511,9 @@ def _sweeps_touching(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH
     tau = law[0]
     F0, F1, F2, H0, H1, H2, H3, H4, H5 = fh
     ckind, cgeo, cmu = co.kinds, co.geo, co.mu
-    pose, pose0, cbank = (co.pos, co.rot), (co.pos0, co.rot0), (co.reals, co.ints, co.starts)
-    shapes = (ckind, co.pos, co.rot, cgeo)
+    pose, pose0 = (co.pos, co.rot, co.reach), (co.pos0, co.rot0)
+    cbank = (co.reals, co.ints, co.starts)
+    shapes = (ckind, co.pos, co.rot, cgeo, co.reals, co.ints, co.starts)
     rec_ptr, rec, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d = sc
     X0, X1, X2 = A
     B0, B1, B2 = B
