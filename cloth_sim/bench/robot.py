@@ -233,6 +233,18 @@ SHEET_JOINTS = {
 }
 
 
+def _measured_step(sim, links, tris, prev):
+    """One step of ``sim``: its wall time, the smallest signed distance of any vertex from any of
+    ``links`` after it, the self-crossings since ``prev`` (the independent check) and the new
+    positions."""
+    t = time.perf_counter()
+    sim.step()
+    took = time.perf_counter() - t
+    x = sim.positions
+    closest = min(float(c.signed_distance(x).min()) for c in links)
+    return took, closest, len(crossings(prev, x, tris)), x.copy()
+
+
 def sweep_sheet(
     name: str, share, options: dict | None = None, dt: float = 1 / 240, iterations: int = 5,
     self_collision: bool = True,
@@ -260,12 +272,8 @@ def sweep_sheet(
     swinging, steps = round(0.5 / dt), round(0.625 / dt)
     for k in range(steps):
         sim.set_joint_positions(name, {swing: -0.9 + 1.8 * min(1.0, (k + 1) / swinging)})
-        t = time.perf_counter()
-        sim.step()
-        wall += time.perf_counter() - t
-        worst = min(worst, min(float(c.signed_distance(sim.positions).min()) for c in links))
-        crossed += len(crossings(prev, sim.positions, tris))
-        prev = sim.positions.copy()
+        took, closest, crossed_now, prev = _measured_step(sim, links, tris, prev)
+        wall, worst, crossed = wall + took, min(worst, closest), crossed + crossed_now
     print(
         f"{name} swung through the issue's 32x32 sheet (vbd {dt:.4g} s x {iterations}, "
         f"self-contact {'on' if self_collision else 'off'}, {options or 'defaults'}): deepest "
@@ -311,12 +319,8 @@ def pinch_sheet(share, gap: float) -> None:
             "panda_finger_joint2": finger,
         }
         sim.set_joint_positions("panda", q)
-        t = time.perf_counter()
-        sim.step()
-        wall += time.perf_counter() - t
-        worst = min(worst, min(float(c.signed_distance(sim.positions).min()) for c in links))
-        crossed += len(crossings(prev, sim.positions, tris))
-        prev = sim.positions.copy()
+        took, closest, crossed_now, prev = _measured_step(sim, links, tris, prev)
+        wall, worst, crossed = wall + took, min(worst, closest), crossed + crossed_now
     tip = robot.link_transforms({**joints, **q})["panda_hand_tcp"][:3, 3]
     held = float(np.linalg.norm(sim.positions[n // 2] - tip))
     print(
