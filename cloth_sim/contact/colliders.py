@@ -478,6 +478,17 @@ def _distances(kind, pos, rot, geo, pts, bank):
 
 
 @numba.njit(cache=True, inline="always")
+def beyond_reach(pos, reach, c, x, y, z):
+    """How far the point ``(x, y, z)`` lies beyond collider ``c``'s reach, ``|x − pos| − reach``
+    (every point of the collider is within its reach of its position, so the point's distance
+    from it is at least that); ``−inf`` for a half-space, whose reach is unbounded."""
+    if not reach[c] < math.inf:
+        return -math.inf
+    r2 = (x - pos[c, 0]) ** 2 + (y - pos[c, 1]) ** 2
+    return math.sqrt(r2 + (z - pos[c, 2]) ** 2) - reach[c]
+
+
+@numba.njit(cache=True, inline="always")
 def carried(p_old, R_old, p_new, R_new, c, x, y, z):
     """Where the point ``(x, y, z)`` attached to collider ``c``'s new pose (``p_new[c]``,
     ``R_new[c]``) was at its old pose (``p_old[c]``, ``R_old[c]``); by index, as :func:`sdf`."""

@@ -88,6 +88,7 @@ from ..contact.colliders import (
     MESH,
     NO_COLLIDERS,
     SPHERE,
+    beyond_reach,
     collider_travel,
     mesh_sdf,
     packed_between,
@@ -575,10 +576,9 @@ def collider_allowances(x, allowance, bounded, co, cdepth, tau, allow, near):
         b = allowance[i] if bounded else math.inf
         nearest = math.inf
         for c in range(ckind.shape[0]):
-            far = -math.inf  # |x − pos| − reach: d is at least that
-            if creach[c] < math.inf and allowance[i] < math.inf:
-                far = (x[i, 0] - cpos[c, 0]) ** 2 + (x[i, 1] - cpos[c, 1]) ** 2
-                far = math.sqrt(far + (x[i, 2] - cpos[c, 2]) ** 2) - creach[c]
+            far = -math.inf  # d is at least that
+            if allowance[i] < math.inf:
+                far = beyond_reach(cpos, creach, c, x[i, 0], x[i, 1], x[i, 2])
             if bounded and far >= (allowance[i] + tau * 1.01) * (1.0 + 1e-9):
                 # beyond its reach: d ≥ allowance + 1.01 τ, so it neither bounds the vertex below
                 # its allowance nor makes it near (the same as measured)
@@ -632,10 +632,8 @@ def _overtaken(x, free, co, tau):
         for i in range(x.shape[0]):
             if not free[i]:
                 continue
-            if creach[c] < math.inf:
-                far = (x[i, 0] - cpos[c, 0]) ** 2 + (x[i, 1] - cpos[c, 1]) ** 2
-                if math.sqrt(far + (x[i, 2] - cpos[c, 2]) ** 2) - creach[c] >= tau:
-                    continue
+            if beyond_reach(cpos, creach, c, x[i, 0], x[i, 1], x[i, 2]) >= tau:
+                continue
             if ckind[c] == MESH:
                 xi, yi, zi = x[i, 0], x[i, 1], x[i, 2]
                 d, nx, ny, nz = mesh_sdf(cpos, crot, cgeo, c, xi, yi, zi, cbank, tau)

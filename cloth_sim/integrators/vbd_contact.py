@@ -11,7 +11,7 @@ import math
 
 import numba
 
-from ..contact.colliders import MESH, carried, mesh_sdf, sdf
+from ..contact.colliders import MESH, beyond_reach, carried, mesh_sdf, sdf
 
 
 @numba.njit(cache=True, inline="always")
@@ -93,15 +93,13 @@ def colliders_at(i, x, xt, ckind, pose, pose0, cgeo, cmu, cbank, law, fh, seen):
     cpos0, crot0 = pose0
     touched = False
     for c in range(ckind.shape[0]):
-        if creach[c] < math.inf:
-            # beyond its reach (every point of it within that of its position) by the thickness:
-            # no contact, without the query (a robot's links each asked by every vertex near any
-            # of them: most of a Franka Panda's step); a mesh's lower bound kept for onset
-            far = (x[i, 0] - cpos[c, 0]) ** 2 + (x[i, 1] - cpos[c, 1]) ** 2
-            far = math.sqrt(far + (x[i, 2] - cpos[c, 2]) ** 2) - creach[c]
-            if far >= tau:
-                seen[i, c, 0], seen[i, c, 1], seen[i, c, 2], seen[i, c, 3] = far, 0.0, 0.0, 0.0
-                continue
+        # beyond its reach by the thickness: no contact, without the query (a robot's links each
+        # asked by every vertex near any of them: most of a Franka Panda's step); a mesh's lower
+        # bound kept for onset
+        far = beyond_reach(cpos, creach, c, x[i, 0], x[i, 1], x[i, 2])
+        if far >= tau:
+            seen[i, c, 0], seen[i, c, 1], seen[i, c, 2], seen[i, c, 3] = far, 0.0, 0.0, 0.0
+            continue
         if ckind[c] == MESH:
             d, nx, ny, nz = mesh_sdf(cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2], cbank)
             seen[i, c, 0], seen[i, c, 1], seen[i, c, 2], seen[i, c, 3] = d, nx, ny, nz
