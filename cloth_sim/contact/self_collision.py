@@ -452,19 +452,25 @@ class SelfCollision:
         (:data:`KEEP_BELOW`)."""
         return (1 + 2 * SKIN) * self.thickness <= KEEP_BELOW * self._shortest_edge
 
-    def candidates(self, x0, reach, keep: bool = False):
+    @property
+    def _skin(self) -> float:
+        """The stage's own searches' skin (m): :data:`SKIN` thicknesses where it keeps its pairs
+        (:attr:`keeps_pairs`), else none."""
+        return SKIN * self.thickness if self.keeps_pairs else 0.0
+
+    def candidates(self, x0, reach, skin=0.0):
         """``(vf, vf_distance, ee, ee_distance)``: the particle–triangle and edge–edge pairs within
-        ``reach`` of each other at ``x0``
-        (:meth:`cloth_sim.contact.collision_tree.TriangleTree.pairs`); with ``keep``, answered
-        from the pairs kept since the last such query while they cover it
-        (:mod:`cloth_sim.contact.pair_list`: the same answer, cheaper for a caller whose
-        positions move little between queries)."""
+        ``reach`` of each other at ``x0``, as
+        :meth:`cloth_sim.contact.collision_tree.TriangleTree.pairs` finds them: from the pairs
+        kept since the last search while they cover the query
+        (:mod:`cloth_sim.contact.pair_list`), else from a new search with every reach grown by
+        ``skin`` (m, a number or one per particle; 0 searches for the query alone and keeps that
+        for the next). The same answer either way, cheaper where the positions move little
+        between queries."""
         if self._pairs is None:
             tree = TriangleTree(self._tris, self.model.positions, self._features)
             self._pairs = PairList(tree)
-        if not (keep and self.keeps_pairs):
-            return self._pairs.tree.pairs(x0, reach)
-        return self._pairs.pairs(x0, reach, SKIN * self.thickness)
+        return self._pairs.pairs(x0, reach, skin)
 
     def set_enabled(self, on: bool) -> None:
         """Turn it on or off; on needs the model's triangles and a thickness it can use
@@ -501,7 +507,7 @@ class SelfCollision:
         # the stage's steps are small: the kept pairs answer most of them where the cloth is
         # coarse against its thickness (keeps_pairs: the fold scene 1.6x faster at 24x24); vbd's
         # 1/60 s steps move too far between its queries to gain
-        pairs, dist, e_pairs, e_dist = self.candidates(x0, reach, keep=True)
+        pairs, dist, e_pairs, e_dist = self.candidates(x0, reach, self._skin)
         free = self._inv_mass
         self.last_pushed = (
             proximity(x, x0, v, tris, pairs, inv_mass, free, clearance, h)
@@ -514,7 +520,7 @@ class SelfCollision:
         # search covered that unless the pushes moved some particle more than h / 2 further
         moved = displacements(x, x0, self._moved)
         if (moved > reach).any():
-            pairs, dist, e_pairs, e_dist = self.candidates(x0, moved, keep=True)
+            pairs, dist, e_pairs, e_dist = self.candidates(x0, moved, self._skin)
         self.last_pairs, self.last_edge_pairs = len(pairs), len(e_pairs)
         displacement_factors(moved, tris, pairs, dist, self._factor)
         edge_displacement_factors(moved, edges, e_pairs, e_dist, self._factor)

@@ -6,6 +6,7 @@ from the coplanarity cubic, not with the simulator's code).
 """
 
 import math
+import sys
 
 import numpy as np
 import pytest
@@ -15,7 +16,7 @@ from cloth_sim import ClothModel, Simulator, colliders, integrators
 from cloth_sim.bench.crossings import crossings  # the independent crossing check
 from cloth_sim.contact.collision_tree import TriangleTree
 from cloth_sim.contact.pair_list import PairList
-from cloth_sim.contact.self_collision import SKIN
+from cloth_sim.contact.self_collision import SKIN, Uncrossed
 from cloth_sim.scene import SceneError, load_scene, scene_from_dict
 
 G = 9.81
@@ -503,6 +504,43 @@ def test_self_collision_search_finds_every_pair_within_reach_at_any_thread_count
         assert all(np.array_equal(a, b) for a, b in zip(runs[0], other))
 
 
+def test_the_guard_after_vbd_is_answered_by_vbd_s_last_search_as_the_tree_would():
+    """After ``vbd``'s step the contact stage's push is kept from crossing the cloth
+    (``Uncrossed``) by the pairs closer than its displacements: a query the last candidate
+    search of the step covers (pair_list's cover: every primitive's reach plus its motion since
+    within what that search gave it) is answered from that search's pairs, without another walk
+    of the tree. On the T-shirt landing and resting on its table, every answer is the tree's
+    own, to the bit, and the guard's come without a walk."""
+    sim = load_scene("tshirt").build_simulator()
+    stage = sim._self_collision
+    tree = TriangleTree(stage.triangles, sim.model.positions, stage.features)
+    sim.step()
+    walk, walks = stage._pairs.tree.pairs, [0]
+
+    def counted(x0, radius):
+        walks[0] += 1
+        return walk(x0, radius)
+
+    stage._pairs.tree.pairs = counted
+    kept = stage.candidates
+    guards = [0, 0]  # the guard's queries, and those answered without a walk of the tree
+
+    def checked(x0, reach, skin=0.0):
+        before = walks[0]
+        got = kept(x0, reach, skin)
+        want = tree.pairs(x0, reach)  # every query's answer, vbd's own searches too
+        assert all(np.array_equal(a, b) for a, b in zip(want, got))
+        if isinstance(sys._getframe(1).f_locals.get("self"), Uncrossed):
+            guards[0] += 1
+            guards[1] += walks[0] == before
+        return got
+
+    stage.candidates = checked
+    steps = int(round(2.0 / sim.dt))  # it lands at 0.14 s and flattens
+    sim.step(steps)
+    assert guards[0] >= 0.5 * steps and guards[1] >= 0.9 * guards[0]  # (108 of 108)
+
+
 def test_the_kept_pairs_answer_as_the_tree_does_and_search_again_when_a_particle_outruns_them():
     """Self-collision's candidate pairs kept between searches (pair_list): on the fold scene's
     cotton piling onto itself at 12×12 (1.5 s of falling, folding and settling, every query the
@@ -515,7 +553,7 @@ def test_the_kept_pairs_answer_as_the_tree_does_and_search_again_when_a_particle
     kept = PairList(TriangleTree(stage.triangles, sim.model.positions, stage.features))
     found = [0]
 
-    def both(x0, reach, keep=False):
+    def both(x0, reach, skin=0.0):
         want = tree.pairs(x0, reach)
         got = kept.pairs(x0, reach, SKIN * stage.thickness)
         assert all(np.array_equal(a, b) for a, b in zip(want, got))
