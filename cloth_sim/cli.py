@@ -21,10 +21,10 @@ drape scene)
 
 ``cloth-sim bench strain [--sizes 32 64] [--seconds 3]`` (worst strain and cost of the strain
 limit) ``cloth-sim bench contacts [--sizes 32 64] [--seconds 1.5]`` (cost of colliders and
-self-collision) ``cloth-sim bench camera [--size 32] [--seconds 10]`` (the node's real-time factor,
-camera topics subscribed) ``cloth-sim bench lockstep [--size 32]`` (steps per second through ~/step
-from another process) ``cloth-sim bench startup [--sizes 32 64] [--trials 4]`` (process start to
-the first cloud)
+self-collision; ``--scene tshirt`` the garments as they ship) ``cloth-sim bench camera [--size
+32] [--seconds 10]`` (the node's real-time factor, camera topics subscribed) ``cloth-sim bench
+lockstep [--size 32]`` (steps per second through ~/step from another process) ``cloth-sim bench
+startup [--sizes 32 64] [--trials 4]`` (process start to the first cloud)
     Print the node's real-time factor with and without a ~/points subscriber (needs rclpy).
 ``cloth-sim textile cantilever|tensile|drape [--material NAME ...] [--grid N ...]``
     The textile standard tests on the simulator, each measured value beside the expected one.

@@ -50,8 +50,11 @@ class VBDOptions:
     substeps: int | str | None = None
     #: the share of the thickness a collider may travel in a substep (None: off)
     collider_share: float | None = None
-    #: the contact penalty's stiffness (N/m)
+    #: the colliders' contact penalty's stiffness (N/m)
     contact_stiffness: float = 1e4
+    #: the self-contact penalty's stiffness (N/m; None: ``contact_stiffness``; 'cloth': as stiff
+    #: as the cloth's springs at its median vertex)
+    self_contact_stiffness: float | str | None = None
     #: iterations between candidate searches for self-contact (None: chosen, fewer while a
     #: collider moves)
     collision_interval: int | None = None
@@ -117,6 +120,12 @@ class VBDOptions:
             raise ValueError(
                 "contact_stiffness must be a positive number (N/m), got "
                 f"{self.contact_stiffness!r}"
+            )
+        ks = self.self_contact_stiffness
+        if ks not in (None, "cloth") and not (_is_number(ks) and 0 < ks < math.inf):
+            raise ValueError(
+                "self_contact_stiffness must be None (contact_stiffness), 'cloth' (as stiff as "
+                f"the cloth's springs at a vertex) or a positive number (N/m), got {ks!r}"
             )
         budget = self.time_budget
         if budget is not None and not (_is_number(budget) and 0 < budget < math.inf):

@@ -360,6 +360,8 @@ def test_counters_report_iterations_and_the_residual():
         ({"iterations": 0}, "iterations"),
         ({"rho": 1.0}, "rho"),
         ({"contact_stiffness": -1.0}, "contact_stiffness"),
+        ({"self_contact_stiffness": 0.0}, r"self_contact_stiffness must be None \(contact_stiff"),
+        ({"self_contact_stiffness": "stiff"}, "self_contact_stiffness"),
         ({"collision_interval": 1.5}, "collision_interval"),
         ({"time_budget": 0.0}, "time_budget"),
         ({"tethers": 1}, "tethers"),
