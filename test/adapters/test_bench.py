@@ -82,3 +82,16 @@ def test_scaling_quick(bench_dir):
     names = [s["variant"] for s in data["skipping"]]
     assert names[0].startswith("everything on") and "none of them" in names
     assert "wind" in data["skipping"][0]["terms"] and "wind" not in data["skipping"][1]["terms"]
+
+
+def test_the_garment_contacts_table_has_its_three_cases_and_counts_crossings(capsys):
+    """``cloth-sim bench contacts --scene``: off, on and on as stiff as the cloth, each timed, the
+    step without self-contact the ratios' base, and the crossings counted where self-contact is
+    on (the T-shirt falling onto its table: none)."""
+    from cloth_sim.bench.steps import print_garment_contacts_table
+
+    rows = print_garment_contacts_table(("tshirt",), seconds=0.5, settle=0.25)
+    assert [r["self_contact"] for r in rows] == ["off", "on", "on, 'cloth'"]
+    assert rows[0]["ratio"] == 1.0 and all(r["ms"] > 0 for r in rows)
+    assert rows[0]["crossings"] is None and rows[1]["crossings"] == rows[2]["crossings"] == 0
+    assert capsys.readouterr().out.count("\n| tshirt |") == 3
