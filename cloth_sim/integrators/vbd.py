@@ -200,16 +200,21 @@ def colour_groups(springs: np.ndarray, n: int, free: np.ndarray) -> tuple[np.nda
     return cptr, np.ascontiguousarray(verts, dtype=np.int64)
 
 
+def summed_at(ptr, values) -> np.ndarray:
+    """Per vertex, the sum of its springs' ``values`` (``ptr``: the vertices' springs, CSR;
+    ``values`` in that order)."""
+    n = len(ptr) - 1
+    owner = np.repeat(np.arange(n), np.diff(ptr))  # each vertex's springs, in CSR order
+    return np.bincount(owner, weights=values, minlength=n)
+
+
 def substeps_needed(ptr, k, c, bdiag, masses, free, dt, cap: int = MAX_SUBSTEPS) -> int:
     """The fewest substeps (at most ``cap``) of a step of ``dt`` in which every free
     vertex's ``(h²·Σk + h·Σc + h²·Q_ii)/m`` is at most :data:`SUBSTEP_RATIO`: ``ptr`` the
     vertices' springs (CSR), ``k``, ``c`` their stiffness and damping in that order, ``bdiag`` the
     bending's diagonal (empty for none). What :meth:`VBD.substeps_for` chooses, and the CUDA
     backend with it."""
-    n = len(ptr) - 1
-    owner = np.repeat(np.arange(n), np.diff(ptr))  # each vertex's springs, in CSR order
-    ks = np.bincount(owner, weights=k, minlength=n)
-    cs = np.bincount(owner, weights=c, minlength=n)
+    ks, cs = summed_at(ptr, k), summed_at(ptr, c)
     if len(bdiag):
         ks = ks + bdiag
     ratio = (dt * dt * ks + dt * cs)[free] / masses[free]
@@ -882,10 +887,8 @@ class VBD(Integrator):
         if ks != "cloth":
             return ks
         if self._self_stiffness_of is None or self._self_stiffness_of[0] is not forces:
-            n = self.model.n_particles
-            k = np.asarray(forces.k, np.float64)
-            ends = np.asarray(forces.springs, np.int64)
-            at = np.bincount(ends[:, 0], k, n) + np.bincount(ends[:, 1], k, n)
+            ptr, _, _, k = self._layout(forces)[0][:4]  # each vertex's springs (CSR)
+            at = summed_at(ptr, k)
             at = at[self.free & (at > 0.0)]
             ks = SELF_CONTACT_SHARE * float(np.median(at)) if len(at) else self.contact_stiffness
             self._self_stiffness_of = (forces, ks)
