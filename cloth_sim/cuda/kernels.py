@@ -790,7 +790,7 @@ def frames_on_grid(top, wor, it, cptr, run, out, partial):
         sweeps += done
         if part % run.substeps == run.substeps - 1 and worst > run.tolerance:
             missed += 1
-    if rank < worlds:
-        out[rank, 0] = worst
-        out[rank, 1] = sweeps
-        out[rank, 2] = missed
+    for w in range(rank, worlds, size):  # (every thread holds the same, over all the worlds)
+        out[w, 0] = worst
+        out[w, 1] = sweeps
+        out[w, 2] = missed

@@ -304,6 +304,27 @@ def test_every_launch_gives_the_same_bits(integrator):
     assert np.max(np.abs(got["stages"][1] - got["stages"][0])) > 1e-6
 
 
+def test_the_cooperative_launch_reports_to_every_world():
+    """The grid launch's counters (the residual, the sweeps, the steps that missed the tolerance)
+    reach every world's row however few threads it has: on the simulator's one thread the rows
+    past the first were left unwritten, and the iterations were read from whatever the buffer
+    held (a NaN once in `make test-gpu`)."""
+    b = BatchSimulator(
+        cotton(),
+        worlds=3,
+        integrator="vbd",
+        dt=1 / 120,
+        device="cuda",
+        precision="float64",
+        integrator_options=dict(iterations=4, tolerance=0.0),
+        launch="grid",
+    )
+    b._out.copy_to_device(np.full((3, 3), np.nan))
+    b.step()
+    assert np.isfinite(b.last_residual).all()
+    assert np.all(b.iterations == b.iterations[0]) and b.iterations[0] >= 4
+
+
 def test_worlds_in_blocks_stop_at_their_own_tolerance():
     """In a block a world, a world that converges stops sweeping while a stiffer one goes on."""
     m = sheet(stiffness=3e3)
