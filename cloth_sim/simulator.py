@@ -977,7 +977,7 @@ def _compile_steps() -> None:
             term.springs, term.rest, term.k, term.c, term.kind, True, model.n_particles
         )
         gravity, inv_mass = sim.forces.terms[0].force, sim.forces.inv_mass
-        gather = (*springs, gravity, np.zeros_like(sim.positions), inv_mass, 1e-4)
+        gather = (tuple(springs), gravity, np.zeros_like(sim.positions), inv_mass, 1e-4)
         x, v = sim.positions.copy(), sim.velocities.copy()
         k = np.zeros((2, 2, *x.shape))
         stage = (x, v, k[0], k[1], np.ones(2))
@@ -1005,7 +1005,7 @@ def _compile_steps() -> None:
             k[1],
             np.zeros_like(x),
             np.zeros(2),
-            *springs,
+            tuple(springs),
             gravity,
             inv_mass,
         )

@@ -39,6 +39,7 @@ and §11).
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -210,9 +211,33 @@ def _attach_all(x, anchor, reach, tau, moved):
     return n
 
 
+class PassWork(NamedTuple):
+    """What :func:`provot_passes` keeps from call to call (:class:`_PassScratch` makes it once per
+    spring set): each particle's limited springs (CSR ``inc_ptr``, ``inc``, in the springs'
+    order); the ``clock`` (one entry); ``by_spring`` (3 rows: the heap, the next pass's springs,
+    and the stamps of those queued) and ``by_particle`` (4 rows: the stamps of those listed as
+    moved, the last spring that moved each in the pass, the lists of the moved and of those the
+    attachments moved): the stamps kept, the rest scratch."""
+
+    inc_ptr: np.ndarray
+    inc: np.ndarray
+    clock: np.ndarray
+    by_spring: np.ndarray
+    by_particle: np.ndarray
+
+
+class Attachments(NamedTuple):
+    """The long-range attachments :func:`provot_passes` applies: each particle's nearest pins
+    ``anchor`` and its rest geodesic distances to them ``reach`` (:func:`_attach`), and whether
+    they are on (``on``; off: :data:`_NO_ANCHOR`, :data:`_NO_REACH`)."""
+
+    anchor: np.ndarray
+    reach: np.ndarray
+    on: bool
+
+
 @numba.njit(cache=True)
-def provot_passes(x, springs, rest, tau, tol, pinned, passes, share, inc_ptr, inc, anchor, reach,
-                  attach, clock, by_spring, by_particle):  # fmt: skip
+def provot_passes(x, springs, rest, tau, tol, pinned, passes, share, tethers, work):
     """What :meth:`StrainLimit.correct` does with Provot's passes: with ``attach``, the long-range
     attachments first; then up to ``passes`` of :func:`provot_pass`, stopping after one that
     shortens nothing, each followed by the attachments if it shortened something; returns how
@@ -226,12 +251,13 @@ def provot_passes(x, springs, rest, tau, tol, pinned, passes, share, inc_ptr, in
     over the limit after a step and takes 20 passes, each of which visited all 64,000 springs
     (docs/BENCHMARKS.md §11).
 
-    ``inc_ptr, inc``: each particle's springs (CSR); ``clock`` (one entry); ``by_spring`` (3 rows:
-    the heap, the next pass's springs, and the stamps of those queued) and ``by_particle`` (4
-    rows: the stamps of those listed as moved, the last spring that moved each in the pass, the
-    lists of the moved and of those the attachments moved): the stamps kept from call to call
-    (:class:`_PassScratch`), the rest scratch. (Twenty arguments of these types made numba's
-    dispatcher keep 400 bytes a call, never freed.)"""
+    ``tethers``: the attachments (:class:`Attachments`' fields as a plain tuple); ``work``: the
+    topology, stamps and scratch (:class:`PassWork`'s, alike). (Twenty separate arguments of
+    these types made numba's dispatcher keep 400 bytes a call, never freed.)"""
+    # (the bundles' fields, passed as plain tuples: numba types a NamedTuple argument on a slow
+    # path, ~1 µs a call, keeping objects for its first hundreds of calls)
+    anchor, reach, attach = tethers
+    inc_ptr, inc, clock, by_spring, by_particle = work
     heap, nxt, queued = by_spring[0], by_spring[1], by_spring[2]
     listed, last = by_particle[0], by_particle[1]
     n_springs = springs.shape[0]
@@ -370,7 +396,7 @@ _NO_REACH = np.zeros((1, 1))
 
 class _PassScratch:
     """What :func:`provot_passes` keeps: each particle's limited springs (CSR, in the springs'
-    order) and its stamps and scratch arrays."""
+    order) and its stamps and scratch arrays, as :attr:`work` (:class:`PassWork`)."""
 
     def __init__(self, springs: np.ndarray, n: int):
         ends = springs.astype(np.int64).ravel()
@@ -379,12 +405,14 @@ class _PassScratch:
         self.inc_ptr = np.zeros(n + 1, np.int64)
         np.cumsum(np.bincount(ends, minlength=n), out=self.inc_ptr[1:])
         m = len(springs)
-        self.topology = (self.inc_ptr, self.inc)
-        self.arrays = (
+        self.work = PassWork(
+            self.inc_ptr,
+            self.inc,
             np.zeros(1, np.int64),  # the clock
             np.zeros((3, max(m, 1)), np.int64),  # the heap, the next pass, queued (stamps)
             np.zeros((4, max(n, 1)), np.int64),  # listed (stamps), last, the two lists
         )
+        self.plain = tuple(self.work)  # as provot_passes takes it
 
 
 class Stage:
@@ -499,14 +527,27 @@ class StrainLimit(Stage):
             self._pinned,
             self.passes,
             FULL_PASS_SHARE,
-            *self._passes.topology,
-            self._anchor if lra else _NO_ANCHOR,
-            self._reach if lra else _NO_REACH,
-            lra and self._attach is not _no_attachments,
-            *self._passes.arrays,
+            self._attachments(lra),
+            self._passes.plain,
         )
         self.last_passes = used
         return used
+
+    def _attachments(self, lra: bool) -> tuple:
+        """The passes' :class:`Attachments` as a plain tuple, made once for each (the attachments
+        on or off, the anchors)."""
+        on = lra and self._attach is not _no_attachments
+        key = (lra, id(self._anchor), on)
+        if self._tethers is None or self._tethers[0] != key:
+            bundle = Attachments(
+                self._anchor if lra else _NO_ANCHOR,
+                self._reach if lra else _NO_REACH,
+                on,
+            )
+            self._tethers = (key, tuple(bundle))
+        return self._tethers[1]
+
+    _tethers = None
 
     def _project(self, x) -> int:
         if self._scratch is None:

@@ -35,6 +35,7 @@ exactly ``12 k_b/L²``.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -284,43 +285,45 @@ def _block_forces(d, rest, k, c, kind, tab, with_damping, fx, fy, fz):
         )
 
 
+class GatherSprings(NamedTuple):
+    """What :func:`spring_forces_gather` reads of the springs besides the state, made by
+    :func:`gather_arrays`: their ends (32-bit, in :func:`spring_layout`'s order) and material in
+    that order, the Choi–Ko table, whether they carry damping, each particle's springs
+    (:func:`incidence`: ``ptr``, ``adj``, ``sign``), the per-spring force scratch by coordinate
+    ``fs`` (3, springs), and the rows of a material's bending ``Q`` (``qptr``, ``qidx``,
+    ``qval``) with its scratch ``fb`` (n, 3) (:data:`NO_BENDING_ROWS` without)."""
+
+    ends: np.ndarray
+    rest: np.ndarray
+    k: np.ndarray
+    c: np.ndarray
+    kind: np.ndarray
+    tab: np.ndarray
+    with_damping: bool
+    ptr: np.ndarray
+    adj: np.ndarray
+    sign: np.ndarray
+    fs: np.ndarray
+    qptr: np.ndarray
+    qidx: np.ndarray
+    qval: np.ndarray
+    fb: np.ndarray
+
+
 @numba.njit(cache=True, parallel=True)
-def spring_forces_gather(
-    x,
-    v,
-    springs,
-    rest,
-    k,
-    c,
-    kind,
-    tab,
-    with_damping,
-    ptr,
-    adj,
-    sign,
-    fs,
-    qptr,
-    qidx,
-    qval,
-    fb,
-    base,
-    f,
-    inv_mass,
-    dt,
-    mode,
-    xo,
-    vo,
-    stage,
-):
+def spring_forces_gather(x, v, net, base, f, inv_mass, dt, mode, xo, vo, stage):
     """:func:`spring_forces` on every core, deterministically: each spring's force into ``fs`` (one
     spring per iteration), then each particle gathers its springs' forces in increasing spring
     order (``ptr``/``adj``/``sign``: :func:`incidence`) — the order the serial loop adds them in,
     so the result is bit-identical to it at any thread count (no racy scatter). Each particle's sum
     starts from ``base`` (``f`` itself to add to it, or gravity's force: no pass to copy it first).
-    The arrays are :func:`gather_arrays`' (32-bit indices, ``fs`` by coordinate, (3, springs)).
-    A material's bending (``qptr``, ``qidx``, ``qval``: the rows of its ``Q``, ``fb`` (n, 3)
-    scratch; ``qptr`` of length 1 without) is summed into ``fb`` in a pass of its own before the
-    gather, which starts each particle's sum from ``base + fb``.
+    ``net``: the springs' arrays (:class:`GatherSprings`' fields as a plain tuple,
+    :attr:`SpringTerm.net`; 32-bit indices, ``fs`` by coordinate, (3, springs)). A material's
+    bending (its ``qptr``, ``qidx``, ``qval``: the rows of its ``Q``, ``fb`` (n, 3) scratch;
+    ``qptr`` of length 1 without) is summed into ``fb`` in a pass of its own before the gather,
+    which starts each particle's sum from ``base + fb``. The bundle's fields are taken out before
+    the parallel loops, whose bodies read and write only those (a write through a bundle's field
+    in a parallel loop's body is lost: numba issues 7135 and 10338).
 
     The springs go in blocks of :data:`GATHER_BLOCK` in :func:`spring_layout`'s order: their ends'
     differences gathered into a small array, then :func:`_block_forces` in SIMD. What each of these
@@ -338,6 +341,9 @@ def spring_forces_gather(
     operations of :func:`kick_drift` in its order. No particle's position is read after the first
     loop, and each core updates the particles whose forces it summed, while they are in its cache
     (a separate serial pass cost most of what the second core saved: docs/BENCHMARKS.md §7)."""
+    # (GatherSprings' fields; passed as a plain tuple: numba types a NamedTuple argument on a
+    # slow path, ~1 µs a call, keeping objects for its first hundreds of calls)
+    springs, rest, k, c, kind, tab, with_damping, ptr, adj, sign, fs, qptr, qidx, qval, fb = net
     m = springs.shape[0]
     for b in numba.prange((m + GATHER_BLOCK - 1) // GATHER_BLOCK):
         lo = b * GATHER_BLOCK
@@ -408,40 +414,14 @@ def spring_forces_gather(
 
 
 @numba.njit(cache=True)
-def runge_kutta_fused(
-    x,
-    v,
-    A,
-    b,
-    dt,
-    kx,
-    kv,
-    xs,
-    coef,
-    springs,
-    rest,
-    k,
-    c,
-    kind,
-    tab,
-    with_damping,
-    ptr,
-    adj,
-    sign,
-    fs,
-    qptr,
-    qidx,
-    qval,
-    fb,
-    base,
-    inv_mass,
-):
+def runge_kutta_fused(x, v, A, b, dt, kx, kv, xs, coef, net, base, inv_mass):
     """A whole explicit Runge–Kutta step of tableau ``(A, b)`` in place on ``x``, ``v``, each stage
     one pass of :func:`spring_forces_gather` in :data:`GATHER_RK_STAGE` (its forces, the division
     by the mass and the next stage's state, or in the last stage the step's update): the operations
     of the stage-by-stage Python loop in
     :class:`~cloth_sim.integrators.explicit.ExplicitRungeKutta`, in one call instead of one per
-    stage. ``kx``, ``kv`` (stages, n, 3), ``xs`` (n, 3) and ``coef`` (stages,) are scratch."""
+    stage. ``kx``, ``kv`` (stages, n, 3), ``xs`` (n, 3) and ``coef`` (stages,) are scratch;
+    ``net``: the springs' :class:`GatherSprings`."""
     stages = b.shape[0]
     for p in range(x.shape[0]):
         for d in range(3):
@@ -454,21 +434,7 @@ def runge_kutta_fused(
         spring_forces_gather(
             x if i == 0 else xs,
             kx[i],
-            springs,
-            rest,
-            k,
-            c,
-            kind,
-            tab,
-            with_damping,
-            ptr,
-            adj,
-            sign,
-            fs,
-            qptr,
-            qidx,
-            qval,
-            fb,
+            net,
             base,
             kv[i],
             inv_mass,
@@ -623,12 +589,12 @@ NO_BENDING_ROWS = (np.zeros(1, np.uint32), np.zeros(0, np.uint32), np.zeros(0), 
 
 def gather_arrays(
     springs, rest, k, c, kind, with_damping: bool, n: int, layout=None, bending=None
-) -> tuple:
-    """The arguments :func:`spring_forces_gather` takes before ``base``, for these springs and
-    their material: their ends and material in :func:`spring_layout`'s order, the Choi–Ko table,
-    the incidence, the per-spring force scratch by coordinate (3, springs), and the rows of a
-    material's bending ``Q`` with their scratch (:data:`NO_BENDING_ROWS` without). ``layout``: the
-    springs' :func:`spring_layout`, if already at hand."""
+) -> GatherSprings:
+    """What :func:`spring_forces_gather` reads of these springs (:class:`GatherSprings`): their
+    ends and material in :func:`spring_layout`'s order, the Choi–Ko table, the incidence, the
+    per-spring force scratch by coordinate (3, springs), and the rows of a material's bending
+    ``Q`` with their scratch (:data:`NO_BENDING_ROWS` without). ``layout``: the springs'
+    :func:`spring_layout`, if already at hand."""
     order, ends, ptr, adj, sign = spring_layout(springs, n) if layout is None else layout
     if bending is None:
         rows = NO_BENDING_ROWS
@@ -640,7 +606,7 @@ def gather_arrays(
             qval,
             np.empty((n, 3)),
         )
-    return (
+    return GatherSprings(
         ends,
         rest[order],
         k[order],
@@ -709,7 +675,10 @@ class SpringTerm:
                 _layout_of(model, live),
                 self.bending,
             )
-            self._incidence, self._fs = self._gather_args[7:10], self._gather_args[10]
+            g = self._gather_args
+            self._incidence, self._fs = (g.ptr, g.adj, g.sign), g.fs
+            #: the same as the plain tuple :func:`spring_forces_gather` takes
+            self.net = tuple(g)
             if self.bending is not None:
                 self.labels = (*self.labels, "bending")
 
@@ -723,7 +692,7 @@ class SpringTerm:
         lists and its per-spring force array, written and read back). For the memory-bandwidth
         bound of :mod:`cloth_sim.bench.scaling`."""
         read = sum(a.nbytes for a in (self.rest, self.k, self.c, self.kind))
-        read += (self._gather_args[0] if self.parallel else self.springs).nbytes
+        read += (self._gather_args.ends if self.parallel else self.springs).nbytes
         written = 0
         if self.parallel:
             read += sum(a.nbytes for a in self._incidence) + self._fs.nbytes
@@ -735,7 +704,7 @@ class SpringTerm:
             spring_forces_gather(
                 x,
                 v,
-                *self._gather_args,
+                self.net,
                 f,
                 f,
                 _NO_MASS,
@@ -954,7 +923,7 @@ class Forces:
             spring_forces_gather(
                 x,
                 v,
-                *self.spring_term._gather_args,
+                self.spring_term.net,
                 base,
                 f,
                 self.inv_mass,
@@ -979,7 +948,7 @@ class Forces:
             spring_forces_gather(
                 x,
                 v,
-                *self.spring_term._gather_args,
+                self.spring_term.net,
                 base,
                 a,
                 self.inv_mass,
@@ -1014,7 +983,7 @@ class Forces:
             kv,
             xs,
             coef,
-            *self.spring_term._gather_args,
+            self.spring_term.net,
             self._gather_base,
             self.inv_mass,
         )
