@@ -151,6 +151,11 @@ class GridLayout:
         self._a, self._b, self._t, self._y, self._n, self._p = (
             (a[0], a[1], a[2]) for a in (self.A, self.B, self.T, self.Y, self.N, self.P2)
         )
+        #: what the sweeps read of the lattice, as they take it (:func:`solve`): the colours'
+        #: shifts, the block size and each colour's range, the offsets' stiffness, rest length,
+        #: damping and bending coupling, the bending diagonal, ``m/h²`` and which slots move
+        self.lattice = (self.shift, self.PQ, self.lo, self.hi, self.K, self.REST, self.C,
+                        self.QO, self.QD, self.m_h2, self.free)  # fmt: skip
 
     @classmethod
     def of(cls, model, forces) -> "GridLayout | None":
@@ -191,31 +196,14 @@ class GridLayout:
         iterate is in ``A`` after an even number). ``contact``: :meth:`contact`'s tuple where
         the step has colliders."""
         return solve(
-            self._a,
-            self._b,
-            self._t,
-            self._y,
-            self._n,
-            self._p,
-            self.shift,
-            self.PQ,
-            self.lo,
-            self.hi,
-            self.K,
-            self.REST,
-            self.C,
-            self.QO,
-            self.QD,
-            self.m_h2,
-            self.free,
-            inv_h,
-            drag_h,
+            (self._a, self._b, self._t, self._y, self._n, self._p),
+            self.lattice,
+            (inv_h, drag_h, rho),
             self.stepped,
             self.chunks,
             first,
             last,
             total,
-            rho,
             omega,
             contact,
         )
@@ -382,8 +370,7 @@ def _solve(a0, b, c, dd, e, ff, f0, f1, f2, free):
 
 
 @numba.njit(cache=True)
-def solve(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE, inv_h, drag_h,
-          stepped, chunks, first, last, total, rho, omega, contact):  # fmt: skip
+def solve(blocks, lattice, rates, stepped, chunks, first, last, total, omega, contact):
     """Iterations ``first … last − 1`` of a step of ``total``; returns Chebyshev's weight and how
     many times ``A`` and ``B`` took turns. Each iteration sweeps the nine colours in order from
     the iterate ``A`` (:func:`_sweeps`). Where ``rho > 0``, after every iteration but the step's
@@ -394,10 +381,14 @@ def solve(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE, in
     take turns. The same arithmetic as a separate pass after the sweeps, without that pass over
     every array.
 
-    ``A, B, T, Y, N, P`` are tuples of one array a coordinate (the iterate, its extrapolation,
-    the step's start, the inertial target, the sweep's new positions, the older positions);
+    ``blocks`` holds ``A, B, T, Y, N, P``, tuples of one array a coordinate (the iterate, its
+    extrapolation, the step's start, the inertial target, the sweep's new positions, the older
+    positions); ``lattice``: :attr:`GridLayout.lattice`; ``rates``: ``(1/h, drag/h, ρ)``;
     ``contact``: the colliders and the vertices' bounds (:meth:`GridLayout.contact`), or
-    ``None``."""
+    ``None``. (The bundles are plain tuples, unpacked in their order: numba types a NamedTuple
+    argument on a slow path, ~1 µs a call.)"""
+    A, B, T, Y, N, P = blocks
+    rho = rates[2]
     flips = 0
     for it in range(first, last):
         mode = 0  # 0: no Chebyshev step; 1: its copy only (ω₁ = 1); 2: the extrapolation
@@ -405,11 +396,10 @@ def solve(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE, in
             omega = next_omega(it, rho, omega)
             mode = 2 if it > 0 else 1
         if contact is None:
-            _sweeps(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE, inv_h,
-                    drag_h, stepped, chunks, mode, omega)  # fmt: skip
+            _sweeps((A, B, T, Y, N, P), lattice, rates, stepped, chunks, mode, omega)
         else:
-            _sweeps_touching(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE,
-                             inv_h, drag_h, stepped, chunks, mode, omega, contact)  # fmt: skip
+            _sweeps_touching((A, B, T, Y, N, P), lattice, rates, stepped, chunks, mode, omega,
+                             contact)  # fmt: skip
         if mode:
             A, B = B, A
             flips += 1
@@ -455,8 +445,7 @@ def _commit(t, x0, x1, x2, move, mode, omega, X0, X1, X2, B0, B1, B2, P0, P1, P2
 
 
 @numba.njit(cache=True, parallel=True, error_model="numpy", fastmath={"contract"})
-def _sweeps(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE, inv_h, drag_h,
-            stepped, chunks, mode, omega):  # fmt: skip
+def _sweeps(blocks, lattice, rates, stepped, chunks, mode, omega):
     """One iteration's sweeps: the nine colours in order, each colour's range cut into
     ``chunks`` for the cores (any number gives the same bits). Each particle's Newton step is
     written to ``N`` (its squared length to ``stepped``), then committed (:func:`_commit`). Free
@@ -467,7 +456,10 @@ def _sweeps(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE, 
     particles' loop runs in SIMD lanes without run-time overlap checks, and the new positions go
     to ``N`` first so that no array is both read at a shift and written. ``fastmath={"contract"}``
     only fuses multiplies and adds (FMA): the same in every lane and in the scalar remainder,
-    ~10 % faster."""
+    ~10 % faster. The bundles: :func:`solve`'s."""
+    A, B, T, Y, N, P = blocks
+    shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE = lattice
+    inv_h, drag_h = rates[0], rates[1]
     X0, X1, X2 = A
     B0, B1, B2 = B
     T0, T1, T2 = T
@@ -495,8 +487,7 @@ def _sweeps(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE, 
 
 
 @numba.njit(cache=True, parallel=True, error_model="numpy", fastmath={"contract"})
-def _sweeps_touching(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE, inv_h,
-                     drag_h, stepped, chunks, mode, omega, contact):  # fmt: skip
+def _sweeps_touching(blocks, lattice, rates, stepped, chunks, mode, omega, contact):
     """:func:`_sweeps` with colliders: each colour's SIMD loop as there, then a second pass over
     its slots (a parallel loop of its own: the contact terms take views of the colliders'
     arrays, which would cost the first loop its unaliased arrays) that takes again the step of
@@ -507,6 +498,9 @@ def _sweeps_touching(A, B, T, Y, N, P, shift, PQ, lo, hi, K, REST, C, QO, QD, MH
     and every extrapolation within the vertex's bounds (:func:`~.vbd_contact.within`,
     :func:`~.vbd_contact.truncate`: what the last search lets it move), extrapolates no vertex in
     contact, and commits."""
+    A, B, T, Y, N, P = blocks
+    shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE = lattice
+    inv_h, drag_h = rates[0], rates[1]
     (vof, xm, xt, near, touch, cut, x_cd, allow, gamma, law, co, sc, fh, seen) = contact
     tau = law[0]
     F0, F1, F2, H0, H1, H2, H3, H4, H5 = fh

@@ -215,9 +215,6 @@ MOST_PARAMETERS = 12
 LONG_SIGNATURES = {
     "cloth_sim.integrators.vbd_grid:_terms": 19,
     "cloth_sim.integrators.vbd_grid:_spring": 17,
-    "cloth_sim.integrators.vbd_grid:solve": 27,
-    "cloth_sim.integrators.vbd_grid:_sweeps_touching": 24,
-    "cloth_sim.integrators.vbd_grid:_sweeps": 23,
     "cloth_sim.simulator:Simulator.__init__": 17,
     "cloth_sim.integrators.vbd_grid:_commit": 16,
     "cloth_sim.physics.forces:_spring_force": 13,
