@@ -124,6 +124,7 @@ bench-peers: install
 	$(UV) -r requirements-peers.txt
 	$(VENV)/bin/cloth-sim bench peers
 	$(VENV)/bin/cloth-sim bench vbd-peers
+	$(VENV)/bin/cloth-sim bench franka-peer
 	$(VENV)/bin/cloth-sim bench flex-peer
 
 # robots in the scene: forward kinematics, mesh colliders against primitives, the robot_sweep

@@ -16,7 +16,8 @@ hanging drape … --grid 64``)
 
 ``cloth-sim bench peers [--sizes 32 64 128] [--rounds 9]`` (NVIDIA Warp's CPU cloth kernel beside
 ours) ``cloth-sim bench vbd-peers [--sizes 32 64] [--device cpu]`` (Newton's VBD beside ours, and
-its cloth twist) ``cloth-sim bench flex-peer [--size 32]`` (MuJoCo's flex cloth beside ours on the
+its cloth twist) ``cloth-sim bench franka-peer [--frames 480]`` (Newton's Franka folding its shirt,
+beside ours) ``cloth-sim bench flex-peer [--size 32]`` (MuJoCo's flex cloth beside ours on the
 drape scene)
 
 ``cloth-sim bench strain [--sizes 32 64] [--seconds 3]`` (worst strain and cost of the strain

@@ -131,6 +131,13 @@ def _bench_vbd_peers(args) -> int:
     return print_vbd_peer_table(tuple(args.sizes), args.seconds, args.twist_seconds, args.device)
 
 
+def _bench_franka_peer(args) -> int:
+    from .franka_peer import print_franka_table
+
+    print_franka_table(args.frames, args.newton)
+    return 0
+
+
 def _bench_vbd_floor(args) -> int:
     from .vbd_floor import print_vbd_floor_table
 
@@ -261,6 +268,21 @@ def add_parser(sub) -> argparse.ArgumentParser:
     )
     vp.add_argument("--device", default="cpu", help="Warp device of Newton's side (cpu, cuda:0)")
     vp.set_defaults(func=_bench_vbd_peers)
+    fr = bsub.add_parser(
+        "franka-peer",
+        help="Newton's example_cloth_franka (its FR3, its shirt, its settings) beside cloth_sim "
+        "on the CPU: time a frame, deepest inside a link, self-crossings (needs the optional "
+        "newton and usd-core: make bench-peers)",
+    )
+    fr.add_argument(
+        "--frames", type=int, default=480, help="1/60 s frames (480: to the arm's first grasp)"
+    )
+    fr.add_argument(
+        "--newton",
+        default=None,
+        help="an .npz of Newton's run: read where it exists (its frames), else written there",
+    )
+    fr.set_defaults(func=_bench_franka_peer)
     vf = bsub.add_parser(
         "vbd-floor",
         help="vbd's cost per vertex and iteration on the grid against its memory-bandwidth floor",

@@ -2,7 +2,9 @@
 cloth never crosses itself, measured independently of the simulator.
 
 The robots are the Franka Emika Panda and the Universal Robots UR5 as published (their URDFs and
-collision meshes from example-robot-data, in ``test/data``). The sweep is the robots issue's: a
+collision meshes from example-robot-data, in ``test/data``), and the Franka FR3 with its hand that
+Newton's ``example_cloth_franka`` uses (``test/data/newton-assets``; the Panda's kinematics, other
+collision meshes and box fingers). The sweep is the robots issue's: a
 32×32 sheet, 0.6 m square and 0.3 kg, springs of 300 N/m, hanging from its top corners in a
 vertical plane 0.35 m in front of the robot's base; the first joint swings from −0.9 to +0.9 rad in
 0.5 s (the Panda's hand at about 2.5 m/s) and the sheet swings on for 30 more steps; ``vbd`` at
@@ -31,9 +33,19 @@ yourdfpy = pytest.importorskip("yourdfpy")
 DATA = Path(__file__).resolve().parents[1] / "data"
 ROBOTS = DATA / "example-robot-data" / "robots"
 TAU = 0.005
+#: where each robot's ``package://`` URIs resolve (the folder holding its packages)
+PACKAGES = {"fr3": DATA / "newton-assets"}
 
-#: robot: its URDF, its base, the joints held, the joint swung, and the sheet's top-left corner
+#: robot: its URDF (under ``ROBOTS``, or a whole path), its base, the joints held, the joint
+#: swung, and the sheet's top-left corner
 SWEEPS = {
+    "fr3": (
+        DATA / "newton-assets" / "franka_description" / "urdf" / "fr3_franka_hand.urdf",
+        (0.0, 0.0, 0.0),
+        {"fr3_joint2": 0.6, "fr3_joint4": -1.6, "fr3_joint6": 2.2},
+        "fr3_joint1",
+        (0.0, 0.35, 0.7),
+    ),
     "panda": (
         "panda_description/urdf/panda.urdf",
         (0.0, 0.0, 0.0),
@@ -51,18 +63,18 @@ SWEEPS = {
 }
 
 
-def _uri(name: str) -> str:
-    return str(name).replace("package://", str(DATA) + "/")
+def _uri(name: str, packages: Path = DATA) -> str:
+    return str(name).replace("package://", str(packages) + "/")
 
 
-def _link_solids(urdf):
+def _link_solids(urdf, packages: Path = DATA):
     """Each link's collision geometry as trimesh solids in the link's frame."""
     solids = {}
     for link in urdf.robot.links:
         for c in link.collisions:
             g = c.geometry
             if g.mesh is not None:
-                m = trimesh.load(_uri(g.mesh.filename), force="mesh")
+                m = trimesh.load(_uri(g.mesh.filename, packages), force="mesh")
                 if g.mesh.scale is not None:
                     m.apply_scale(g.mesh.scale)
             elif g.box is not None:
@@ -100,12 +112,15 @@ def _deepest(urdf, solids, base, x):
 @pytest.mark.parametrize("robot", sorted(SWEEPS))
 def test_a_published_arm_swept_through_the_cloth_leaves_no_vertex_inside_and_no_crossing(robot):
     path, base, held, swing, corner = SWEEPS[robot]
-    urdf_path = ROBOTS / path
-    arm = Robot.from_urdf(urdf_path, package_paths=[DATA])
+    urdf_path, packages = ROBOTS / path, PACKAGES.get(robot, DATA)
+    arm = Robot.from_urdf(urdf_path, package_paths=[packages])
     urdf = yourdfpy.URDF.load(
-        str(urdf_path), filename_handler=_uri, load_meshes=False, load_collision_meshes=False
+        str(urdf_path),
+        filename_handler=lambda name: _uri(name, packages),
+        load_meshes=False,
+        load_collision_meshes=False,
     )
-    solids = _link_solids(urdf)
+    solids = _link_solids(urdf, packages)
     model = ClothModel.grid(
         32, 32, size=(0.6, 0.6), particle_mass=0.3 / 1024, stiffness=300.0,
         pinned=[(0, 0), (0, -1)], orientation="vertical", origin=corner,
