@@ -153,7 +153,7 @@ def fr3() -> Robot:
     return Robot.from_urdf(URDF, package_paths=[ASSETS])
 
 
-def ours(q: np.ndarray, thickness: float | None = None) -> Simulator:
+def ours(q: np.ndarray) -> Simulator:
     """cloth_sim's side at Newton's first frame (module docstring): ``vbd`` at a substep of
     Newton's (1/600 s), 5 iterations."""
     vertices, tris = shirt_mesh()
@@ -168,7 +168,7 @@ def ours(q: np.ndarray, thickness: float | None = None) -> Simulator:
         model,
         integrator="vbd",
         dt=FRAME / SUBSTEPS,
-        thickness=thickness_limit(model) if thickness is None else thickness,
+        thickness=thickness_limit(model),
         self_collision=True,
         colliders=[
             colliders.Box(TABLE_CENTER, TABLE_HALF, friction=FRICTION, name="table"),
@@ -233,8 +233,15 @@ def print_franka_table(frames: int = 480, newton_file: str | None = None) -> Non
     if newton_file and Path(newton_file).is_file():
         with np.load(newton_file) as z:
             theirs = {k: z[k] for k in z.files}
+        if frames < len(theirs["wall"]):
+            theirs.pop("crossed", None)  # (counted over every recorded frame)
         frames = min(frames, len(theirs["wall"]))
-        theirs = {**theirs, "q": theirs["q"][: frames + 1], "x": theirs["x"][: frames + 1]}
+        theirs = {
+            **theirs,
+            "q": theirs["q"][: frames + 1],
+            "x": theirs["x"][: frames + 1],
+            "wall": theirs["wall"][:frames],
+        }
     else:
         theirs = run_newton(frames)
         if newton_file:

@@ -412,7 +412,6 @@ class _PassScratch:
             np.zeros((3, max(m, 1)), np.int64),  # the heap, the next pass, queued (stamps)
             np.zeros((4, max(n, 1)), np.int64),  # listed (stamps), last, the two lists
         )
-        self.plain = tuple(self.work)  # as provot_passes takes it
 
 
 class Stage:
@@ -527,27 +526,18 @@ class StrainLimit(Stage):
             self._pinned,
             self.passes,
             FULL_PASS_SHARE,
-            self._attachments(lra),
-            self._passes.plain,
+            # the bundles as plain tuples (a NamedTuple argument takes numba's slow path)
+            tuple(
+                Attachments(
+                    self._anchor if lra else _NO_ANCHOR,
+                    self._reach if lra else _NO_REACH,
+                    lra and self._attach is not _no_attachments,
+                )
+            ),
+            tuple(self._passes.work),
         )
         self.last_passes = used
         return used
-
-    def _attachments(self, lra: bool) -> tuple:
-        """The passes' :class:`Attachments` as a plain tuple, made once for each (the attachments
-        on or off, the anchors)."""
-        on = lra and self._attach is not _no_attachments
-        key = (lra, id(self._anchor), on)
-        if self._tethers is None or self._tethers[0] != key:
-            bundle = Attachments(
-                self._anchor if lra else _NO_ANCHOR,
-                self._reach if lra else _NO_REACH,
-                on,
-            )
-            self._tethers = (key, tuple(bundle))
-        return self._tethers[1]
-
-    _tethers = None
 
     def _project(self, x) -> int:
         if self._scratch is None:

@@ -388,7 +388,7 @@ def solve(blocks, lattice, rates, stepped, chunks, first, last, total, omega, co
     ``None``. (The bundles are plain tuples, unpacked in their order: numba types a NamedTuple
     argument on a slow path, ~1 µs a call.)"""
     A, B, T, Y, N, P = blocks
-    rho = rates[2]
+    _, _, rho = rates
     flips = 0
     for it in range(first, last):
         mode = 0  # 0: no Chebyshev step; 1: its copy only (ω₁ = 1); 2: the extrapolation
@@ -459,7 +459,7 @@ def _sweeps(blocks, lattice, rates, stepped, chunks, mode, omega):
     ~10 % faster. The bundles: :func:`solve`'s."""
     A, B, T, Y, N, P = blocks
     shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE = lattice
-    inv_h, drag_h = rates[0], rates[1]
+    inv_h, drag_h, _ = rates
     X0, X1, X2 = A
     B0, B1, B2 = B
     T0, T1, T2 = T
@@ -500,7 +500,7 @@ def _sweeps_touching(blocks, lattice, rates, stepped, chunks, mode, omega, conta
     contact, and commits."""
     A, B, T, Y, N, P = blocks
     shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE = lattice
-    inv_h, drag_h = rates[0], rates[1]
+    inv_h, drag_h, _ = rates
     (vof, xm, xt, near, touch, cut, x_cd, allow, gamma, law, co, sc, fh, seen) = contact
     tau = law[0]
     F0, F1, F2, H0, H1, H2, H3, H4, H5 = fh
