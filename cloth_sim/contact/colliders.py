@@ -389,13 +389,13 @@ def sdf(kind, pos, rot, geo, c, x, y, z):
 
 
 @numba.njit(cache=True, inline="always")
-def mesh_sdf(pos, rot, geo, c, x, y, z, bank, cutoff=math.inf):
+def mesh_sdf(pos, rot, geo, c, x, y, z, reals, ints, starts, cutoff=math.inf):
     """:func:`sdf` of a Mesh collider ``c`` (``geo[c, 0]`` its index in ``bank``, the packed
     meshes of :func:`.triangle_meshes.pack`): signed where the mesh is closed, unsigned where it is
     open; a point outside and at least ``cutoff`` from it is answered ``(cutoff, 0, 0, 0)`` (a
     query that only asks whether the point is within the cutoff walks less of the tree)."""
     qx, qy, qz = _to_frame(pos, rot, c, x, y, z)
-    d, lx, ly, lz = mesh_distance(bank, int(geo[c, 0]), qx, qy, qz, cutoff)
+    d, lx, ly, lz = mesh_distance(reals, ints, starts, int(geo[c, 0]), qx, qy, qz, cutoff)
     nx, ny, nz = _from_frame(rot, c, lx, ly, lz)
     return d, nx, ny, nz
 
@@ -469,9 +469,10 @@ def _distances(kind, pos, rot, geo, pts, bank):
     """The signed distances of ``pts`` from the one collider packed in ``pos``, ``rot``,
     ``geo`` (index 0)."""
     out = np.empty(pts.shape[0])
+    r, t, s = bank
     for i in range(pts.shape[0]):
         if kind == MESH:
-            out[i] = mesh_sdf(pos, rot, geo, 0, pts[i, 0], pts[i, 1], pts[i, 2], bank)[0]
+            out[i] = mesh_sdf(pos, rot, geo, 0, pts[i, 0], pts[i, 1], pts[i, 2], r, t, s)[0]
         else:
             out[i] = sdf(kind, pos, rot, geo, 0, pts[i, 0], pts[i, 1], pts[i, 2])[0]
     return out
@@ -542,6 +543,7 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
     it could do nothing (only its clearance is left unmeasured, far above any skin)."""
     kinds, pos, rot, pos0, rot0, geo = co.kinds, co.pos, co.rot, co.pos0, co.rot0, co.geo
     mu, reach, bank = co.mu, co.reach, (co.reals, co.ints, co.starts)
+    reals, ints, starts = co.reals, co.ints, co.starts
     touching, clearance, push, turn = out.touching, out.clearance, out.push, out.turn
     n = x.shape[0]
     count = 0
@@ -582,12 +584,15 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
             # (1) continuous detection from a start outside the skin (not after an integrator
             # that kept the path out of the colliders itself)
             held = False  # the step's motion undone: it moved with the collider
+            # whether (1) asked the distance and normal at x[p] already (d, n)
+            known = False
+            d = nx = ny = nz = 0.0
             if continuous:
                 if k == MESH:
-                    d0, mx, my, mz = mesh_sdf(pos, rot, geo, c, sx, sy, sz, bank)
+                    r0, mx, my, mz = mesh_sdf(pos, rot, geo, c, sx, sy, sz, reals, ints, starts)
                 else:
-                    d0, mx, my, mz = sdf(k, pos, rot, geo, c, sx, sy, sz)
-                d0 -= h
+                    r0, mx, my, mz = sdf(k, pos, rot, geo, c, sx, sy, sz)
+                d0 = r0 - h
                 ex, ey, ez = x[p, 0] - sx, x[p, 1] - sy, x[p, 2] - sz
                 length = math.sqrt(ex * ex + ey * ey + ez * ez)
                 if d0 <= CONTACT_TOLERANCE * h:
@@ -597,26 +602,32 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
                     # solid): stay
                     if k == MESH:
                         de, fx, fy, fz = mesh_sdf(
-                            pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2], bank
+                            pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2], reals, ints, starts
                         )
                     else:
                         de, fx, fy, fz = sdf(k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])
+                    known = True
+                    d, nx, ny, nz = de, fx, fy, fz
                     if fx * mx + fy * my + fz * mz < 0.0:
                         x[p, 0], x[p, 1], x[p, 2] = sx, sy, sz
                         held = True
+                        d, nx, ny, nz = r0, mx, my, mz
                 elif length > d0:
                     t = 0.0
                     hit = False
                     for _ in range(_MARCH_STEPS):
                         qx, qy, qz = sx + t * ex, sy + t * ey, sz + t * ez
                         if k == MESH:
-                            d = mesh_sdf(pos, rot, geo, c, qx, qy, qz, bank)[0] - h
+                            d, nx, ny, nz = mesh_sdf(
+                                pos, rot, geo, c, qx, qy, qz, reals, ints, starts
+                            )
                         else:
-                            d = sdf(k, pos, rot, geo, c, qx, qy, qz)[0] - h
-                        if d <= 1e-3 * h:
+                            d, nx, ny, nz = sdf(k, pos, rot, geo, c, qx, qy, qz)
+                        if d - h <= 1e-3 * h:
                             hit = True
+                            known = True  # (x[p] is set to this point below)
                             break
-                        t += d / length
+                        t += (d - h) / length
                         if t >= 1.0:
                             break
                     if not hit and t < 1.0:
@@ -624,10 +635,13 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
                     if hit:
                         x[p, 0], x[p, 1], x[p, 2] = sx + t * ex, sy + t * ey, sz + t * ez
             # (2) projection with friction on the motion relative to the collider
-            if k == MESH:
-                d, nx, ny, nz = mesh_sdf(pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2], bank)
-            else:
-                d, nx, ny, nz = sdf(k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])
+            if not known:
+                if k == MESH:
+                    d, nx, ny, nz = mesh_sdf(
+                        pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2], reals, ints, starts
+                    )
+                else:
+                    d, nx, ny, nz = sdf(k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])
             clearance[p] = min(clearance[p], max(d - h, 0.0))  # (0 once projected onto the skin)
             if d >= h * (1.0 + CONTACT_TOLERANCE):
                 continue
@@ -702,7 +716,8 @@ def _crease(x, p, kinds, pos, rot, geo, bank, h):
         moved = False
         for c in range(kinds.shape[0]):
             if kinds[c] == MESH:
-                d, nx, ny, nz = mesh_sdf(pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2], bank)
+                r, t, s = bank
+                d, nx, ny, nz = mesh_sdf(pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2], r, t, s)
             else:
                 d, nx, ny, nz = sdf(kinds[c], pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])
             if d < h * (1.0 - 1e-6):

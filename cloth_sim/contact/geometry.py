@@ -203,3 +203,14 @@ def closest_on_segments(x, a, b, c, d):
     rx, ry, rz = x[a, 0] - x[c, 0], x[a, 1] - x[c, 1], x[a, 2] - x[c, 2]
     px, py, pz = rx + sv * d1x - tv * d2x, ry + sv * d1y - tv * d2y, rz + sv * d1z - tv * d2z
     return sv, tv, math.sqrt(px * px + py * py + pz * pz)
+
+
+@numba.njit(cache=True, inline="always")
+def corners_d2(x, y, z, ax, ay, az, bx, by, bz, cx, cy, cz):
+    """The point of the triangle of corners ``a``, ``b``, ``c`` nearest ``(x, y, z)``: the squared
+    distance, the point and its barycentric weights (:func:`closest_on_triangle`)."""
+    wa, wb, wc = closest_on_triangle(x, y, z, ax, ay, az, bx, by, bz, cx, cy, cz)
+    px = wa * ax + wb * bx + wc * cx
+    py = wa * ay + wb * by + wc * cy
+    pz = wa * az + wb * bz + wc * cz
+    return (x - px) ** 2 + (y - py) ** 2 + (z - pz) ** 2, px, py, pz, wa, wb, wc

@@ -27,10 +27,20 @@ half its median edge over its box grown by a band of two cells, and each cell li
 whose box, grown by the band, meets the cell (built once, by rasterising each triangle's grown
 box). Every triangle within the band of a point in the cell is listed, so where the nearest listed
 triangle lies within the band, or a query's cutoff does, the cell's list is the answer; the list
-keeps the walk's order and the arithmetic is the walk's, so the answer is the walk's to the bit. A
-cell where the distance is affine (every point's nearest point inside one triangle: a face's
-interior, :func:`_planes`) keeps that plane, and a query there is one dot product, equal to the
-walk's answer to rounding (``test_mesh_colliders.py``). Elsewhere the walk answers.
+keeps the walk's order and the arithmetic is the walk's, so the answer is the walk's to the bit
+(but where two triangles sharing an edge tie for the nearest: the walk passes over a box no nearer
+than its best so far, and may keep the other one, the same point to rounding).
+
+A cell over which one *feature* is nearest everywhere (:mod:`.mesh_features`) keeps it, and a query
+there is the feature's closed form, equal to the walk's answer to rounding
+(``test_mesh_colliders.py``): a **plane** where every point's nearest point lies inside one face
+(one dot product); an **edge** where it lies inside one edge (a point's distance from a segment,
+signed by the edge's pseudonormal); a **crease** on a closed mesh, where it lies on one of two
+faces or on the edge between them (two planes and a segment: a box's edge, where the face's and
+the edge's points share cells). A cloth lying on a box mesh, on its faces and over its edges, is
+answered this way but near the box's corners, at about twice the Box primitive's cost a query
+against six times for the list (``python -m cloth_sim.bench.robot``). Elsewhere the list or the
+walk answers.
 """
 
 from __future__ import annotations
@@ -41,7 +51,15 @@ import numba
 import numpy as np
 
 from .collision_tree import build_hierarchy
-from .geometry import closest_on_triangle
+from .geometry import corners_d2
+from .mesh_features import (
+    CREASE_FEATURE,
+    FEATURE_WIDTH,
+    NO_FEATURE,
+    PLANE_FEATURE,
+    crease_distance,
+    find_features,
+)
 
 #: triangles a leaf holds at most
 LEAF = 4
@@ -116,12 +134,25 @@ class TriangleMesh:
         self.cell_ptr, self.cell_list = _candidates(
             v, t, self.order, self.grid_origin, cell, self.grid_dims, self.grid_band
         )
-        #: each cell's plane ``(n, offset)`` where the distance is ``n·x + offset`` over the
-        #: whole cell (NaN where it is not)
-        self.cell_plane = _planes(
+        #: each cell's feature (its row in ``cell_features``, −1: none) where one answers every
+        #: query in the cell (a plane, an edge, a crease: :func:`.mesh_features.find_features`)
+        self.cell_feature, self.cell_features = find_features(
             v, t, self.order, self.face_normals, self.closed, self.grid_origin, cell,
             self.grid_dims, self.grid_band, self.cell_ptr, self.cell_list,
         )  # fmt: skip
+
+    def feature_at(self, point) -> int:
+        """The kind of feature that answers a query at ``point`` (in the mesh's frame):
+        ``PLANE_FEATURE``, ``EDGE_FEATURE`` or ``NO_FEATURE`` (the cell's list or the walk
+        answers)."""
+        at = (np.asarray(point, dtype=np.float64) - self.grid_origin) / self.grid_cell
+        cell = np.floor(at).astype(np.int64)
+        if not np.all((cell >= 0) & (cell < self.grid_dims)):
+            return NO_FEATURE
+        f = self.cell_feature[
+            (cell[0] * self.grid_dims[1] + cell[1]) * self.grid_dims[2] + cell[2]
+        ]
+        return NO_FEATURE if f < 0 else int(self.cell_features[f, 0])
 
     @property
     def extent(self) -> float:
@@ -187,26 +218,6 @@ def _boxes(v, t, order, first, end):
     return lo, hi
 
 
-@numba.njit(cache=True, inline="always")
-def _triangle_d2(v, t, k, x, y, z):
-    """Triangle ``k``'s point nearest ``(x, y, z)``: the squared distance, the point and its
-    barycentric weights."""
-    a, b, c = t[k, 0], t[k, 1], t[k, 2]
-    return _corners_d2(
-        x, y, z, v[a, 0], v[a, 1], v[a, 2], v[b, 0], v[b, 1], v[b, 2], v[c, 0], v[c, 1], v[c, 2]
-    )
-
-
-@numba.njit(cache=True, inline="always")
-def _corners_d2(x, y, z, ax, ay, az, bx, by, bz, cx, cy, cz):
-    """:func:`_triangle_d2` of the triangle of corners ``a``, ``b``, ``c``."""
-    wa, wb, wc = closest_on_triangle(x, y, z, ax, ay, az, bx, by, bz, cx, cy, cz)
-    px = wa * ax + wb * bx + wc * cx
-    py = wa * ay + wb * by + wc * cy
-    pz = wa * az + wb * bz + wc * cz
-    return (x - px) ** 2 + (y - py) ** 2 + (z - pz) ** 2, px, py, pz, wa, wb, wc
-
-
 @numba.njit(cache=True)
 def _candidates(v, t, order, origin, cell, dims, band):
     """The candidate grid's CSR ``(ptr, positions)``: for each cell (x slowest, z fastest) the
@@ -242,106 +253,6 @@ def _candidates(v, t, order, origin, cell, dims, band):
     return ptr, out
 
 
-@numba.njit(cache=True, inline="always")
-def _coplanar(v, t, fn, k, tri, a):
-    """Whether triangle ``k`` lies in triangle ``tri``'s plane (``a`` one of its vertices): a point
-    whose projection on that plane is inside ``tri`` is then nearer ``tri`` than ``k``."""
-    cross = (
-        abs(fn[k, 1] * fn[tri, 2] - fn[k, 2] * fn[tri, 1])
-        + abs(fn[k, 2] * fn[tri, 0] - fn[k, 0] * fn[tri, 2])
-        + abs(fn[k, 0] * fn[tri, 1] - fn[k, 1] * fn[tri, 0])
-    )
-    if cross > 1e-12:
-        return False
-    for corner in range(3):
-        b = t[k, corner]
-        off = (
-            fn[tri, 0] * (v[b, 0] - v[a, 0])
-            + fn[tri, 1] * (v[b, 1] - v[a, 1])
-            + fn[tri, 2] * (v[b, 2] - v[a, 2])
-        )
-        if abs(off) > 1e-12:
-            return False
-    return True
-
-
-@numba.njit(cache=True)
-def _planes(v, t, order, fn, closed, origin, cell, dims, band, ptr, listed):
-    """Each cell's plane ``(nx, ny, nz, offset)`` where the distance from every point ``x`` of the
-    cell is ``n·x + offset`` (NaN elsewhere): the nearest point of each of the cell's eight
-    corners lies inside one triangle ``T`` (not on its edges), within the band, so every point of
-    the cell has its nearest point of ``T``'s plane inside ``T`` (a triangle is convex); and every
-    other listed triangle is farther from the cell's centre, less the half diagonal, than ``T``'s
-    plane is from any corner, so none is nearer anywhere in the cell (and what is not listed lies
-    beyond the band; a triangle in ``T``'s plane is farther anywhere the projection is inside
-    ``T``). The plane is ``T``'s outward one on a closed mesh (the signed distance; the
-    face's pseudonormal is its normal), and turned towards the cell on an open one, whose corners
-    must then lie on one side (or on the plane)."""
-    ny, nz = dims[1], dims[2]
-    cells = dims[0] * ny * nz
-    out = np.full((cells, 4), np.nan)
-    r = 0.5 * cell * math.sqrt(3.0)
-    for ix in range(dims[0]):
-        for iy in range(ny):
-            for iz in range(nz):
-                cid = (ix * ny + iy) * nz + iz
-                if ptr[cid + 1] == ptr[cid]:
-                    continue
-                tri = -1
-                far = 0.0
-                side = 0.0
-                ok = True
-                for corner in range(8):
-                    x = origin[0] + (ix + (corner & 1)) * cell
-                    y = origin[1] + (iy + ((corner >> 1) & 1)) * cell
-                    z = origin[2] + (iz + ((corner >> 2) & 1)) * cell
-                    best = band * band
-                    bk = -1
-                    inner = False
-                    for j in range(ptr[cid], ptr[cid + 1]):
-                        k = order[listed[j]]
-                        d2, _, _, _, wa, wb, wc = _triangle_d2(v, t, k, x, y, z)
-                        if d2 < best:
-                            best, bk = d2, k
-                            inner = wa > 1e-9 and wb > 1e-9 and wc > 1e-9
-                    if bk < 0 or not inner or (tri >= 0 and bk != tri):
-                        ok = False
-                        break
-                    tri = bk
-                    a = t[tri, 0]
-                    d = (
-                        fn[tri, 0] * (x - v[a, 0])
-                        + fn[tri, 1] * (y - v[a, 1])
-                        + fn[tri, 2] * (z - v[a, 2])
-                    )
-                    if not closed and d != 0.0:  # (a corner on the plane is on either side)
-                        s = 1.0 if d > 0.0 else -1.0
-                        if side != 0.0 and s != side:
-                            ok = False
-                            break
-                        side = s
-                    far = max(far, abs(d))
-                if not ok or (not closed and side == 0.0):
-                    continue
-                cx = origin[0] + (ix + 0.5) * cell
-                cy = origin[1] + (iy + 0.5) * cell
-                cz = origin[2] + (iz + 0.5) * cell
-                for j in range(ptr[cid], ptr[cid + 1]):
-                    k = order[listed[j]]
-                    if k == tri or _coplanar(v, t, fn, k, tri, a):
-                        continue  # (its points are off the cell's projection: farther)
-                    if math.sqrt(_triangle_d2(v, t, k, cx, cy, cz)[0]) - r <= far:
-                        ok = False
-                        break
-                if not ok:
-                    continue
-                s = 1.0 if closed else side
-                nx, ny_, nz_ = s * fn[tri, 0], s * fn[tri, 1], s * fn[tri, 2]
-                out[cid, 0], out[cid, 1], out[cid, 2] = nx, ny_, nz_
-                out[cid, 3] = -(nx * v[a, 0] + ny_ * v[a, 1] + nz_ * v[a, 2])
-    return out
-
-
 #: a bank (:func:`pack`) is the tuple ``(reals, ints, starts)``, read as ``bank[REALS]`` …
 REALS, INTS, STARTS = range(3)
 
@@ -349,9 +260,9 @@ REALS, INTS, STARTS = range(3)
 #: where each part of the bank starts: ``bank[STARTS][PART]`` in ``bank[REALS]`` (the first
 #: ten) or in ``bank[INTS]`` (the rest)
 (
-    VERTS, VNORMALS, FNORMALS, ENORMALS, BOX_LO, BOX_HI, ORIGIN, CELL, BAND, PLANES,
-    TRIS, LEFT, RIGHT, FIRST, END, ORDER, ROOT, CLOSED, DIMS, START, PTR, LISTED,
-) = range(22)  # fmt: skip
+    VERTS, VNORMALS, FNORMALS, ENORMALS, BOX_LO, BOX_HI, ORIGIN, PER_CELL, BAND, FEATURES,
+    TRIS, LEFT, RIGHT, FIRST, END, ORDER, ROOT, CLOSED, DIMS, START, PTR, LISTED, FEATURE,
+) = range(23)  # fmt: skip
 
 
 def pack(meshes) -> tuple:
@@ -380,13 +291,16 @@ def pack(meshes) -> tuple:
     vertices, nodes and cells are numbered across the bank."""
     vs, ts, los, his, ls, rs, fs, es, os_, roots = [], [], [], [], [], [], [], [], [], []
     fns, vns, ens, closed = [], [], [], []
-    gorg, gcell, gdim, gstart, cptrs, clists, gband, planes = [], [], [], [], [], [], [], []
-    nv = nt = nn = nc = nl = 0
+    gorg, gcell, gdim, gstart, cptrs, clists, gband = [], [], [], [], [], [], []
+    rows, feature = [], []
+    nv = nt = nn = nc = nl = nf = 0
     for m in meshes:
         gorg.append(m.grid_origin)
         gcell.append(m.grid_cell)
         gband.append(m.grid_band)
-        planes.append(m.cell_plane)
+        rows.append(m.cell_features)
+        feature.append(np.where(m.cell_feature >= 0, m.cell_feature + nf, -1))
+        nf += len(m.cell_features)
         gdim.append(m.grid_dims)
         gstart.append(nc)
         cptrs.append(m.cell_ptr[:-1] + nl)
@@ -415,9 +329,9 @@ def pack(meshes) -> tuple:
         ("box_lo", los),
         ("box_hi", his),
         ("origin", gorg),
-        ("cell", [np.atleast_1d(c) for c in gcell]),
+        ("per_cell", [np.atleast_1d(1.0 / c) for c in gcell]),
         ("band", [np.atleast_1d(b) for b in gband]),
-        ("planes", planes),
+        ("features", rows),
     ]
     ints = [
         ("tris", ts),
@@ -432,6 +346,7 @@ def pack(meshes) -> tuple:
         ("start", [np.atleast_1d(s) for s in gstart]),
         ("ptr", [*cptrs, np.array([nl])]),
         ("listed", clists),
+        ("feature", feature),
     ]
     at = {}
 
@@ -455,12 +370,12 @@ EMPTY = pack([])
 
 @numba.njit(cache=True, inline="always")
 def _bank_triangle_d2(bank, k, x, y, z):
-    """:func:`_triangle_d2` of the bank's triangle ``k`` (the same arithmetic)."""
+    """The nearest point of the bank's triangle ``k`` (:func:`.geometry.corners_d2`)."""
     r, t = bank[REALS], bank[INTS]
     a = bank[STARTS][VERTS] + 3 * t[bank[STARTS][TRIS] + 3 * k]
     b = bank[STARTS][VERTS] + 3 * t[bank[STARTS][TRIS] + 3 * k + 1]
     c = bank[STARTS][VERTS] + 3 * t[bank[STARTS][TRIS] + 3 * k + 2]
-    return _corners_d2(
+    return corners_d2(
         x, y, z, r[a], r[a + 1], r[a + 2], r[b], r[b + 1], r[b + 2], r[c], r[c + 1], r[c + 2]
     )
 
@@ -504,17 +419,20 @@ def _nearest(bank, m, x, y, z, cutoff):
 
 
 @numba.njit(cache=True, inline="always")
-def _cell_of(bank, m, x, y, z):
-    """The candidate grid's cell (its index in the bank) that holds ``(x, y, z)``, −1 if none."""
-    r, t = bank[REALS], bank[INTS]
-    cs = r[bank[STARTS][CELL] + m]
-    o, d = bank[STARTS][ORIGIN] + 3 * m, bank[STARTS][DIMS] + 3 * m
-    ix = int(math.floor((x - r[o]) / cs))
-    iy = int(math.floor((y - r[o + 1]) / cs))
-    iz = int(math.floor((z - r[o + 2]) / cs))
-    if 0 <= ix < t[d] and 0 <= iy < t[d + 1] and 0 <= iz < t[d + 2]:
-        return t[bank[STARTS][START] + m] + (ix * t[d + 1] + iy) * t[d + 2] + iz
-    return -1
+def _feature_of(r, t, starts, m, x, y, z):
+    """The candidate grid's cell (its index in the bank) that holds ``(x, y, z)``, −1 if none,
+    and the row of the feature that answers there, −1 if none."""
+    per = r[starts[PER_CELL] + m]
+    o, d = starts[ORIGIN] + 3 * m, starts[DIMS] + 3 * m
+    fx, fy, fz = (x - r[o]) * per, (y - r[o + 1]) * per, (z - r[o + 2]) * per
+    if not (fx >= 0.0 and fy >= 0.0 and fz >= 0.0):  # (NaN too)
+        return -1, -1
+    ix, iy, iz = int(fx), int(fy), int(fz)  # (floors: not negative)
+    if not (ix < t[d] and iy < t[d + 1] and iz < t[d + 2]):
+        return -1, -1
+    cid = t[starts[START] + m] + (ix * t[d + 1] + iy) * t[d + 2] + iz
+    f = t[starts[FEATURE] + cid]
+    return cid, f
 
 
 @numba.njit(cache=True, inline="always")
@@ -562,7 +480,7 @@ def mesh_closed(bank, m):
 
 
 @numba.njit(cache=True, inline="always")
-def mesh_distance(bank, m, x, y, z, cutoff=np.inf):
+def mesh_distance(reals, ints, starts, m, x, y, z, cutoff=np.inf):
     """Distance of the point ``(x, y, z)`` (in the mesh's frame) from mesh ``m`` of the bank,
     signed (negative inside) where the mesh is closed and unsigned where it is open (module
     docstring), and the distance's gradient: the unit direction from the surface to the point,
@@ -572,15 +490,32 @@ def mesh_distance(bank, m, x, y, z, cutoff=np.inf):
 
     Inlined where it is called, so that a cell whose distance is affine answers without a
     call."""
-    cid = _cell_of(bank, m, x, y, z)
+    cid, f = _feature_of(reals, ints, starts, m, x, y, z)
     if cid >= 0:
-        r, p = bank[REALS], bank[STARTS][PLANES] + 4 * cid
-        if not math.isnan(r[p]):  # the distance is affine over the cell
-            d = r[p] * x + r[p + 1] * y + r[p + 2] * z + r[p + 3]
-            if d >= cutoff:
-                return cutoff, 0.0, 0.0, 0.0
-            return d, r[p], r[p + 1], r[p + 2]
-    return _listed_distance(bank, m, x, y, z, cutoff, cid)
+        if f >= 0:  # one feature answers over the cell
+            r, p = reals, starts[FEATURES] + FEATURE_WIDTH * f
+            if r[p] == PLANE_FEATURE:
+                d = r[p + 1] * x + r[p + 2] * y + r[p + 3] * z + r[p + 4]
+                if d >= cutoff:
+                    return cutoff, 0.0, 0.0, 0.0
+                return d, r[p + 1], r[p + 2], r[p + 3]
+            if r[p] == CREASE_FEATURE:
+                d, nx, ny, nz = crease_distance(r[p : p + FEATURE_WIDTH], x, y, z)
+                if d >= cutoff:
+                    return cutoff, 0.0, 0.0, 0.0
+                return d, nx, ny, nz
+            # an edge: the distance from the segment, the edge's sign
+            px, py, pz = x - r[p + 1], y - r[p + 2], z - r[p + 3]
+            s = (px * r[p + 4] + py * r[p + 5] + pz * r[p + 6]) * r[p + 7]
+            s = min(1.0, max(0.0, s))
+            px, py, pz = px - s * r[p + 4], py - s * r[p + 5], pz - s * r[p + 6]
+            d = math.sqrt(px * px + py * py + pz * pz)
+            if d > 1e-12:
+                sign = r[p + 8]
+                if sign > 0.0 and d >= cutoff:
+                    return cutoff, 0.0, 0.0, 0.0
+                return sign * d, sign * px / d, sign * py / d, sign * pz / d
+    return _listed_distance((reals, ints, starts), m, x, y, z, cutoff, cid)
 
 
 @numba.njit(cache=True)

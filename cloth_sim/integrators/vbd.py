@@ -588,6 +588,7 @@ def collider_allowances(x, allowance, bounded, co, cdepth, tau, allow, near):
     terms were most of the iterations' time; docs/BENCHMARKS.md §11)."""
     ckind, cpos, crot, cgeo, creach = co.kinds, co.pos, co.rot, co.geo, co.reach
     cbank = (co.reals, co.ints, co.starts)
+    reals, ints, starts = cbank
     for i in range(x.shape[0]):
         b = allowance[i] if bounded else math.inf
         nearest = math.inf
@@ -606,7 +607,9 @@ def collider_allowances(x, allowance, bounded, co, cdepth, tau, allow, near):
                 # every search: 22 of a step's 35 ms)
                 d = far
             elif ckind[c] == MESH:
-                d = mesh_sdf(cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2], cbank)[0]
+                d = mesh_sdf(cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2], reals, ints, starts)[
+                    0
+                ]
             else:
                 d = sdf(ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2])[0]
             nearest = min(nearest, d)
@@ -633,7 +636,7 @@ def _overtaken(x, free, co, tau):
     how many. Without it a vertex in front of a link sweeping many thicknesses a step starts the
     iterations inside the link, where its bounds let it out by a fraction of ``τ`` a search."""
     ckind, cpos, crot, cpos0, crot0 = co.kinds, co.pos, co.rot, co.pos0, co.rot0
-    cgeo, creach, cbank = co.geo, co.reach, (co.reals, co.ints, co.starts)
+    cgeo, creach, reals, ints, starts = co.geo, co.reach, co.reals, co.ints, co.starts
     moved = 0
     for c in range(ckind.shape[0]):
         still = True
@@ -652,7 +655,7 @@ def _overtaken(x, free, co, tau):
                 continue
             if ckind[c] == MESH:
                 xi, yi, zi = x[i, 0], x[i, 1], x[i, 2]
-                d, nx, ny, nz = mesh_sdf(cpos, crot, cgeo, c, xi, yi, zi, cbank, tau)
+                d, nx, ny, nz = mesh_sdf(cpos, crot, cgeo, c, xi, yi, zi, reals, ints, starts, tau)
             else:
                 d, nx, ny, nz = sdf(ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2])
             if d < tau:

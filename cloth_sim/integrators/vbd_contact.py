@@ -101,7 +101,10 @@ def colliders_at(i, x, xt, ckind, pose, pose0, cgeo, cmu, cbank, law, fh, seen):
             seen[i, c, 0], seen[i, c, 1], seen[i, c, 2], seen[i, c, 3] = far, 0.0, 0.0, 0.0
             continue
         if ckind[c] == MESH:
-            d, nx, ny, nz = mesh_sdf(cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2], cbank)
+            reals, ints, starts = cbank
+            d, nx, ny, nz = mesh_sdf(
+                cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2], reals, ints, starts
+            )
             seen[i, c, 0], seen[i, c, 1], seen[i, c, 2], seen[i, c, 3] = d, nx, ny, nz
         else:
             d, nx, ny, nz = sdf(ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2])
@@ -219,8 +222,9 @@ def onset(i, s, x, rec_ptr, rec, rec_d, pcoef, pnrm, tau, colliders, shapes, see
                 # d − τ stops short of the onset whatever the normal; a longer one asks
                 if d - tau >= math.sqrt(sx * sx + sy * sy + sz * sz) * (1.0 + 1e-9):
                     continue
-                bank = (reals, ints, starts)
-                d, nx, ny, nz = mesh_sdf(cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2], bank)
+                d, nx, ny, nz = mesh_sdf(
+                    cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2], reals, ints, starts
+                )
         else:
             d, nx, ny, nz = sdf(ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2])
         if d < tau:

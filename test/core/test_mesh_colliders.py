@@ -247,13 +247,22 @@ def test_every_integrator_keeps_a_cloth_off_a_mesh(integrator):
 def test_the_candidate_grid_answers_as_the_walk_does(shape):
     """A query inside the mesh's candidate grid reads only its cell: where the cell lists
     triangles, the signed distance and its gradient are the hierarchy walk's to the bit (the same
-    triangles in the walk's order); where the distance is affine over the cell (a face's
-    interior), the cell's plane gives them to rounding. Checked with and without a cutoff for
-    points near the surface, in the box and beyond the grid, against the same mesh without a grid
-    (every query walks); a cell lists a few triangles, not the mesh, and on a box or a plate,
-    whose faces are large, many queries near the surface are answered by a plane."""
+    triangles in the walk's order; to rounding where two triangles tie for the nearest); where
+    one feature is nearest over the whole cell (a face's interior: its plane; an edge's interior:
+    the segment; two faces and their edge: the crease), the feature gives them to rounding.
+    Checked with and without a cutoff for points near the surface and beside its edges, in the
+    box and beyond the grid, against the same mesh without a grid (every query walks); a cell
+    lists a few triangles, not the mesh, and on a box or a plate, whose faces are large, many
+    queries near the surface are answered by a plane, and on a box most beside its edges by an
+    edge or a crease."""
     import trimesh
 
+    from cloth_sim.contact.mesh_features import (
+        CREASE_FEATURE,
+        EDGE_FEATURE,
+        NO_FEATURE,
+        PLANE_FEATURE,
+    )
     from cloth_sim.contact.triangle_meshes import TriangleMesh, mesh_distance, pack
 
     if shape == "box":
@@ -285,22 +294,41 @@ def test_the_candidate_grid_answers_as_the_walk_does(shape):
         normal *= rng.choice([-1.0, 1.0], size=(300, 1))
     on = np.einsum("ij,ijk->ik", w, v[f[k]])
     hover = on + 0.3 * mesh.grid_cell * normal
-    planes = 0
-    for n, p in enumerate(np.concatenate([hover, near, inside, around])):
-        cell = np.floor((p - mesh.grid_origin) / mesh.grid_cell).astype(int)
-        affine = False
-        if np.all((cell >= 0) & (cell < mesh.grid_dims)):
-            cid = (cell[0] * mesh.grid_dims[1] + cell[1]) * mesh.grid_dims[2] + cell[2]
-            affine = not np.isnan(mesh.cell_plane[cid, 0])
+    # points beside the edges, a third of a cell out along the edge's pseudonormal (a cloth
+    # draped over a box's edges), a tenth of a cell apart
+    ends = f[k][:, [0, 1]]
+    s = rng.uniform(0.05, 0.95, size=(300, 1))
+    along = v[ends[:, 0]] + s * (v[ends[:, 1]] - v[ends[:, 0]])
+    bisector = mesh.edge_normals[k, 0]
+    crease = np.linalg.norm(bisector, axis=1) < 2.0 - 1e-9  # (not between two coplanar faces)
+    bisector /= np.linalg.norm(bisector, axis=1, keepdims=True)
+    beside = along + 0.3 * mesh.grid_cell * bisector
+    beside += rng.normal(scale=0.1 * mesh.grid_cell, size=(300, 3))
+    kinds = {PLANE_FEATURE: 0, EDGE_FEATURE: 0}
+    exact = listed = edges = 0
+    probes = np.concatenate([hover, near, inside, around, beside])
+    for n, p in enumerate(probes):
+        kind = mesh.feature_at(p)
         for cutoff in (np.inf, 0.005, 0.05):
-            got = np.array(mesh_distance(grid, 1, *p, cutoff))
-            want = np.array(mesh_distance(walk, 1, *p, cutoff))
-            if affine:
-                assert np.allclose(got, want, rtol=0, atol=1e-12), (p, cutoff, got, want)
-            else:
-                assert np.array_equal(got, want), (p, cutoff, got, want)
-        planes += affine and n < len(hover)
+            got = np.array(mesh_distance(*grid, 1, *p, cutoff))
+            want = np.array(mesh_distance(*walk, 1, *p, cutoff))
+            # the walk's nearest triangle; where two triangles sharing an edge tie for it, the
+            # cell's may be the other one (the walk passes over a box no nearer than the best
+            # so far), the same point to rounding; and the walk's gradient is (x − nearest)/d,
+            # its rounding growing as 1/d
+            slack = 1e-12 + 8 * np.finfo(float).eps * np.abs(p).max() / max(abs(want[0]), 1e-300)
+            assert abs(got[0] - want[0]) <= 1e-12, (p, cutoff, got, want, kind)
+            assert np.allclose(got[1:], want[1:], rtol=0, atol=slack), (p, cutoff, got, want)
+            exact += kind == NO_FEATURE and np.array_equal(got, want)
+            listed += kind == NO_FEATURE
+        if n < len(hover):
+            kinds[kind] = kinds.get(kind, 0) + 1
+        m = n - (len(probes) - len(beside))
+        edges += m >= 0 and crease[m] and kind in (EDGE_FEATURE, CREASE_FEATURE)
+    assert exact >= 0.98 * listed  # (the listed triangles are the walk's, in its order)
     counts = np.diff(mesh.cell_ptr)
     assert np.median(counts[counts > 0]) <= 16
     if shape != "mannequin":  # (a body's triangles are smaller than a cell and its margins)
-        assert planes > 0.3 * len(hover)
+        assert kinds[PLANE_FEATURE] > 0.3 * len(hover)
+    if shape == "box":  # (beside a box's edges, most queries are answered by an edge or a crease)
+        assert edges > 0.8 * crease.sum() > 0
