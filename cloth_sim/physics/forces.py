@@ -144,11 +144,15 @@ def axial(l, L, k, kind, tab):
 
 
 @numba.njit(cache=True, inline="always")
-def _spring_force(dx, dy, dz, l, wx, wy, wz, rest, k, c, kind, tab, with_damping):
-    """The force on a spring's first end, from ``x_j − x_i`` = (dx, dy, dz) of length ``l > 0`` and
-    ``v_j − v_i`` = (wx, wy, wz) (read only ``with_damping``): :func:`axial`'s ``dE/dl`` plus the
-    damping along the spring, times the unit vector. (Inlined: measured as fast as the lines
-    written out, docs/BENCHMARKS.md §7.)"""
+def _spring_force(d, w, law, tab, with_damping):
+    """The force on a spring's first end, from ``d = (dx, dy, dz, l)``, ``x_j − x_i`` and its
+    length ``l > 0``, and ``w = v_j − v_i`` (read only ``with_damping``), for the spring's
+    ``law = (rest, k, c, kind)`` and the Choi–Ko table ``tab``: :func:`axial`'s ``dE/dl`` plus the
+    damping along the spring, times the unit vector. (Inlined, the tuples of numbers too:
+    measured as fast as the lines written out, docs/BENCHMARKS.md §7.)"""
+    dx, dy, dz, l = d
+    wx, wy, wz = w
+    rest, k, c, kind = law
     inv = 1.0 / l
     ux, uy, uz = dx * inv, dy * inv, dz * inv
     _, de, _ = axial(l, rest, k, kind, tab)
@@ -168,17 +172,9 @@ def spring_forces(x, v, springs, rest, k, c, kind, tab, with_damping, f):
         if l < 1e-300:
             continue
         fx, fy, fz = _spring_force(
-            dx,
-            dy,
-            dz,
-            l,
-            v[j, 0] - v[i, 0],
-            v[j, 1] - v[i, 1],
-            v[j, 2] - v[i, 2],
-            rest[s],
-            k[s],
-            c[s],
-            kind[s],
+            (dx, dy, dz, l),
+            (v[j, 0] - v[i, 0], v[j, 1] - v[i, 1], v[j, 2] - v[i, 2]),
+            (rest[s], k[s], c[s], kind[s]),
             tab,
             with_damping,
         )
@@ -281,7 +277,11 @@ def _block_forces(d, rest, k, c, kind, tab, with_damping, fx, fy, fz):
         if l < 1e-300 or l >= rest[t]:  # Hooke's law above is this spring's force
             continue
         fx[t], fy[t], fz[t] = _spring_force(
-            dx, dy, dz, l, wx[t], wy[t], wz[t], rest[t], k[t], c[t], kind[t], tab, with_damping
+            (dx, dy, dz, l),
+            (wx[t], wy[t], wz[t]),
+            (rest[t], k[t], c[t], kind[t]),
+            tab,
+            with_damping,
         )
 
 

@@ -217,7 +217,6 @@ LONG_SIGNATURES = {
     "cloth_sim.integrators.vbd_grid:_spring": 17,
     "cloth_sim.simulator:Simulator.__init__": 17,
     "cloth_sim.integrators.vbd_grid:_commit": 16,
-    "cloth_sim.physics.forces:_spring_force": 13,
     "cloth_sim.envs.cloth_env:ClothEnv.__init__": 13,
     "cloth_sim.cuda.simulator:CudaSimulator.__init__": 13,
 }
