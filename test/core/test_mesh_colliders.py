@@ -243,7 +243,7 @@ def test_every_integrator_keeps_a_cloth_off_a_mesh(integrator):
     assert np.all(sim.positions[:, 2] >= H * (1 - 0.1))
 
 
-@pytest.mark.parametrize("shape", ["box", "mannequin", "plate"])
+@pytest.mark.parametrize("shape", ["box", "ell", "mannequin", "plate"])
 def test_the_candidate_grid_answers_as_the_walk_does(shape):
     """A query inside the mesh's candidate grid reads only its cell: where the cell lists
     triangles, the signed distance and its gradient are the hierarchy walk's to the bit (the same
@@ -254,7 +254,7 @@ def test_the_candidate_grid_answers_as_the_walk_does(shape):
     box and beyond the grid, against the same mesh without a grid (every query walks); a cell
     lists a few triangles, not the mesh, and on a box or a plate, whose faces are large, many
     queries near the surface are answered by a plane, and on a box most beside its edges by an
-    edge or a crease."""
+    edge or a crease; an L-shaped prism has a concave edge, whose creases are answered too."""
     import trimesh
 
     from cloth_sim.contact.mesh_features import (
@@ -269,6 +269,12 @@ def test_the_candidate_grid_answers_as_the_walk_does(shape):
         v, f = box_mesh((0.3, 0.3, 0.1))
     elif shape == "plate":
         v, f = quad(0.4)
+    elif shape == "ell":  # (a closed mesh with a concave edge)
+        from shapely.geometry import Polygon
+
+        ell = Polygon([(0, 0), (0.4, 0), (0.4, 0.15), (0.15, 0.15), (0.15, 0.4), (0, 0.4)])
+        prism = trimesh.creation.extrude_polygon(ell, 0.2)
+        v, f = np.asarray(prism.vertices), np.asarray(prism.faces)
     else:
         path = Path(__file__).resolve().parents[2] / "config" / "meshes" / "mannequin.obj"
         body = trimesh.load(path, process=False)
@@ -305,8 +311,18 @@ def test_the_candidate_grid_answers_as_the_walk_does(shape):
     beside = along + 0.3 * mesh.grid_cell * bisector
     beside += rng.normal(scale=0.1 * mesh.grid_cell, size=(300, 3))
     kinds = {PLANE_FEATURE: 0, EDGE_FEATURE: 0}
-    exact = listed = edges = 0
-    probes = np.concatenate([hover, near, inside, around, beside])
+    exact = listed = edges = in_notch = 0
+    notch = np.empty((0, 3))
+    if shape == "ell":  # around the concave edge, the vertical one at (0.15, 0.15)
+        notch = np.column_stack(
+            [
+                0.15 + rng.uniform(-0.5, 1.0, 300) * mesh.grid_cell,
+                0.15 + rng.uniform(-0.5, 1.0, 300) * mesh.grid_cell,
+                rng.uniform(0.05, 0.15, 300),
+            ]
+        )
+    probes = np.concatenate([hover, near, inside, around, notch, beside])
+    first_notch = len(probes) - len(beside) - len(notch)
     for n, p in enumerate(probes):
         kind = mesh.feature_at(p)
         for cutoff in (np.inf, 0.005, 0.05):
@@ -325,6 +341,7 @@ def test_the_candidate_grid_answers_as_the_walk_does(shape):
             kinds[kind] = kinds.get(kind, 0) + 1
         m = n - (len(probes) - len(beside))
         edges += m >= 0 and crease[m] and kind in (EDGE_FEATURE, CREASE_FEATURE)
+        in_notch += m < 0 and n >= first_notch and kind == CREASE_FEATURE
     assert exact >= 0.98 * listed  # (the listed triangles are the walk's, in its order)
     counts = np.diff(mesh.cell_ptr)
     assert np.median(counts[counts > 0]) <= 16
@@ -332,3 +349,8 @@ def test_the_candidate_grid_answers_as_the_walk_does(shape):
         assert kinds[PLANE_FEATURE] > 0.3 * len(hover)
     if shape == "box":  # (beside a box's edges, most queries are answered by an edge or a crease)
         assert edges > 0.8 * crease.sum() > 0
+    if shape == "ell":  # the concave edge's creases (their sign −1) answered queries too
+        concave = mesh.cell_features[:, 0] == CREASE_FEATURE
+        concave &= mesh.cell_features[:, 15] < 0
+        assert concave.sum() > 0 and in_notch > 0.3 * len(notch)
+        assert edges > 0.5 * crease.sum() > 0
