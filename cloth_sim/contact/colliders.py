@@ -711,12 +711,18 @@ def _crease(x, p, kinds, pos, rot, geo, bank, h):
     """Particle ``p`` after the colliders' projections, one after the other: where two colliders
     meet (a robot's links at a joint), pushing it out of the later one may have pushed it into an
     earlier one. The projections are repeated, normal only, until it is within none (at most
-    ``_CREASE_PASSES`` passes: they alternate towards the crease, where both are ``h`` away)."""
+    ``_CREASE_PASSES`` passes: they alternate towards the crease, where both are ``h`` away).
+
+    Where two links meet face to face (a vertex between the upper arm's end and the forearm's, at
+    the elbow) there is no such crease: each pass pushes the particle out of one into the other,
+    and the last left it ``h`` inside a solid. Unsettled after the passes and inside a solid, it
+    is moved along that solid's normal to where it is as deep in the other link that faces it as
+    in this one: between two faces that touch, onto the seam, inside neither."""
+    r, t, s = bank
     for _ in range(_CREASE_PASSES):
         moved = False
         for c in range(kinds.shape[0]):
             if kinds[c] == MESH:
-                r, t, s = bank
                 d, nx, ny, nz = mesh_sdf(pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2], r, t, s)
             else:
                 d, nx, ny, nz = sdf(kinds[c], pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])
@@ -727,6 +733,30 @@ def _crease(x, p, kinds, pos, rot, geo, bank, h):
                 moved = True
         if not moved:
             return
+    # unsettled: the deepest solid, and the link facing it that pushed the particle in
+    d1, n1x, n1y, n1z = math.inf, 0.0, 0.0, 0.0
+    for c in range(kinds.shape[0]):
+        if kinds[c] == MESH:
+            d, nx, ny, nz = mesh_sdf(pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2], r, t, s)
+        else:
+            d, nx, ny, nz = sdf(kinds[c], pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])
+        if d < d1:
+            d1, n1x, n1y, n1z = d, nx, ny, nz
+    if d1 >= 0.0:
+        return
+    d2 = math.inf
+    for c in range(kinds.shape[0]):
+        if kinds[c] == MESH:
+            d, nx, ny, nz = mesh_sdf(pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2], r, t, s)
+        else:
+            d, nx, ny, nz = sdf(kinds[c], pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])
+        if d > d1 and d < h * (1.0 + 1e-6) and nx * n1x + ny * n1y + nz * n1z < -0.5:
+            d2 = min(d2, d)
+    if d2 < math.inf:
+        move = min(0.5 * (d2 - d1), h - d1)
+        x[p, 0] += move * n1x
+        x[p, 1] += move * n1y
+        x[p, 2] += move * n1z
 
 
 class PackedColliders(NamedTuple):

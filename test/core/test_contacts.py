@@ -147,6 +147,31 @@ def test_a_moving_box_carries_a_resting_particle_at_its_speed():
     assert sim.positions[0, 0] == pytest.approx(u * 1.0 - slip, rel=0.02)
 
 
+@pytest.mark.parametrize("integrator", ["symplectic_euler", "vbd"])
+def test_a_particle_between_two_links_meeting_face_to_face_ends_inside_neither(integrator):
+    """Two boxes meeting face to face, as a robot's upper arm and forearm do at the elbow: a
+    particle pressed into the seam between them has no way out along either normal (pushed out of
+    one, it is inside the other, and the way out is 0.2 m sideways). The contact stage leaves it
+    on the seam, inside neither solid by their own signed distances (it left it a thickness
+    inside the lower box, carried there step after step by friction)."""
+    lower = colliders.Box(center=(0.0, 0.0, -0.1), half_extents=(0.2, 0.2, 0.1), friction=0.5)
+    upper = colliders.Box(center=(0.0, 0.0, 0.1), half_extents=(0.2, 0.2, 0.1), friction=0.5)
+    for z in (-0.3 * H, 0.3 * H, -0.9 * H):
+        model = ClothModel.from_springs(
+            [[0.0, 0.0, z], [0.01, 0.0, z]], [1e-3, 1e-3], [[0, 1]], [0.01], [1.0]
+        )
+        sim = Simulator(
+            model, integrator=integrator, dt=1e-3, thickness=H, colliders=[lower, upper]
+        )
+        for _ in range(5):
+            sim.step()
+            x = sim.positions
+            inside = min(
+                float(lower.signed_distance(x).min()), float(upper.signed_distance(x).min())
+            )
+            assert inside >= -1e-9 * H, (z, inside / H)
+
+
 def test_without_colliders_no_contact_code_runs_and_trajectories_are_unchanged():
     model = ClothModel.grid(8, 8, 0.05, 0.01, stiffness=300.0, damping=0.02, pinned=[(0, 0)])
     plain = Simulator(model, integrator="rk4", dt=1e-3, strain_limit=0.1)
