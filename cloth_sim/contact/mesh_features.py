@@ -174,7 +174,8 @@ def find_features(v, t, order, fn, closed, origin, cell, dims, band, ptr, listed
       in the edge's region of each triangle that has it (its projection on the triangle's plane
       beyond the edge, between the perpendicular planes at its ends: linear conditions, so the
       whole cell does), where that triangle's nearest point is on the edge; a closed mesh's
-      sign is the edge pseudonormal's, the same at every corner (:func:`mesh_distance`).
+      sign is the edge pseudonormal's, the same at every corner
+      (:func:`.triangle_meshes.mesh_distance`).
     - A **crease**, on a closed mesh, where two faces meet at an edge: the planes' and the edge's
       distance combined (:func:`crease_distance`, checked by :func:`_crease_cell`), near a box's
       edges where a cell holds points nearest a face and points nearest the edge.
