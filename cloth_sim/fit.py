@@ -61,8 +61,8 @@ def _distances(bank, points, out):
     reals, ints, starts = bank
     for i in range(points.shape[0]):
         # the distance to the surface, unsigned (a closed cloth mesh has an inside)
-        p = points[i]
-        out[i] = abs(mesh_distance(reals, ints, starts, 0, p[0], p[1], p[2])[0])
+        x, y, z = points[i, 0], points[i, 1], points[i, 2]
+        out[i] = abs(mesh_distance(reals, ints, starts, 0, x, y, z)[0])
 
 
 def one_way(recorded: np.ndarray, x: np.ndarray, triangles: np.ndarray) -> tuple[float, float]:

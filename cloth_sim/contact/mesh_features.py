@@ -32,6 +32,8 @@ NO_FEATURE, PLANE_FEATURE, EDGE_FEATURE, CREASE_FEATURE = 0, 1, 2, 3
 #: direction ``b − a``, ``1/|b − a|²`` and its sign (+1 outside, −1 inside); or a crease's two
 #: planes, a point of its edge, the edge's unit direction and its sign (:func:`crease_distance`)
 FEATURE_WIDTH = 16
+#: :func:`_plane_group`'s line when there is no crease to pass over (a zero direction)
+_NO_LINE = np.zeros(3)
 
 
 @numba.njit(cache=True, inline="always")
@@ -83,6 +85,17 @@ def _shares_edge(v, t, k, i, j):
         ):
             return True
     return False
+
+
+@numba.njit(cache=True, inline="always")
+def _third(v, t, k, i, j):
+    """The corner of triangle ``k`` that is neither the point of vertex ``i`` nor that of ``j``
+    (its edge ``ij``'s opposite corner)."""
+    third = t[k, 0]
+    for e in range(3):
+        if not (_same_point(v, t[k, e], i) or _same_point(v, t[k, e], j)):
+            third = t[k, e]
+    return third
 
 
 @numba.njit(cache=True, inline="always")
@@ -292,7 +305,7 @@ def _plane_cell(mesh, at, row):
         far = max(far, abs(d))
     if not closed and side == 0.0:
         return False
-    if grouped and not _plane_group(mesh, tri, a, cid, r, centre, (centre, np.zeros(3))):
+    if grouped and not _plane_group(mesh, tri, a, cid, r, centre, (centre, _NO_LINE)):
         return False
     cx, cy, cz = centre[0], centre[1], centre[2]
     for j in range(ptr[cid], ptr[cid + 1]):
@@ -313,7 +326,7 @@ def _plane_cell(mesh, at, row):
 def _edge_cell(mesh, at, row):
     """Whether an edge answers the cell ``at`` (:func:`find_features`), written to ``row``."""
     v, t, order, fn, closed, band, ptr, listed = mesh
-    cid, corners, centre, r, near_k, _, near_w = at
+    cid, corners, centre, r, _, _, _ = at
     # the edge: where the first corner's nearest point lies, inside an edge
     bk, _, wa, wb, wc = _near(mesh, at, 0)
     if bk < 0:
@@ -335,10 +348,7 @@ def _edge_cell(mesh, at, row):
         k = order[listed[j]]
         if not _shares_edge(v, t, k, i0, i1):
             continue
-        third = t[k, 0]
-        for e in range(3):
-            if not (_same_point(v, t[k, e], i0) or _same_point(v, t[k, e], i1)):
-                third = t[k, e]
+        third = _third(v, t, k, i0, i1)
         wx, wy, wz = v[third, 0] - ax, v[third, 1] - ay, v[third, 2] - az
         f = (wx * ex + wy * ey + wz * ez) / ee
         mx, my, mz = wx - f * ex, wy - f * ey, wz - f * ez  # in the plane, across the edge
@@ -420,8 +430,7 @@ def _crease_cell(mesh, at, row):
     cell centre's projection (so where the crease takes a face's plane, the face is there:
     :func:`_plane_group`); every other listed triangle is farther than the crease's largest
     bound on the cell (each plane's distance and the edge's, largest at a corner)."""
-    v, t, order, fn, closed, band, ptr, listed = mesh
-    cid, corners, centre, r, near_k, near_d2, near_w = at
+    t, closed = mesh[1], mesh[4]
     if not closed:
         return False
     bk = _near(mesh, at, 0)[0]
@@ -436,8 +445,8 @@ def _crease_cell(mesh, at, row):
 @numba.njit(cache=True)
 def _crease_row(mesh, at, f1, i0, i1, row):
     """:func:`_crease_cell` of the edge ``i0 i1`` of triangle ``f1``."""
-    v, t, order, fn, closed, band, ptr, listed = mesh
-    cid, corners, centre, r, near_k, near_d2, near_w = at
+    v, t, order, fn, _, band, ptr, listed = mesh
+    cid, corners, centre, r, _, _, _ = at
     ax, ay, az = v[i0, 0], v[i0, 1], v[i0, 2]
     ex, ey, ez = v[i1, 0] - ax, v[i1, 1] - ay, v[i1, 2] - az
     length = math.sqrt(ex * ex + ey * ey + ez * ez)
@@ -460,10 +469,7 @@ def _crease_row(mesh, at, f1, i0, i1, row):
     if nx * nx + ny * ny + nz * nz < 1e-12:
         return False  # (coplanar: a plane's, or none)
     # convex where the second face's far corner lies behind the first face's plane
-    third = t[f2, 0]
-    for e in range(3):
-        if not (_same_point(v, t[f2, e], i0) or _same_point(v, t[f2, e], i1)):
-            third = t[f2, e]
+    third = _third(v, t, f2, i0, i1)
     behind = (
         fn[f1, 0] * (v[third, 0] - ax)
         + fn[f1, 1] * (v[third, 1] - ay)
@@ -487,7 +493,7 @@ def _crease_row(mesh, at, f1, i0, i1, row):
     for corner in range(8):
         x, y, z = corners[corner, 0], corners[corner, 1], corners[corner, 2]
         s = (x - ax) * ux + (y - ay) * uy + (z - az) * uz
-        k, d2 = _near(mesh, at, corner)[:2]
+        k, nearest2 = _near(mesh, at, corner)[:2]
         if k < 0:
             return False
         if not (
@@ -496,12 +502,12 @@ def _crease_row(mesh, at, f1, i0, i1, row):
         ):
             return False
         d = crease_distance(row, x, y, z)[0]
-        if abs(math.sqrt(d2) - abs(d)) > 1e-9 * band:
+        if abs(math.sqrt(nearest2) - abs(d)) > 1e-9 * band:
             return False
-        d1 = row[1] * x + row[2] * y + row[3] * z + row[4]
-        d2 = row[5] * x + row[6] * y + row[7] * z + row[8]
+        p1 = row[1] * x + row[2] * y + row[3] * z + row[4]
+        p2 = row[5] * x + row[6] * y + row[7] * z + row[8]
         wx, wy, wz = x - ax - s * ux, y - ay - s * uy, z - az - s * uz
-        far = max(far, abs(d1), abs(d2), math.sqrt(wx * wx + wy * wy + wz * wz))
+        far = max(far, abs(p1), abs(p2), math.sqrt(wx * wx + wy * wy + wz * wz))
     line = (row[9:12], row[12:15])
     if not (
         _plane_group(mesh, f1, t[f1, 0], cid, r, centre, line)

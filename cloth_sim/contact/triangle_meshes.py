@@ -38,9 +38,9 @@ there is the feature's closed form, equal to the walk's answer to rounding
 signed by the edge's pseudonormal); a **crease** on a closed mesh, where it lies on one of two
 faces or on the edge between them (two planes and a segment: a box's edge, where the face's and
 the edge's points share cells). A cloth lying on a box mesh, on its faces and over its edges, is
-answered this way but near the box's corners, at about twice the Box primitive's cost a query
-against six times for the list (``python -m cloth_sim.bench.robot``). Elsewhere the list or the
-walk answers.
+answered this way but near the box's corners, at about three times the Box primitive's cost a
+query (44–54 against 13–17 ns) where the list and the walk take about ten
+(``python -m cloth_sim.bench.robot``, ``mesh_queries``). Elsewhere the list or the walk answers.
 """
 
 from __future__ import annotations
@@ -143,8 +143,8 @@ class TriangleMesh:
 
     def feature_at(self, point) -> int:
         """The kind of feature that answers a query at ``point`` (in the mesh's frame):
-        ``PLANE_FEATURE``, ``EDGE_FEATURE`` or ``NO_FEATURE`` (the cell's list or the walk
-        answers)."""
+        ``PLANE_FEATURE``, ``EDGE_FEATURE``, ``CREASE_FEATURE`` or ``NO_FEATURE`` (the cell's
+        list or the walk answers)."""
         at = (np.asarray(point, dtype=np.float64) - self.grid_origin) / self.grid_cell
         cell = np.floor(at).astype(np.int64)
         if not np.all((cell >= 0) & (cell < self.grid_dims)):
@@ -488,8 +488,7 @@ def mesh_distance(reals, ints, starts, m, x, y, z, cutoff=np.inf):
     surface (and outside) is answered ``(cutoff, 0, 0, 0)`` without the walk below boxes farther
     than it; a point inside a closed mesh is answered whatever its depth.
 
-    Inlined where it is called, so that a cell whose distance is affine answers without a
-    call."""
+    Inlined where it is called, so that a cell with a feature answers without a call."""
     cid, f = _feature_of(reals, ints, starts, m, x, y, z)
     if cid >= 0:
         if f >= 0:  # one feature answers over the cell

@@ -607,9 +607,8 @@ def collider_allowances(x, allowance, bounded, co, cdepth, tau, allow, near):
                 # every search: 22 of a step's 35 ms)
                 d = far
             elif ckind[c] == MESH:
-                d = mesh_sdf(cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2], reals, ints, starts)[
-                    0
-                ]
+                xi, yi, zi = x[i, 0], x[i, 1], x[i, 2]
+                d = mesh_sdf(cpos, crot, cgeo, c, xi, yi, zi, reals, ints, starts)[0]
             else:
                 d = sdf(ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2])[0]
             nearest = min(nearest, d)
