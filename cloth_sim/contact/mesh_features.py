@@ -202,7 +202,7 @@ def find_features(v, t, order, fn, closed, origin, cell, dims, band, ptr, listed
     mesh = (v, t, order, fn, closed, band, ptr, listed)
     r = 0.5 * cell * math.sqrt(3.0)
     found = np.zeros(cells, np.bool_)
-    every = np.empty((cells, FEATURE_WIDTH))
+    every = np.zeros((cells, FEATURE_WIDTH))  # (a row's columns past its kind's stay 0)
     for ix in numba.prange(dims[0]):
         corners = np.empty((8, 3))
         centre = np.empty(3)
