@@ -147,13 +147,9 @@ class GridLayout:
         #: thread count is 1 while they run)
         self.parallel = self.hi - self.lo >= PARALLEL_MIN
         self.chunks = CHUNKS if self.parallel else 1
-        # the arrays as the kernels take them: a tuple of rows
-        self._a, self._b, self._t, self._y, self._n, self._p = (
-            (a[0], a[1], a[2]) for a in (self.A, self.B, self.T, self.Y, self.N, self.P2)
-        )
         #: what the sweeps read of the lattice, as they take it (:func:`solve`): the colours'
-        #: shifts, the block size and each colour's range, the offsets' stiffness, rest length,
-        #: damping and bending coupling, the bending diagonal, ``m/h²`` and which slots move
+        #: shifts, the block size and each colour's range, the offsets' springs and couplings
+        #: (``S``), the bending diagonal, ``m/h²`` and which slots move
         self.lattice = (self.shift, self.PQ, self.lo, self.hi, self.K, self.REST, self.C,
                         self.QO, self.QD, self.m_h2, self.free)  # fmt: skip
 
@@ -196,7 +192,7 @@ class GridLayout:
         iterate is in ``A`` after an even number). ``contact``: :meth:`contact`'s tuple where
         the step has colliders."""
         return solve(
-            (self._a, self._b, self._t, self._y, self._n, self._p),
+            (self.A, self.B, self.T, self.Y, self.N, self.P2),
             self.lattice,
             (inv_h, drag_h, rho),
             self.stepped,
@@ -223,7 +219,6 @@ class GridLayout:
     def swap(self) -> None:
         """The two position arrays take turns (what :func:`solve` did inside, once)."""
         self.A, self.B = self.B, self.A
-        self._a, self._b = self._b, self._a
 
     def store(self, x, stepped, flips: int = 0) -> None:
         """The iterate back into ``x`` ``(n, 3)`` (in ``A``, or in ``B`` after an odd number of
@@ -251,18 +246,20 @@ def _gather(X, slot, x):
 
 
 @numba.njit(cache=True, inline="always")
-def _spring(X0, X1, X2, T0, T1, T2, j, t, o, K, REST, C, QO, inv_h, p, m, fh):
+def _spring(X, T, j, t, o, K, REST, C, QO, inv_h, pm, fh):
     """Particle ``t``'s spring and bending coupling to its neighbour ``j`` (slot ``o``): the
-    general sweep's spring terms (:func:`cloth_sim.integrators.vbd._springs_at`): ``p`` the
-    particle's position, ``m`` its motion over the step, ``fh`` its block (nine numbers), each a
-    tuple of numbers. The arrays one by one: a tuple of arrays, built in the colour's parallel
-    loop or captured by it, cost the loop its SIMD lanes (numba's reference counting: packed
-    square roots 12 → 0, ``test_the_grid_sweep_runs_in_simd_lanes``); tuples of numbers compile
-    to the same code."""
-    xi, yi, zi = p
-    mx, my, mz = m
+    general sweep's spring terms (:func:`cloth_sim.integrators.vbd._springs_at`): ``X`` the
+    iterate and ``T`` the step's start (``(3, size)``, a row a coordinate), ``K, REST, C, QO``
+    the offsets' springs (:class:`GridLayout`), ``pm`` the particle's position and its motion
+    over the step (six numbers), ``fh`` its block (nine numbers). Whole arrays, indexed here, not
+    tuples of their rows: a tuple of arrays, built in the colour's parallel loop or captured by
+    it, cost the loop its SIMD lanes (numba's reference counting: packed square roots 12 → 0,
+    ``test_the_grid_sweep_runs_in_simd_lanes``); tuples of numbers compile to the same code. (The
+    four spring arrays as one ``(4, 12, size)`` array, indexed ``S[k, o, t]``: 8–10 % slower
+    per iteration, measured in one process at 64² and 128².)"""
+    xi, yi, zi, mx, my, mz = pm
     f0, f1, f2, h0, h1, h2, h3, h4, h5 = fh
-    xj, yj, zj = X0[j], X1[j], X2[j]
+    xj, yj, zj = X[0, j], X[1, j], X[2, j]
     dx, dy, dz = xj - xi, yj - yi, zj - zi
     l = np.sqrt(dx * dx + dy * dy + dz * dz)
     inv = 1.0 / l if l >= 1e-300 else 0.0
@@ -271,7 +268,7 @@ def _spring(X0, X1, X2, T0, T1, T2, j, t, o, K, REST, C, QO, inv_h, p, m, fh):
     cs = C[o, t] * inv_h
     de = kk * (l - REST[o, t])
     mag = de + cs * (
-        ((xj - T0[j]) - mx) * ux + ((yj - T1[j]) - my) * uy + ((zj - T2[j]) - mz) * uz
+        ((xj - T[0, j]) - mx) * ux + ((yj - T[1, j]) - my) * uy + ((zj - T[2, j]) - mz) * uz
     )
     q = QO[o, t]
     f0 += mag * ux - q * xj
@@ -290,7 +287,7 @@ def _spring(X0, X1, X2, T0, T1, T2, j, t, o, K, REST, C, QO, inv_h, p, m, fh):
 
 
 @numba.njit(cache=True, inline="always")
-def _advance(t, p, fh, free, N0, N1, N2, stepped):
+def _advance(t, p, fh, free, N, stepped):
     """Slot ``t``'s Newton step (:func:`_solve`) from ``p``, its position, and ``fh``, its block
     (force and Hessian, nine numbers: :mod:`~cloth_sim.integrators.vbd_terms`): the new position
     into ``N``, its squared force (the imbalance the step answers) into ``stepped``. (A call of
@@ -299,7 +296,7 @@ def _advance(t, p, fh, free, N0, N1, N2, stepped):
     xi, yi, zi = p
     f0, f1, f2, a0, b, c, dd, e, ff = fh
     sx, sy, sz = _solve(a0, b, c, dd, e, ff, f0, f1, f2, free)
-    N0[t], N1[t], N2[t] = xi + sx, yi + sy, zi + sz
+    N[0, t], N[1, t], N[2, t] = xi + sx, yi + sy, zi + sz
     stepped[t] = f0 * f0 + f1 * f1 + f2 * f2  # its imbalance as the sweep found it
 
 
@@ -315,35 +312,36 @@ def next_omega(it, rho, omega):
 
 
 @numba.njit(cache=True, inline="always")
-def _terms(t, n, X0, X1, X2, T0, T1, T2, Y0, Y1, Y2, K, REST, C, QO, QD, MH2, inv_h, drag_h):
+def _terms(t, n, X, T, Y, K, REST, C, QO, QD, MH2, rates):
     """Slot ``t``'s position, and its force and Hessian (six entries) of the incremental
     potential from its inertia, drag, bending diagonal and twelve springs (``n``: its colour's
     twelve shifts, a tuple): the general sweep's terms (:func:`cloth_sim.integrators.vbd._sweep`).
-    (The arrays one by one, as :func:`_spring` says.)"""
-    xi, yi, zi = X0[t], X1[t], X2[t]
-    mx, my, mz = xi - T0[t], yi - T1[t], zi - T2[t]
+    ``rates``: :func:`solve`'s. (Whole arrays, as :func:`_spring` says.)"""
+    inv_h, drag_h, _ = rates
+    xi, yi, zi = X[0, t], X[1, t], X[2, t]
+    mx, my, mz = xi - T[0, t], yi - T[1, t], zi - T[2, t]
     m = MH2[t]
     qd = QD[t]
     d = m + drag_h + qd
-    f0 = -m * (xi - Y0[t]) - drag_h * mx - qd * xi
-    f1 = -m * (yi - Y1[t]) - drag_h * my - qd * yi
-    f2 = -m * (zi - Y2[t]) - drag_h * mz - qd * zi
+    f0 = -m * (xi - Y[0, t]) - drag_h * mx - qd * xi
+    f1 = -m * (yi - Y[1, t]) - drag_h * my - qd * yi
+    f2 = -m * (zi - Y[2, t]) - drag_h * mz - qd * zi
     fh = (f0, f1, f2, d, 0.0, 0.0, d, 0.0, d)
-    p, mo = (xi, yi, zi), (mx, my, mz)
+    pm = (xi, yi, zi, mx, my, mz)
     # the twelve springs, one a line
     # fmt: off
-    fh = _spring(X0, X1, X2, T0, T1, T2, t + n[0], t, 0, K, REST, C, QO, inv_h, p, mo, fh)  # noqa: E501
-    fh = _spring(X0, X1, X2, T0, T1, T2, t + n[1], t, 1, K, REST, C, QO, inv_h, p, mo, fh)  # noqa: E501
-    fh = _spring(X0, X1, X2, T0, T1, T2, t + n[2], t, 2, K, REST, C, QO, inv_h, p, mo, fh)  # noqa: E501
-    fh = _spring(X0, X1, X2, T0, T1, T2, t + n[3], t, 3, K, REST, C, QO, inv_h, p, mo, fh)  # noqa: E501
-    fh = _spring(X0, X1, X2, T0, T1, T2, t + n[4], t, 4, K, REST, C, QO, inv_h, p, mo, fh)  # noqa: E501
-    fh = _spring(X0, X1, X2, T0, T1, T2, t + n[5], t, 5, K, REST, C, QO, inv_h, p, mo, fh)  # noqa: E501
-    fh = _spring(X0, X1, X2, T0, T1, T2, t + n[6], t, 6, K, REST, C, QO, inv_h, p, mo, fh)  # noqa: E501
-    fh = _spring(X0, X1, X2, T0, T1, T2, t + n[7], t, 7, K, REST, C, QO, inv_h, p, mo, fh)  # noqa: E501
-    fh = _spring(X0, X1, X2, T0, T1, T2, t + n[8], t, 8, K, REST, C, QO, inv_h, p, mo, fh)  # noqa: E501
-    fh = _spring(X0, X1, X2, T0, T1, T2, t + n[9], t, 9, K, REST, C, QO, inv_h, p, mo, fh)  # noqa: E501
-    fh = _spring(X0, X1, X2, T0, T1, T2, t + n[10], t, 10, K, REST, C, QO, inv_h, p, mo, fh)  # noqa: E501
-    fh = _spring(X0, X1, X2, T0, T1, T2, t + n[11], t, 11, K, REST, C, QO, inv_h, p, mo, fh)  # noqa: E501
+    fh = _spring(X, T, t + n[0], t, 0, K, REST, C, QO, inv_h, pm, fh)
+    fh = _spring(X, T, t + n[1], t, 1, K, REST, C, QO, inv_h, pm, fh)
+    fh = _spring(X, T, t + n[2], t, 2, K, REST, C, QO, inv_h, pm, fh)
+    fh = _spring(X, T, t + n[3], t, 3, K, REST, C, QO, inv_h, pm, fh)
+    fh = _spring(X, T, t + n[4], t, 4, K, REST, C, QO, inv_h, pm, fh)
+    fh = _spring(X, T, t + n[5], t, 5, K, REST, C, QO, inv_h, pm, fh)
+    fh = _spring(X, T, t + n[6], t, 6, K, REST, C, QO, inv_h, pm, fh)
+    fh = _spring(X, T, t + n[7], t, 7, K, REST, C, QO, inv_h, pm, fh)
+    fh = _spring(X, T, t + n[8], t, 8, K, REST, C, QO, inv_h, pm, fh)
+    fh = _spring(X, T, t + n[9], t, 9, K, REST, C, QO, inv_h, pm, fh)
+    fh = _spring(X, T, t + n[10], t, 10, K, REST, C, QO, inv_h, pm, fh)
+    fh = _spring(X, T, t + n[11], t, 11, K, REST, C, QO, inv_h, pm, fh)
     # fmt: on
     f0, f1, f2, a0, b, c, dd, e, ff = fh
     return xi, yi, zi, f0, f1, f2, a0, b, c, dd, e, ff
@@ -381,12 +379,12 @@ def solve(blocks, lattice, rates, stepped, chunks, first, last, total, omega, co
     take turns. The same arithmetic as a separate pass after the sweeps, without that pass over
     every array.
 
-    ``blocks`` holds ``A, B, T, Y, N, P``, tuples of one array a coordinate (the iterate, its
-    extrapolation, the step's start, the inertial target, the sweep's new positions, the older
-    positions); ``lattice``: :attr:`GridLayout.lattice`; ``rates``: ``(1/h, drag/h, ρ)``;
-    ``contact``: the colliders and the vertices' bounds (:meth:`GridLayout.contact`), or
-    ``None``. (The bundles are plain tuples, unpacked in their order: numba types a NamedTuple
-    argument on a slow path, ~1 µs a call.)"""
+    ``blocks`` holds ``A, B, T, Y, N, P``, ``(3, size)`` arrays, a row a coordinate (the
+    iterate, its extrapolation, the step's start, the inertial target, the sweep's new
+    positions, the older positions); ``lattice``: :attr:`GridLayout.lattice`; ``rates``:
+    ``(1/h, drag/h, ρ)``; ``contact``: the colliders and the vertices' bounds
+    (:meth:`GridLayout.contact`), or ``None``. (The bundles are plain tuples, unpacked in their
+    order: numba types a NamedTuple argument on a slow path, ~1 µs a call.)"""
     A, B, T, Y, N, P = blocks
     _, _, rho = rates
     flips = 0
@@ -428,19 +426,20 @@ def _chunk(a, b, size, ch):
 
 
 @numba.njit(cache=True, inline="always")
-def _commit(t, x0, x1, x2, move, mode, omega, X0, X1, X2, B0, B1, B2, P0, P1, P2):
-    """Slot ``t``'s new position ``x`` into ``A`` (``X``) and, where ``mode`` asks for
-    Chebyshev's step (:func:`solve`), the next iterate into ``B`` (extrapolated if ``move``) and
-    the position before into ``P``; returns what went into ``B``."""
+def _commit(t, x, move, mode, omega, X, B, P):
+    """Slot ``t``'s new position ``x`` (three numbers) into ``A`` (``X``) and, where ``mode`` asks
+    for Chebyshev's step (:func:`solve`), the next iterate into ``B`` (extrapolated if ``move``)
+    and the position before into ``P``; returns what went into ``B``."""
+    x0, x1, x2 = x
     b0, b1, b2 = x0, x1, x2
     if mode == 2 and move:
-        b0 = omega * (x0 - P0[t]) + P0[t]
-        b1 = omega * (x1 - P1[t]) + P1[t]
-        b2 = omega * (x2 - P2[t]) + P2[t]
+        b0 = omega * (x0 - P[0, t]) + P[0, t]
+        b1 = omega * (x1 - P[1, t]) + P[1, t]
+        b2 = omega * (x2 - P[2, t]) + P[2, t]
     if mode:
-        B0[t], B1[t], B2[t] = b0, b1, b2
-        P0[t], P1[t], P2[t] = X0[t], X1[t], X2[t]
-    X0[t], X1[t], X2[t] = x0, x1, x2
+        B[0, t], B[1, t], B[2, t] = b0, b1, b2
+        P[0, t], P[1, t], P[2, t] = X[0, t], X[1, t], X[2, t]
+    X[0, t], X[1, t], X[2, t] = x0, x1, x2
     return b0, b1, b2
 
 
@@ -457,15 +456,8 @@ def _sweeps(blocks, lattice, rates, stepped, chunks, mode, omega):
     to ``N`` first so that no array is both read at a shift and written. ``fastmath={"contract"}``
     only fuses multiplies and adds (FMA): the same in every lane and in the scalar remainder,
     ~10 % faster. The bundles: :func:`solve`'s."""
-    A, B, T, Y, N, P = blocks
+    X, B, T, Y, N, P = blocks
     shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE = lattice
-    inv_h, drag_h, _ = rates
-    X0, X1, X2 = A
-    B0, B1, B2 = B
-    T0, T1, T2 = T
-    Y0, Y1, Y2 = Y
-    N0, N1, N2 = N
-    P0, P1, P2 = P
     for cb in range(9):
         a, bb, size, n0, n1, n2, n3, n4, n5, n6, n7, n8, n9, n10, n11 = _colour(
             shift, cb, PQ, lo, hi, chunks
@@ -475,15 +467,12 @@ def _sweeps(blocks, lattice, rates, stepped, chunks, mode, omega):
             lo_, hi_ = _chunk(a, bb, size, ch)
             for t in range(lo_, hi_):
                 xi, yi, zi, f0, f1, f2, a0, b, c, dd, e, ff = _terms(
-                    t, n, X0, X1, X2, T0, T1, T2, Y0, Y1, Y2, K, REST, C, QO, QD, MH2, inv_h,
-                    drag_h,
-                )  # fmt: skip
-                _advance(t, (xi, yi, zi), (f0, f1, f2, a0, b, c, dd, e, ff), FREE[t], N0, N1, N2,
-                         stepped)  # fmt: skip
+                    t, n, X, T, Y, K, REST, C, QO, QD, MH2, rates
+                )
+                _advance(t, (xi, yi, zi), (f0, f1, f2, a0, b, c, dd, e, ff), FREE[t], N, stepped)
             for t in range(lo_, hi_):
                 move = FREE[t] != 0.0
-                _commit(t, N0[t], N1[t], N2[t], move, mode, omega, X0, X1, X2, B0, B1, B2, P0,
-                        P1, P2)  # fmt: skip
+                _commit(t, (N[0, t], N[1, t], N[2, t]), move, mode, omega, X, B, P)
 
 
 @numba.njit(cache=True, parallel=True, error_model="numpy", fastmath={"contract"})
@@ -498,9 +487,8 @@ def _sweeps_touching(blocks, lattice, rates, stepped, chunks, mode, omega, conta
     and every extrapolation within the vertex's bounds (:func:`~.vbd_contact.within`,
     :func:`~.vbd_contact.truncate`: what the last search lets it move), extrapolates no vertex in
     contact, and commits."""
-    A, B, T, Y, N, P = blocks
+    X, B, T, Y, N, P = blocks
     shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE = lattice
-    inv_h, drag_h, _ = rates
     (vof, xm, xt, near, touch, cut, x_cd, allow, gamma, law, co, sc, fh, seen) = contact
     tau = law[0]
     F0, F1, F2, H0, H1, H2, H3, H4, H5 = fh
@@ -509,12 +497,6 @@ def _sweeps_touching(blocks, lattice, rates, stepped, chunks, mode, omega, conta
     cbank = (co.reals, co.ints, co.starts)
     shapes = (ckind, co.pos, co.rot, cgeo, co.reals, co.ints, co.starts)
     rec_ptr, rec, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d = sc
-    X0, X1, X2 = A
-    B0, B1, B2 = B
-    T0, T1, T2 = T
-    Y0, Y1, Y2 = Y
-    N0, N1, N2 = N
-    P0, P1, P2 = P
     for cb in range(9):
         a, bb, size, n0, n1, n2, n3, n4, n5, n6, n7, n8, n9, n10, n11 = _colour(
             shift, cb, PQ, lo, hi, chunks
@@ -524,11 +506,9 @@ def _sweeps_touching(blocks, lattice, rates, stepped, chunks, mode, omega, conta
             lo_, hi_ = _chunk(a, bb, size, ch)
             for t in range(lo_, hi_):
                 xi, yi, zi, f0, f1, f2, a0, b, c, dd, e, ff = _terms(
-                    t, n, X0, X1, X2, T0, T1, T2, Y0, Y1, Y2, K, REST, C, QO, QD, MH2, inv_h,
-                    drag_h,
-                )  # fmt: skip
-                _advance(t, (xi, yi, zi), (f0, f1, f2, a0, b, c, dd, e, ff), FREE[t], N0, N1, N2,
-                         stepped)  # fmt: skip
+                    t, n, X, T, Y, K, REST, C, QO, QD, MH2, rates
+                )
+                _advance(t, (xi, yi, zi), (f0, f1, f2, a0, b, c, dd, e, ff), FREE[t], N, stepped)
                 # the springs' force and Hessian, for the vertices the second pass takes again
                 F0[t], F1[t], F2[t] = f0, f1, f2
                 H0[t], H1[t], H2[t], H3[t], H4[t], H5[t] = a0, b, c, dd, e, ff
@@ -537,13 +517,12 @@ def _sweeps_touching(blocks, lattice, rates, stepped, chunks, mode, omega, conta
             for t in range(lo_, hi_):
                 v = vof[t]
                 if v < 0 or FREE[t] == 0.0:  # a ghost or a pin: kept
-                    _commit(t, N0[t], N1[t], N2[t], False, mode, omega, X0, X1, X2, B0, B1, B2,
-                            P0, P1, P2)  # fmt: skip
+                    _commit(t, (N[0, t], N[1, t], N[2, t]), False, mode, omega, X, B, P)
                     continue
-                x0, x1, x2 = N0[t], N1[t], N2[t]
+                x0, x1, x2 = N[0, t], N[1, t], N[2, t]
                 touch[v] = 0
                 if near[v]:
-                    xi, yi, zi = X0[t], X1[t], X2[t]
+                    xi, yi, zi = X[0, t], X[1, t], X[2, t]
                     f0, f1, f2 = F0[t], F1[t], F2[t]
                     a0, b, c, dd, e, ff = H0[t], H1[t], H2[t], H3[t], H4[t], H5[t]
                     xm[v, 0], xm[v, 1], xm[v, 2] = xi, yi, zi
@@ -566,8 +545,7 @@ def _sweeps_touching(blocks, lattice, rates, stepped, chunks, mode, omega, conta
                                                    pcoef, pnrm, pdist, dmin, gamma)  # fmt: skip
                 if was_cut:
                     cut[v] = 1
-                b0, b1, b2 = _commit(t, x0, x1, x2, touch[v] == 0, mode, omega, X0, X1, X2, B0,
-                                     B1, B2, P0, P1, P2)  # fmt: skip
+                b0, b1, b2 = _commit(t, (x0, x1, x2), touch[v] == 0, mode, omega, X, B, P)
                 if mode == 2 and touch[v] == 0:  # the extrapolation within the bounds too
                     b0, b1, b2, was_cut, settled = within(b0, b1, b2, x_cd[v, 0], x_cd[v, 1],
                                                           x_cd[v, 2], allow[v], dmin[v],
@@ -576,6 +554,6 @@ def _sweeps_touching(blocks, lattice, rates, stepped, chunks, mode, omega, conta
                         b0, b1, b2, was_cut = truncate(v, (b0, b1, b2), x_cd, allow, gptr, grec,
                                                        pidx, pcoef, pnrm, pdist, dmin,
                                                        gamma)  # fmt: skip
-                    B0[t], B1[t], B2[t] = b0, b1, b2
+                    B[0, t], B[1, t], B[2, t] = b0, b1, b2
                     if was_cut:
                         cut[v] = 1

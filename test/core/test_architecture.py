@@ -208,15 +208,11 @@ def test_the_function_import_check_sees_one():
 MOST_PARAMETERS = 12
 
 #: the functions that still take more, with how many: the house issue's debt, listed so that it
-#: only shrinks (a function may leave this list, never join it or grow). Helpers inlined into a
-#: hot loop take arrays, not bundles: a bundle's fields read in a hot inlined helper cost numba a
-#: reference count each (measured 1.7× on the self-collision tree), so these wait for a layout
-#: that needs fewer arrays (issue 67's "bank as a few arrays")
+#: only shrinks (a function may leave this list, never join it or grow). (Helpers inlined into a
+#: hot loop take whole arrays, not bundles of them: a bundle's fields read in a hot inlined helper
+#: cost numba a reference count each, measured 1.7× on the self-collision tree.)
 LONG_SIGNATURES = {
-    "cloth_sim.integrators.vbd_grid:_terms": 19,
-    "cloth_sim.integrators.vbd_grid:_spring": 17,
     "cloth_sim.simulator:Simulator.__init__": 17,
-    "cloth_sim.integrators.vbd_grid:_commit": 16,
     "cloth_sim.envs.cloth_env:ClothEnv.__init__": 13,
     "cloth_sim.cuda.simulator:CudaSimulator.__init__": 13,
 }
