@@ -190,7 +190,7 @@ def truncate(i, p, x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, gamm
 
 
 @numba.njit(cache=True, inline="always")
-def onset(i, s, x, rec_ptr, rec, rec_d, pcoef, pnrm, tau, colliders, shapes, seen):
+def onset(i, s, x, records, tau, colliders, shapes, seen):
     """Vertex ``i``'s step ``s`` from ``x[i]`` with the part that would press a contact not yet
     pressed (distance at least ``τ``: not in the step's Hessian) taken off along that contact's
     normal, so that it stops at its onset (the next iteration sees it); the motion along the
@@ -199,16 +199,17 @@ def onset(i, s, x, rec_ptr, rec, rec_d, pcoef, pnrm, tau, colliders, shapes, see
     (kinds, positions, rotations, geometry, and the mesh bank's reals, ints and starts)``), a
     mesh's as :func:`colliders_at` left it in ``seen[i]`` for the same point (asked here only
     where that left its reach's lower bound and the step is longer than the bound's room).
-    ``s``: three numbers, and so is what it returns."""
+    ``s``: three numbers, and so is what it returns. ``records``: the vertices' self-contact
+    records' ``(ptr, weights, normals, distances)``
+    (:func:`cloth_sim.integrators.vbd.pack_records`)."""
+    rec_ptr, rec_w, rec_n, rec_d = records
     sx, sy, sz = s
     for q in range(rec_ptr[i], rec_ptr[i + 1]):
-        d = rec_d[q]  # (its distance as _self_contacts_at found it for this step)
+        d = rec_d[q]  # (its distance as self_contacts_at found it for this step)
         if d < tau:
             continue
-        r = rec[q]
-        pair = r // 4
-        w = pcoef[pair, r % 4]
-        nx, ny, nz = w * pnrm[pair, 0], w * pnrm[pair, 1], w * pnrm[pair, 2]
+        w = rec_w[q, 4]
+        nx, ny, nz = w * rec_n[q, 0], w * rec_n[q, 1], w * rec_n[q, 2]
         over = (tau - d) - (nx * sx + ny * sy + nz * sz)  # how far past the onset d would go
         if over > 0.0:
             f = over / (nx * nx + ny * ny + nz * nz)

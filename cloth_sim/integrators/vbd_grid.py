@@ -496,7 +496,7 @@ def _sweeps_touching(blocks, lattice, rates, stepped, chunks, mode, omega, conta
     pose, pose0 = (co.pos, co.rot, co.reach), (co.pos0, co.rot0)
     cbank = (co.reals, co.ints, co.starts)
     shapes = (ckind, co.pos, co.rot, cgeo, co.reals, co.ints, co.starts)
-    rec_ptr, rec, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d = sc
+    rec_ptr, rec_v, rec_w, rec_n, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d = sc
     for cb in range(9):
         a, bb, size, n0, n1, n2, n3, n4, n5, n6, n7, n8, n9, n10, n11 = _colour(
             shift, cb, PQ, lo, hi, chunks
@@ -533,7 +533,7 @@ def _sweeps_touching(blocks, lattice, rates, stepped, chunks, mode, omega, conta
                     if touched:
                         touch[v] = 1
                     sx, sy, sz = _solve(a0, b, c, dd, e, ff, f0, f1, f2, 1.0)
-                    sx, sy, sz = onset(v, (sx, sy, sz), xm, rec_ptr, rec, rec_d, pcoef, pnrm, tau,
+                    sx, sy, sz = onset(v, (sx, sy, sz), xm, (rec_ptr, rec_w, rec_n, rec_d), tau,
                                        ckind.shape[0], shapes, seen)  # fmt: skip
                     x0, x1, x2 = xi + sx, yi + sy, zi + sz
                     stepped[t] = f0 * f0 + f1 * f1 + f2 * f2
