@@ -321,20 +321,24 @@ def contact_records(n, idx, coef, use):
 
 
 @numba.njit(cache=True)
-def pack_records(rec, idx, coef, nrm):
+def pack_records(rec, idx, coef, nrm, colour):
     """The energy records ``rec`` (``4·pair + slot``, each vertex's in a run:
     :func:`contact_records`) with their pairs' data copied in, record by record: ``(vertices
-    (R, 4), weights (R, 5): the pair's four and then the record's own, normal (R, 3))``. A sweep
-    reads a vertex's records in a row: on the T-shirt's 42,615 records one pass over every
-    vertex's self-contacts took 3.4 ms reading each pair's rows of ``idx``, ``coef`` and ``nrm``
-    through its record, 1.16 ms reading these (the same bits, one thread); making them costs
-    0.25 ms a search."""
+    (R, 4), weights (R, 5): the pair's four and then the record's own, normal (R, 3))``; a
+    vertex of the record's own vertex's ``colour`` (another than itself) is stored as ``−v − 1``
+    (:func:`~cloth_sim.integrators.vbd_terms.self_contacts_at` reads it where the iteration
+    began). A sweep reads a vertex's records in a row: one iteration on the settled T-shirt
+    (42,990 records, two threads) took 1.27 ms reading each pair's rows of ``idx``, ``coef`` and
+    ``nrm`` through its record and each partner's colour, 0.97 ms reading these (the same bits);
+    making them costs ~0.25 ms a search."""
     m = rec.shape[0]
     rv, rw, rn = np.empty((m, 4), np.int64), np.empty((m, 5)), np.empty((m, 3))
     for q in range(m):
         pair = rec[q] // 4
+        own = idx[pair, rec[q] % 4]
         for slot in range(4):
-            rv[q, slot] = idx[pair, slot]
+            v = idx[pair, slot]
+            rv[q, slot] = -v - 1 if v != own and colour[v] == colour[own] else v
             rw[q, slot] = coef[pair, slot]
         rw[q, 4] = coef[pair, rec[q] % 4]
         for k in range(3):
@@ -365,7 +369,7 @@ def _sweep(verts, lo, hi, state, inertia, sp, co, sc, law, bounds, out):
     * ``sp``: each vertex's springs (CSR: the other end, rest length, k, c, kind, in the vertex's
       order), Choi–Ko's table, whether any is not smooth, and the bending's rows;
     * ``co``: the colliders (:class:`~cloth_sim.contact.colliders.PackedColliders`); ``sc``: the
-      self-contact records, pairs and the colouring;
+      self-contact records and pairs (:meth:`VBD._records`);
     * ``law = (τ, the colliders' penalty stiffness, friction's ε, self-contact's stiffness and
       μ, γ)``; ``bounds = (x_cd, allow, near)``: where the last search was made, each vertex's
       allowance, and whether it may touch a collider;
@@ -387,7 +391,7 @@ def _sweep(verts, lo, hi, state, inertia, sp, co, sc, law, bounds, out):
     cpos0, crot0, cbank = co.pos0, co.rot0, (co.reals, co.ints, co.starts)
     pose, pose0 = (cpos, crot, co.reach), (cpos0, crot0)
     shapes = (ckind, cpos, crot, cgeo, co.reals, co.ints, co.starts)
-    rec_ptr, rec_v, rec_w, rec_n, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d, colour = sc
+    rec_ptr, rec_v, rec_w, rec_n, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d = sc
     records = (rec_ptr, rec_v, rec_w, rec_n, rec_d)
     collider_law, self_law = (tau, kc, eps), (tau, ks, mu_self, eps)
     for q in range(lo, hi):
@@ -420,7 +424,7 @@ def _sweep(verts, lo, hi, state, inertia, sp, co, sc, law, bounds, out):
                 touch[i] = 1
         if rec_ptr[i + 1] > rec_ptr[i]:
             touch[i] = 1
-            fh = self_contacts_at(i, x, xs, xt, colour, records, self_law, fh)
+            fh = self_contacts_at(i, x, xs, xt, records, self_law, fh)
         f0, f1, f2, h0, h1, h2, h3, h4, h5 = fh
         stepped[i] = f0 * f0 + f1 * f1 + f2 * f2  # its imbalance as the sweep found it
         sx, sy, sz = solve3(h0, h1, h2, h3, h4, h5, f0, f1, f2)
@@ -511,7 +515,7 @@ def _chebyshev(x, x_prev2, omega, free, x_cd, allow, gamma, sc, cut, touch):
     """``x ← ω (x − x_prev2) + x_prev2`` on the free vertices not in contact (extrapolated, a
     contact's penalty made the cloth chatter on a table), within their bounds (:func:`.truncate`);
     ``ω = 1`` only holds them there."""
-    _, _, _, _, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, _, _ = sc
+    _, _, _, _, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, _ = sc
     for i in range(x.shape[0]):
         if not free[i] or touch[i]:
             continue
@@ -836,6 +840,7 @@ class VBD(Integrator):
                 np.zeros((0, 4), np.int64),
                 np.zeros((0, 4)),
                 np.zeros((0, 3)),
+                np.zeros(0, np.int64),
             ),  # fmt: skip
             np.zeros(n + 1, np.int64),
             np.zeros(0, np.int64),
@@ -1130,7 +1135,7 @@ class VBD(Integrator):
                 x_cd,
                 allow,
                 GAMMA,
-                (*self._rec, self._colour),
+                self._rec,
                 self._cut,
                 self._no_touch,
             )
@@ -1188,7 +1193,7 @@ class VBD(Integrator):
                 # a vertex hit its bound: search again from here, for room to move on
                 self._detect(x, y, colliders, tau, self_contact, x_cd)
                 cut[:] = 0
-            sc_arrays = (*self._rec, self._colour)
+            sc_arrays = self._rec
             np.copyto(xs, x)
             run(
                 verts,
@@ -1375,7 +1380,7 @@ class VBD(Integrator):
         gptr, grec = contact_records(n, idx, coef, np.ones(len(idx), np.bool_))
         return (
             ptr,
-            *pack_records(rec, idx, coef, nrm),
+            *pack_records(rec, idx, coef, nrm, self._colour),
             gptr,
             grec,
             idx,
