@@ -329,7 +329,7 @@ def pack_records(rec, idx, coef, nrm, colour):
     (:func:`~cloth_sim.integrators.vbd_terms.self_contacts_at` reads it where the iteration
     began). A sweep reads a vertex's records in a row: one iteration on the settled T-shirt
     (42,990 records, two threads) took 1.27 ms reading each pair's rows of ``idx``, ``coef`` and
-    ``nrm`` through its record and each partner's colour, 0.97 ms reading these (the same bits);
+    ``nrm`` through its record and each partner's colour, 0.95 ms reading these (the same bits);
     making them costs ~0.25 ms a search."""
     m = rec.shape[0]
     rv, rw, rn = np.empty((m, 4), np.int64), np.empty((m, 5)), np.empty((m, 3))

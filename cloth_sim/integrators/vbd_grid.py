@@ -148,8 +148,8 @@ class GridLayout:
         self.parallel = self.hi - self.lo >= PARALLEL_MIN
         self.chunks = CHUNKS if self.parallel else 1
         #: what the sweeps read of the lattice, as they take it (:func:`solve`): the colours'
-        #: shifts, the block size and each colour's range, the offsets' springs and couplings
-        #: (``S``), the bending diagonal, ``m/h²`` and which slots move
+        #: shifts, the block size and each colour's range, the offsets' stiffness, rest length,
+        #: damping and bending coupling, the bending diagonal, ``m/h²`` and which slots move
         self.lattice = (self.shift, self.PQ, self.lo, self.hi, self.K, self.REST, self.C,
                         self.QO, self.QD, self.m_h2, self.free)  # fmt: skip
 
@@ -328,7 +328,8 @@ def _terms(t, n, X, T, Y, K, REST, C, QO, QD, MH2, rates):
     f2 = -m * (zi - Y[2, t]) - drag_h * mz - qd * zi
     fh = (f0, f1, f2, d, 0.0, 0.0, d, 0.0, d)
     pm = (xi, yi, zi, mx, my, mz)
-    # the twelve springs, one a line
+    # the twelve springs, one a line (as a loop over the twelve offsets the colour's loop lost
+    # its SIMD lanes: packed square roots 12 → 0)
     # fmt: off
     fh = _spring(X, T, t + n[0], t, 0, K, REST, C, QO, inv_h, pm, fh)
     fh = _spring(X, T, t + n[1], t, 1, K, REST, C, QO, inv_h, pm, fh)

@@ -145,7 +145,7 @@ def self_contacts_at(i, x, xs, xt, records, law, fh):
     (That choice is written out in the loop: as an inlined helper taking the three arrays, called
     for each of a record's vertices, numba counted the arrays' references at every call, 2.5× the
     whole function's time: 3.0 against 1.2 ms a pass over the T-shirt's 42,615 records. The mark
-    made when the records are packed saves reading each partner's colour: 1.07 → 0.97 ms an
+    made when the records are packed saves reading each partner's colour: 1.07 → 0.95 ms an
     iteration on the settled T-shirt.)"""
     rec_ptr, rec_v, rec_w, rec_n, rec_d = records
     tau, ks, mu, eps = law
