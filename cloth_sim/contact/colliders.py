@@ -733,23 +733,24 @@ def _crease(x, p, kinds, pos, rot, geo, bank, h):
                 moved = True
         if not moved:
             return
-    # unsettled: the deepest solid, and the link facing it that pushed the particle in
-    d1, n1x, n1y, n1z = math.inf, 0.0, 0.0, 0.0
+    # unsettled: the deepest solid, and the link facing it that pushed the particle in (each
+    # collider asked once: its distance and normal)
+    dn = np.empty((kinds.shape[0], 4))
+    deepest = 0
     for c in range(kinds.shape[0]):
         if kinds[c] == MESH:
             d, nx, ny, nz = mesh_sdf(pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2], r, t, s)
         else:
             d, nx, ny, nz = sdf(kinds[c], pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])
-        if d < d1:
-            d1, n1x, n1y, n1z = d, nx, ny, nz
+        dn[c, 0], dn[c, 1], dn[c, 2], dn[c, 3] = d, nx, ny, nz
+        if d < dn[deepest, 0]:
+            deepest = c
+    d1, n1x, n1y, n1z = dn[deepest, 0], dn[deepest, 1], dn[deepest, 2], dn[deepest, 3]
     if d1 >= 0.0:
         return
     d2 = math.inf
     for c in range(kinds.shape[0]):
-        if kinds[c] == MESH:
-            d, nx, ny, nz = mesh_sdf(pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2], r, t, s)
-        else:
-            d, nx, ny, nz = sdf(kinds[c], pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])
+        d, nx, ny, nz = dn[c, 0], dn[c, 1], dn[c, 2], dn[c, 3]
         if d > d1 and d < h * (1.0 + 1e-6) and nx * n1x + ny * n1y + nz * n1z < -0.5:
             d2 = min(d2, d)
     if d2 < math.inf:
