@@ -145,6 +145,13 @@ def _bench_vbd_floor(args) -> int:
     return 0
 
 
+def _bench_compile(args) -> int:
+    from .compile import print_compile_table
+
+    print_compile_table(args.parts, args.top, args.side_by_side)
+    return 0
+
+
 def _bench_convergence(args) -> int:
     from .convergence import print_accuracy_table, print_convergence_table, print_rest_table
 
@@ -289,6 +296,21 @@ def add_parser(sub) -> argparse.ArgumentParser:
     )
     vf.add_argument("--sizes", type=int, nargs="+", default=[32, 64, 128])
     vf.set_defaults(func=_bench_vbd_floor)
+    ck = bsub.add_parser(
+        "compile",
+        help="make install's kernel compilation from an empty cache: each part's seconds and its "
+        "dearest kernels (numba's compile events)",
+    )
+    ck.add_argument(
+        "--parts", nargs="+", default=None, help="compile_kernels' parts (default: all)"
+    )
+    ck.add_argument("--top", type=int, default=12, help="kernels listed per part (default 12)")
+    ck.add_argument(
+        "--side-by-side",
+        action="store_true",
+        help="the parts at once in one shared cache, as make install runs them",
+    )
+    ck.set_defaults(func=_bench_compile)
     cv = bsub.add_parser(
         "convergence",
         help="vbd on a library fabric: iterations a step against its residual, and substeps "

@@ -1,14 +1,18 @@
 """`cloth-sim bench … --quick`: the outputs exist and are well formed, the quick sweep's observed
 orders are the methods' orders, and the stability bisection finds symplectic Euler's linear limit.
 
-Nothing here times anything: the figures are the benchmarks' business (docs/BENCHMARKS.md).
+Nothing here asserts a speed: the figures are the benchmarks' business (docs/BENCHMARKS.md).
 """
 
 import csv
 import json
+import time
 
+import numba
+import numpy as np
 import pytest
 
+from cloth_sim.bench.compile import listening
 from cloth_sim.cli import main as cli_main
 
 
@@ -95,3 +99,38 @@ def test_the_garment_contacts_table_has_its_three_cases_and_counts_crossings(cap
     assert rows[0]["ratio"] == 1.0 and all(r["ms"] > 0 for r in rows)
     assert rows[0]["crossings"] is None and rows[1]["crossings"] == rows[2]["crossings"] == 0
     assert capsys.readouterr().out.count("\n| tshirt |") == 3
+
+
+def test_the_compile_profile_charges_each_kernel_its_own_seconds():
+    """``cloth-sim bench compile``'s listener: a kernel numba compiles on the way into its caller
+    is charged its own seconds, not the caller's, and the two together are the compilation's
+    span."""
+
+    @numba.njit
+    def callee(a):
+        s = 0.0
+        for v in a:
+            s += v * v
+        return s
+
+    @numba.njit
+    def caller(a):
+        return callee(a) + 1.0
+
+    with listening() as times:
+        t0 = time.perf_counter()
+        caller(np.ones(3))
+        span = time.perf_counter() - t0
+    rows = {name.rsplit(".", 1)[-1]: (s, n) for name, s, n in times.rows()}
+    assert rows["caller"][1] == rows["callee"][1] == 1
+    assert rows["caller"][0] > 0.0 and rows["callee"][0] > 0.0
+    both = rows["caller"][0] + rows["callee"][0]
+    assert 0.5 * span < both <= span
+    # each charged apart: the caller's own seconds exclude the callee's compilation
+    assert sum(s for _, s, _ in times.rows()) <= span
+
+
+def test_the_compile_profile_names_an_unknown_part(capsys):
+    """A part that compile_kernels does not have is refused, naming the option and the parts."""
+    with pytest.raises(SystemExit, match=r"--parts: 'steps2' is not one of grid_contacts"):
+        cli_main(["bench", "compile", "--parts", "steps2"])
