@@ -124,10 +124,11 @@ def test_the_compile_profile_charges_each_kernel_its_own_seconds():
     rows = {name.rsplit(".", 1)[-1]: (s, n) for name, s, n in times.rows()}
     assert rows["caller"][1] == rows["callee"][1] == 1
     assert rows["caller"][0] > 0.0 and rows["callee"][0] > 0.0
-    both = rows["caller"][0] + rows["callee"][0]
-    assert 0.5 * span < both <= span
-    # each charged apart: the caller's own seconds exclude the callee's compilation
-    assert sum(s for _, s, _ in times.rows()) <= span
+    # each second charged once: the compilations nested in the caller's (the callee's, and any of
+    # numba's own it needed) are not the caller's too, so their sum is within the call's span;
+    # counted twice, the callee's would take it past the span
+    total = sum(s for _, s, _ in times.rows())
+    assert 0.5 * span < total <= span
 
 
 def test_the_compile_profile_names_an_unknown_part(capsys):
