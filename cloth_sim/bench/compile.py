@@ -29,6 +29,8 @@ from contextlib import contextmanager
 
 from numba.core import event
 
+from ..simulator import COMPILE_PARTS, compile_kernels
+
 #: the prefix of the child's one line of results on its standard output
 _MARK = "compile-profile: "
 
@@ -74,8 +76,6 @@ def listening():
 def _child(part: str) -> None:
     """In the child: compile ``part`` (numba's cache is this process's empty one) and print the
     results as one JSON line."""
-    from ..simulator import compile_kernels
-
     with listening() as times:
         t0 = time.perf_counter()
         compile_kernels(part)
@@ -119,8 +119,8 @@ def profile_parts(parts, side_by_side: bool = False) -> tuple[list[dict], float]
 
 
 def print_compile_table(parts, top: int = 12, side_by_side: bool = False) -> None:
-    from ..simulator import COMPILE_PARTS
-
+    """Print each part's wall time and its ``top`` dearest kernels (:func:`profile_parts`);
+    ``parts``: :data:`cloth_sim.simulator.COMPILE_PARTS`' names, or none for all."""
     parts = list(parts or COMPILE_PARTS)
     unknown = [p for p in parts if p not in COMPILE_PARTS]
     if unknown:
