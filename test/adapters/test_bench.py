@@ -103,8 +103,8 @@ def test_the_garment_contacts_table_has_its_three_cases_and_counts_crossings(cap
 
 def test_the_compile_profile_charges_each_kernel_its_own_seconds():
     """``cloth-sim bench compile``'s listener: a kernel numba compiles on the way into its caller
-    is charged its own seconds, not the caller's, and the two together are the compilation's
-    span."""
+    is charged its own seconds, not the caller's too, so that every compilation's own seconds
+    together lie within the call's span."""
 
     @numba.njit
     def callee(a):
