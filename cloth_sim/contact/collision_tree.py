@@ -40,6 +40,13 @@ from .geometry import closest_on_segments, point_triangle_distance, read_only
 #: of items between two subtrees (:func:`_tasks`: ~200 tasks at 64×64, fewer on a small cloth)
 TASKS = 64
 
+#: rows a task has at least for each kind of pair. Rows kept large cost little (a task writes only
+#: the rows it fills, and the rows are kept from search to search), while a search run again for
+#: want of them costs a walk: so a task's rows only shrink when they are more than KEEP_ROWS and
+#: more than SHRINK_ABOVE times what its last search found (plus a quarter), to SHRINK_TO times
+#: that (shrinking robot_sweep's few hundred rows a task ran 4 % of its searches twice)
+MIN_ROWS, KEEP_ROWS, SHRINK_ABOVE, SHRINK_TO = 16, 4096, 16, 4
+
 #: items (triangles, lone particles) a leaf holds at most (the fastest search measured:
 #: docs/BENCHMARKS.md §7)
 LEAF = 8
@@ -528,7 +535,10 @@ class TriangleTree:
         # itself and one per level of each side of a pair
         self.stack_size = int(6 * (depth.max() + 2) + 8)
         self.leaf_cap = int((end - first)[left < 0].max())
-        self.caps = np.array([16, 16], np.int64)  # rows per task, grown as a cloth needs
+        #: rows per task for particle–triangle and edge pairs, grown as a search needs more and
+        #: shrunk when far above what it needed
+        self.caps = np.array([MIN_ROWS, MIN_ROWS], np.int64)
+        self._rows = None  # the rows at those caps (_task_rows)
 
     def pairs(self, x0, radius):
         """``(vf, vf_distance, ee, ee_distance)``: every (particle, triangle) pair, the particle
@@ -549,10 +559,32 @@ class TriangleTree:
         prim = self.prim._replace(x0=x0, reach=reach)
         _refit(prim, self.tree)
         _edge_boxes(prim)
-        n_tasks = len(self.tasks)
         while True:
-            cap_vf, cap_ee = (int(c) for c in self.caps)
-            rows = TaskRows(
+            rows = self._task_rows()
+            _traverse(self.tasks, self.tree, prim, rows, self.stack_size, self.leaf_cap)
+            most = rows.counts.max(axis=0)
+            if most[0] <= rows.cap_vf and most[1] <= rows.cap_ee:
+                break
+            self.caps = np.maximum(self.caps, most + most // 4)
+        # a cap far above what the search needed shrinks back (one crumpled moment would
+        # otherwise size every later search's rows)
+        need = np.maximum(most + most // 4, MIN_ROWS)
+        shrink = (self.caps > KEEP_ROWS) & (self.caps > SHRINK_ABOVE * need)
+        self.caps = np.where(shrink, SHRINK_TO * need, self.caps)
+        return _join(rows.counts[:, 0], rows.cap_vf, rows.vf, rows.vf_d) + _join(
+            rows.counts[:, 1], rows.cap_ee, rows.ee, rows.ee_d
+        )
+
+    def _task_rows(self) -> TaskRows:
+        """The traversal's rows for :attr:`caps`, kept from search to search and made again only
+        when the caps change: made fresh every search, rows grown to 240,000 a task (176 tasks,
+        1.4 GB untouched but mapped and unmapped each time) took longer than the walk itself
+        (Newton's shirt: 24 ms a search, 9 ms of it the walk)."""
+        cap_vf, cap_ee = (int(c) for c in self.caps)
+        rows = self._rows
+        if rows is None or (rows.cap_vf, rows.cap_ee) != (cap_vf, cap_ee):
+            n_tasks = len(self.tasks)
+            rows = self._rows = TaskRows(
                 np.empty((n_tasks * cap_vf, 2), np.int64),
                 np.empty(n_tasks * cap_vf),
                 np.empty((n_tasks * cap_ee, 2), np.int64),
@@ -561,11 +593,4 @@ class TriangleTree:
                 cap_vf,
                 cap_ee,
             )
-            _traverse(self.tasks, self.tree, prim, rows, self.stack_size, self.leaf_cap)
-            most = rows.counts.max(axis=0)
-            if most[0] <= cap_vf and most[1] <= cap_ee:
-                break
-            self.caps = np.maximum(self.caps, most + most // 4)
-        return _join(rows.counts[:, 0], cap_vf, rows.vf, rows.vf_d) + _join(
-            rows.counts[:, 1], cap_ee, rows.ee, rows.ee_d
-        )
+        return rows
