@@ -172,6 +172,35 @@ def test_a_particle_between_two_links_meeting_face_to_face_ends_inside_neither(i
             assert inside >= -1e-9 * H, (z, inside / H)
 
 
+def test_colliders_out_of_reach_change_nothing_where_a_cloth_lies_on_another():
+    """A cloth landing on a box: a mesh block beside it (within its reach of the cloth's
+    particles, beyond their thickness) and colliders far away leave every position to the bit
+    as the box alone does. With more than one collider each touching particle is checked
+    against them all after its projections (``colliders._crease``), which answers a collider
+    beyond the thickness without its exact distance."""
+    import trimesh
+
+    box = colliders.Box(center=(0.1, 0.1, -0.1), half_extents=(0.2, 0.2, 0.1), friction=0.4)
+    block = trimesh.creation.box(extents=(0.05, 0.05, 0.05))
+    others = [
+        colliders.Mesh((block.vertices, block.faces), position=(0.1, -0.035, 0.025)),
+        colliders.Mesh((block.vertices, block.faces), position=(3.0, 0.0, 0.0)),
+        colliders.Sphere(center=(0.0, 0.0, 2.0), radius=0.1),
+    ]
+    runs = []
+    for extra in ([], others):
+        model = ClothModel.grid(10, 10, 0.02, 0.01, stiffness=200.0, origin=(0.0, 0.0, 0.01))
+        sim = Simulator(
+            model, integrator="symplectic_euler", dt=1e-3, thickness=H, colliders=[box, *extra]
+        )
+        sim.step(150)
+        runs.append(sim.positions)
+    near = np.linalg.norm(runs[1] - others[0].position, axis=1) - others[0].reach
+    assert near.min() < 0.0  # the block's reach takes in particles of the cloth
+    assert others[0].signed_distance(runs[1]).min() > 1.5 * H  # beyond the thickness
+    assert np.array_equal(runs[0], runs[1])
+
+
 def test_without_colliders_no_contact_code_runs_and_trajectories_are_unchanged():
     model = ClothModel.grid(8, 8, 0.05, 0.01, stiffness=300.0, damping=0.02, pinned=[(0, 0)])
     plain = Simulator(model, integrator="rk4", dt=1e-3, strain_limit=0.1)
@@ -527,6 +556,46 @@ def test_self_collision_search_finds_every_pair_within_reach_at_any_thread_count
     assert np.all(e_pairs[:, 0] < e_pairs[:, 1])
     for other in runs[1:]:
         assert all(np.array_equal(a, b) for a, b in zip(runs[0], other))
+
+
+def test_a_search_keeps_its_rows_and_gives_back_what_one_crowded_search_grew(monkeypatch):
+    """The search's rows (a block per task) are kept from search to search: a search allocates
+    far less than they hold (made fresh each time, rows grown by one crowded moment cost more
+    than the walk: 1.4 GB mapped a search on Newton's shirt). Rows far beyond what the searches
+    need shrink back, and every answer is the one a fresh tree gives."""
+    import tracemalloc
+
+    from cloth_sim.contact import collision_tree
+    from cloth_sim.contact.self_collision import _features
+
+    model = ClothModel.grid(12, 12, 0.02, 0.01, stiffness=100.0)
+    rng = np.random.default_rng(5)
+    x = rng.uniform(0.0, 0.05, size=(144, 3))  # crumpled into a 5 cm box: every pair is near
+    features = _features(model.triangles, 144)
+    tree = TriangleTree(model.triangles, model.positions, features)
+    crowded = tree.pairs(x, 0.05)
+    assert len(crowded[0]) > 10_000
+    held = int(tree.caps.sum()) * len(tree.tasks) * 24  # bytes: two ints and a distance a row
+    tracemalloc.start()
+    try:
+        again = tree.pairs(x, 0.05)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert all(np.array_equal(a, b) for a, b in zip(crowded, again))
+    answer = sum(a.nbytes for a in again)
+    assert peak < answer + held / 4, (peak, answer, held)  # the answer, not another set of rows
+    # the rows shrink once they are far more than a search needs (here at any size)
+    monkeypatch.setattr(collision_tree, "KEEP_ROWS", 0)
+    big = tree.caps.copy()
+    sparse = tree.pairs(model.positions, 0.004)
+    assert np.all(tree.caps < big)
+    fresh = TriangleTree(model.triangles, model.positions, features)
+    for ours, theirs in zip(
+        (sparse, tree.pairs(x, 0.05)),
+        (fresh.pairs(model.positions, 0.004), fresh.pairs(x, 0.05)),
+    ):
+        assert all(np.array_equal(a, b) for a, b in zip(ours, theirs))
 
 
 def test_the_guard_after_vbd_is_answered_by_vbd_s_last_search_as_the_tree_would():
