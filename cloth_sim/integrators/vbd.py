@@ -101,7 +101,7 @@ from ..physics.bending import bending_row
 from ..physics.forces import BUCKLE_TABLE, incidence
 from .base import Integrator, Stability
 from .registry import register
-from .vbd_contact import colliders_at, onset, solve3, truncate, within
+from .vbd_contact import colliders_at, moving_within_reach, onset, solve3, truncate, within
 from .vbd_grid import GridLayout
 from .vbd_newton import NewtonSolve, applies, direct_is_cheaper
 from .vbd_options import VBDOptions
@@ -111,11 +111,13 @@ from .vbd_terms import local_energy, self_contacts_at, springs_at
 #: the share of the nearest found distance a vertex may move between two candidate searches
 GAMMA = 0.45
 #: iterations between two candidate searches where a vertex met its bound (the option
-#: ``collision_interval`` where it is not given), and while a collider moves: a link pushing the
+#: ``collision_interval`` where it is not given), and while a collider moves within reach of the
+#: cloth (:func:`~cloth_sim.integrators.vbd_contact.moving_within_reach`): a link pushing the
 #: cloth drives the vertices in front of it into their bounds iteration after iteration, and
 #: pressed layers each move only γ of their gap a search (the Panda and the UR5 swung through a
 #: sheet at 5 iterations a step: vertices 13-32 mm inside a link searched every fifth iteration,
-#: none every other, at 0.97-1.27 times the step's time; docs/robots.md)
+#: none every other, at 0.97-1.27 times the step's time; docs/robots.md). An arm moving far from
+#: the cloth is a still collider to it (Newton's shirt settling while the FR3 moves above it)
 COLLISION_INTERVAL, MOVING_COLLISION_INTERVAL = 5, 2
 #: how far a vertex may move between two searches besides that bound: (a, b) for a·τ + b·|its
 #: motion to the step's initial guess| (a search then serves the next steps while they stay
@@ -1183,9 +1185,12 @@ class VBD(Integrator):
             run = _iterate_parallel if len(verts) >= PARALLEL_MIN_VERTICES else _iterate_serial
         interval = self.collision_interval
         if interval is None:
-            moving = len(colliders.kinds) and not (
-                np.array_equal(colliders.pos, colliders.pos0)
-                and np.array_equal(colliders.rot, colliders.rot0)
+            # the vertices in front of a moving link meet their bounds iteration after
+            # iteration; a link that moved far from every vertex's reach is as a still one
+            moving = (
+                self_contact
+                and len(colliders.kinds)
+                and moving_within_reach(x_cd, free, colliders, allow, tau)
             )
             interval = MOVING_COLLISION_INTERVAL if moving else COLLISION_INTERVAL
         for it in range(0 if grid is not None else self.iterations):

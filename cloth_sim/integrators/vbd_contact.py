@@ -234,3 +234,32 @@ def onset(i, s, x, records, tau, colliders, shapes, seen):
         if over > 0.0:
             sx, sy, sz = sx + over * nx, sy + over * ny, sz + over * nz
     return sx, sy, sz
+
+
+@numba.njit(cache=True)
+def moving_within_reach(x, free, co, allow, tau):
+    """Whether a collider of ``co`` that moved over the step (from ``pos0``, ``rot0`` to ``pos``,
+    ``rot``) could come within ``tau`` of a free vertex of ``x`` moving at most its ``allow``: a
+    half-space that moved always could; any other was within its reach of ``pos`` at the step's
+    end, and within its reach plus how far its points moved (``|Δpos| + reach·‖Δrot‖``) over the
+    step. One that moved far from the cloth is asked nothing, as a still one."""
+    kinds, pos, rot, pos0, rot0, reach = co.kinds, co.pos, co.rot, co.pos0, co.rot0, co.reach
+    for c in range(kinds.shape[0]):
+        shift = 0.0
+        turn = 0.0
+        for a in range(3):
+            shift += (pos[c, a] - pos0[c, a]) ** 2
+            for b in range(3):
+                turn += (rot[c, a, b] - rot0[c, a, b]) ** 2
+        if shift == 0.0 and turn == 0.0:
+            continue
+        if not reach[c] < math.inf:
+            return True
+        motion = math.sqrt(shift) + reach[c] * math.sqrt(turn)
+        for i in range(x.shape[0]):
+            if not free[i]:
+                continue
+            beyond = beyond_reach(pos, reach, c, x[i, 0], x[i, 1], x[i, 2]) - motion
+            if not beyond >= (allow[i] + 1.01 * tau) * (1.0 + 1e-9):  # (a NaN is near)
+                return True
+    return False

@@ -17,6 +17,7 @@ from test_contacts import _count_crossings, _fold
 
 from cloth_sim import ClothModel, Simulator, colliders
 from cloth_sim.integrators.vbd import FAR, VBD, collider_allowances, colour_groups
+from cloth_sim.integrators.vbd_contact import moving_within_reach
 from cloth_sim.physics.forces import BUCKLE_TABLE, spring_energy
 from cloth_sim.scene import load_scene
 
@@ -315,6 +316,64 @@ def test_a_vertex_far_from_every_collider_skips_their_terms_and_cannot_reach_the
             step *= (allow * rng.uniform(0.0, 1.0, len(x)) / np.linalg.norm(step, axis=1))[:, None]
             y = x[far] + step[far]
             assert np.min([c.signed_distance(y) for c in shapes], axis=0).min() >= 1.01 * tau
+
+
+def test_the_search_cadence_counts_a_collider_as_moving_only_within_reach_of_the_cloth():
+    """vbd searches again every other iteration while a collider moves near the cloth (a link
+    pushes the vertices in front of it into their bounds), every fifth otherwise. A collider
+    counts as moving when some free vertex, moving at most its allowance, could come within the
+    thickness of it anywhere on its way over the step: sampled along the way of a sphere moved
+    at random, every such case is counted (and none farther than its motion beyond that); a box
+    turned in place counts by how far its corners moved; a half-space that moved always counts,
+    nothing that stayed ever does."""
+    tau = 0.005
+    ball = colliders.Sphere(center=(0.0, 0.0, 1.0), radius=0.05)
+    box = colliders.Box(center=(0.0, 0.0, 1.0), half_extents=(0.2, 0.05, 0.05))
+    floor = colliders.Plane(offset=-1.0)
+    sim = Simulator(
+        ClothModel.grid(6, 6, 0.04, 0.01, stiffness=100.0, pinned=[(0, 0)]),
+        integrator="vbd",
+        colliders=[ball, box, floor],
+        thickness=tau,
+    )
+    co = sim.stages[1].packed()
+    x = sim.positions
+    free = ~sim.model.pinned
+    rng = np.random.default_rng(11)
+    allow = rng.uniform(0.0, 0.01, len(x))
+
+    def pose(i, p1, p0, r1=np.eye(3), r0=np.eye(3)):
+        """``co`` with collider ``i`` moved from ``p0`` (turned ``r0``) to ``p1`` (``r1``) and
+        the others at rest out of reach."""
+        pos, rot = np.array([[0.0, 0.0, 5.0]] * 3), np.array([np.eye(3)] * 3)
+        pos0, rot0 = pos.copy(), rot.copy()
+        pos[i], pos0[i], rot[i], rot0[i] = p1, p0, r1, r0
+        return co._replace(pos=pos, rot=rot, pos0=pos0, rot0=rot0)
+
+    assert not moving_within_reach(x, free, pose(0, (0.1, 0.1, 0.0), (0.1, 0.1, 0.0)), allow, tau)
+    counted = 0
+    for _ in range(300):
+        p1 = rng.uniform((-0.2, -0.2, -0.2), (0.4, 0.4, 0.2))
+        p0 = p1 + rng.normal(size=3) * rng.uniform(0.0, 0.08)
+        got = moving_within_reach(x, free, pose(0, p1, p0), allow, tau)
+        way = p0 + np.linspace(0.0, 1.0, 101)[:, None] * (p1 - p0)
+        gap = np.linalg.norm(x[free][:, None] - way[None], axis=2).min(axis=1) - 0.05
+        assert got or (gap >= allow[free] + 1.01 * tau).all()
+        end_gap = np.linalg.norm(x[free] - p1, axis=1) - 0.05
+        shift = np.linalg.norm(p1 - p0)
+        assert not got or (end_gap < allow[free] + 1.01 * tau + shift + 1e-12).any()
+        counted += got
+    assert 30 < counted < 270  # both answers met
+    # turned in place, 0.3 m above the cloth: its 0.21 m reach turned 0.2 rad is 0.04 m of way
+    turn = np.array(
+        [[1.0, 0.0, 0.0], [0.0, np.cos(0.2), -np.sin(0.2)], [0.0, np.sin(0.2), np.cos(0.2)]]
+    )
+    above = (0.1, 0.1, 0.3)
+    assert not moving_within_reach(x, free, pose(1, above, above, turn), allow, tau)
+    assert moving_within_reach(
+        x, free, pose(1, (0.1, 0.1, 0.24), (0.1, 0.1, 0.24), turn), allow, tau
+    )
+    assert moving_within_reach(x, free, pose(2, (0.0, 0.0, 5.0), (0.0, 0.0, 5.1)), allow, tau)
 
 
 def test_self_contact_inside_the_solve_never_crosses():
