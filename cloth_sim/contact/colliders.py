@@ -548,11 +548,29 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
     n = x.shape[0]
     count = 0
     edge = h * (1.0 + CONTACT_TOLERANCE) * (1.0 + 1e-9)
+    # per collider how far its position moved over the step and ‖R − R₀‖ (Frobenius): with the
+    # particle's own motion they bound its path's length seen from the collider (below)
+    shift = np.empty(kinds.shape[0])
+    turned = np.empty(kinds.shape[0])
+    for c in range(kinds.shape[0]):
+        shift[c] = math.sqrt(
+            (pos[c, 0] - pos0[c, 0]) ** 2
+            + (pos[c, 1] - pos0[c, 1]) ** 2
+            + (pos[c, 2] - pos0[c, 2]) ** 2
+        )
+        t2 = 0.0
+        for i in range(3):
+            for j in range(3):
+                t2 += (rot[c, i, j] - rot0[c, i, j]) ** 2
+        turned[c] = math.sqrt(t2)
     for p in range(n):
         touching[p] = False
         clearance[p] = np.inf
         if pinned[p]:
             continue
+        travel = math.sqrt(
+            (x[p, 0] - x0[p, 0]) ** 2 + (x[p, 1] - x0[p, 1]) ** 2 + (x[p, 2] - x0[p, 2]) ** 2
+        )
         for c in range(kinds.shape[0]):
             k = kinds[c]
             if not continuous and reach[c] == np.inf and k != MESH:
@@ -562,6 +580,24 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
                 d = sdf(k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])[0]
                 if d >= h * (1.0 + CONTACT_TOLERANCE):
                     clearance[p] = min(clearance[p], max(d - h, 0.0))
+                    continue
+            if reach[c] < np.inf:
+                # the test below before its start is carried: b = |s − pos| is |x0 − pos0| (a
+                # rigid motion), and L ≤ |x − x0| + |x0 − s| ≤ travel + shift + ‖R − R₀‖·b, so a
+                # collider this passes over the exact test passes over too (with room for
+                # rounding); a far link costs two distances, not two frame changes
+                a = math.sqrt(
+                    (x[p, 0] - pos[c, 0]) ** 2
+                    + (x[p, 1] - pos[c, 1]) ** 2
+                    + (x[p, 2] - pos[c, 2]) ** 2
+                )
+                b = math.sqrt(
+                    (x0[p, 0] - pos0[c, 0]) ** 2
+                    + (x0[p, 1] - pos0[c, 1]) ** 2
+                    + (x0[p, 2] - pos0[c, 2]) ** 2
+                )
+                longest = travel + shift[c] + turned[c] * b
+                if 0.5 * (a + b - longest) - reach[c] > edge + 1e-9 * (a + b + reach[c]):
                     continue
             # the start, carried with the collider to its new pose (equal to x0 for a static one)
             sx, sy, sz = carried(pos, rot, pos0, rot0, c, x0[p, 0], x0[p, 1], x0[p, 2])
