@@ -763,7 +763,10 @@ def _crease_ask(kinds, pos, rot, geo, reach, bank, h, c, x, y, z):
     return sdf(kinds[c], pos, rot, geo, c, x, y, z)
 
 
-@numba.njit(cache=True, inline="always")
+# compiled on its own, not inlined: resolve_contacts took 55 s to compile with it inlined (its
+# four distance queries copied in), 21 s without it and 11 s for it, at the same speed (called
+# once a touching particle, where there is more than one collider)
+@numba.njit(cache=True)
 def _crease(x, p, kinds, pos, rot, geo, reach, bank, h):
     """Particle ``p`` after the colliders' projections, one after the other: where two colliders
     meet (a robot's links at a joint), pushing it out of the later one may have pushed it into an
