@@ -479,6 +479,20 @@ def _distances(kind, pos, rot, geo, pts, bank):
 
 
 @numba.njit(cache=True, inline="always")
+def pose_change(pos, rot, pos0, rot0, c):
+    """How far collider ``c`` moved from its pose ``pos0``, ``rot0`` to ``pos``, ``rot``: its
+    position's shift and ``‖R − R₀‖`` (Frobenius). A point of it ``r`` from its position moved
+    at most ``shift + r·‖R − R₀‖``."""
+    shift = 0.0
+    turn = 0.0
+    for i in range(3):
+        shift += (pos[c, i] - pos0[c, i]) ** 2
+        for j in range(3):
+            turn += (rot[c, i, j] - rot0[c, i, j]) ** 2
+    return math.sqrt(shift), math.sqrt(turn)
+
+
+@numba.njit(cache=True, inline="always")
 def beyond_reach(pos, reach, c, x, y, z):
     """How far the point ``(x, y, z)`` lies beyond collider ``c``'s reach, ``|x − pos| − reach``
     (every point of the collider is within its reach of its position, so the point's distance
@@ -553,16 +567,7 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
     shift = np.empty(kinds.shape[0])
     turned = np.empty(kinds.shape[0])
     for c in range(kinds.shape[0]):
-        shift[c] = math.sqrt(
-            (pos[c, 0] - pos0[c, 0]) ** 2
-            + (pos[c, 1] - pos0[c, 1]) ** 2
-            + (pos[c, 2] - pos0[c, 2]) ** 2
-        )
-        t2 = 0.0
-        for i in range(3):
-            for j in range(3):
-                t2 += (rot[c, i, j] - rot0[c, i, j]) ** 2
-        turned[c] = math.sqrt(t2)
+        shift[c], turned[c] = pose_change(pos, rot, pos0, rot0, c)
     for p in range(n):
         touching[p] = False
         clearance[p] = np.inf
@@ -581,6 +586,7 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
                 if d >= h * (1.0 + CONTACT_TOLERANCE):
                     clearance[p] = min(clearance[p], max(d - h, 0.0))
                     continue
+            a = 0.0  # the end's distance from the collider's position (a bounded collider's)
             if reach[c] < np.inf:
                 # the test below before its start is carried: b = |s − pos| is |x0 − pos0| (a
                 # rigid motion), and L ≤ |x − x0| + |x0 − s| ≤ travel + shift + ‖R − R₀‖·b, so a
@@ -591,22 +597,17 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
                     + (x[p, 1] - pos[c, 1]) ** 2
                     + (x[p, 2] - pos[c, 2]) ** 2
                 )
-                b = math.sqrt(
+                b0 = math.sqrt(
                     (x0[p, 0] - pos0[c, 0]) ** 2
                     + (x0[p, 1] - pos0[c, 1]) ** 2
                     + (x0[p, 2] - pos0[c, 2]) ** 2
                 )
-                longest = travel + shift[c] + turned[c] * b
-                if 0.5 * (a + b - longest) - reach[c] > edge + 1e-9 * (a + b + reach[c]):
+                longest = travel + shift[c] + turned[c] * b0
+                if 0.5 * (a + b0 - longest) - reach[c] > edge + 1e-9 * (a + b0 + reach[c]):
                     continue
             # the start, carried with the collider to its new pose (equal to x0 for a static one)
             sx, sy, sz = carried(pos, rot, pos0, rot0, c, x0[p, 0], x0[p, 1], x0[p, 2])
             if reach[c] < np.inf:  # every point q of the path s→x: |q − pos| ≥ (a + b − L)/2
-                a = math.sqrt(
-                    (x[p, 0] - pos[c, 0]) ** 2
-                    + (x[p, 1] - pos[c, 1]) ** 2
-                    + (x[p, 2] - pos[c, 2]) ** 2
-                )
                 b = math.sqrt(
                     (sx - pos[c, 0]) ** 2 + (sy - pos[c, 1]) ** 2 + (sz - pos[c, 2]) ** 2
                 )

@@ -11,7 +11,7 @@ import math
 
 import numba
 
-from ..contact.colliders import MESH, beyond_reach, carried, mesh_sdf, sdf
+from ..contact.colliders import MESH, beyond_reach, carried, mesh_sdf, pose_change, sdf
 
 
 @numba.njit(cache=True, inline="always")
@@ -245,17 +245,12 @@ def moving_within_reach(x, free, co, allow, tau):
     step. One that moved far from the cloth is asked nothing, as a still one."""
     kinds, pos, rot, pos0, rot0, reach = co.kinds, co.pos, co.rot, co.pos0, co.rot0, co.reach
     for c in range(kinds.shape[0]):
-        shift = 0.0
-        turn = 0.0
-        for a in range(3):
-            shift += (pos[c, a] - pos0[c, a]) ** 2
-            for b in range(3):
-                turn += (rot[c, a, b] - rot0[c, a, b]) ** 2
+        shift, turn = pose_change(pos, rot, pos0, rot0, c)
         if shift == 0.0 and turn == 0.0:
             continue
         if not reach[c] < math.inf:
             return True
-        motion = math.sqrt(shift) + reach[c] * math.sqrt(turn)
+        motion = shift + reach[c] * turn
         for i in range(x.shape[0]):
             if not free[i]:
                 continue
