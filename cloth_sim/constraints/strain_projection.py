@@ -53,7 +53,11 @@ every spring over: all active and redundant.
 
 Each iteration moves the particles by ``−W Jᵀ λ``, so the mass-weighted sum of the moves is zero
 where no pin takes part: the centre of mass (and the linear momentum, the velocities following the
-moves) is kept. It runs on one core in a fixed order: the same bits at any thread count.
+moves) is kept. A step's first measure of every spring runs in parallel over fixed chunks
+(:func:`_over_bound`), merged in the springs' order; the rest runs on one core in a fixed order:
+the same bits at any thread count. Nothing the size of the springs is reset a call (``seen`` holds
+stamps, the last set is kept as a list): at 128×128 (64,770 springs, ~1,000 active) the serial
+measure and resets were 0.13 of the projection's 0.62 ms a step.
 """
 
 from __future__ import annotations
@@ -87,6 +91,9 @@ WARM_START = 0.005
 #: two springs at a particle continue each other in a chain of the preconditioner when the cosine
 #: of their directions is below ``−STRAIGHT`` (the module docstring)
 STRAIGHT = 0.9
+#: springs a chunk of the first measure (:func:`_over_bound`) takes: fixed, so its chunks, and the
+#: set they make, are the same at any thread count
+CHUNK = 2048
 
 
 @numba.njit(cache=True, inline="always")
@@ -300,9 +307,10 @@ class Workspace(NamedTuple):
     each particle's springs (CSR ``inc_ptr``, ``inc``), each spring's chain neighbours ``nb``,
     the last call's set ``prev`` (the warm start), the active set and its chains, the set's
     springs' ends and directions, ``spring``'s nine rows (c, L's subdiagonal, D⁻¹, λ, r, z, p,
-    Ap, y), the set's particles with their local numbers and inverse masses, ``g = Jᵀλ``, and
+    Ap, y), the set's particles with their local numbers and inverse masses, ``g = Jᵀλ``,
     ``stats``: the last call's (iterations, CG iterations, active springs, worst excess strain
-    left)."""
+    left), the first measure's per chunk (``found``, ``most``), the last set as a list
+    (``prev_set``) and ``tally`` (the last stamp in ``seen``, the last set's size)."""
 
     inc_ptr: np.ndarray
     inc: np.ndarray
@@ -324,6 +332,10 @@ class Workspace(NamedTuple):
     wl: np.ndarray
     g: np.ndarray
     stats: np.ndarray
+    found: np.ndarray
+    most: np.ndarray
+    prev_set: np.ndarray
+    tally: np.ndarray
 
 
 class Settings(NamedTuple):
@@ -380,6 +392,12 @@ class Scratch:
         self.g = np.empty((n, 3))
         #: the last call's (iterations, CG iterations, active springs, worst excess strain left)
         self.stats = np.zeros(4)
+        chunks = -(-m // CHUNK)
+        self.found = np.zeros(chunks, np.int64)  # the first measure's, per chunk
+        self.most = np.zeros(chunks)
+        self.prev_set = np.empty(m, np.int64)  # the last call's set, as a list
+        #: the last stamp ``seen`` holds, and the size of the last call's set
+        self.tally = np.zeros(2, np.int64)
 
     def workspace(self) -> Workspace:
         return Workspace(
@@ -403,7 +421,46 @@ class Scratch:
             self.wl,
             self.g,
             self.stats,
+            self.found,
+            self.most,
+            self.prev_set,
+            self.tally,
         )
+
+
+@numba.njit(cache=True, parallel=True)
+def _over_bound(x, springs, rest, w, tau, prev, cand, found, worst):
+    """A step's first measure of every spring, in parallel over chunks of :data:`CHUNK` springs:
+    chunk ``c`` writes the springs that join the set (longer than ``(1 + τ)·L``, or in the last
+    call's set ``prev`` and within :data:`WARM_START` of it) to ``cand[c·CHUNK:]`` in their order,
+    their number to ``found[c]`` and the worst excess strain among them to ``worst[c]``."""
+    m = springs.shape[0]
+    for c in numba.prange(found.shape[0]):
+        lo = c * CHUNK
+        hi = min(lo + CHUNK, m)
+        count = 0
+        most = 0.0
+        for s in range(lo, hi):
+            i = springs[s, 0]
+            j = springs[s, 1]
+            if w[i] == 0.0 and w[j] == 0.0:
+                continue
+            dx = x[j, 0] - x[i, 0]
+            dy = x[j, 1] - x[i, 1]
+            dz = x[j, 2] - x[i, 2]
+            l2 = dx * dx + dy * dy + dz * dz
+            b = (1.0 + tau + _JOIN) * rest[s]
+            if l2 <= b * b:
+                # within its bound: joins only if it was in the last step's set and is near it
+                near = (1.0 + tau - WARM_START) * rest[s]
+                if not (prev[s] == 1 and l2 > near * near):
+                    continue
+            else:
+                most = max(most, np.sqrt(l2) / rest[s] - 1.0 - tau)
+            cand[lo + count] = s
+            count += 1
+        found[c] = count
+        worst[c] = most
 
 
 @numba.njit(cache=True)
@@ -428,11 +485,11 @@ def project(x, springs, rest, w, settings, work):
     )
     ea, eb, nrm, pl, loc, wl, g = work.ea, work.eb, work.nrm, work.pl, work.loc, work.wl, work.g
     stats, spring = work.stats, work.spring
-    m = springs.shape[0]
+    found, most, prev_set, tally = work.found, work.most, work.prev_set, work.tally
     c, low, dinv, lam = spring[0], spring[1], spring[2], spring[3]
-    for s in range(m):
-        inset[s] = 0
-        seen[s] = -1
+    # ``inset`` is all 0 between calls; ``seen`` holds stamps, each measure after a solve a new
+    # one, going on from the last call's: no array the size of the springs is reset
+    stamp = tally[0]
     k = 0
     q = 0
     cg_total = 0
@@ -440,42 +497,48 @@ def project(x, springs, rest, w, settings, work):
     worst = 0.0
     while True:
         # the springs now too long join the set; the worst excess decides whether to go on. First
-        # every spring; after a solve, the springs of the particles it moved (the others' lengths
-        # are as they were: within the bound, or in the set, whose springs all moved)
+        # every spring, in parallel; after a solve, the springs of the particles it moved (the
+        # others' lengths are as they were: within the bound, or in the set, whose springs all
+        # moved)
         worst = 0.0
-        count = m
-        if outer > 0:
+        if outer == 0:
+            _over_bound(x, springs, rest, w, tau, prev, cand, found, most)
+            for h in range(found.shape[0]):
+                worst = max(worst, most[h])
+                for u in range(h * CHUNK, h * CHUNK + found[h]):
+                    s = cand[u]
+                    inset[s] = 1
+                    act[k] = s
+                    k += 1
+        else:
+            stamp += 1
             count = 0
             for t in range(q):
                 pp = pl[t]
                 for h in range(inc_ptr[pp], inc_ptr[pp + 1]):
                     s = inc[h]
-                    if seen[s] != outer:
-                        seen[s] = outer
+                    if seen[s] != stamp:
+                        seen[s] = stamp
                         cand[count] = s
                         count += 1
-        for u in range(count):
-            s = u if outer == 0 else cand[u]
-            i = springs[s, 0]
-            j = springs[s, 1]
-            if w[i] == 0.0 and w[j] == 0.0:
-                continue
-            dx = x[j, 0] - x[i, 0]
-            dy = x[j, 1] - x[i, 1]
-            dz = x[j, 2] - x[i, 2]
-            l2 = dx * dx + dy * dy + dz * dz
-            b = (1.0 + tau + _JOIN) * rest[s]
-            if l2 <= b * b:
-                # within its bound: joins now only if it was in the last step's set and is near it
-                near = (1.0 + tau - WARM_START) * rest[s]
-                if not (outer == 0 and prev[s] == 1 and l2 > near * near):
+            for u in range(count):
+                s = cand[u]
+                i = springs[s, 0]
+                j = springs[s, 1]
+                if w[i] == 0.0 and w[j] == 0.0:
                     continue
-            else:
+                dx = x[j, 0] - x[i, 0]
+                dy = x[j, 1] - x[i, 1]
+                dz = x[j, 2] - x[i, 2]
+                l2 = dx * dx + dy * dy + dz * dz
+                b = (1.0 + tau + _JOIN) * rest[s]
+                if l2 <= b * b:
+                    continue
                 worst = max(worst, np.sqrt(l2) / rest[s] - 1.0 - tau)
-            if inset[s] == 0:
-                inset[s] = 1
-                act[k] = s
-                k += 1
+                if inset[s] == 0:
+                    inset[s] = 1
+                    act[k] = s
+                    k += 1
         if worst <= tol or outer >= max_outer:
             break
         # the set chain by chain, and its particles numbered locally
@@ -542,8 +605,16 @@ def project(x, springs, rest, w, settings, work):
             x[pp, 2] -= wt * g[t, 2]
             loc[pp] = -1
         outer += 1
-    for s in range(m):
-        prev[s] = inset[s]
+    # this call's set becomes the next one's warm start, and ``inset`` all 0 again
+    for a in range(tally[1]):
+        prev[prev_set[a]] = 0
+    for a in range(k):
+        s = act[a]
+        prev[s] = 1
+        prev_set[a] = s
+        inset[s] = 0
+    tally[0] = stamp
+    tally[1] = k
     stats[0] = outer
     stats[1] = cg_total
     stats[2] = k

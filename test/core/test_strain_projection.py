@@ -4,6 +4,7 @@ plateau, and bad values refused with the state kept."""
 
 import dataclasses
 
+import numba
 import numpy as np
 import pytest
 
@@ -164,6 +165,65 @@ def test_a_closed_ring_is_cut_once_and_still_solved_in_three_cg_iterations():
     assert stats[1] <= 3 * stats[0]
     assert stats[3] <= strain_projection.TOLERANCE
     np.testing.assert_allclose(masses @ x / masses.sum(), before, rtol=0, atol=1e-14)
+
+
+def crumpled_grid(cells, stretch, seed):
+    """A free grid of ``cells``² cells scaled by ``stretch`` and shaken: its strain-limited
+    springs, their rest lengths, unit inverse masses and the positions."""
+    rng = np.random.default_rng(seed)
+    model = ClothModel.grid(cells, cells, 0.02, 0.01, stiffness=100.0)
+    x = stretch * model.positions + rng.normal(0.0, 0.002, model.positions.shape)
+    limited = np.ascontiguousarray(model.springs[model.strain_limited], np.uint32)
+    rest = np.ascontiguousarray(model.rest_lengths[model.strain_limited])
+    return model, limited, rest, np.ones(model.n_particles), x
+
+
+def test_the_first_measure_in_chunks_gives_the_same_bits_at_any_thread_count():
+    """A step's first measure runs in parallel over fixed chunks of springs, merged in order: a
+    cloth of several chunks, projected call after call (each call's set the next one's warm
+    start), ends alike at one and two threads."""
+    model, springs, rest, w, x0 = crumpled_grid(48, 1.25, 5)
+    assert len(springs) > 2 * strain_projection.CHUNK  # several chunks
+    settings = strain_projection.Settings(0.1)
+    threads = numba.get_num_threads()
+    runs = []
+    try:
+        for n_threads in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
+            numba.set_num_threads(n_threads)
+            scratch = strain_projection.Scratch(springs, model.positions)
+            x = x0.copy()
+            out = []
+            for call in range(4):
+                x += 0.004 * np.sin(np.arange(x.size) * (call + 1.0)).reshape(x.shape)
+                strain_projection.project(x, springs, rest, w, settings, scratch.workspace())
+                assert scratch.stats[3] <= strain_projection.TOLERANCE
+                out.append((x.copy(), scratch.stats.copy()))
+            runs.append(out)
+    finally:
+        numba.set_num_threads(threads)
+    for (xa, sa), (xb, sb) in zip(*runs):
+        assert np.array_equal(xa, xb) and np.array_equal(sa, sb)
+
+
+def test_the_warm_start_is_the_last_calls_set_and_only_it():
+    """The first measure takes the last call's springs still within ``WARM_START`` of their bound.
+    After a call that found nothing, springs just inside their bound join nothing, though a call
+    before that had them all in its set."""
+    model, springs, rest, w, x0 = crumpled_grid(48, 1.25, 6)
+    settings = strain_projection.Settings(0.1)
+    scratch = strain_projection.Scratch(springs, model.positions)
+
+    def call(x):
+        strain_projection.project(x, springs, rest, w, settings, scratch.workspace())
+        return scratch.stats.copy()
+
+    near = model.positions * (1.1 - strain_projection.WARM_START / 2)  # every spring near τ
+    assert call(x0.copy())[2] > 0.9 * len(springs)  # crumpled: nearly all in the set
+    assert call(near.copy())[2] > 0.9 * len(springs)  # still near their bound: kept, held
+    assert call(model.positions.copy())[2] == 0  # at rest: none joins, the set empties
+    x = near.copy()
+    assert call(x)[2] == 0  # near again, but the last set was empty
+    np.testing.assert_array_equal(x, near)
 
 
 def test_the_hanging_cloth_keeps_its_stretch_at_the_limit_through_its_swing():
