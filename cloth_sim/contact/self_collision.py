@@ -467,10 +467,20 @@ class SelfCollision:
         ``skin`` (m, a number or one per particle; 0 searches for the query alone and keeps that
         for the next). The same answer either way, cheaper where the positions move little
         between queries."""
+        return self._pair_list().pairs(x0, reach, skin)
+
+    def candidates_touching(self, x0, reach, touched):
+        """The pairs :meth:`candidates` would find at ``x0`` with a feature that has a
+        ``touched`` particle, found by walking only the tree's leaves that hold them
+        (:meth:`~cloth_sim.contact.collision_tree.TriangleTree.pairs_touching`); ordered by their
+        indices, not kept for later queries."""
+        return self._pair_list().tree.pairs_touching(x0, reach, touched)
+
+    def _pair_list(self) -> PairList:
         if self._pairs is None:
             tree = TriangleTree(self._tris, self.model.positions, self._features)
             self._pairs = PairList(tree)
-        return self._pairs.pairs(x0, reach, skin)
+        return self._pairs
 
     def set_enabled(self, on: bool) -> None:
         """Turn it on or off; on needs the model's triangles and a thickness it can use

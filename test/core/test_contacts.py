@@ -558,6 +558,75 @@ def test_self_collision_search_finds_every_pair_within_reach_at_any_thread_count
         assert all(np.array_equal(a, b) for a, b in zip(runs[0], other))
 
 
+def test_a_search_for_some_particles_finds_the_whole_searchs_pairs_of_their_features():
+    """``pairs_touching``: on the folded, jittered cloth with a lone particle, for touched sets
+    from one particle to most of them, the pairs of the whole search that have a feature with a
+    touched particle (the particle or a corner of the triangle; an end of either edge), the same
+    arrays in the same order, and nothing else; the whole search's rows stay as they were."""
+    from cloth_sim.contact.self_collision import _features
+
+    rng = np.random.default_rng(7)
+    model = ClothModel.grid(10, 10, 0.02, 0.01, stiffness=100.0)
+    r, c = np.divmod(np.arange(100), 10)
+    x = np.stack(
+        [0.02 * c, 0.02 * np.where(r < 5, r, 9 - r) + 0.01 * (r >= 5), 0.006 * (r >= 5)], axis=1
+    ) + rng.normal(scale=0.002, size=(100, 3))
+    tris = model.triangles[~(model.triangles == 44).any(axis=1)]  # particle 44 in no triangle
+    features = _features(tris, 100)
+    edges = features[0]
+    tree = TriangleTree(tris, model.positions, features)
+    for share in (0.01, 0.05, 0.2, 0.6):
+        reach = rng.uniform(0.002, 0.008, 100)
+        touched = rng.random(100) < share
+        touched[[44, int(rng.integers(100))]] = share < 0.1, True
+        vf, vf_d, ee, ee_d = tree.pairs(x, reach)
+        caps = tree.caps.copy()
+        got = tree.pairs_touching(x, reach, touched)
+        keep = touched[vf[:, 0]] | touched[tris[vf[:, 1]]].any(axis=1)
+        keep_e = touched[edges[ee]].any(axis=(1, 2))
+        assert keep.any() and keep_e.any() and not keep_e.all()
+        want = (vf[keep], vf_d[keep], ee[keep_e], ee_d[keep_e])
+        assert all(np.array_equal(a, b) for a, b in zip(got, want))
+        assert np.array_equal(tree.caps, caps)
+    nothing = tree.pairs_touching(x, reach, np.zeros(100, bool))
+    assert [len(a) for a in nothing] == [0, 0, 0, 0]
+
+
+def test_vbd_searches_again_for_the_vertices_that_met_their_bounds_as_a_whole_search_would():
+    """During the iterations, where a few vertices met their bounds, only those (and those near
+    a collider that used half their allowance) are searched again: every other vertex keeps its
+    place, allowance and pairs. The pairs then held are those a whole search finds from the
+    places held (robot_sweep, its link pushing the sheet: every such search checked), and the
+    vertices never come nearer to each other than the bounds allow (no crossing)."""
+    sim = load_scene("robot_sweep").build_simulator()
+    vbd = sim._integrator
+    sc = vbd._self_collision
+    checked = []
+    searched = vbd._detect_touching
+
+    def check(x, y, colliders, tau, x_cd, met):
+        searched(x, y, colliders, tau, x_cd, met)
+        vt, vt_d, ee, ee_d, allowance = vbd._found
+        want = TriangleTree(sc.triangles, sim.model.positions, sc.features).pairs(
+            x_cd, 0.5 * tau + allowance
+        )
+        have_vt = dict(zip(map(tuple, vt.tolist()), vt_d))
+        have_ee = dict(zip(map(tuple, ee.tolist()), ee_d))
+        assert len(have_vt) == len(vt) and len(have_ee) == len(ee)  # each pair once
+        assert have_vt == dict(zip(map(tuple, want[0].tolist()), want[1]))
+        assert have_ee == dict(zip(map(tuple, want[2].tolist()), want[3]))
+        checked.append(int(met.sum()))
+
+    vbd._detect_touching = check
+    before = sim.positions.copy()
+    for _ in range(150):
+        sim.step()
+        assert crossings(before, sim.positions, sc.triangles) == []
+        before = sim.positions.copy()
+    assert len(checked) > 20 and min(checked) >= 1
+    assert max(checked) <= 0.03 * sim.model.n_particles
+
+
 def test_a_search_keeps_its_rows_and_gives_back_what_one_crowded_search_grew(monkeypatch):
     """The search's rows (a block per task) are kept from search to search: a search allocates
     far less than they hold (made fresh each time, rows grown by one crowded moment cost more
