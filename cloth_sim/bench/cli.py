@@ -8,6 +8,7 @@ optional peer (``make bench-peers``), say so in their help.
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from .. import integrators
 from ..kinds import STRAIN_LIMIT_METHODS
@@ -153,9 +154,16 @@ def _bench_compile(args) -> int:
 
 
 def _bench_convergence(args) -> int:
-    from .convergence import print_accuracy_table, print_convergence_table, print_rest_table
+    from .convergence import (
+        print_accuracy_table,
+        print_convergence_table,
+        print_rest_table,
+        work_precision,
+    )
 
-    if args.rest:
+    if args.work_precision:
+        work_precision(args.material.split(","), tuple(args.sizes), args.seconds or 2.0, args.out)
+    elif args.rest:
         print_rest_table(args.material.split(","), tuple(args.sizes), args.seconds or 10.0)
     elif args.accuracy:
         print_accuracy_table(args.material.split(","), tuple(args.sizes), args.seconds or 2.0)
@@ -186,7 +194,6 @@ def _bench_record(args) -> int:
 
 def _bench_suite(args) -> int:
     import importlib
-    from pathlib import Path
 
     module = importlib.import_module(f".{args.bench.replace('-', '_')}", __package__)
     module.main(Path(args.out or f"bench_out/{args.bench}"), quick=args.quick)
@@ -336,6 +343,18 @@ def add_parser(sub) -> argparse.ArgumentParser:
         action="store_true",
         help="vbd's defaults at 1/60 s in air until the sheet is at rest: its free edge's height "
         "at each size (10 s at most)",
+    )
+    cv.add_argument(
+        "--work-precision",
+        action="store_true",
+        help="each method at several amounts of work against the fine-step reference: wall time "
+        "against the path's error, a table and a figure under --out",
+    )
+    cv.add_argument(
+        "--out",
+        type=Path,
+        default=Path("docs/bench/convergence"),
+        help="with --work-precision: where the table and figure go",
     )
     cv.set_defaults(func=_bench_convergence)
     gp = bsub.add_parser(

@@ -65,6 +65,30 @@ def test_work_precision_quick(bench_dir, monkeypatch):
     assert list((bench_dir / "cache" / "cloth_sim" / "bench").glob("reference-*.npz"))
 
 
+def test_the_convergence_figure_measures_each_method_against_the_fine_step_reference(bench_dir):
+    """``cloth-sim bench convergence --work-precision``: every method's points and the reference's
+    cost, written as a table and a figure; the reference is its own path, a converged ``vbd``
+    step is nearer it than ten sweeps of one step a frame, and Baraff–Witkin comes nearer as its
+    step shrinks (first order)."""
+    out = bench_dir / "convergence"
+    argv = ["bench", "convergence", "--work-precision", "--material", "cotton", "--sizes", "8"]
+    assert cli_main([*argv, "--seconds", "0.5", "--out", str(out)]) == 0
+    rows, data, md = outputs(out, "work_precision")
+    by = {}
+    for r in data["rows"]:
+        by.setdefault(r["family"], []).append(r)
+    ref = by.pop("symplectic Euler (the reference)")
+    assert len(ref) == 1 and ref[0]["path"] == 0.0 and ref[0]["wall_s_per_s"] > 0
+    assert sorted(len(v) for v in by.values()) == [3, 3, 3, 4, 4]
+    converged = by["vbd, its defaults (over the tolerance)"]
+    one_step = by["vbd, one step a frame (over its iterations)"]
+    assert converged[1]["unconverged"] == 0
+    assert converged[1]["path"] < one_step[0]["path"]
+    bw = [r["path"] for r in by["Baraff–Witkin (over its step)"]]
+    assert bw[0] > bw[1] > bw[2] > 0.0
+    assert "Baraff–Witkin" in md
+
+
 def test_stability_quick_brackets_the_linear_limit(bench_dir):
     out = bench_dir / "st"
     assert cli_main(["bench", "stability", "--quick", "--out", str(out)]) == 0
