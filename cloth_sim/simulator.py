@@ -1099,6 +1099,13 @@ def _compile_contacts(model, integrator: str) -> "Simulator":
     )
     sim.set_collider_pose(1, (0.0, 0.0, -0.5))
     sim.step(2)
+    # the search for some particles' pairs alone (vbd's during its iterations where few vertices
+    # met their bounds), which a short run need not make
+    touched = np.zeros(model.n_particles, np.bool_)
+    touched[0] = True
+    sim._self_collision.candidates_touching(
+        sim.positions, np.full(model.n_particles, 0.005), touched
+    )
     for collider in sim.colliders:  # the signed distances users and the node ask for
         collider.signed_distance(sim.positions)
     return sim
