@@ -131,6 +131,14 @@ def trajectory(sim: Simulator, n: int, seconds: float) -> dict:
     }
 
 
+def reference(model: ClothModel, n: int, seconds: float) -> tuple[Simulator, dict]:
+    """The fine-step reference: symplectic Euler at :data:`REFERENCE_SHARE` of its stable step,
+    and its :func:`trajectory`."""
+    sim = Simulator(model, integrator="symplectic_euler", dt=1.0)
+    sim.dt = REFERENCE_SHARE * sim.stable_dt()
+    return sim, trajectory(sim, n, seconds)
+
+
 def accuracy(run: dict, ref: dict) -> tuple[float, float]:
     """The solver issue's two figures: the worst strain averaged over the last half against the
     reference's (difference), and the RMS distance between the free edge's centroid paths over
@@ -158,9 +166,7 @@ def print_accuracy_table(materials, sizes, seconds: float = 2.0) -> None:
     for material in materials:
         for n in sizes:
             model = hanging(n, material)
-            ref_sim = Simulator(model, integrator="symplectic_euler", dt=1.0)
-            ref_sim.dt = REFERENCE_SHARE * ref_sim.stable_dt()
-            ref = trajectory(ref_sim, n, seconds)
+            _, ref = reference(model, n, seconds)
             sim = Simulator(model, integrator="vbd", dt=1.0 / 60)
             sim.step()  # numba's kernels for this model, and its substeps
             sim = Simulator(model, integrator="vbd", dt=1.0 / 60)
@@ -272,9 +278,7 @@ def work_precision(materials, sizes, seconds: float, out: Path) -> list[dict]:
     for material in materials:
         for n in sizes:
             model = hanging(n, material)
-            ref_sim = Simulator(model, integrator="symplectic_euler", dt=1.0)
-            ref_sim.dt = REFERENCE_SHARE * ref_sim.stable_dt()
-            ref = trajectory(ref_sim, n, seconds)
+            ref_sim, ref = reference(model, n, seconds)
             rows.append(
                 {
                     "fabric": material,

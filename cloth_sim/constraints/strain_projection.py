@@ -428,6 +428,20 @@ class Scratch:
         )
 
 
+@numba.njit(cache=True, inline="always")
+def _length2(x, springs, w, s):
+    """Spring ``s``'s squared length at ``x``; −1 where both its ends are pinned (``w`` 0: no
+    projection moves it)."""
+    i = springs[s, 0]
+    j = springs[s, 1]
+    if w[i] == 0.0 and w[j] == 0.0:
+        return -1.0
+    dx = x[j, 0] - x[i, 0]
+    dy = x[j, 1] - x[i, 1]
+    dz = x[j, 2] - x[i, 2]
+    return dx * dx + dy * dy + dz * dz
+
+
 @numba.njit(cache=True, parallel=True)
 def _over_bound(x, springs, rest, w, tau, prev, cand, found, worst):
     """A step's first measure of every spring, in parallel over chunks of :data:`CHUNK` springs:
@@ -441,14 +455,9 @@ def _over_bound(x, springs, rest, w, tau, prev, cand, found, worst):
         count = 0
         most = 0.0
         for s in range(lo, hi):
-            i = springs[s, 0]
-            j = springs[s, 1]
-            if w[i] == 0.0 and w[j] == 0.0:
+            l2 = _length2(x, springs, w, s)
+            if l2 < 0.0:
                 continue
-            dx = x[j, 0] - x[i, 0]
-            dy = x[j, 1] - x[i, 1]
-            dz = x[j, 2] - x[i, 2]
-            l2 = dx * dx + dy * dy + dz * dz
             b = (1.0 + tau + _JOIN) * rest[s]
             if l2 <= b * b:
                 # within its bound: joins only if it was in the last step's set and is near it
@@ -523,14 +532,9 @@ def project(x, springs, rest, w, settings, work):
                         count += 1
             for u in range(count):
                 s = cand[u]
-                i = springs[s, 0]
-                j = springs[s, 1]
-                if w[i] == 0.0 and w[j] == 0.0:
+                l2 = _length2(x, springs, w, s)
+                if l2 < 0.0:
                     continue
-                dx = x[j, 0] - x[i, 0]
-                dy = x[j, 1] - x[i, 1]
-                dz = x[j, 2] - x[i, 2]
-                l2 = dx * dx + dy * dy + dz * dz
                 b = (1.0 + tau + _JOIN) * rest[s]
                 if l2 <= b * b:
                     continue

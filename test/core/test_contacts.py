@@ -496,6 +496,20 @@ def _brute_force_pairs(x, tris, edges, reach):
     return tri_pairs, edge_pairs
 
 
+def _folded_cloth(rng):
+    """A 10×10 cloth (2 cm spacing) whose rows fold over at row 4.5, 6 mm above, jittered by
+    ``rng``, with particle 44 in no triangle: ``(model, positions, triangles, features)``."""
+    from cloth_sim.contact.self_collision import _features
+
+    model = ClothModel.grid(10, 10, 0.02, 0.01, stiffness=100.0)
+    r, c = np.divmod(np.arange(100), 10)
+    x = np.stack(
+        [0.02 * c, 0.02 * np.where(r < 5, r, 9 - r) + 0.01 * (r >= 5), 0.006 * (r >= 5)], axis=1
+    ) + rng.normal(scale=0.002, size=(100, 3))
+    tris = model.triangles[~(model.triangles == 44).any(axis=1)]
+    return model, x, tris, _features(tris, 100)
+
+
 @pytest.mark.parametrize("reaches", ["radius", "per particle"])
 def test_self_collision_search_finds_every_pair_within_reach_at_any_thread_count(reaches):
     """The particle–triangle and edge–edge searches (a hierarchy over the triangles, traversed in
@@ -506,16 +520,9 @@ def test_self_collision_search_finds_every_pair_within_reach_at_any_thread_count
     import numba
 
     from cloth_sim.contact.collision_tree import TriangleTree
-    from cloth_sim.contact.self_collision import _features
 
     rng = np.random.default_rng(3)
-    model = ClothModel.grid(10, 10, 0.02, 0.01, stiffness=100.0)
-    r, c = np.divmod(np.arange(100), 10)  # rows folded over at row 4.5, 6 mm above, jittered
-    x = np.stack(
-        [0.02 * c, 0.02 * np.where(r < 5, r, 9 - r) + 0.01 * (r >= 5), 0.006 * (r >= 5)], axis=1
-    ) + rng.normal(scale=0.002, size=(100, 3))
-    tris = model.triangles[~(model.triangles == 44).any(axis=1)]  # particle 44 in no triangle
-    features = _features(tris, 100)
+    model, x, tris, features = _folded_cloth(rng)
     edges = features[0]
     radius = 0.012 if reaches == "radius" else rng.uniform(0.002, 0.008, 100)
     reach = np.full(100, radius / 2) if reaches == "radius" else radius
@@ -563,16 +570,8 @@ def test_a_search_for_some_particles_finds_the_whole_searchs_pairs_of_their_feat
     from one particle to most of them, the pairs of the whole search that have a feature with a
     touched particle (the particle or a corner of the triangle; an end of either edge), the same
     arrays in the same order, and nothing else; the whole search's rows stay as they were."""
-    from cloth_sim.contact.self_collision import _features
-
     rng = np.random.default_rng(7)
-    model = ClothModel.grid(10, 10, 0.02, 0.01, stiffness=100.0)
-    r, c = np.divmod(np.arange(100), 10)
-    x = np.stack(
-        [0.02 * c, 0.02 * np.where(r < 5, r, 9 - r) + 0.01 * (r >= 5), 0.006 * (r >= 5)], axis=1
-    ) + rng.normal(scale=0.002, size=(100, 3))
-    tris = model.triangles[~(model.triangles == 44).any(axis=1)]  # particle 44 in no triangle
-    features = _features(tris, 100)
+    model, x, tris, features = _folded_cloth(rng)
     edges = features[0]
     tree = TriangleTree(tris, model.positions, features)
     for share in (0.01, 0.05, 0.2, 0.6):
