@@ -1202,10 +1202,9 @@ class VBD(Integrator):
             interval = MOVING_COLLISION_INTERVAL if moving else COLLISION_INTERVAL
         for it in range(0 if grid is not None else self.iterations):
             if self_contact and it > 0 and it % interval == 0 and cut.any():
-                # a vertex hit its bound: search again from here, for room to move on; for those
-                # vertices alone where they are few
-                # the vertices that met a bound, and those near a collider that used half their
-                # allowance (a link pushing them: they meet it at the next sweep)
+                # a vertex met its bound: search again from here, for room to move on. Where few
+                # did, only they are searched again, with those near a collider that used half
+                # their allowance (a link pushing them: they meet it at the next sweep)
                 used = np.einsum("ij,ij->i", x - x_cd, x - x_cd) > 0.25 * allow * allow
                 met = ((cut != 0) | (used & self._near)) & free
                 if np.count_nonzero(met) <= LOCAL_SEARCH_SHARE * np.count_nonzero(free):
