@@ -405,5 +405,7 @@ def print_garment_contacts_table(scenes=("tshirt",), seconds: float = 10.0, sett
 
 
 def _searches(sim) -> int:
-    """The candidate searches ``vbd`` has made (0 for another integrator)."""
-    return int(sim.integrator_stats.get("detections", 0))
+    """The candidate searches ``vbd`` has made, whole or for the vertices that met their bounds
+    (0 for another integrator)."""
+    stats = sim.integrator_stats
+    return int(stats.get("detections", 0)) + int(stats.get("local_detections", 0))
