@@ -507,6 +507,21 @@ def _marks(tree, touched, tris, orphans):
     return mark, imark
 
 
+def touching(vf, ee, tris, edges, touched) -> tuple[np.ndarray, np.ndarray]:
+    """Which of the particle–triangle pairs ``vf`` and the edge pairs ``ee`` have a feature with a
+    ``touched`` particle (a boolean per particle): the particle or a corner of the triangle, an end
+    of either edge."""
+    return (
+        touched[vf[:, 0]] | touched[tris[vf[:, 1]]].any(axis=1),
+        touched[edges[ee[:, 0]]].any(axis=1) | touched[edges[ee[:, 1]]].any(axis=1),
+    )
+
+
+def _no_pairs() -> tuple:
+    """:meth:`TriangleTree.pairs`' answer where there is nothing to pair."""
+    return np.empty((0, 2), np.int64), np.empty(0), np.empty((0, 2), np.int64), np.empty(0)
+
+
 def reaches(radius, n: int) -> np.ndarray:
     """Per-particle reaches from a search radius: a number ``R`` (every pair within ``R``) is half
     of it for each particle; an array of ``n`` is taken as it is."""
@@ -586,12 +601,7 @@ class TriangleTree:
         a fixed order, the same at any thread count."""
         x0 = read_only(x0, np.float64)
         if self.empty:
-            return (
-                np.empty((0, 2), np.int64),
-                np.empty(0),
-                np.empty((0, 2), np.int64),
-                np.empty(0),
-            )
+            return _no_pairs()
         return self._search(x0, radius, self.tree)
 
     def _search(self, x0, radius, tree, touched=None):
@@ -620,9 +630,7 @@ class TriangleTree:
         if touched is not None:
             # a marked item's own corners and edges are measured against the other item whether
             # touched or not: only the pairs with a touched feature are asked for
-            keep = touched[vf[:, 0]] | touched[self.tris[vf[:, 1]]].any(axis=1)
-            ends = self.edges
-            keep_e = touched[ends[ee[:, 0]]].any(axis=1) | touched[ends[ee[:, 1]]].any(axis=1)
+            keep, keep_e = touching(vf, ee, self.tris, self.edges, touched)
             vf, vf_d, ee, ee_d = vf[keep], vf_d[keep], ee[keep_e], ee_d[keep_e]
         return vf, vf_d, ee, ee_d
 
@@ -637,12 +645,7 @@ class TriangleTree:
         x0 = read_only(x0, np.float64)
         touched = np.asarray(touched, bool)
         if self.empty or not touched.any():
-            return (
-                np.empty((0, 2), np.int64),
-                np.empty(0),
-                np.empty((0, 2), np.int64),
-                np.empty(0),
-            )
+            return _no_pairs()
         tree = self.tree
         mark, imark = _marks(tree, touched, self.tris, self.orphans)
         return self._search(x0, radius, tree._replace(mark=mark, imark=imark), touched)

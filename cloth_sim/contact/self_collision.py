@@ -472,8 +472,8 @@ class SelfCollision:
     def candidates_touching(self, x0, reach, touched):
         """The pairs :meth:`candidates` would find at ``x0`` with a feature that has a
         ``touched`` particle, found by walking only the tree's leaves that hold them
-        (:meth:`~cloth_sim.contact.collision_tree.TriangleTree.pairs_touching`); ordered by their
-        indices, not kept for later queries."""
+        (:meth:`~cloth_sim.contact.collision_tree.TriangleTree.pairs_touching`); in the whole
+        search's order, not kept for later queries."""
         return self._pair_list().tree.pairs_touching(x0, reach, touched)
 
     def _pair_list(self) -> PairList:

@@ -94,6 +94,7 @@ from ..contact.colliders import (
     packed_between,
     sdf,
 )
+from ..contact.collision_tree import touching
 from ..contact.geometry import segment_parameters, triangle_weights
 from ..contact.triangle_meshes import mesh_closed
 from ..kinds import LINEAR
@@ -1384,14 +1385,12 @@ class VBD(Integrator):
             y[met] - x[met], axis=1
         )
         sc = self._self_collision
-        ends, tris = sc.edges, self._tris
-        keep = ~(met[vt[:, 0]] | met[tris[vt[:, 1]]].any(axis=1))
-        keep_e = ~(met[ends[ee[:, 0]]].any(axis=1) | met[ends[ee[:, 1]]].any(axis=1))
+        gone, gone_e = touching(vt, ee, self._tris, sc.edges, met)  # measured again below
         nvt, nvt_d, nee, nee_d = sc.candidates_touching(x_cd, 0.5 * tau + allowance, met)
-        vt = np.concatenate([vt[keep], nvt])
-        vt_d = np.concatenate([vt_d[keep], nvt_d])
-        ee = np.concatenate([ee[keep_e], nee])
-        ee_d = np.concatenate([ee_d[keep_e], nee_d])
+        vt = np.concatenate([vt[~gone], nvt])
+        vt_d = np.concatenate([vt_d[~gone], nvt_d])
+        ee = np.concatenate([ee[~gone_e], nee])
+        ee_d = np.concatenate([ee_d[~gone_e], nee_d])
         self._rec = self._records(n, x_cd, vt, vt_d, ee, ee_d, sc)
         self._found = (vt, vt_d, ee, ee_d, allowance)
         # the colliders' hold on the vertices searched again (the others' is as it was: the same
