@@ -591,6 +591,34 @@ def test_a_search_for_some_particles_finds_the_whole_searchs_pairs_of_their_feat
     assert [len(a) for a in nothing] == [0, 0, 0, 0]
 
 
+def test_a_search_where_few_particles_reach_walks_their_leaves_with_the_whole_walks_answer(
+    monkeypatch,
+):
+    """A pair is kept only within the sum of its sides' reaches, so where most reaches are 0 (the
+    guard after a contact stage that pushed a few particles) the search walks only the leaves
+    holding the others: against a brute-force test of every pair, and the same arrays in the
+    same order as the whole walk (forced by a share of 0), from one reaching particle to half."""
+    from cloth_sim.contact import collision_tree
+
+    rng = np.random.default_rng(11)
+    model, x, tris, features = _folded_cloth(rng)
+    edges = features[0]
+    for share in (0.01, 0.1, 0.5):
+        reach = rng.uniform(0.004, 0.012, 100) * (rng.random(100) < share)
+        reach[int(rng.integers(100))] = 0.01
+        tri_truth, edge_truth = _brute_force_pairs(x, tris, edges, reach)
+        got = TriangleTree(tris, model.positions, features).pairs(x, reach)
+        assert len(got[0]) and len(got[2])
+        assert {tuple(p) for p in got[0].tolist()} == tri_truth.keys()
+        assert {tuple(p) for p in got[2].tolist()} <= edge_truth.keys()
+        with monkeypatch.context() as m:
+            m.setattr(collision_tree, "REACHING_WALK_SHARE", 0.0)
+            whole = TriangleTree(tris, model.positions, features).pairs(x, reach)
+        assert all(np.array_equal(a, b) for a, b in zip(got, whole))
+    nothing = TriangleTree(tris, model.positions, features).pairs(x, np.zeros(100))
+    assert [len(a) for a in nothing] == [0, 0, 0, 0]
+
+
 def test_vbd_searches_again_for_the_vertices_that_met_their_bounds_as_a_whole_search_would():
     """During the iterations, where a few vertices met their bounds, only those (and those near
     a collider that used half their allowance) are searched again: every other vertex keeps its
