@@ -535,6 +535,46 @@ class ContactResults(NamedTuple):
 
 
 @numba.njit(cache=True)
+def _spread(n):
+    """``0 … n−1`` in bit-reversed order (of the next power of two, those below ``n`` kept): any
+    run of the list that a thread takes holds indices from all over the range."""
+    bits = 0
+    while (1 << bits) < n:
+        bits += 1
+    order = np.empty(n, np.int64)
+    m = 0
+    for k in range(1 << bits):
+        r = 0
+        for b in range(bits):
+            if (k >> b) & 1:
+                r |= 1 << (bits - 1 - b)
+        if r < n:
+            order[m] = r
+            m += 1
+    return order
+
+
+#: particles a task of the contact stage's kernel takes (:func:`resolve_contacts`): the tasks'
+#: impulse sums are joined in task order, so they are the same at any thread count
+CONTACT_CHUNK = 256
+
+
+# the distance queries of resolve_contacts, compiled on their own and called from its parallel
+# loop: with sdf inlined at its five call sites (as elsewhere) the kernel took 77 s to compile,
+# 21 s with these called, at the same speed a thread as the serial kernel it replaced
+@numba.njit(cache=True)
+def _sdf_called(kind, pos, rot, geo, c, x, y, z):
+    """:func:`sdf`, not inlined."""
+    return sdf(kind, pos, rot, geo, c, x, y, z)
+
+
+@numba.njit(cache=True)
+def _mesh_sdf_called(pos, rot, geo, c, x, y, z, reals, ints, starts):
+    """:func:`mesh_sdf`, not inlined."""
+    return mesh_sdf(pos, rot, geo, c, x, y, z, reals, ints, starts)
+
+
+@numba.njit(cache=True, parallel=True)
 def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
     """The contact stage's kernel, per particle in index order (each particle is independent):
     the colliders ``co`` (:class:`PackedColliders`), its results written to ``out``
@@ -551,16 +591,17 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
     the impulse). Returns the number of particles touching; ``touching[p]`` says which, and
     ``clearance[p]`` how far above the nearest collider's skin the particle ends (``inf``:
     none). ``push[c]`` and ``turn[c]`` gather the impulse the particles gave collider ``c`` in
-    (3) (``m·Δv``, N·s, in index order: the same sum every run) and its moment about the
-    collider's position. A collider whose ``reach`` (every point of it within that of its
-    position) keeps the particle's whole path beyond ``h·(1 + CONTACT_TOLERANCE)`` is passed over:
-    it could do nothing (only its clearance is left unmeasured, far above any skin)."""
+    (3) (``m·Δv``, N·s) and its moment about the collider's position: summed in index order over
+    each task's :data:`CONTACT_CHUNK` particles, the tasks' sums added in order (the same sums
+    at any thread count). The tasks run on every core. A collider whose ``reach`` (every point of
+    it within that of its position) keeps the particle's whole path beyond
+    ``h·(1 + CONTACT_TOLERANCE)`` is passed over: it could do nothing (only its clearance is left
+    unmeasured, far above any skin)."""
     kinds, pos, rot, pos0, rot0, geo = co.kinds, co.pos, co.rot, co.pos0, co.rot0, co.geo
     mu, reach, bank = co.mu, co.reach, (co.reals, co.ints, co.starts)
     reals, ints, starts = co.reals, co.ints, co.starts
     touching, clearance, push, turn = out.touching, out.clearance, out.push, out.turn
     n = x.shape[0]
-    count = 0
     edge = h * (1.0 + CONTACT_TOLERANCE) * (1.0 + 1e-9)
     # per collider how far its position moved over the step and ‖R − R₀‖ (Frobenius): with the
     # particle's own motion they bound its path's length seen from the collider (below)
@@ -568,174 +609,198 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
     turned = np.empty(kinds.shape[0])
     for c in range(kinds.shape[0]):
         shift[c], turned[c] = pose_change(pos, rot, pos0, rot0, c)
-    for p in range(n):
-        touching[p] = False
-        clearance[p] = np.inf
-        if pinned[p]:
-            continue
-        travel = math.sqrt(
-            (x[p, 0] - x0[p, 0]) ** 2 + (x[p, 1] - x0[p, 1]) ** 2 + (x[p, 2] - x0[p, 2]) ** 2
-        )
-        for c in range(kinds.shape[0]):
-            k = kinds[c]
-            if not continuous and reach[c] == np.inf and k != MESH:
-                # a half-space after an integrator that kept the path off it: only (2) and (3)
-                # below can act, and only within its edge; farther, its clearance is all there
-                # is to measure (the same as below, without carrying the path's ends)
-                d = sdf(k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])[0]
-                if d >= h * (1.0 + CONTACT_TOLERANCE):
-                    clearance[p] = min(clearance[p], max(d - h, 0.0))
-                    continue
-            a = 0.0  # the end's distance from the collider's position (a bounded collider's)
-            if reach[c] < np.inf:
-                # the test below before its start is carried: b = |s − pos| is |x0 − pos0| (a
-                # rigid motion), and L ≤ |x − x0| + |x0 − s| ≤ travel + shift + ‖R − R₀‖·b, so a
-                # collider this passes over the exact test passes over too (with room for
-                # rounding); a far link costs two distances, not two frame changes
-                a = math.sqrt(
-                    (x[p, 0] - pos[c, 0]) ** 2
-                    + (x[p, 1] - pos[c, 1]) ** 2
-                    + (x[p, 2] - pos[c, 2]) ** 2
-                )
-                b0 = math.sqrt(
-                    (x0[p, 0] - pos0[c, 0]) ** 2
-                    + (x0[p, 1] - pos0[c, 1]) ** 2
-                    + (x0[p, 2] - pos0[c, 2]) ** 2
-                )
-                longest = travel + shift[c] + turned[c] * b0
-                if 0.5 * (a + b0 - longest) - reach[c] > edge + 1e-9 * (a + b0 + reach[c]):
-                    continue
-            # the start, carried with the collider to its new pose (equal to x0 for a static one)
-            sx, sy, sz = carried(pos, rot, pos0, rot0, c, x0[p, 0], x0[p, 1], x0[p, 2])
-            if reach[c] < np.inf:  # every point q of the path s→x: |q − pos| ≥ (a + b − L)/2
-                b = math.sqrt(
-                    (sx - pos[c, 0]) ** 2 + (sy - pos[c, 1]) ** 2 + (sz - pos[c, 2]) ** 2
-                )
-                L = math.sqrt((x[p, 0] - sx) ** 2 + (x[p, 1] - sy) ** 2 + (x[p, 2] - sz) ** 2)
-                if 0.5 * (a + b - L) - reach[c] > edge:
-                    continue
-            # where the collider's point under x[p] was at the start: its displacement over the
-            # step
-            cx, cy, cz = carried(pos0, rot0, pos, rot, c, x[p, 0], x[p, 1], x[p, 2])
-            ux, uy, uz = x[p, 0] - cx, x[p, 1] - cy, x[p, 2] - cz
-            # (1) continuous detection from a start outside the skin (not after an integrator
-            # that kept the path out of the colliders itself)
-            held = False  # the step's motion undone: it moved with the collider
-            # whether (1) asked the distance and normal at x[p] already (d, n)
-            known = False
-            d = nx = ny = nz = 0.0
-            if continuous:
-                if k == MESH:
-                    r0, mx, my, mz = mesh_sdf(pos, rot, geo, c, sx, sy, sz, reals, ints, starts)
-                else:
-                    r0, mx, my, mz = sdf(k, pos, rot, geo, c, sx, sy, sz)
-                d0 = r0 - h
-                ex, ey, ez = x[p, 0] - sx, x[p, 1] - sy, x[p, 2] - sz
-                length = math.sqrt(ex * ex + ey * ey + ez * ez)
-                if d0 <= CONTACT_TOLERANCE * h:
-                    # a start touching the surface: the end is projected below, unless the path
-                    # went past the middle of the solid or through it (the normal at the end
-                    # points the other way: a straight path between opposite sides crosses the
-                    # solid): stay
+    tasks = (n + CONTACT_CHUNK - 1) // CONTACT_CHUNK
+    pushes = np.zeros((tasks, kinds.shape[0], 3))
+    turns = np.zeros((tasks, kinds.shape[0], 3))
+    counts = np.zeros(tasks, np.int64)
+    # the threads take equal runs of the list, and the particles touching lie together (a cloth's
+    # rows on a table): in index order one core idled, spread (:func:`_spread`) each run holds
+    # tasks from all over the cloth
+    order = _spread(tasks)
+    for k in numba.prange(tasks):
+        task = order[k]
+        for p in range(task * CONTACT_CHUNK, min(n, (task + 1) * CONTACT_CHUNK)):
+            touching[p] = False
+            clearance[p] = np.inf
+            if pinned[p]:
+                continue
+            travel = math.sqrt(
+                (x[p, 0] - x0[p, 0]) ** 2 + (x[p, 1] - x0[p, 1]) ** 2 + (x[p, 2] - x0[p, 2]) ** 2
+            )
+            for c in range(kinds.shape[0]):
+                k = kinds[c]
+                if not continuous and reach[c] == np.inf and k != MESH:
+                    # a half-space after an integrator that kept the path off it: only (2) and (3)
+                    # below can act, and only within its edge; farther, its clearance is all there
+                    # is to measure (the same as below, without carrying the path's ends)
+                    d = _sdf_called(k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])[0]
+                    if d >= h * (1.0 + CONTACT_TOLERANCE):
+                        clearance[p] = min(clearance[p], max(d - h, 0.0))
+                        continue
+                a = 0.0  # the end's distance from the collider's position (a bounded collider's)
+                if reach[c] < np.inf:
+                    # the test below before its start is carried: b = |s − pos| is |x0 − pos0| (a
+                    # rigid motion), and L ≤ |x − x0| + |x0 − s| ≤ travel + shift + ‖R − R₀‖·b,
+                    # so a collider this passes over the exact test passes over too (with room
+                    # for rounding); a far link costs two distances, not two frame changes
+                    a = math.sqrt(
+                        (x[p, 0] - pos[c, 0]) ** 2
+                        + (x[p, 1] - pos[c, 1]) ** 2
+                        + (x[p, 2] - pos[c, 2]) ** 2
+                    )
+                    b0 = math.sqrt(
+                        (x0[p, 0] - pos0[c, 0]) ** 2
+                        + (x0[p, 1] - pos0[c, 1]) ** 2
+                        + (x0[p, 2] - pos0[c, 2]) ** 2
+                    )
+                    longest = travel + shift[c] + turned[c] * b0
+                    if 0.5 * (a + b0 - longest) - reach[c] > edge + 1e-9 * (a + b0 + reach[c]):
+                        continue
+                # the start, carried with the collider to its new pose (x0 for a static one)
+                sx, sy, sz = carried(pos, rot, pos0, rot0, c, x0[p, 0], x0[p, 1], x0[p, 2])
+                if reach[c] < np.inf:  # every point q of the path s→x: |q − pos| ≥ (a + b − L)/2
+                    b = math.sqrt(
+                        (sx - pos[c, 0]) ** 2 + (sy - pos[c, 1]) ** 2 + (sz - pos[c, 2]) ** 2
+                    )
+                    L = math.sqrt((x[p, 0] - sx) ** 2 + (x[p, 1] - sy) ** 2 + (x[p, 2] - sz) ** 2)
+                    if 0.5 * (a + b - L) - reach[c] > edge:
+                        continue
+                # where the collider's point under x[p] was at the start: its displacement over the
+                # step
+                cx, cy, cz = carried(pos0, rot0, pos, rot, c, x[p, 0], x[p, 1], x[p, 2])
+                ux, uy, uz = x[p, 0] - cx, x[p, 1] - cy, x[p, 2] - cz
+                # (1) continuous detection from a start outside the skin (not after an integrator
+                # that kept the path out of the colliders itself)
+                held = False  # the step's motion undone: it moved with the collider
+                # whether (1) asked the distance and normal at x[p] already (d, n)
+                known = False
+                d = nx = ny = nz = 0.0
+                if continuous:
                     if k == MESH:
-                        de, fx, fy, fz = mesh_sdf(
+                        r0, mx, my, mz = _mesh_sdf_called(
+                            pos, rot, geo, c, sx, sy, sz, reals, ints, starts
+                        )
+                    else:
+                        r0, mx, my, mz = _sdf_called(k, pos, rot, geo, c, sx, sy, sz)
+                    d0 = r0 - h
+                    ex, ey, ez = x[p, 0] - sx, x[p, 1] - sy, x[p, 2] - sz
+                    length = math.sqrt(ex * ex + ey * ey + ez * ez)
+                    if d0 <= CONTACT_TOLERANCE * h:
+                        # a start touching the surface: the end is projected below, unless the path
+                        # went past the middle of the solid or through it (the normal at the end
+                        # points the other way: a straight path between opposite sides crosses the
+                        # solid): stay
+                        if k == MESH:
+                            de, fx, fy, fz = _mesh_sdf_called(
+                                pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2], reals, ints, starts
+                            )
+                        else:
+                            de, fx, fy, fz = _sdf_called(
+                                k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2]
+                            )
+                        known = True
+                        d, nx, ny, nz = de, fx, fy, fz
+                        if fx * mx + fy * my + fz * mz < 0.0:
+                            x[p, 0], x[p, 1], x[p, 2] = sx, sy, sz
+                            held = True
+                            d, nx, ny, nz = r0, mx, my, mz
+                    elif length > d0:
+                        t = 0.0
+                        hit = False
+                        for _ in range(_MARCH_STEPS):
+                            qx, qy, qz = sx + t * ex, sy + t * ey, sz + t * ez
+                            if k == MESH:
+                                d, nx, ny, nz = _mesh_sdf_called(
+                                    pos, rot, geo, c, qx, qy, qz, reals, ints, starts
+                                )
+                            else:
+                                d, nx, ny, nz = _sdf_called(k, pos, rot, geo, c, qx, qy, qz)
+                            if d - h <= 1e-3 * h:
+                                hit = True
+                                known = True  # (x[p] is set to this point below)
+                                break
+                            t += (d - h) / length
+                            if t >= 1.0:
+                                break
+                        if not hit and t < 1.0:
+                            hit = True  # the march did not settle: stop where it stands
+                        if hit:
+                            x[p, 0], x[p, 1], x[p, 2] = sx + t * ex, sy + t * ey, sz + t * ez
+                # (2) projection with friction on the motion relative to the collider
+                if not known:
+                    if k == MESH:
+                        d, nx, ny, nz = _mesh_sdf_called(
                             pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2], reals, ints, starts
                         )
                     else:
-                        de, fx, fy, fz = sdf(k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])
-                    known = True
-                    d, nx, ny, nz = de, fx, fy, fz
-                    if fx * mx + fy * my + fz * mz < 0.0:
-                        x[p, 0], x[p, 1], x[p, 2] = sx, sy, sz
-                        held = True
-                        d, nx, ny, nz = r0, mx, my, mz
-                elif length > d0:
-                    t = 0.0
-                    hit = False
-                    for _ in range(_MARCH_STEPS):
-                        qx, qy, qz = sx + t * ex, sy + t * ey, sz + t * ez
-                        if k == MESH:
-                            d, nx, ny, nz = mesh_sdf(
-                                pos, rot, geo, c, qx, qy, qz, reals, ints, starts
-                            )
-                        else:
-                            d, nx, ny, nz = sdf(k, pos, rot, geo, c, qx, qy, qz)
-                        if d - h <= 1e-3 * h:
-                            hit = True
-                            known = True  # (x[p] is set to this point below)
-                            break
-                        t += (d - h) / length
-                        if t >= 1.0:
-                            break
-                    if not hit and t < 1.0:
-                        hit = True  # the march did not settle: stop where it stands (conservative)
-                    if hit:
-                        x[p, 0], x[p, 1], x[p, 2] = sx + t * ex, sy + t * ey, sz + t * ez
-            # (2) projection with friction on the motion relative to the collider
-            if not known:
-                if k == MESH:
-                    d, nx, ny, nz = mesh_sdf(
-                        pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2], reals, ints, starts
+                        d, nx, ny, nz = _sdf_called(k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])
+                clearance[p] = min(
+                    clearance[p], max(d - h, 0.0)
+                )  # (0 once projected onto the skin)
+                if d >= h * (1.0 + CONTACT_TOLERANCE):
+                    continue
+                touching[p] = True
+                stuck = held
+                if d < h:
+                    depth = h - d
+                    x[p, 0] += depth * nx
+                    x[p, 1] += depth * ny
+                    x[p, 2] += depth * nz
+                    rx, ry, rz = x[p, 0] - sx, x[p, 1] - sy, x[p, 2] - sz
+                    rn = rx * nx + ry * ny + rz * nz
+                    tx, ty, tz = rx - rn * nx, ry - rn * ny, rz - rn * nz
+                    tl = math.sqrt(tx * tx + ty * ty + tz * tz)
+                    budget = mu[c] * depth
+                    stuck = stuck or tl <= budget
+                    if tl > 0.0:
+                        f = 1.0 if stuck else budget / tl
+                        x[p, 0] -= f * tx
+                        x[p, 1] -= f * ty
+                        x[p, 2] -= f * tz
+                # (3) velocity filter relative to the collider's velocity at the point: an
+                # approaching normal velocity removed, the tangential one shrunk by μ times what
+                # was removed; held by static friction in (2), no tangential velocity either (a
+                # particle the projection keeps in place whose velocity slid on would gather the
+                # springs' pull step after step: a cloth caught under a moving link reached
+                # 900 m/s)
+                wx, wy, wz = ux / dt, uy / dt, uz / dt
+                rx, ry, rz = v[p, 0] - wx, v[p, 1] - wy, v[p, 2] - wz
+                vn = rx * nx + ry * ny + rz * nz
+                if vn < 0.0 or stuck:
+                    tx, ty, tz = rx - vn * nx, ry - vn * ny, rz - vn * nz
+                    tl = math.sqrt(tx * tx + ty * ty + tz * tz)
+                    keep = 0.0
+                    if tl > 0.0 and not stuck:
+                        keep = max(0.0, 1.0 - mu[c] * (-vn) / tl)
+                    vn = max(vn, 0.0)  # (separating: kept)
+                    jx, jy, jz = v[p, 0], v[p, 1], v[p, 2]
+                    v[p, 0] = wx + vn * nx + keep * tx
+                    v[p, 1] = wy + vn * ny + keep * ty
+                    v[p, 2] = wz + vn * nz + keep * tz
+                    # the impulse the particle gave the collider
+                    jx, jy, jz = (
+                        masses[p] * (jx - v[p, 0]),
+                        masses[p] * (jy - v[p, 1]),
+                        masses[p] * (jz - v[p, 2]),
                     )
-                else:
-                    d, nx, ny, nz = sdf(k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])
-            clearance[p] = min(clearance[p], max(d - h, 0.0))  # (0 once projected onto the skin)
-            if d >= h * (1.0 + CONTACT_TOLERANCE):
-                continue
-            touching[p] = True
-            stuck = held
-            if d < h:
-                depth = h - d
-                x[p, 0] += depth * nx
-                x[p, 1] += depth * ny
-                x[p, 2] += depth * nz
-                rx, ry, rz = x[p, 0] - sx, x[p, 1] - sy, x[p, 2] - sz
-                rn = rx * nx + ry * ny + rz * nz
-                tx, ty, tz = rx - rn * nx, ry - rn * ny, rz - rn * nz
-                tl = math.sqrt(tx * tx + ty * ty + tz * tz)
-                budget = mu[c] * depth
-                stuck = stuck or tl <= budget
-                if tl > 0.0:
-                    f = 1.0 if stuck else budget / tl
-                    x[p, 0] -= f * tx
-                    x[p, 1] -= f * ty
-                    x[p, 2] -= f * tz
-            # (3) velocity filter relative to the collider's velocity at the point: an approaching
-            # normal velocity removed, the tangential one shrunk by μ times what was removed; held
-            # by static friction in (2), no tangential velocity either (a particle the projection
-            # keeps in place whose velocity slid on would gather the springs' pull step after
-            # step: a cloth caught under a moving link reached 900 m/s)
-            wx, wy, wz = ux / dt, uy / dt, uz / dt
-            rx, ry, rz = v[p, 0] - wx, v[p, 1] - wy, v[p, 2] - wz
-            vn = rx * nx + ry * ny + rz * nz
-            if vn < 0.0 or stuck:
-                tx, ty, tz = rx - vn * nx, ry - vn * ny, rz - vn * nz
-                tl = math.sqrt(tx * tx + ty * ty + tz * tz)
-                keep = 0.0
-                if tl > 0.0 and not stuck:
-                    keep = max(0.0, 1.0 - mu[c] * (-vn) / tl)
-                vn = max(vn, 0.0)  # (separating: kept)
-                jx, jy, jz = v[p, 0], v[p, 1], v[p, 2]
-                v[p, 0] = wx + vn * nx + keep * tx
-                v[p, 1] = wy + vn * ny + keep * ty
-                v[p, 2] = wz + vn * nz + keep * tz
-                # the impulse the particle gave the collider
-                jx, jy, jz = (
-                    masses[p] * (jx - v[p, 0]),
-                    masses[p] * (jy - v[p, 1]),
-                    masses[p] * (jz - v[p, 2]),
-                )
-                push[c, 0] += jx
-                push[c, 1] += jy
-                push[c, 2] += jz
-                ax, ay, az = x[p, 0] - pos[c, 0], x[p, 1] - pos[c, 1], x[p, 2] - pos[c, 2]
-                turn[c, 0] += ay * jz - az * jy
-                turn[c, 1] += az * jx - ax * jz
-                turn[c, 2] += ax * jy - ay * jx
-        if touching[p] and kinds.shape[0] > 1:
-            _crease(x, p, kinds, pos, rot, geo, reach, bank, h)
-        if touching[p]:
-            count += 1
+                    pushes[task, c, 0] += jx
+                    pushes[task, c, 1] += jy
+                    pushes[task, c, 2] += jz
+                    ax, ay, az = x[p, 0] - pos[c, 0], x[p, 1] - pos[c, 1], x[p, 2] - pos[c, 2]
+                    turns[task, c, 0] += ay * jz - az * jy
+                    turns[task, c, 1] += az * jx - ax * jz
+                    turns[task, c, 2] += ax * jy - ay * jx
+            if touching[p] and kinds.shape[0] > 1:
+                _crease(x, p, kinds, pos, rot, geo, reach, bank, h)
+            if touching[p]:
+                counts[task] += 1
+    count = 0
+    for task in range(tasks):
+        count += counts[task]
+        for c in range(kinds.shape[0]):
+            for i in range(3):
+                push[c, i] += pushes[task, c, i]
+                turn[c, i] += turns[task, c, i]
     return count
 
 
@@ -892,8 +957,9 @@ class Contacts:
         #: none)
         self.clearance = np.full(model.n_particles, np.inf)
         self.last_touching = 0
-        self._pinned = np.ascontiguousarray(model.pinned)
-        self._masses = np.ascontiguousarray(model.masses, dtype=np.float64)
+        # read-only whoever owns them: the kernel is compiled for one signature
+        self._pinned = read_only(model.pinned, np.bool_)
+        self._masses = read_only(model.masses, np.float64)
         self._push = np.zeros((0, 3))  # the impulses of the last step, per collider
         self._turn = np.zeros((0, 3))
         self._pack()
@@ -919,7 +985,7 @@ class Contacts:
 
     def set_pinned(self, pinned) -> None:
         """Particles the stage leaves alone (pins and held particles)."""
-        self._pinned = np.ascontiguousarray(pinned)
+        self._pinned = read_only(pinned, np.bool_)
 
     def add(self, collider) -> int:
         """Append a collider (its pose now is where its first step starts); returns its index."""

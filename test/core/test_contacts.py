@@ -172,6 +172,56 @@ def test_a_particle_between_two_links_meeting_face_to_face_ends_inside_neither(i
             assert inside >= -1e-9 * H, (z, inside / H)
 
 
+def test_the_contact_stage_gives_the_same_bits_at_any_thread_count():
+    """The contact stage's kernel runs its particles in tasks on every core: a 24×24 cloth (three
+    tasks) thrown onto a box and a sphere that meet, half of it touching, ends every step with
+    the same positions, velocities, number touching and the colliders' wrenches (each
+    task's impulses summed in its particles' order, the tasks' sums in task order) at one and at
+    two threads."""
+    import numba
+
+    from cloth_sim.contact.colliders import CONTACT_CHUNK
+
+    model = ClothModel.grid(24, 24, 0.02, 0.01, stiffness=200.0)
+    assert model.n_particles > 2 * CONTACT_CHUNK
+    runs = []
+    threads = numba.get_num_threads()
+    try:
+        for n_threads in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
+            numba.set_num_threads(n_threads)
+            sim = Simulator(
+                model,
+                integrator="symplectic_euler",
+                dt=5e-4,
+                thickness=H,
+                colliders=[
+                    colliders.Box(center=(0.2, 0.2, -0.1), half_extents=(0.3, 0.15, 0.1)),
+                    colliders.Sphere(center=(0.25, 0.4, -0.05), radius=0.08, friction=0.3),
+                ],
+            )
+            sim.velocities = np.tile([0.3, -0.2, -2.0], (model.n_particles, 1))
+            steps = []
+            for _ in range(120):
+                sim.step()
+                steps.append(
+                    (
+                        sim.positions,
+                        sim.velocities,
+                        np.array(sim.contact_counts[0]),
+                        *sim.collider_wrench(0),
+                        *sim.collider_wrench(1),
+                    )
+                )
+            runs.append(steps)
+    finally:
+        numba.set_num_threads(threads)
+    touching = int(runs[0][-1][2])
+    assert model.n_particles // 4 < touching < model.n_particles
+    assert np.abs(runs[0][-1][3]).max() > 0 and np.abs(runs[0][-1][5]).max() > 0
+    for a, b in zip(*runs):
+        assert all(np.array_equal(u, w) for u, w in zip(a, b))
+
+
 def test_colliders_out_of_reach_change_nothing_where_a_cloth_lies_on_another():
     """A cloth landing on a box: a mesh block beside it (within its reach of the cloth's
     particles, beyond their thickness) and colliders far away leave every position to the bit
