@@ -576,9 +576,9 @@ def _mesh_sdf_called(pos, rot, geo, c, x, y, z, reals, ints, starts):
 
 @numba.njit(cache=True, parallel=True)
 def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
-    """The contact stage's kernel, per particle in index order (each particle is independent):
-    the colliders ``co`` (:class:`PackedColliders`), its results written to ``out``
-    (:class:`ContactResults`).
+    """The contact stage's kernel, particle by particle (each is independent; in tasks of
+    :data:`CONTACT_CHUNK` on every core): the colliders ``co`` (:class:`PackedColliders`), its
+    results written to ``out`` (:class:`ContactResults`).
 
     For each collider, in order: (1) continuous detection: the particle's path over the step, seen
     from the collider (its start carried by the collider's motion), is marched by sphere tracing on
@@ -592,8 +592,8 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
     ``clearance[p]`` how far above the nearest collider's skin the particle ends (``inf``:
     none). ``push[c]`` and ``turn[c]`` gather the impulse the particles gave collider ``c`` in
     (3) (``m·Δv``, N·s) and its moment about the collider's position: summed in index order over
-    each task's :data:`CONTACT_CHUNK` particles, the tasks' sums added in order (the same sums
-    at any thread count). The tasks run on every core. A collider whose ``reach`` (every point of
+    each task's particles, the tasks' sums added in order (the same sums at any thread count). A
+    collider whose ``reach`` (every point of
     it within that of its position) keeps the particle's whole path beyond
     ``h·(1 + CONTACT_TOLERANCE)`` is passed over: it could do nothing (only its clearance is left
     unmeasured, far above any skin)."""
@@ -734,9 +734,8 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
                         )
                     else:
                         d, nx, ny, nz = _sdf_called(k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])
-                clearance[p] = min(
-                    clearance[p], max(d - h, 0.0)
-                )  # (0 once projected onto the skin)
+                # (0 once projected onto the skin)
+                clearance[p] = min(clearance[p], max(d - h, 0.0))
                 if d >= h * (1.0 + CONTACT_TOLERANCE):
                     continue
                 touching[p] = True

@@ -239,6 +239,12 @@ def _csr(owner: np.ndarray, item: np.ndarray, n: int) -> tuple[np.ndarray, np.nd
     return ptr, np.ascontiguousarray(item[order], dtype=np.int64)
 
 
+def _allowances(x, y, tau):
+    """How far each vertex at ``x`` may move before it is searched again, :data:`ALLOWANCE`:
+    ``a·τ`` and ``b`` times its way to ``y``, the step's initial guess."""
+    return ALLOWANCE[0] * tau + ALLOWANCE[1] * np.linalg.norm(y - x, axis=1)
+
+
 @numba.njit(cache=True, parallel=True)
 def contact_pairs(x, vt, ee, tris, edges, tri_edge, edge_owner, vertex_owner):
     """Every candidate pair as its four vertices, the weights of its nearest points and the unit
@@ -1333,7 +1339,7 @@ class VBD(Integrator):
         collider."""
         np.copyto(x_cd, x)
         n = len(x)
-        allowance = ALLOWANCE[0] * tau + ALLOWANCE[1] * np.linalg.norm(y - x, axis=1)
+        allowance = _allowances(x, y, tau)
         c = self.counters
         c["detections"] += 1
         self._rec = self._no_rec
@@ -1381,9 +1387,7 @@ class VBD(Integrator):
         vt, vt_d, ee, ee_d, allowance = self._found
         allowance = allowance.copy()
         x_cd[met] = x[met]
-        allowance[met] = ALLOWANCE[0] * tau + ALLOWANCE[1] * np.linalg.norm(
-            y[met] - x[met], axis=1
-        )
+        allowance[met] = _allowances(x[met], y[met], tau)
         sc = self._self_collision
         gone, gone_e = touching(vt, ee, self._tris, sc.edges, met)  # measured again below
         nvt, nvt_d, nee, nee_d = sc.candidates_touching(x_cd, 0.5 * tau + allowance, met)
