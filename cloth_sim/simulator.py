@@ -571,8 +571,10 @@ class Simulator:
             if keep_end:  # the step's own end, before any correction (for the wrench)
                 np.copyto(self._prestage.x, state.x)
                 np.copyto(self._prestage.v, state.v)
-            for stage in stages:
-                stage.apply(state, checkpoint, dt, follow)
+            if stages:
+                origin = integ.velocity_origin()
+                for stage in stages:
+                    stage.apply(state, checkpoint, dt, follow, origin)
             if self._contacts_inside:  # the colliders' poses this step ended at start the next
                 self._contacts.end_step()
             if grippers:

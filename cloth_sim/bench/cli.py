@@ -164,7 +164,9 @@ def _bench_convergence(args) -> int:
     if args.work_precision:
         work_precision(args.material.split(","), tuple(args.sizes), args.seconds or 2.0, args.out)
     elif args.rest:
-        print_rest_table(args.material.split(","), tuple(args.sizes), args.seconds or 10.0)
+        print_rest_table(
+            args.material.split(","), tuple(args.sizes), args.seconds or 10.0, args.strain_limit
+        )
     elif args.accuracy:
         print_accuracy_table(args.material.split(","), tuple(args.sizes), args.seconds or 2.0)
     else:
@@ -343,6 +345,13 @@ def add_parser(sub) -> argparse.ArgumentParser:
         action="store_true",
         help="vbd's defaults at 1/60 s in air until the sheet is at rest: its free edge's height "
         "at each size (10 s at most)",
+    )
+    cv.add_argument(
+        "--strain-limit",
+        type=float,
+        default=None,
+        help="with --rest: the strain limit on (hanging ships 0.1, by projection), symplectic "
+        "Euler's edge at rest beside vbd's",
     )
     cv.add_argument(
         "--work-precision",

@@ -183,36 +183,61 @@ def print_accuracy_table(materials, sizes, seconds: float = 2.0) -> None:
             )
 
 
-def print_rest_table(materials, sizes, seconds: float = 10.0) -> None:
+def _at_rest(model: ClothModel, n: int, integrator: str, seconds: float, strain_limit):
+    """``(edge, sim, wall)``: ``model`` released in air (:func:`~cloth_sim.textile.released`)
+    and stepped from flat by ``integrator`` (``vbd`` at 1/60 s with its defaults; symplectic Euler
+    at :data:`REFERENCE_SHARE` of its stable step) until at rest or ``seconds``; ``edge``: the
+    free edge's mean height below the pins."""
+    pins = float(model.positions[model.pinned, 2].mean())
+    t0 = time.perf_counter()
+    sim = textile.released(model, integrator, 1.0 / 60)
+    if integrator == "symplectic_euler":
+        sim.dt = REFERENCE_SHARE * sim.stable_dt()
+    if strain_limit is not None:
+        sim.strain_limit_method = "projection"
+        sim.strain_limit = strain_limit
+    textile.until_rest(sim, seconds, textile.REST_SPEED)
+    return pins - float(sim.positions[:n, 2].mean()), sim, time.perf_counter() - t0
+
+
+def print_rest_table(materials, sizes, seconds: float = 10.0, strain_limit=None) -> None:
     """The sheet hanging at rest at each resolution: ``vbd`` at 1/60 s with its defaults, in air
     (:func:`~cloth_sim.textile.released`), from flat until :func:`~cloth_sim.textile.until_rest`
     or ``seconds``; the free edge's height below the pins (the solver issue's target: within
-    1 cm at every resolution), the worst strain, when it came to rest and the wall time."""
+    1 cm at every resolution), the worst strain, when it came to rest and the wall time. With
+    ``strain_limit`` (the ``hanging`` scene's 0.1, by projection), the limit on, and symplectic
+    Euler's edge at rest beside it (at :data:`REFERENCE_SHARE` of its stable step, under the same
+    limit). Without a limit the two corner pins' point loads stretch the cloth beside them more
+    at each doubling and the edge moves with the resolution (docs/convergence.md); the limit
+    bounds that stretch."""
+    limit = "no strain limit" if strain_limit is None else f"strain limit {strain_limit:g}"
     print(
-        f"vbd at 1/60 s, defaults, in air (relaxation {textile.AIR_RELAXATION:g} s), from flat "
-        f"until no particle moves faster than {1e3 * textile.REST_SPEED:g} mm/s (at most "
-        f"{seconds:g} s); the free edge's mean height below the pins"
+        f"vbd at 1/60 s, defaults, {limit}, in air (relaxation {textile.AIR_RELAXATION:g} s), "
+        f"from flat until no particle moves faster than {1e3 * textile.REST_SPEED:g} mm/s (at "
+        f"most {seconds:g} s); the free edge's mean height below the pins"
+        + ("" if strain_limit is None else "; beside it symplectic Euler's at rest")
     )
     print(
         f"{'fabric':>10} {'N':>4} {'edge m':>8} {'worst strain':>12} {'at rest s':>9} "
         f"{'speed mm/s':>10} {'direct':>6} {'wall s':>7}"
+        + ("" if strain_limit is None else f" {'explicit m':>10}")
     )
     for material in materials:
         edges = []
         for n in sizes:
             model = hanging(n, material)
-            pins = float(model.positions[model.pinned, 2].mean())
-            t0 = time.perf_counter()
-            sim = textile.released(model, "vbd", 1.0 / 60)
-            textile.until_rest(sim, seconds, textile.REST_SPEED)
-            wall = time.perf_counter() - t0
-            edge = pins - float(sim.positions[:n, 2].mean())
+            edge, sim, wall = _at_rest(model, n, "vbd", seconds, strain_limit)
             edges.append(edge)
             speed = float(np.abs(sim.velocities).max())
+            beside = ""
+            if strain_limit is not None:
+                beside = (
+                    f" {_at_rest(model, n, 'symplectic_euler', seconds, strain_limit)[0]:>10.4f}"
+                )
             print(
                 f"{material:>10} {n:>4} {edge:>8.4f} {sim.max_strain():>12.4f} "
                 f"{sim.time:>9.2f} {1e3 * speed:>10.2f} "
-                f"{sim.integrator_stats['direct_steps']:>6} {wall:>7.1f}",
+                f"{sim.integrator_stats['direct_steps']:>6} {wall:>7.1f}{beside}",
                 flush=True,
             )
         print(f"{material:>10} spread of the edge over the sizes: {max(edges) - min(edges):.4f} m")

@@ -1,6 +1,7 @@
 """Post-step stages: corrections of positions (and velocities) after each integrator step.
 
-A stage is an object with ``name``, ``active`` and ``apply(state, start, dt, velocity_follow)``.
+A stage is an object with ``name``, ``active`` and ``apply(state, start, dt, velocity_follow,
+origin)``.
 The simulator runs its active stages in order after every step; an inactive stage costs nothing (it
 is not even called). To add a stage (contacts, grippers): a class with those three members, and one
 line where :class:`~cloth_sim.simulator.Simulator` builds its ``stages`` list.
@@ -415,10 +416,13 @@ class _PassScratch:
 
 
 class Stage:
-    """A post-step correction. ``apply(state, start, dt, velocity_follow)`` changes ``state.x`` /
-    ``state.v`` in place; ``start`` is the state before the step. A position change ``Δx`` moves
-    the velocity by ``velocity_follow·Δx/dt`` (the integrator's own factor: 1 for one-step methods,
-    1.5 for Verlet's BDF2 velocity)."""
+    """A post-step correction. ``apply(state, start, dt, velocity_follow, origin)`` changes
+    ``state.x`` / ``state.v`` in place; ``start`` is the state before the step. A position change
+    ``Δx`` moves the velocity by ``velocity_follow·Δx/h`` (the integrator's own factor: 1 for
+    one-step methods, 1.5 for Verlet's BDF2 velocity), ``h`` the time the step's velocity was
+    measured over: ``origin``, where not None, is ``(x, h)``, the positions that velocity was
+    measured from and ``h`` (:meth:`~cloth_sim.integrators.base.Integrator.velocity_origin`: a
+    method's last substep), else ``(start.x, dt)``."""
 
     name = ""
 
@@ -426,7 +430,7 @@ class Stage:
     def active(self) -> bool:
         raise NotImplementedError
 
-    def apply(self, state, start, dt: float, velocity_follow: float) -> None:
+    def apply(self, state, start, dt: float, velocity_follow: float, origin=None) -> None:
         raise NotImplementedError
 
 
@@ -552,34 +556,52 @@ class StrainLimit(Stage):
             x, self._springs, self._rest, self._w, settings, self._scratch.workspace()
         )
 
-    def apply(self, state, start, dt, velocity_follow):
+    def apply(self, state, start, dt, velocity_follow, origin=None):
         """Correct the positions; the velocities follow the part of each particle's correction no
-        longer than its own motion over the step. A correction beyond that undoes stretch that was
-        there before the step (the limit was just tightened, or a pass left some over): moving it
-        back is a projection, and divided by a small dt it would be a false speed (1.6 mm over
-        dt = 1e-6 s is 1600 m/s)."""
+        longer than its own motion over the time its velocity was measured over (``origin``:
+        :class:`Stage`; the step, or a method's last substep). A correction beyond that undoes
+        stretch that was there before (the limit was just tightened, or a pass left some over):
+        moving it back is a projection, and divided by a small dt it would be a false speed (1.6
+        mm over dt = 1e-6 s is 1600 m/s)."""
+        x0, h = (start.x, dt) if origin is None else origin
+        self.correct_within(state, x0, h, velocity_follow)
+        if self.track_reaction:
+            self._react(dt)
+
+    def correct_within(self, state, start_x, h, velocity_follow) -> None:
+        """The correction after a part of a step: the velocities, measured over ``h`` from
+        ``start_x``, follow it as :meth:`apply` says. A method that steps in substeps (``vbd``)
+        corrects after each but the last (the stage's own :meth:`apply` after the step): a
+        velocity follows only the corrections of its own substep, so a correction of several
+        substeps' stretch divided by the whole step left the rest of a velocity that stretched the
+        springs, and the cloth beside the pins kept moving at ~1 m/s (cotton hanging at 32×32,
+        ``vbd`` at 1/60 s in 5 substeps, still after 10 s). The corrections' momentum is gathered
+        over the step for :attr:`reaction`."""
         if self._before is None or self._before.shape != state.x.shape:
             self._before = np.empty_like(state.x)
         before = self._before
         np.copyto(before, state.x)
         if self.correct(state.x):
-            _follow_corrections(state.x, before, start.x, state.v, velocity_follow / dt)
+            _follow_corrections(state.x, before, start_x, state.v, velocity_follow / h)
         if self.track_reaction:
-            self._react((state.x - before) / dt, dt)
+            if self._gained is None or self._gained.shape != state.x.shape:
+                self._gained = np.zeros_like(state.x)
+            self._gained += (state.x - before) / h
 
     _before = None
+    _gained = None  # the step's corrections' Δx/h so far, per particle (for the reaction)
     #: keep :attr:`reaction` (grippers ask for it): the force the limit's corrections put on the
     #: pins
     track_reaction = False
     #: ``(n, 3)``: per pinned particle, the force (N) the last step's corrections exerted on it
     reaction = None
 
-    def _react(self, dv, dt):
-        """The momentum the corrections imply for each free particle (``Δv = Δx/dt``: the whole
-        correction, whether or not the velocity was let follow all of it) came from the
-        constraints holding the cloth up; each particle's share is put on its nearest pin (by rest
-        distance along the springs, as the long-range attachments use), as the reaction
-        ``−m·Δv/dt``."""
+    def _react(self, dt):
+        """The momentum the step's corrections imply for each free particle (``Δv = Δx/h`` for
+        each, summed: the whole correction, whether or not the velocity was let follow all of it)
+        came from the constraints holding the cloth up; each particle's share is put on its
+        nearest pin (by rest distance along the springs, as the long-range attachments use), as
+        the reaction ``−m·Δv/dt``."""
         model = self.model
         if self._nearest is None:
             anchor = self._anchor if self._anchor is not None else nearest_attachments(model)[0]
@@ -589,7 +611,9 @@ class StrainLimit(Stage):
         self.reaction[:] = 0.0
         near = self._nearest
         ok = near >= 0
+        dv = self._gained
         np.add.at(self.reaction, near[ok], -(model.masses[ok, None] * dv[ok]) / dt)
+        dv[:] = 0.0
 
     _nearest = None
 

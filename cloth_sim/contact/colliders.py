@@ -1067,7 +1067,7 @@ class Contacts:
 
     _dt = 1.0
 
-    def apply(self, state, start, dt, velocity_follow):
+    def apply(self, state, start, dt, velocity_follow, origin=None):
         if self._push.shape[0] != len(self.colliders):
             self._push = np.zeros((len(self.colliders), 3))
             self._turn = np.zeros((len(self.colliders), 3))

@@ -499,7 +499,7 @@ class SelfCollision:
     #: pinned, so it never pushes the cloth into a collider
     clearance = None
 
-    def apply(self, state, start, dt, velocity_follow):
+    def apply(self, state, start, dt, velocity_follow, origin=None):
         x, x0, v = state.x, start.x, state.v
         h = self.thickness
         inv_mass = self._inv_mass
@@ -612,9 +612,9 @@ class Uncrossed:
     def active(self) -> bool:
         return self.stage.active
 
-    def apply(self, state, start, dt, velocity_follow):
+    def apply(self, state, start, dt, velocity_follow, origin=None):
         np.copyto(self._before, state.x)
-        self.stage.apply(state, start, dt, velocity_follow)
+        self.stage.apply(state, start, dt, velocity_follow, origin)
         moved = displacements(state.x, self._before, self._moved)
         self.last_slowed = 0
         if not moved.any() or not np.isfinite(moved).all():

@@ -110,6 +110,13 @@ class Integrator:
     def step(self, state, forces, dt: float) -> None:
         raise NotImplementedError
 
+    def velocity_origin(self):
+        """``(x, h)``: the positions the last step's velocities were measured from and over how
+        long, where that is not the step's start and ``dt`` (a method's last substep: ``vbd``);
+        ``None`` here. A stage's position correction moves the velocities by ``Δx/h``
+        (:class:`~cloth_sim.constraints.strain_limit.Stage`)."""
+        return None
+
     def pins_moved(self, state) -> None:
         """Pinned particles were placed (no-op for methods without position history)."""
 

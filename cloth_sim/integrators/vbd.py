@@ -868,6 +868,7 @@ class VBD(Integrator):
         )
         self._rec = self._no_rec
         self._found = None  # the last search's pairs and allowances (_detect_touching)
+        self._solve_h = None  # the last solve's step (velocity_origin)
         self._no_colliders = NO_COLLIDERS
 
     # ------------------------------------------------------------------ protocol
@@ -1004,11 +1005,16 @@ class VBD(Integrator):
         # a step's time budget is shared by its substeps
         budget = None if self.time_budget is None else self.time_budget / n
         iterations, worst, on_grid = 0, 0.0, False
+        strain = self._strain_limit
         for part in range(n):
             colliders = packed
             if n > 1 and packed is not None:
                 colliders = packed_between(packed, part / n, (part + 1) / n)
             done, res, blocks = self._substep(state, forces, dt / n, colliders, budget, direct)
+            if part < n - 1 and strain is not None and strain.active:
+                # each substep's stretch corrected before the next (the last: the simulator's
+                # stage, over velocity_origin): a velocity follows its own substep's correction
+                strain.correct_within(state, *self.velocity_origin(), self.velocity_follow)
             iterations += done
             worst = max(worst, res)
             on_grid = on_grid or blocks
@@ -1022,6 +1028,11 @@ class VBD(Integrator):
         c["last_residual"] = worst
         c["converged"] = bool(worst <= self.tolerance)
         c["unconverged_steps"] += 0 if worst <= self.tolerance else 1
+
+    def velocity_origin(self):
+        """The last substep's solve: its start (``x̂`` under BDF2) and step, over which
+        :func:`_velocities` measured the velocities (``v = (x − xᵗ)/h``)."""
+        return None if self._solve_h is None else (self._xt, self._solve_h)
 
     def _direct_for(self, forces, packed, dt) -> bool:
         """Whether a step of ``dt`` is solved directly (:mod:`~cloth_sim.integrators.vbd_newton`):
@@ -1097,7 +1108,7 @@ class VBD(Integrator):
         model = self.model
         sp, (cptr, verts) = self._layout(forces)
         free = self.free
-        h = dt
+        h = self._solve_h = dt
         xt = self._buffer("_xt", x)
         np.copyto(xt, x)
         # the external acceleration: gravity and the wind at the step's start

@@ -363,7 +363,7 @@ def test_a_stage_after_vbd_is_kept_from_pushing_a_vertex_through_the_cloth():
         def __init__(self, by):
             self.by = np.asarray(by, float)
 
-        def apply(self, state, start, dt, follow):
+        def apply(self, state, start, dt, follow, origin=None):
             state.x[p] += self.by
 
     for by, whole in (([0.0, 0.0, -0.01], False), ([0.003, 0.0, 0.0], True)):
