@@ -210,8 +210,10 @@ def _schema() -> dict[str, Param]:
             "",
             "Iterations per step of the vbd integrator (Vertex Block "
             "Descent) at most: it stops earlier where the step reaches vbd.tolerance; more is "
-            "closer to backward Euler's step, any count gives a usable state.",
-            lo=1,
+            "closer to backward Euler's step, any count gives a usable state. 0: as many as a "
+            "step needs (200 at most); with vbd.substeps 0 as well, vbd chooses its work from "
+            "the fabric, the step and the tolerance (docs/convergence.md).",
+            lo=0,
             hi=10_000,
             scene_key="vbd.iterations",
             simulator="integrator_options",

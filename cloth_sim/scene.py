@@ -123,12 +123,16 @@ class Scene:
     strain_limit: float | None = None
     strain_limit_method: str = "provot"
     integrator: str = "symplectic_euler"
-    #: the vbd integrator's iterations a step (``vbd: {iterations: N}``)
-    vbd_iterations: int = 10
+    #: the vbd integrator's iterations a step at most (``vbd: {iterations: N}``), 0 for as many
+    #: as a step needs to reach the tolerance
+    vbd_iterations: int = 0
     #: the relative residual at which its steps stop iterating (``vbd: {tolerance: r}``)
     vbd_tolerance: float = VBD_TOLERANCE
-    #: the substeps a step is cut into, 0 for as many as the cloth asks (``vbd: {substeps: n}``)
-    vbd_substeps: int = 1
+    #: the substeps a step is cut into, 0 for as many as the cloth asks (``vbd: {substeps: n}``;
+    #: a file that gives iterations alone keeps one step: :func:`scene_from_dict`). Both 0: vbd
+    #: chooses its work from the fabric, the step and the tolerance
+    #: (:func:`~cloth_sim.simulator_options.vbd_options`)
+    vbd_substeps: int = 0
     dt: float = 1e-3
     origin: tuple = (0.0, 0.0, 0.0)
     thickness: float = 0.005
@@ -602,7 +606,10 @@ def scene_from_dict(data, source: str = "<dict>", name: str = "scene") -> Scene:
     v.known("vbd.", vbd, {"iterations", "tolerance", "substeps"})
     s.vbd_iterations = v.param("vbd.iterations", vbd.get("iterations", s.vbd_iterations))
     s.vbd_tolerance = v.param("vbd.tolerance", vbd.get("tolerance", s.vbd_tolerance))
-    s.vbd_substeps = v.param("vbd.substeps", vbd.get("substeps", s.vbd_substeps))
+    # iterations given alone keep one step a frame (the shipped vbd scenes' own work); given
+    # neither, vbd chooses its work
+    default_substeps = 1 if s.vbd_iterations else s.vbd_substeps
+    s.vbd_substeps = v.param("vbd.substeps", vbd.get("substeps", default_substeps))
     s.dt = v.param("dt", data.get("dt", s.dt))
     s.thickness = v.param("thickness", data.get("thickness", s.thickness))
     s.self_collision = v.param("self_collision", data.get("self_collision", False))

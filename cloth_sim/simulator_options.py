@@ -24,9 +24,18 @@ FIT_SHARE = 0.6
 
 
 def vbd_options(iterations: int, tolerance: float, substeps: int) -> dict:
-    """The vbd integrator's options from a scene's or the node's values (``vbd.iterations``,
-    ``vbd.tolerance``, ``vbd.substeps``: 0 for as many as the cloth asks, ``"auto"``)."""
-    return {"iterations": iterations, "tolerance": tolerance, "substeps": substeps or "auto"}
+    """The vbd integrator's options from a scene's or the node's values: ``vbd.iterations`` (0:
+    as many as each step needs to reach ``vbd.tolerance``), ``vbd.tolerance`` and
+    ``vbd.substeps`` (0: as many as the cloth asks, ``"auto"``). Both 0, vbd chooses its work as
+    it does from Python without options: substeps from the cloth, or a direct solve where that
+    is cheaper (:class:`~cloth_sim.integrators.vbd.VBD`)."""
+    options = {"tolerance": tolerance}
+    if iterations:
+        options["iterations"] = iterations
+        options["substeps"] = substeps or "auto"
+    elif substeps:
+        options["substeps"] = substeps
+    return options
 
 
 def wind(values: dict):

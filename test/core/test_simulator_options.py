@@ -51,6 +51,7 @@ CHANGES = [
     {"strain_limit": 0.05, "strain_limit_passes": 7, "strain_limit_method": "projection"},
     {"thickness": 0.004, "self_collision": True},
     {"integrator": "vbd", "vbd.iterations": 7, "vbd.substeps": 2},
+    {"integrator": "vbd"},
     {"integrator": "xpbd"},
 ]
 
@@ -105,3 +106,20 @@ def test_a_scene_builds_the_simulator_its_values_build():
         b = settings.build_simulator(cfg, settings.build_model(cfg, scene), scene)
         for option in LIVE:
             assert _same(getattr(a, option), getattr(b, option)), (name, option)
+
+
+def test_vbd_in_a_scene_that_names_no_work_chooses_it_and_converges():
+    """A scene that names neither iterations nor substeps (``hanging``, switched to ``vbd`` as a
+    user would in the node) gets ``vbd``'s own choice: substeps from the cloth, iterations to the
+    tolerance, every step converged, the cotton sheet at 32×32 held at the scene's strain limit.
+    A scene that names its iterations keeps one step of at most that many (``tshirt``: 3)."""
+    cfg, _, sim, _ = settings.configure("hanging", {"integrator": "vbd", "dt": 1 / 60})
+    assert cfg["vbd.iterations"] == 0 and cfg["vbd.substeps"] == 0
+    sim.advance(1.0)
+    stats = sim.integrator_stats
+    assert stats["last_substeps"] > 1 and stats["unconverged_steps"] == 0
+    assert sim.max_strain() < 0.1 + 2e-3
+    scene = load_scene("tshirt")
+    assert (scene.vbd_iterations, scene.vbd_substeps) == (3, 1)
+    want = {"tolerance": scene.vbd_tolerance, "iterations": 3, "substeps": 1}
+    assert scene.vbd_options() == want
