@@ -570,13 +570,13 @@ class StrainLimit(Stage):
 
     def correct_within(self, state, start_x, h, velocity_follow) -> None:
         """The correction after a part of a step: the velocities, measured over ``h`` from
-        ``start_x``, follow it as :meth:`apply` says. A method that steps in substeps (``vbd``)
-        corrects after each but the last (the stage's own :meth:`apply` after the step): a
-        velocity follows only the corrections of its own substep, so a correction of several
-        substeps' stretch divided by the whole step left the rest of a velocity that stretched the
-        springs, and the cloth beside the pins kept moving at ~1 m/s (cotton hanging at 32×32,
-        ``vbd`` at 1/60 s in 5 substeps, still after 10 s). The corrections' momentum is gathered
-        over the step for :attr:`reaction`."""
+        ``start_x``, follow it as :meth:`apply` says. A method that steps in substeps (``vbd``,
+        ``xpbd``) corrects after each but the last (the stage's own :meth:`apply` after the
+        step): a velocity follows only the corrections of its own substep, so a correction of
+        several substeps' stretch divided by the whole step left the rest of a velocity that
+        stretched the springs, and the cloth beside the pins kept moving at ~1 m/s (cotton
+        hanging at 32×32, ``vbd`` at 1/60 s in 5 substeps, still after 10 s). The corrections'
+        momentum is gathered over the step for :attr:`reaction`."""
         if self._before is None or self._before.shape != state.x.shape:
             self._before = np.empty_like(state.x)
         before = self._before
