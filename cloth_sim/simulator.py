@@ -572,7 +572,7 @@ class Simulator:
                 np.copyto(self._prestage.x, state.x)
                 np.copyto(self._prestage.v, state.v)
             if stages:
-                origin = integ.velocity_origin()
+                origin = integ.velocity_origin(checkpoint.x, dt)
                 for stage in stages:
                     stage.apply(state, checkpoint, dt, follow, origin)
             if self._contacts_inside:  # the colliders' poses this step ended at start the next

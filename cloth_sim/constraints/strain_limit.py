@@ -420,9 +420,11 @@ class Stage:
     ``state.x`` / ``state.v`` in place; ``start`` is the state before the step. A position change
     ``Δx`` moves the velocity by ``velocity_follow·Δx/h`` (the integrator's own factor: 1 for
     one-step methods, 1.5 for Verlet's BDF2 velocity), ``h`` the time the step's velocity was
-    measured over: ``origin``, where not None, is ``(x, h)``, the positions that velocity was
-    measured from and ``h`` (:meth:`~cloth_sim.integrators.base.Integrator.velocity_origin`: a
-    method's last substep), else ``(start.x, dt)``."""
+    measured over: ``origin``, where not None, is the integrator's
+    :meth:`~cloth_sim.integrators.base.Integrator.velocity_origin` (``x``, ``h`` and ``mean``: a
+    method's last substep, or for the explicit Runge–Kutta methods the step with ``mean``, a
+    corrected particle then taking its mean velocity over it and ``Δx/h``), else ``(start.x,
+    dt)``."""
 
     name = ""
 
@@ -563,30 +565,39 @@ class StrainLimit(Stage):
         stretch that was there before (the limit was just tightened, or a pass left some over):
         moving it back is a projection, and divided by a small dt it would be a false speed (1.6
         mm over dt = 1e-6 s is 1600 m/s)."""
-        x0, h = (start.x, dt) if origin is None else origin
-        self.correct_within(state, x0, h, velocity_follow)
+        self.correct_within(state, (start.x, dt) if origin is None else origin, velocity_follow)
         if self.track_reaction:
             self._react(dt)
 
-    def correct_within(self, state, start_x, h, velocity_follow) -> None:
-        """The correction after a part of a step: the velocities, measured over ``h`` from
-        ``start_x``, follow it as :meth:`apply` says. A method that steps in substeps (``vbd``,
-        ``xpbd``) corrects after each but the last (the stage's own :meth:`apply` after the
-        step): a velocity follows only the corrections of its own substep, so a correction of
-        several substeps' stretch divided by the whole step left the rest of a velocity that
-        stretched the springs, and the cloth beside the pins kept moving at ~1 m/s (cotton
-        hanging at 32×32, ``vbd`` at 1/60 s in 5 substeps, still after 10 s). The corrections'
-        momentum is gathered over the step for :attr:`reaction`."""
+    def correct_within(self, state, origin, velocity_follow) -> None:
+        """The correction after a part of a step: the velocities, measured over ``origin``
+        (``(x, h)`` or a :class:`~cloth_sim.integrators.base.VelocityOrigin`), follow it as
+        :meth:`apply` says; where they are not the positions' difference over it (its ``mean``),
+        a corrected particle takes its mean velocity over ``h`` and the correction's. A method
+        that steps in substeps (``vbd``, ``xpbd``) corrects after each but the last (the stage's
+        own :meth:`apply` after the step): a velocity follows only the corrections of its own
+        substep, so a correction of several substeps' stretch divided by the whole step left the
+        rest of a velocity that stretched the springs, and the cloth beside the pins kept moving
+        at ~1 m/s (cotton hanging at 32×32, ``vbd`` at 1/60 s in 5 substeps, still after 10 s).
+        The corrections' momentum is gathered over the step for :attr:`reaction` (with ``mean``,
+        a corrected particle's whole change of velocity, the mean's included)."""
         if self._before is None or self._before.shape != state.x.shape:
             self._before = np.empty_like(state.x)
         before = self._before
         np.copyto(before, state.x)
+        start_x, h, *mean = origin  # (a VelocityOrigin's third field)
+        mean = bool(mean and mean[0])
+        v_end = state.v.copy() if mean and self.track_reaction else None
         if self.correct(state.x):
-            _follow_corrections(state.x, before, start_x, state.v, velocity_follow / h)
+            _follow_corrections(state.x, before, start_x, state.v, velocity_follow / h, mean)
         if self.track_reaction:
             if self._gained is None or self._gained.shape != state.x.shape:
                 self._gained = np.zeros_like(state.x)
-            self._gained += (state.x - before) / h
+            if mean:
+                moved = np.any(state.x != before, axis=1)[:, None]
+                self._gained += np.where(moved, (state.x - start_x) / h - v_end, 0.0)
+            else:
+                self._gained += (state.x - before) / h
 
     _before = None
     _gained = None  # the step's corrections' Δx/h so far, per particle (for the reaction)
@@ -619,9 +630,10 @@ class StrainLimit(Stage):
 
 
 @numba.njit(cache=True)
-def _follow_corrections(x, before, start, v, gain):
+def _follow_corrections(x, before, start, v, gain, mean):
     """``v += gain·Δx`` per particle, ``Δx = x − before`` shortened to at most ``|before −
-    start|``."""
+    start|``; with ``mean``, a corrected particle's velocity is first set to ``gain·(before −
+    start)``, its mean over the step."""
     for p in range(x.shape[0]):
         d0, d1, d2 = x[p, 0] - before[p, 0], x[p, 1] - before[p, 1], x[p, 2] - before[p, 2]
         corr2 = d0 * d0 + d1 * d1 + d2 * d2
@@ -636,6 +648,10 @@ def _follow_corrections(x, before, start, v, gain):
         scale = gain
         if corr2 > move2:
             scale *= np.sqrt(move2 / corr2)
+        if mean:
+            v[p, 0] = gain * m0
+            v[p, 1] = gain * m1
+            v[p, 2] = gain * m2
         v[p, 0] += scale * d0
         v[p, 1] += scale * d1
         v[p, 2] += scale * d2

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import enum
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -58,6 +59,18 @@ def _subclasses(cls) -> list:
     for c in cls.__subclasses__():
         out += [c, *_subclasses(c)]
     return out
+
+
+class VelocityOrigin(NamedTuple):
+    """What a step's end velocities are measured over, for a stage's position correction
+    (:meth:`Integrator.velocity_origin`): the positions ``x`` and the time ``h`` (a method's last
+    substep, or the step), and whether they are the positions' own difference over it (``mean``
+    False: a correction ``Δx`` moves a velocity by ``velocity_follow·Δx/h``) or not (``mean``
+    True: a corrected particle takes its mean velocity over ``h`` and ``Δx/h``)."""
+
+    x: np.ndarray
+    h: float
+    mean: bool = False
 
 
 class Integrator:
@@ -110,10 +123,12 @@ class Integrator:
     def step(self, state, forces, dt: float) -> None:
         raise NotImplementedError
 
-    def velocity_origin(self):
-        """``(x, h)``: the positions the last step's velocities were measured from and over how
-        long, where that is not the step's start and ``dt`` (a method's last substep: ``vbd``);
-        ``None`` here. A stage's position correction moves the velocities by ``Δx/h``
+    def velocity_origin(self, start_x, dt) -> VelocityOrigin | None:
+        """What the last step's end velocities are measured over (:class:`VelocityOrigin`) where
+        that is not the positions' difference over the step from ``start_x`` (``None`` here: it
+        is, for symplectic Euler and the implicit methods): a method's last substep (``vbd``,
+        ``xpbd``), or the step's mean (the explicit Runge–Kutta methods). A stage's position
+        correction moves the velocities by it
         (:class:`~cloth_sim.constraints.strain_limit.Stage`)."""
         return None
 

@@ -100,7 +100,7 @@ from ..contact.triangle_meshes import mesh_closed
 from ..kinds import LINEAR
 from ..physics.bending import bending_row
 from ..physics.forces import BUCKLE_TABLE, incidence
-from .base import Integrator, Stability
+from .base import Integrator, Stability, VelocityOrigin
 from .registry import register
 from .vbd_contact import colliders_at, moving_within_reach, onset, solve3, truncate, within
 from .vbd_grid import GridLayout
@@ -1014,7 +1014,7 @@ class VBD(Integrator):
             if part < n - 1 and strain is not None and strain.active:
                 # each substep's stretch corrected before the next (the last: the simulator's
                 # stage, over velocity_origin): a velocity follows its own substep's correction
-                strain.correct_within(state, *self.velocity_origin(), self.velocity_follow)
+                strain.correct_within(state, self.velocity_origin(None, dt), self.velocity_follow)
             iterations += done
             worst = max(worst, res)
             on_grid = on_grid or blocks
@@ -1029,10 +1029,10 @@ class VBD(Integrator):
         c["converged"] = bool(worst <= self.tolerance)
         c["unconverged_steps"] += 0 if worst <= self.tolerance else 1
 
-    def velocity_origin(self):
+    def velocity_origin(self, start_x, dt) -> VelocityOrigin | None:
         """The last substep's solve: its start (``x̂`` under BDF2) and step, over which
         :func:`_velocities` measured the velocities (``v = (x − xᵗ)/h``)."""
-        return None if self._solve_h is None else (self._xt, self._solve_h)
+        return None if self._solve_h is None else VelocityOrigin(self._xt, self._solve_h)
 
     def _direct_for(self, forces, packed, dt) -> bool:
         """Whether a step of ``dt`` is solved directly (:mod:`~cloth_sim.integrators.vbd_newton`):

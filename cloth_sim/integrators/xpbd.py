@@ -34,7 +34,7 @@ import numpy as np
 
 from ..physics import stability as stab
 from ..physics.forces import BUCKLE_TABLE, GravityTerm, WindTerm, axial, spring_vector
-from .base import Integrator, Stability
+from .base import Integrator, Stability, VelocityOrigin
 from .registry import register
 
 
@@ -116,7 +116,7 @@ class XPBD(Integrator):
         stage corrects after the last, over :meth:`velocity_origin`)."""
         self._strain_limit = strain_limit
 
-    def velocity_origin(self):
+    def velocity_origin(self, start_x, dt) -> VelocityOrigin | None:
         """The last substep's start and ``h``: a substep's velocity is ``(p − x)/h`` over it."""
         return self._origin
 
@@ -160,7 +160,7 @@ class XPBD(Integrator):
                 # once a step over dt, a correction of several substeps' stretch left the rest of
                 # a velocity that stretched the springs again (a soft sheet under a strain limit
                 # kept moving at 0.56 m/s after 10 s)
-                strain.correct_within(state, start, h, self.velocity_follow)
+                strain.correct_within(state, VelocityOrigin(start, h), self.velocity_follow)
             np.copyto(start, x)
             a[:] = 0.0
             for term in external:
@@ -190,5 +190,5 @@ class XPBD(Integrator):
             # v = (p − x)/h on the free particles; pins keep their velocity and land at x + h·v
             v[free] = (p[free] - x[free]) / h
             np.copyto(x, p)
-        self._origin = (start, h)
+        self._origin = VelocityOrigin(start, h)
         self.counters["substeps"] += self.substeps
