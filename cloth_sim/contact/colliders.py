@@ -593,10 +593,9 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
     none). ``push[c]`` and ``turn[c]`` gather the impulse the particles gave collider ``c`` in
     (3) (``m·Δv``, N·s) and its moment about the collider's position: summed in index order over
     each task's particles, the tasks' sums added in order (the same sums at any thread count). A
-    collider whose ``reach`` (every point of
-    it within that of its position) keeps the particle's whole path beyond
-    ``h·(1 + CONTACT_TOLERANCE)`` is passed over: it could do nothing (only its clearance is left
-    unmeasured, far above any skin)."""
+    collider whose ``reach`` (every point of it within that of its position) keeps the particle's
+    whole path beyond ``h·(1 + CONTACT_TOLERANCE)`` is passed over: it could do nothing (only its
+    clearance is left unmeasured, far above any skin)."""
     kinds, pos, rot, pos0, rot0, geo = co.kinds, co.pos, co.rot, co.pos0, co.rot0, co.geo
     mu, reach, bank = co.mu, co.reach, (co.reals, co.ints, co.starts)
     reals, ints, starts = co.reals, co.ints, co.starts
@@ -617,8 +616,8 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
     # rows on a table): in index order one core idled, spread (:func:`_spread`) each run holds
     # tasks from all over the cloth
     order = _spread(tasks)
-    for k in numba.prange(tasks):
-        task = order[k]
+    for j in numba.prange(tasks):
+        task = order[j]
         for p in range(task * CONTACT_CHUNK, min(n, (task + 1) * CONTACT_CHUNK)):
             touching[p] = False
             clearance[p] = np.inf

@@ -1014,7 +1014,8 @@ class VBD(Integrator):
             if part < n - 1 and strain is not None and strain.active:
                 # each substep's stretch corrected before the next (the last: the simulator's
                 # stage, over velocity_origin): a velocity follows its own substep's correction
-                strain.correct_within(state, self.velocity_origin(None, dt), self.velocity_follow)
+                origin = VelocityOrigin(self._xt, self._solve_h)  # this substep's solve
+                strain.correct_within(state, origin, self.velocity_follow)
             iterations += done
             worst = max(worst, res)
             on_grid = on_grid or blocks

@@ -161,7 +161,8 @@ class XPBD(Integrator):
                 # a velocity that stretched the springs again (a soft sheet under a strain limit
                 # kept moving at 0.56 m/s after 10 s)
                 strain.correct_within(state, VelocityOrigin(start, h), self.velocity_follow)
-            np.copyto(start, x)
+            if strain is not None or k == self.substeps - 1:  # (the last: velocity_origin's)
+                np.copyto(start, x)
             a[:] = 0.0
             for term in external:
                 term.add_force(x, v, a)
