@@ -500,25 +500,18 @@ def _sweeps(blocks, lattice, rates, stepped, chunks, mode, omega):
 @numba.njit(cache=True, parallel=True, error_model="numpy", fastmath={"contract"})
 def _sweeps_touching(blocks, lattice, rates, stepped, chunks, mode, omega, contact):
     """:func:`_sweeps` with colliders: each colour's SIMD loop as there, then a second pass over
-    its slots (a parallel loop of its own: the contact terms take views of the colliders'
-    arrays, which would cost the first loop its unaliased arrays) that takes again the step of
-    each vertex that may touch a collider (``near``), from the springs' force and Hessian the
-    first loop left, with the collider's penalty and friction in it and held at a contact's onset
-    (the general sweep's :func:`~.vbd_contact.colliders_at` and
+    its slots (:func:`_touch_colour`, a parallel loop of its own: the contact terms take views of
+    the colliders' arrays, which would cost the first loop its unaliased arrays) that takes again
+    the step of each vertex that may touch a collider (``near``), from the springs' force and
+    Hessian the first loop left, with the collider's penalty and friction in it and held at a
+    contact's onset (the general sweep's :func:`~.vbd_contact.colliders_at` and
     :func:`~.vbd_contact.onset`, on the vertex's row of the original arrays), holds every step
     and every extrapolation within the vertex's bounds (:func:`~.vbd_contact.within`,
     :func:`~.vbd_contact.truncate`: what the last search lets it move), extrapolates no vertex in
     contact, and commits."""
     X, B, T, Y, N, P = blocks
     shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE = lattice
-    (vof, xm, xt, near, touch, cut, x_cd, allow, gamma, law, co, sc, fh, seen) = contact
-    tau = law[0]
-    F0, F1, F2, H0, H1, H2, H3, H4, H5 = fh
-    ckind, cgeo, cmu = co.kinds, co.geo, co.mu
-    pose, pose0 = (co.pos, co.rot, co.reach), (co.pos0, co.rot0)
-    cbank = (co.reals, co.ints, co.starts)
-    shapes = (ckind, co.pos, co.rot, cgeo, co.reals, co.ints, co.starts)
-    rec_ptr, rec_v, rec_w, rec_n, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d = sc
+    F0, F1, F2, H0, H1, H2, H3, H4, H5 = contact[12]  # the springs' blocks (GridLayout.contact)
     for cb in range(9):
         a, bb, size, n0, n1, n2, n3, n4, n5, n6, n7, n8, n9, n10, n11 = _colour(
             shift, cb, PQ, lo, hi, chunks
@@ -534,48 +527,69 @@ def _sweeps_touching(blocks, lattice, rates, stepped, chunks, mode, omega, conta
                 # the springs' force and Hessian, for the vertices the second pass takes again
                 F0[t], F1[t], F2[t] = f0, f1, f2
                 H0[t], H1[t], H2[t], H3[t], H4[t], H5[t] = a0, b, c, dd, e, ff
-        for ch in numba.prange(chunks):
-            lo_, hi_ = _chunk(a, bb, size, ch)
-            for t in range(lo_, hi_):
-                v = vof[t]
-                if v < 0 or FREE[t] == 0.0:  # a ghost or a pin: kept
-                    _commit(t, (N[0, t], N[1, t], N[2, t]), False, mode, omega, X, B, P)
-                    continue
-                x0, x1, x2 = N[0, t], N[1, t], N[2, t]
-                touch[v] = 0
-                if near[v]:
-                    xi, yi, zi = X[0, t], X[1, t], X[2, t]
-                    f0, f1, f2 = F0[t], F1[t], F2[t]
-                    a0, b, c, dd, e, ff = H0[t], H1[t], H2[t], H3[t], H4[t], H5[t]
-                    xm[v, 0], xm[v, 1], xm[v, 2] = xi, yi, zi
-                    f0, f1, f2, a0, b, c, dd, e, ff, touched = colliders_at(
-                        v, xm, xt, ckind, pose, pose0, cgeo, cmu, cbank, law,
-                        (f0, f1, f2, a0, b, c, dd, e, ff), seen,
-                    )  # fmt: skip
-                    if touched:
-                        touch[v] = 1
-                    sx, sy, sz = _solve(a0, b, c, dd, e, ff, f0, f1, f2, 1.0)
-                    sx, sy, sz = onset(v, (sx, sy, sz), xm, (rec_ptr, rec_w, rec_n, rec_d), tau,
-                                       ckind.shape[0], shapes, seen)  # fmt: skip
-                    x0, x1, x2 = xi + sx, yi + sy, zi + sz
-                    stepped[t] = f0 * f0 + f1 * f1 + f2 * f2
-                x0, x1, x2, was_cut, settled = within(x0, x1, x2, x_cd[v, 0], x_cd[v, 1],
+        _touch_colour((a, bb, size, chunks), blocks, FREE, stepped, mode, omega, contact)
+
+
+@numba.njit(cache=True, parallel=True, error_model="numpy", fastmath={"contract"})
+def _touch_colour(span, blocks, FREE, stepped, mode, omega, contact):
+    """:func:`_sweeps_touching`'s second pass over one colour's slots, ``span``: its range
+    ``[a, b)``, chunk size and chunks. A function of its own, called once a colour: inside
+    :func:`_sweeps_touching` beside the first pass, numba's parallel passes over the one
+    function with the colliders' queries inlined cost 68 s of one core to compile, 56 s as two
+    (the same bits; the queries called once a vertex instead: 37 s, but the calls count their
+    18 arrays in and out, and the table ran 30–50 % slower: docs/contributing.md)."""
+    a, bb, size, chunks = span
+    X, B, T, Y, N, P = blocks
+    (vof, xm, xt, near, touch, cut, x_cd, allow, gamma, law, co, sc, fh, seen) = contact
+    tau = law[0]
+    F0, F1, F2, H0, H1, H2, H3, H4, H5 = fh
+    ckind, cgeo, cmu = co.kinds, co.geo, co.mu
+    pose, pose0 = (co.pos, co.rot, co.reach), (co.pos0, co.rot0)
+    cbank = (co.reals, co.ints, co.starts)
+    shapes = (ckind, co.pos, co.rot, cgeo, co.reals, co.ints, co.starts)
+    rec_ptr, rec_v, rec_w, rec_n, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, rec_d = sc
+    for ch in numba.prange(chunks):
+        lo_, hi_ = _chunk(a, bb, size, ch)
+        for t in range(lo_, hi_):
+            v = vof[t]
+            if v < 0 or FREE[t] == 0.0:  # a ghost or a pin: kept
+                _commit(t, (N[0, t], N[1, t], N[2, t]), False, mode, omega, X, B, P)
+                continue
+            x0, x1, x2 = N[0, t], N[1, t], N[2, t]
+            touch[v] = 0
+            if near[v]:
+                xi, yi, zi = X[0, t], X[1, t], X[2, t]
+                f0, f1, f2 = F0[t], F1[t], F2[t]
+                a0, b, c, dd, e, ff = H0[t], H1[t], H2[t], H3[t], H4[t], H5[t]
+                xm[v, 0], xm[v, 1], xm[v, 2] = xi, yi, zi
+                f0, f1, f2, a0, b, c, dd, e, ff, touched = colliders_at(
+                    v, xm, xt, ckind, pose, pose0, cgeo, cmu, cbank, law,
+                    (f0, f1, f2, a0, b, c, dd, e, ff), seen,
+                )  # fmt: skip
+                if touched:
+                    touch[v] = 1
+                sx, sy, sz = _solve(a0, b, c, dd, e, ff, f0, f1, f2, 1.0)
+                sx, sy, sz = onset(v, (sx, sy, sz), xm, (rec_ptr, rec_w, rec_n, rec_d), tau,
+                                   ckind.shape[0], shapes, seen)  # fmt: skip
+                x0, x1, x2 = xi + sx, yi + sy, zi + sz
+                stepped[t] = f0 * f0 + f1 * f1 + f2 * f2
+            x0, x1, x2, was_cut, settled = within(x0, x1, x2, x_cd[v, 0], x_cd[v, 1],
+                                                  x_cd[v, 2], allow[v], dmin[v],
+                                                  gamma)  # fmt: skip
+            if not settled:
+                x0, x1, x2, was_cut = truncate(v, (x0, x1, x2), x_cd, allow, gptr, grec, pidx,
+                                               pcoef, pnrm, pdist, dmin, gamma)  # fmt: skip
+            if was_cut:
+                cut[v] = 1
+            b0, b1, b2 = _commit(t, (x0, x1, x2), touch[v] == 0, mode, omega, X, B, P)
+            if mode == 2 and touch[v] == 0:  # the extrapolation within the bounds too
+                b0, b1, b2, was_cut, settled = within(b0, b1, b2, x_cd[v, 0], x_cd[v, 1],
                                                       x_cd[v, 2], allow[v], dmin[v],
                                                       gamma)  # fmt: skip
                 if not settled:
-                    x0, x1, x2, was_cut = truncate(v, (x0, x1, x2), x_cd, allow, gptr, grec, pidx,
-                                                   pcoef, pnrm, pdist, dmin, gamma)  # fmt: skip
+                    b0, b1, b2, was_cut = truncate(v, (b0, b1, b2), x_cd, allow, gptr, grec,
+                                                   pidx, pcoef, pnrm, pdist, dmin,
+                                                   gamma)  # fmt: skip
+                B[0, t], B[1, t], B[2, t] = b0, b1, b2
                 if was_cut:
                     cut[v] = 1
-                b0, b1, b2 = _commit(t, (x0, x1, x2), touch[v] == 0, mode, omega, X, B, P)
-                if mode == 2 and touch[v] == 0:  # the extrapolation within the bounds too
-                    b0, b1, b2, was_cut, settled = within(b0, b1, b2, x_cd[v, 0], x_cd[v, 1],
-                                                          x_cd[v, 2], allow[v], dmin[v],
-                                                          gamma)  # fmt: skip
-                    if not settled:
-                        b0, b1, b2, was_cut = truncate(v, (b0, b1, b2), x_cd, allow, gptr, grec,
-                                                       pidx, pcoef, pnrm, pdist, dmin,
-                                                       gamma)  # fmt: skip
-                    B[0, t], B[1, t], B[2, t] = b0, b1, b2
-                    if was_cut:
-                        cut[v] = 1
