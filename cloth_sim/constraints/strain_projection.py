@@ -499,8 +499,10 @@ def project(x, springs, rest, w, settings, work):
     # ``inset`` is all 0 between calls; ``seen`` holds stamps, each measure after a solve a new
     # one, going on from the last call's: no array the size of the springs is reset
     stamp = tally[0]
-    k = 0
-    q = 0
+    # int64 from the start: a literal 0, reassigned later, made numba compile _solve and
+    # _chain_order for it too
+    k = np.int64(0)
+    q = np.int64(0)
     cg_total = 0
     outer = 0
     worst = 0.0
@@ -547,7 +549,7 @@ def project(x, springs, rest, w, settings, work):
             break
         # the set chain by chain, and its particles numbered locally
         _chain_order(k, act, springs, nb, mark, order, link)
-        q = 0
+        q = np.int64(0)
         for a in range(k):
             s = act[a]
             i = springs[s, 0]

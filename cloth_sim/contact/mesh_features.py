@@ -32,8 +32,6 @@ NO_FEATURE, PLANE_FEATURE, EDGE_FEATURE, CREASE_FEATURE = 0, 1, 2, 3
 #: direction ``b − a``, ``1/|b − a|²`` and its sign (+1 outside, −1 inside); or a crease's two
 #: planes, a point of its edge, the edge's unit direction and its sign (:func:`crease_distance`)
 FEATURE_WIDTH = 16
-#: :func:`_plane_group`'s line when there is no crease to pass over (a zero direction)
-_NO_LINE = np.zeros(3)
 
 
 @numba.njit(cache=True, inline="always")
@@ -117,14 +115,15 @@ def _segment_d2(px, py, pz, ax, ay, az, bx, by, bz):
 
 
 @numba.njit(cache=True, inline="always")
-def _on_line(v, i, la, lu):
-    """Whether vertex ``i`` lies on the line through ``la`` along the unit ``lu`` (never, where
-    ``lu`` is zero)."""
-    if lu[0] == 0.0 and lu[1] == 0.0 and lu[2] == 0.0:
+def _on_line(v, i, line):
+    """Whether vertex ``i`` lies on the line ``(a point, a unit direction)``, six numbers (never,
+    where the direction is zero)."""
+    ax, ay, az, ux, uy, uz = line
+    if ux == 0.0 and uy == 0.0 and uz == 0.0:
         return False
-    wx, wy, wz = v[i, 0] - la[0], v[i, 1] - la[1], v[i, 2] - la[2]
-    s = wx * lu[0] + wy * lu[1] + wz * lu[2]
-    wx, wy, wz = wx - s * lu[0], wy - s * lu[1], wz - s * lu[2]
+    wx, wy, wz = v[i, 0] - ax, v[i, 1] - ay, v[i, 2] - az
+    s = wx * ux + wy * uy + wz * uz
+    wx, wy, wz = wx - s * ux, wy - s * uy, wz - s * uz
     return wx * wx + wy * wy + wz * wz <= 1e-24 * max(1.0, s * s)
 
 
@@ -136,10 +135,12 @@ def _plane_group(mesh, tri, a, cid, r, cell_centre, line):
     of that union's boundary (an edge of one of them that no other of them shares) comes within
     ``r`` (the cell's half diagonal) of the cell centre's projection, in the plane. (The
     projection of every corner is inside the union, and the projected cell inside the disc of
-    radius ``r``.) ``line`` ``(point, unit direction)`` names a crease whose edges are passed
-    over (:func:`_crease_cell`; a zero direction: none)."""
+    radius ``r``.) ``line``, six numbers ``(point, unit direction)``, names a crease whose edges
+    are passed over (:func:`_crease_cell`; a zero direction: none). (Its callers give it the
+    same types, so that it compiles once: its triangle's index an ``int64`` from the start, not
+    a literal ``-1`` reassigned later, which numba's type inference compiled it for too, and
+    the line as numbers, not a view beside a read-only global array: four signatures, 14 s.)"""
     v, t, order, fn, _, _, ptr, listed = mesh
-    la, lu = line
     nx, ny, nz = fn[tri, 0], fn[tri, 1], fn[tri, 2]
     cx, cy, cz = cell_centre[0], cell_centre[1], cell_centre[2]
     off = nx * (cx - v[a, 0]) + ny * (cy - v[a, 1]) + nz * (cz - v[a, 2])
@@ -157,7 +158,7 @@ def _plane_group(mesh, tri, a, cid, r, cell_centre, line):
                     if _shares_edge(v, t, k2, i0, i1):
                         shared = True
                         break
-            if shared or (_on_line(v, i0, la, lu) and _on_line(v, i1, la, lu)):
+            if shared or (_on_line(v, i0, line) and _on_line(v, i1, line)):
                 continue
             d2 = _segment_d2(
                 qx, qy, qz, v[i0, 0], v[i0, 1], v[i0, 2], v[i1, 0], v[i1, 1], v[i1, 2]
@@ -279,7 +280,7 @@ def _plane_cell(mesh, at, row):
     """Whether a plane answers the cell ``at`` (:func:`find_features`), written to ``row``."""
     v, t, order, fn, closed, band, ptr, listed = mesh
     cid, corners, centre, r, near_k, near_d2, near_w = at
-    tri = a = -1
+    tri = a = np.int64(-1)  # (not a literal: _plane_group's docstring)
     far = side = 0.0
     grouped = False
     for corner in range(8):
@@ -305,7 +306,8 @@ def _plane_cell(mesh, at, row):
         far = max(far, abs(d))
     if not closed and side == 0.0:
         return False
-    if grouped and not _plane_group(mesh, tri, a, cid, r, centre, (centre, _NO_LINE)):
+    no_line = (centre[0], centre[1], centre[2], 0.0, 0.0, 0.0)
+    if grouped and not _plane_group(mesh, tri, a, cid, r, centre, no_line):
         return False
     cx, cy, cz = centre[0], centre[1], centre[2]
     for j in range(ptr[cid], ptr[cid + 1]):
@@ -328,7 +330,7 @@ def _edge_cell(mesh, at, row):
     v, t, order, fn, closed, band, ptr, listed = mesh
     cid, corners, centre, r, _, _, _ = at
     # the edge: where the first corner's nearest point lies, inside an edge
-    bk, _, wa, wb, wc = _near(mesh, at, 0)
+    bk, _, wa, wb, wc = _near(mesh, at, np.int64(0))  # (not a literal: one signature)
     if bk < 0:
         return False
     if wc == 0.0 and wa > 0.0 and wb > 0.0:
@@ -433,7 +435,7 @@ def _crease_cell(mesh, at, row):
     t, closed = mesh[1], mesh[4]
     if not closed:
         return False
-    bk = _near(mesh, at, 0)[0]
+    bk = _near(mesh, at, np.int64(0))[0]  # (not a literal: one signature)
     if bk < 0:
         return False
     for e in range(3):  # the edges of the first corner's nearest triangle
@@ -456,7 +458,7 @@ def _crease_row(mesh, at, f1, i0, i1, row):
         s += (corners[corner, 2] - az) * uz
         if s <= 0.0 or s >= length:
             return False
-    f2 = -1
+    f2 = np.int64(-1)  # (not a literal: _plane_group's docstring)
     for j in range(ptr[cid], ptr[cid + 1]):
         k = order[listed[j]]
         if k != f1 and _shares_edge(v, t, k, i0, i1):
@@ -508,7 +510,7 @@ def _crease_row(mesh, at, f1, i0, i1, row):
         p2 = row[5] * x + row[6] * y + row[7] * z + row[8]
         wx, wy, wz = x - ax - s * ux, y - ay - s * uy, z - az - s * uz
         far = max(far, abs(p1), abs(p2), math.sqrt(wx * wx + wy * wy + wz * wz))
-    line = (row[9:12], row[12:15])
+    line = (row[9], row[10], row[11], row[12], row[13], row[14])
     if not (
         _plane_group(mesh, f1, t[f1, 0], cid, r, centre, line)
         and _plane_group(mesh, f2, t[f2, 0], cid, r, centre, line)

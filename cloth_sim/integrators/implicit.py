@@ -243,7 +243,8 @@ def _cg_direction(beta, z, p):
 
 @numba.njit(cache=True)
 def _slices_sum(partial, col):
-    """The slices' sums of column ``col``, added in slice order."""
+    """The slices' sums of column ``col``, added in slice order. (Its callers pass ``col`` as
+    ``np.int64``: a constant argument compiles a signature of its own, three where one does.)"""
     acc = 0.0
     for c in range(partial.shape[0]):
         acc += partial[c, col]
@@ -278,20 +279,20 @@ def _pcg(system, inv, b, x, rtol, maxiter, r, z, p, q, partial):
     stop = rtol * rtol * _dot(b, b)
     # r·r and z = P⁻¹r, r·z, through the update with α = 0 (x and r unchanged)
     _cg_update(0.0, x, r, p, q, inv, z, partial)
-    rr = _slices_sum(partial, 1)
+    rr = _slices_sum(partial, np.int64(1))
     if rr <= stop:
         return 0
-    rz = _slices_sum(partial, 2)
+    rz = _slices_sum(partial, np.int64(2))
     for i in range(n):
         p[i] = z[i]
     for it in range(1, maxiter + 1):
         _system_product(particles, ptr, adj, other, blocks, D, p, q, partial)
-        alpha = rz / _slices_sum(partial, 0)
+        alpha = rz / _slices_sum(partial, np.int64(0))
         _cg_update(alpha, x, r, p, q, inv, z, partial)
-        rr = _slices_sum(partial, 1)
+        rr = _slices_sum(partial, np.int64(1))
         if rr <= stop:
             return it
-        rz_new = _slices_sum(partial, 2)
+        rz_new = _slices_sum(partial, np.int64(2))
         beta = rz_new / rz
         rz = rz_new
         _cg_direction(beta, z, p)

@@ -439,7 +439,7 @@ def runge_kutta_fused(x, v, A, b, dt, kx, kv, xs, coef, net, base, inv_mass):
             kv[i],
             inv_mass,
             0.0,
-            GATHER_RK_STAGE,
+            np.int64(GATHER_RK_STAGE),  # (a number, not the constant: one signature, not two)
             x if last else xs,
             v if last else kx[i + 1],
             (x, v, kx, kv, coef[:m]),
