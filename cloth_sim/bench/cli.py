@@ -157,12 +157,22 @@ def _bench_convergence(args) -> int:
     from .convergence import (
         print_accuracy_table,
         print_convergence_table,
+        print_rest_by_method,
         print_rest_table,
         work_precision,
     )
 
     if args.work_precision:
         work_precision(args.material.split(","), tuple(args.sizes), args.seconds or 2.0, args.out)
+    elif args.rest and args.methods:
+        methods = None if args.methods == "all" else args.methods.split(",")
+        print_rest_by_method(
+            args.material.split(","),
+            tuple(args.sizes),
+            methods,
+            args.seconds or 10.0,
+            args.strain_limit,
+        )
     elif args.rest:
         print_rest_table(
             args.material.split(","), tuple(args.sizes), args.seconds or 10.0, args.strain_limit
@@ -352,6 +362,12 @@ def add_parser(sub) -> argparse.ArgumentParser:
         default=None,
         help="with --rest: the strain limit on (hanging ships 0.1, by projection), symplectic "
         "Euler's edge at rest beside vbd's",
+    )
+    cv.add_argument(
+        "--methods",
+        default=None,
+        help="with --rest: these integrators (comma-separated, or 'all') each until at rest, "
+        "instead of vbd at each size",
     )
     cv.add_argument(
         "--work-precision",

@@ -29,13 +29,14 @@ default iteration count and the choice of a method must be made from (docs/conve
 
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 
-from .. import textile
+from .. import integrators, textile
 from ..integrators.vbd_options import TOLERANCE
 from ..model import ClothModel
 from ..simulator import Simulator
@@ -185,14 +186,19 @@ def print_accuracy_table(materials, sizes, seconds: float = 2.0) -> None:
 
 def _at_rest(model: ClothModel, n: int, integrator: str, seconds: float, strain_limit):
     """``(edge, sim, wall)``: ``model`` released in air (:func:`~cloth_sim.textile.released`)
-    and stepped from flat by ``integrator`` (``vbd`` at 1/60 s with its defaults; symplectic Euler
-    at :data:`REFERENCE_SHARE` of its stable step) until at rest or ``seconds``; ``edge``: the
-    free edge's mean height below the pins."""
+    and stepped from flat by ``integrator`` (one without a stable step's limit, such as ``vbd``,
+    at 1/60 s with its defaults; one with a limit, such as symplectic Euler, at
+    :data:`REFERENCE_SHARE` of it) until at rest or ``seconds``; ``edge``: the free edge's mean
+    height below the pins. ``ValueError`` where the method refuses the cloth (a material's
+    bending it does not take, no stable step)."""
     pins = float(model.positions[model.pinned, 2].mean())
     t0 = time.perf_counter()
     sim = textile.released(model, integrator, 1.0 / 60)
-    if integrator == "symplectic_euler":
-        sim.dt = REFERENCE_SHARE * sim.stable_dt()
+    stable = sim.stable_dt()
+    if not stable > 0.0:
+        raise ValueError(f"no stable step on this cloth (stable_dt = {stable:g} s)")
+    if math.isfinite(stable):
+        sim.dt = REFERENCE_SHARE * stable
     if strain_limit is not None:
         sim.strain_limit_method = "projection"
         sim.strain_limit = strain_limit
@@ -241,6 +247,43 @@ def print_rest_table(materials, sizes, seconds: float = 10.0, strain_limit=None)
                 flush=True,
             )
         print(f"{material:>10} spread of the edge over the sizes: {max(edges) - min(edges):.4f} m")
+
+
+def print_rest_by_method(materials, sizes, methods, seconds: float = 10.0, strain_limit=None):
+    """:func:`print_rest_table` for each of ``methods`` (integrator names; ``None``: every one
+    registered) on each fabric and size: its step (1/60 s where the method has no stable step's
+    limit, else :data:`REFERENCE_SHARE` of it), the free edge's height below the pins, the worst
+    strain, when it came to rest (or that it did not within ``seconds``) and its fastest
+    particle then; a method that refuses the cloth says why. What a user choosing a method for a
+    hanging cloth gets at rest, under the strain limit or without."""
+    methods = integrators.available() if methods is None else methods
+    limit = "no strain limit" if strain_limit is None else f"strain limit {strain_limit:g}"
+    print(
+        f"each method from flat in air (relaxation {textile.AIR_RELAXATION:g} s), {limit}, until "
+        f"no particle moves faster than {1e3 * textile.REST_SPEED:g} mm/s (at most {seconds:g} s)"
+    )
+    print(
+        f"{'fabric':>10} {'N':>4} {'method':>27} {'dt s':>9} {'edge m':>8} {'worst strain':>12} "
+        f"{'at rest s':>9} {'speed mm/s':>10} {'wall s':>7}"
+    )
+    for material in materials:
+        for n in sizes:
+            model = hanging(n, material)
+            for method in methods:
+                head = f"{material:>10} {n:>4} {method:>27}"
+                try:
+                    edge, sim, wall = _at_rest(model, n, method, seconds, strain_limit)
+                except ValueError as e:
+                    print(f"{head}  refused: {str(e).split(';')[0]}", flush=True)
+                    continue
+                speed = float(np.abs(sim.velocities).max())
+                rest = f"{sim.time:>9.2f}" if speed < textile.REST_SPEED else f"{'not by':>6}"
+                rest = rest if speed < textile.REST_SPEED else f"{rest} {seconds:g}"
+                print(
+                    f"{head} {sim.dt:>9.2e} {edge:>8.4f} {sim.max_strain():>12.4f} "
+                    f"{rest:>9} {1e3 * speed:>10.2f} {wall:>7.1f}",
+                    flush=True,
+                )
 
 
 class Setting(NamedTuple):

@@ -89,6 +89,24 @@ def test_the_convergence_figure_measures_each_method_against_the_fine_step_refer
     assert "Baraff–Witkin" in md
 
 
+def test_the_rest_table_by_method_says_which_methods_rest_and_which_refuse_the_cloth(capsys):
+    """``cloth-sim bench convergence --rest --methods``: a method that takes the cloth runs it
+    from flat until at rest and holds the strain limit, so its free edge hangs within
+    ``(1 + τ)`` of the sheet's length below the pins; one that cannot says why instead of
+    failing the table (Kang takes no material's bending; explicit Euler has no stable step on
+    an undamped cloth)."""
+    argv = ["bench", "convergence", "--rest", "--strain-limit", "0.1", "--material", "cotton"]
+    methods = "symplectic_euler,implicit_euler,kang,explicit_euler"
+    assert cli_main([*argv, "--sizes", "8", "--seconds", "15", "--methods", methods]) == 0
+    rows = {line.split()[2]: line for line in capsys.readouterr().out.splitlines()[2:]}
+    assert set(rows) == set(methods.split(","))
+    assert "bending" in rows["kang"] and "no stable step" in rows["explicit_euler"]
+    for name in ("symplectic_euler", "implicit_euler"):
+        dt, edge, worst, at_rest, speed = (float(v) for v in rows[name].split()[3:8])
+        assert 0.0 < at_rest < 15.0 and speed < 1.0  # mm/s
+        assert 0.9 < edge <= 1.1 * 1.0 and worst <= 0.1 + 2e-3
+
+
 def test_stability_quick_brackets_the_linear_limit(bench_dir):
     out = bench_dir / "st"
     assert cli_main(["bench", "stability", "--quick", "--out", str(out)]) == 0
