@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed
 # with rosidl + cmake from the wheels: tools/build_interfaces.py
 MSGS   := build/interfaces/.built
 # numba's kernels compiled into their on-disk cache (again when the package's code changes: a
-# fraction of a second when the cache holds them; from an empty cache, simulator.compile_kernels'
+# fraction of a second when the cache holds them; from an empty cache, kernels.compile_kernels'
 # three parts each in a process of its own, since numba compiles on one core, beside the
 # interfaces and the site; then one call finds them all in the cache), and the package's
 # bytecode: these machines set PYTHONDONTWRITEBYTECODE=1, so without it every process (a node, a CLI, a Ray worker) compiled
@@ -47,10 +47,10 @@ $(STAMP): requirements.txt setup.py pyproject.toml
 $(KERNELS): $(STAMP) $(shell find cloth_sim -name '*.py')
 	$(PY) -m compileall -q cloth_sim
 	pids=; for part in grid_contacts contacts steps; do \
-		$(PY) -c "from cloth_sim.simulator import compile_kernels as c; \
+		$(PY) -c "from cloth_sim.kernels import compile_kernels as c; \
 			print(f'kernels ($$part) compiled in {c(\"$$part\"):.1f} s')" & pids="$$pids $$!"; \
 	done; for pid in $$pids; do wait $$pid || exit 1; done
-	$(PY) -c "from cloth_sim.simulator import compile_kernels as c; print(f'kernels: all in the cache, {c():.1f} s')"
+	$(PY) -c "from cloth_sim.kernels import compile_kernels as c; print(f'kernels: all in the cache, {c():.1f} s')"
 	@touch $@
 
 $(MSGS): $(STAMP) msg/Stats.msg $(wildcard srv/*.srv) CMakeLists.txt package.xml tools/build_interfaces.py \

@@ -1,7 +1,7 @@
 """``cloth-sim bench compile``: where the kernels' compilation goes, kernel by kernel.
 
 ``make install`` compiles every numba kernel into numba's on-disk cache
-(:func:`cloth_sim.simulator.compile_kernels`, its parts each in a process of its own); on a fresh
+(:func:`cloth_sim.kernels.compile_kernels`, its parts each in a process of its own); on a fresh
 clone that is the longest stage of the install and of CI. This benchmark runs each part again in
 a child process with an empty cache of its own (a temporary ``NUMBA_CACHE_DIR``), so every kernel
 the part reaches is compiled, and prints the part's wall time and its kernels by exclusive compile
@@ -29,7 +29,7 @@ from contextlib import contextmanager
 
 from numba.core import event
 
-from ..simulator import COMPILE_PARTS, compile_kernels
+from ..kernels import COMPILE_PARTS, compile_kernels
 
 #: the prefix of the child's one line of results on its standard output
 _MARK = "compile-profile: "
@@ -120,7 +120,7 @@ def profile_parts(parts, side_by_side: bool = False) -> tuple[list[dict], float]
 
 def print_compile_table(parts, top: int = 12, side_by_side: bool = False) -> None:
     """Print each part's wall time and its ``top`` dearest kernels (:func:`profile_parts`);
-    ``parts``: :data:`cloth_sim.simulator.COMPILE_PARTS`' names, or none for all."""
+    ``parts``: :data:`cloth_sim.kernels.COMPILE_PARTS`' names, or none for all."""
     parts = list(parts or COMPILE_PARTS)
     unknown = [p for p in parts if p not in COMPILE_PARTS]
     if unknown:

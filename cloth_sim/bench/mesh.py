@@ -9,7 +9,7 @@ mesh.
 import time
 
 from cloth_sim import ClothModel, Simulator
-from cloth_sim.simulator import compile_kernels
+from cloth_sim.kernels import compile_kernels
 
 
 def main() -> None:

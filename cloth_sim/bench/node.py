@@ -507,7 +507,7 @@ def _lockstep_rows(client, ex, size, calls, chunks) -> list[dict]:
 def print_startup_table(trials: int = 4, sizes=(32, 64)) -> list[dict]:
     """Seconds from starting ``cloth_sim_node`` (a new process, the default scene resized to N×N)
     to the first ``~/points`` cloud a subscriber in this process receives: interpreter, rclpy,
-    numba's cached kernels (:func:`~cloth_sim.simulator.compile_kernels`), the stability analysis,
+    numba's cached kernels (:func:`~cloth_sim.kernels.compile_kernels`), the stability analysis,
     DDS discovery. The first trial also warms the OS's file cache; the median of the rest is
     printed."""
     import statistics

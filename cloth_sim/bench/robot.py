@@ -20,10 +20,11 @@ import numpy as np
 
 from ..bench.crossings import crossings
 from ..contact import colliders
+from ..kernels import compile_kernels
 from ..model import ClothModel
 from ..robot import Robot
 from ..scene import find_scene, load_scene
-from ..simulator import Simulator, compile_kernels
+from ..simulator import Simulator
 
 
 def forward_kinematics(repeat: int = 300) -> None:

@@ -33,7 +33,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-from ..simulator import compile_kernels
+from ..kernels import compile_kernels
 from .control import SimulationControl
 from .gate import ParameterGate, StartupError, as_declared, settle_garbage
 from .manipulation import Manipulation

@@ -16,7 +16,7 @@ import numpy as np
 from cloth_sim import ClothModel, Simulator
 from cloth_sim.contact import colliders as col
 from cloth_sim.integrators.vbd import PARALLEL_MIN_VERTICES
-from cloth_sim.simulator import compile_kernels
+from cloth_sim.kernels import compile_kernels
 
 
 def signatures():
