@@ -277,8 +277,7 @@ def print_rest_by_method(materials, sizes, methods, seconds: float = 10.0, strai
                     print(f"{head}  refused: {str(e).split(';')[0]}", flush=True)
                     continue
                 speed = float(np.abs(sim.velocities).max())
-                rest = f"{sim.time:>9.2f}" if speed < textile.REST_SPEED else f"{'not by':>6}"
-                rest = rest if speed < textile.REST_SPEED else f"{rest} {seconds:g}"
+                rest = f"{sim.time:.2f}" if speed < textile.REST_SPEED else f"not by {seconds:g}"
                 print(
                     f"{head} {sim.dt:>9.2e} {edge:>8.4f} {sim.max_strain():>12.4f} "
                     f"{rest:>9} {1e3 * speed:>10.2f} {wall:>7.1f}",

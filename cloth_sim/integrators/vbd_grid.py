@@ -511,7 +511,9 @@ def _sweeps_touching(blocks, lattice, rates, stepped, chunks, mode, omega, conta
     contact, and commits."""
     X, B, T, Y, N, P = blocks
     shift, PQ, lo, hi, K, REST, C, QO, QD, MH2, FREE = lattice
-    F0, F1, F2, H0, H1, H2, H3, H4, H5 = contact[12]  # the springs' blocks (GridLayout.contact)
+    # the springs' blocks, for the second pass (the rest of the bundle is _touch_colour's)
+    (_, _, _, _, _, _, _, _, _, _, _, _, fh, _) = contact
+    F0, F1, F2, H0, H1, H2, H3, H4, H5 = fh
     for cb in range(9):
         a, bb, size, n0, n1, n2, n3, n4, n5, n6, n7, n8, n9, n10, n11 = _colour(
             shift, cb, PQ, lo, hi, chunks
