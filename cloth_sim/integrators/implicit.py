@@ -32,6 +32,7 @@ from scipy.sparse.linalg import splu
 
 from ..physics import stability as stab
 from ..physics.forces import incidence, spring_sums
+from . import kang_analysis
 from .base import Integrator, Stability, matrices
 from .registry import register
 
@@ -747,10 +748,10 @@ class Kang(_LinearisedImplicitEuler):
     with the neighbours' ``Δv_j`` from the previous step (kept in ``state.history["dv"]``). Spring
     damping stays explicit in ``f``. Not unconditionally stable: the lagged ``Δv_j`` and explicit
     damping limit the step, which its own analysis finds
-    (:func:`cloth_sim.physics.stability.kang_stable_dt`: a von Neumann analysis of the grid, tens
-    of milliseconds; the whole linearised step for other spring networks), and the simulator's
-    guard catches a blow-up like any explicit method's. The per-particle scaling does not conserve
-    linear momentum while ``Δv`` changes from step to step.
+    (:func:`cloth_sim.integrators.kang_analysis.kang_stable_dt`: a von Neumann analysis of the
+    grid, tens of milliseconds; the whole linearised step for other spring networks), and the
+    simulator's guard catches a blow-up like any explicit method's. The per-particle scaling does
+    not conserve linear momentum while ``Δv`` changes from step to step.
     """
 
     name = "kang"
@@ -763,7 +764,7 @@ class Kang(_LinearisedImplicitEuler):
     def amplification(cls, h, omega, zeta):
         raise NotImplementedError(
             "kang has no scalar mode model (its lagged neighbours couple the "
-            "modes): see cloth_sim.physics.stability.kang_stable_dt"
+            "modes): see cloth_sim.integrators.kang_analysis.kang_stable_dt"
         )
 
     def __init__(self, model, sweeps: int = 1):
@@ -777,7 +778,7 @@ class Kang(_LinearisedImplicitEuler):
         return (self.sweeps,)
 
     def analyse(self, analysis):
-        return stab.kang_stable_dt(
+        return kang_analysis.kang_stable_dt(
             self.model,
             analysis.k,
             analysis.c,

@@ -321,14 +321,14 @@ def test_the_explicit_step_limit_holds_on_a_mesh():
 
 
 def test_kang_on_a_large_mesh_is_analysed_in_bounded_time_by_its_equivalent_grid():
-    from cloth_sim.physics import stability as stab
+    from cloth_sim.integrators import kang_analysis as kang
 
     model = build(MESHES / "tshirt.obj")
-    assert model.n_particles > stab.KANG_FULL_MAX
+    assert model.n_particles > kang.KANG_FULL_MAX
     sim = Simulator(model, integrator="kang", dt=1e-4)
     limit = sim.stable_dt()
-    grid, k, c = stab.equivalent_grid(model, sim.analysis.k, sim.analysis.c)
-    assert limit == stab.kang_stable_dt(grid, k, c, 0.0)
+    grid, k, c = kang.equivalent_grid(model, sim.analysis.k, sim.analysis.c)
+    assert limit == kang.kang_stable_dt(grid, k, c, 0.0)
     assert 0 < limit < 1
 
 

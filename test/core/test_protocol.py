@@ -10,6 +10,7 @@ import pytest
 import yaml
 from cloths import free_cloth, free_fall, one_spring, oscillator_order
 
+import cloth_sim.integrators.kang_analysis as kang
 import cloth_sim.physics.stability as stab
 from cloth_sim import ClothModel, SimulationDiverged, Simulator, integrators
 from cloth_sim.integrators.base import Integrator, Stability
@@ -158,7 +159,7 @@ def test_a_blow_up_never_runs_a_stability_analysis(monkeypatch):
             rows=24, cols=24, spacing=1 / 23, integrator=name, dt=1 / 60, strain_limit=None
         )
         monkeypatch.setattr(stab, "fastest_mode", forbidden)
-        monkeypatch.setattr(stab, "kang_stable_dt", forbidden)
+        monkeypatch.setattr(kang, "kang_stable_dt", forbidden)
         with pytest.raises(SimulationDiverged, match="not computed"):
             sim.advance(2.0)
         monkeypatch.undo()
@@ -195,7 +196,7 @@ def test_kang_linear_step_matrix_is_the_step_it_takes_sweeps_included():
         dv_prev[model.pinned] = 0.0
         sim.state.history["dv"][:] = dv_prev
         sim.step()
-        T = stab.kang_step_matrix(model, k, c, 0.0, dt, sweeps)
+        T = kang.kang_step_matrix(model, k, c, 0.0, dt, sweeps)
         before = np.concatenate([dx.ravel()[free], v.ravel()[free], dv_prev.ravel()[free]])
         predicted = T @ before
         taken = np.concatenate(
@@ -226,8 +227,8 @@ def test_kangs_grid_analysis_is_conservative_against_the_whole_system():
     the whole 12×12 step matrix (seconds): below it, within 20 %."""
     model = load_scene("hanging_provot").build_model(rows=12, cols=12, spacing=1 / 11)
     k, c = np.array(model.stiffness), np.array(model.damping)
-    fourier = stab.kang_stable_dt(model, k, c, 0.0, method="fourier", rel_tol=0.005)
-    full = stab.kang_stable_dt(model, k, c, 0.0, method="full", rel_tol=0.005)
+    fourier = kang.kang_stable_dt(model, k, c, 0.0, method="fourier", rel_tol=0.005)
+    full = kang.kang_stable_dt(model, k, c, 0.0, method="full", rel_tol=0.005)
     assert 0.8 * full <= fourier <= full
     assert (
         stab.grid_stencil(
@@ -354,7 +355,7 @@ def test_every_node_cloth_has_kangs_fast_analysis(scene, model):
     m = load_scene(scene).build_model(rows=12, cols=12, spacing=1 / 11, model=model)
     k, c = np.array(m.stiffness), np.array(m.damping)
     assert stab.grid_stencil(m, k, c) is not None
-    assert 0 < stab.kang_stable_dt(m, k, c, 0.01, method="fourier") < 1
+    assert 0 < kang.kang_stable_dt(m, k, c, 0.01, method="fourier") < 1
 
 
 def test_choi_ko_stable_dt_accounts_for_the_buckling_onset_load():
@@ -424,12 +425,12 @@ def test_kang_limit_from_the_coarse_search_is_the_fine_limit(seed):
         pinned=[(0, 0), (0, -1)],
     )
     k, c, drag = np.array(model.stiffness, float), np.array(model.damping, float), 0.01
-    stab._KANG_GUESS.clear()
-    limit = stab.kang_stable_dt(model, k, c, drag)
+    kang._KANG_GUESS.clear()
+    limit = kang.kang_stable_dt(model, k, c, drag)
     st = stab.grid_stencil(model, k, c)
-    symbols = stab._fourier_symbols(st, min(24, n))
-    assert stab.kang_fourier_radius(st, drag, limit, 1, symbols) <= 1.0 + 1e-9
-    assert stab.kang_fourier_radius(st, drag, limit * 1.01, 1, symbols) > 1.0 + 1e-9
+    symbols = stab.fourier_symbols(st, min(24, n))
+    assert kang.kang_fourier_radius(st, drag, limit, 1, symbols) <= 1.0 + 1e-9
+    assert kang.kang_fourier_radius(st, drag, limit * 1.01, 1, symbols) > 1.0 + 1e-9
 
 
 def test_choi_ko_onset_band_of_the_methods_without_a_step_limit():
