@@ -10,8 +10,9 @@ from dataclasses import fields
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Point
+from geometry_msgs.msg import Point, Vector3
 from sensor_msgs.msg import PointCloud2, PointField
+from simulation_interfaces.msg import Result
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -401,3 +402,12 @@ def camera_info(camera, frame_id: str, stamp):
     msg.r = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
     msg.p = [camera.fx, 0.0, camera.cx, 0.0, 0.0, camera.fy, camera.cy, 0.0, 0.0, 0.0, 1.0, 0.0]
     return msg
+
+
+def result(code: int = Result.RESULT_OK, message: str = "") -> Result:
+    """The ROS simulation standard's result: ``code`` and the message that explains it."""
+    return Result(result=code, error_message=message)
+
+
+def vector(a) -> Vector3:
+    return Vector3(x=float(a[0]), y=float(a[1]), z=float(a[2]))

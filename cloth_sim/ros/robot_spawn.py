@@ -37,7 +37,7 @@ def _load(resource) -> Robot:
 
 def spawn(interfaces, request, resource) -> tuple[Result, str]:
     """``(result, entity name)``: the robot ``resource`` describes put in the scene of
-    ``interfaces`` (the node's :class:`~cloth_sim.ros.sim_interfaces.SimulationInterfaces`)."""
+    ``interfaces`` (the node's :class:`~cloth_sim.ros.spawning.Spawner`)."""
     R = srv.SpawnEntity.Response
     if request.entity_namespace:
         return Result(
