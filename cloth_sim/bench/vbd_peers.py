@@ -72,7 +72,7 @@ class NewtonSprings:
     """A cloth_sim model's particles and springs as a Newton model stepped by its ``SolverVBD``."""
 
     def __init__(self, newton, wp, model, gravity, iterations: int, substeps: int, device: str):
-        from ..integrators.vbd import colour_groups
+        from ..integrators.vbd_kernels import colour_groups
 
         b = newton.ModelBuilder(gravity=tuple(float(g) for g in gravity))
         for i in range(model.n_particles):

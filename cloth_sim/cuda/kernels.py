@@ -267,7 +267,7 @@ def guess_at(top, wor, it, h, w, i):
     """The inertial target ``y = x^t + h v + h² a`` (``a``: gravity and wind over the mass, on a
     free vertex) and the adaptive initial guess: ``y`` with gravity's part of the last step's
     acceleration clamped to ``[0, |g|]``; a pin goes to ``x^t + h v``. As the CPU's
-    ``_initial_guess``; ``x_s`` and the Chebyshev history start at the guess."""
+    ``initial_guess``; ``x_s`` and the Chebyshev history start at the guess."""
     free = wor.free[w, i]
     gx, gy, gz = wor.gravity[w, 0], wor.gravity[w, 1], wor.gravity[w, 2]
     gn = math.sqrt(gx * gx + gy * gy + gz * gz)
@@ -302,7 +302,7 @@ def newton_at(top, wor, it, h, w, i):
     """Vertex ``i``'s Newton step on the incremental potential ``Σ m/(2h²)|x − y|² + E(x)``: its
     force ``r`` and 3×3 Hessian from its inertia, the drag, its springs (elastic, and their
     damping over the step; each part of the Hessian clamped to be positive semi-definite) and its
-    bending row; ``x_i += H⁻¹ r``, and ``|r|²`` kept for the residual (the CPU's ``_sweep``
+    bending row; ``x_i += H⁻¹ r``, and ``|r|²`` kept for the residual (the CPU's ``sweep``
     without contacts)."""
     x, xt, y = it.x, it.xt, it.y
     if not wor.free[w, i]:

@@ -25,7 +25,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..integrators.vbd import colour_groups
+from ..integrators.vbd_kernels import colour_groups
 from ..model import ClothModel
 from ..physics.forces import incidence
 

@@ -25,7 +25,8 @@ from numba import cuda
 from .. import backends
 from ..contact.colliders import PLANE
 from ..contact.geometry import positive
-from ..integrators.vbd import VBD, substeps_needed
+from ..integrators.vbd import VBD
+from ..integrators.vbd_kernels import substeps_needed
 from ..model import ClothModel
 from ..parameters import SCHEMA
 from . import kernels as K

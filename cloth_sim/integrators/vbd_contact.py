@@ -137,7 +137,7 @@ def within(px, py, pz, cx, cy, cz, allow_i, dmin_i, gamma):
     distance; returns the position, whether it was cut and whether that is final (else
     :func:`truncate` must look at its pairs, from the same scale). Scalars only: the inlined
     :func:`truncate`, with its nine arrays, cost ~40 ns a vertex where this arithmetic is a few
-    (``_chebyshev`` at 128×128: 0.70 → 0.06 ms, the same bits; docs/BENCHMARKS.md §11); the
+    (``chebyshev`` at 128×128: 0.70 → 0.06 ms, the same bits; docs/BENCHMARKS.md §11); the
     callers take :func:`truncate` only where this leaves the pairs to look at."""
     if allow_i == math.inf and dmin_i == math.inf:
         return px, py, pz, False, True

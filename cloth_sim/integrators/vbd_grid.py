@@ -1,15 +1,15 @@
 """``vbd``'s iterations on a regular grid, a colour's vertices in SIMD lanes.
 
-On a ``rows × cols`` grid whose springs and bending couplings all join a particle ``(i, j)`` to
-one of the twelve of Provot's stencil, ``(i ± 1, j)``, ``(i, j ± 1)``, ``(i ± 1, j ± 1)``,
-``(i ± 2, j)``, ``(i, j ± 2)``, the nine classes ``(i mod 3, j mod 3)`` are colours: no spring
-joins two particles of a class (each offset changes ``i`` or ``j`` by 1 or 2). Each class is stored
-as its own block, and inside a block particle ``(3p + a, 3q + b)`` (in the grid padded by
-:data:`PAD` ghost rows and columns on each side) sits at ``p·Q + q``; then the neighbour at a
-given offset of every particle of a colour lies in one block at one fixed shift of the index. The
-sweep over a colour is one loop over a contiguous range with the same twelve loads at constant
-shifts for every particle, which the compiler turns into SIMD lanes (8 doubles on AVX-512), where
-the general sweep (:func:`cloth_sim.integrators.vbd._sweep`) follows each vertex's spring list.
+On a ``rows × cols`` grid whose springs and bending couplings all join a particle ``(i, j)`` to one
+of the twelve of Provot's stencil, ``(i ± 1, j)``, ``(i, j ± 1)``, ``(i ± 1, j ± 1)``, ``(i ± 2,
+j)``, ``(i, j ± 2)``, the nine classes ``(i mod 3, j mod 3)`` are colours: no spring joins two
+particles of a class (each offset changes ``i`` or ``j`` by 1 or 2). Each class is stored as its
+own block, and inside a block particle ``(3p + a, 3q + b)`` (in the grid padded by :data:`PAD`
+ghost rows and columns on each side) sits at ``p·Q + q``; then the neighbour at a given offset of
+every particle of a colour lies in one block at one fixed shift of the index. The sweep over a
+colour is one loop over a contiguous range with the same twelve loads at constant shifts for every
+particle, which the compiler turns into SIMD lanes (8 doubles on AVX-512), where the general sweep
+(:func:`cloth_sim.integrators.vbd_kernels.sweep`) follows each vertex's spring list.
 
 The ghost cells carry no spring (stiffness, damping, bending and mass 0) and are never moved;
 a missing spring of a real particle (on the cloth's border, or a family absent from the model) is a
@@ -250,7 +250,7 @@ def _gather(X, slot, x):
 @numba.njit(cache=True, inline="always")
 def _spring(X, T, j, t, o, K, REST, C, QO, inv_h, pm, fh):
     """Particle ``t``'s spring and bending coupling to its neighbour ``j`` (slot ``o``): the
-    general sweep's spring terms (:func:`cloth_sim.integrators.vbd._springs_at`): ``X`` the
+    general sweep's spring terms (:func:`cloth_sim.integrators.vbd_terms.springs_at`): ``X`` the
     iterate and ``T`` the step's start (``(3, size)``, a row a coordinate), ``K, REST, C, QO``
     the offsets' springs (:class:`GridLayout`), ``pm`` the particle's position and its motion
     over the step (six numbers), ``fh`` its block (nine numbers). Whole arrays, indexed here, not
@@ -317,7 +317,8 @@ def next_omega(it, rho, omega):
 def _terms(t, n, X, T, Y, K, REST, C, QO, QD, MH2, rates):
     """Slot ``t``'s position, and its force and Hessian (six entries) of the incremental
     potential from its inertia, drag, bending diagonal and twelve springs (``n``: its colour's
-    twelve shifts, a tuple): the general sweep's terms (:func:`cloth_sim.integrators.vbd._sweep`).
+    twelve shifts, a tuple): the general sweep's terms
+    (:func:`cloth_sim.integrators.vbd_kernels.sweep`).
     ``rates``: :func:`solve`'s. (Whole arrays, as :func:`_spring` says.)"""
     inv_h, drag_h, _ = rates
     xi, yi, zi = X[0, t], X[1, t], X[2, t]
@@ -373,14 +374,14 @@ def _solve(a0, b, c, dd, e, ff, f0, f1, f2, free):
 @numba.njit(cache=True)
 def solve(blocks, lattice, rates, stepped, chunks, first, last, total, omega, contact):
     """Iterations ``first … last − 1`` of a step of ``total``; returns Chebyshev's weight and how
-    many times ``A`` and ``B`` took turns. Each iteration sweeps the nine colours in order from
-    the iterate ``A`` (:func:`_sweeps`). Where ``rho > 0``, after every iteration but the step's
-    last, the general loop's Chebyshev step (:func:`cloth_sim.integrators.vbd._chebyshev` and its
+    many times ``A`` and ``B`` took turns. Each iteration sweeps the nine colours in order from the
+    iterate ``A`` (:func:`_sweeps`). Where ``rho > 0``, after every iteration but the step's last,
+    the general loop's Chebyshev step (:func:`cloth_sim.integrators.vbd_kernels.chebyshev` and its
     copy): the next iterate ``ω (x − p) + p`` of each free particle not in contact, ``p`` its
-    position before the last iteration's sweep (``P``), is written to ``B`` as each colour's
-    sweep ends, while ``A`` keeps the swept positions the later colours read; then ``A`` and ``B``
-    take turns. The same arithmetic as a separate pass after the sweeps, without that pass over
-    every array.
+    position before the last iteration's sweep (``P``), is written to ``B`` as each colour's sweep
+    ends, while ``A`` keeps the swept positions the later colours read; then ``A`` and ``B`` take
+    turns. The same arithmetic as a separate pass after the sweeps, without that pass over every
+    array.
 
     ``blocks`` holds ``A, B, T, Y, N, P``, ``(3, size)`` arrays, a row a coordinate (the
     iterate, its extrapolation, the step's start, the inertial target, the sweep's new

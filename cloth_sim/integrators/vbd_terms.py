@@ -3,7 +3,7 @@ contacts with colliders (those: :mod:`~cloth_sim.integrators.vbd_contact`): a ve
 (elastic and their damping), its part of the potential for a line search, and its self-contacts.
 Each adds its part to a vertex's **block** ``fh = (f0, f1, f2, h0, …, h5)``, the vertex's force
 and symmetric Hessian ``(xx, xy, xz, yy, yz, zz)`` as nine numbers, and returns it, for the sweeps
-(:func:`cloth_sim.integrators.vbd._sweep`). A vertex's springs are one bundle, ``springs =
+(:func:`cloth_sim.integrators.vbd_kernels.sweep`). A vertex's springs are one bundle, ``springs =
 (inc_ptr, nbr, rest, k, c, kind, tab)`` (CSR: each vertex's springs' other ends, rest lengths,
 stiffnesses, dampings and kinds, and Choi–Ko's table); its self-contact records another,
 ``records = (rec_ptr, rec_v, rec_w, rec_n, rec_d)``, each record's pair copied in
@@ -131,7 +131,7 @@ def local_energy(i, p, x, xt, y, m_h2, drag_h, springs, inv_h, bend):
 def self_contacts_at(i, x, xs, xt, records, law, fh):
     """Vertex ``i``'s self-contacts: ``½ k (τ − d)²`` on each pair's distance ``d`` along the
     normal the search found, ``d = n·Σ_k w_k x_k`` over the pair's four vertices
-    (:func:`~cloth_sim.integrators.vbd.contact_pairs`: the normal and the nearest points'
+    (:func:`~cloth_sim.integrators.vbd_kernels.contact_pairs`: the normal and the nearest points'
     weights held between two searches), for the pairs ``i`` is in (its records, each with its
     pair's vertices, weights and normal: :func:`~cloth_sim.integrators.vbd.pack_records`); and
     friction ``μ`` between the two sides as on a collider (IPC's smoothed, lagged friction on

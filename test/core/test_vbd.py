@@ -16,8 +16,9 @@ from cloths import one_spring, oscillator_order
 from test_contacts import _count_crossings, _fold
 
 from cloth_sim import ClothModel, Simulator, colliders
-from cloth_sim.integrators.vbd import FAR, VBD, collider_allowances, colour_groups
+from cloth_sim.integrators.vbd import VBD
 from cloth_sim.integrators.vbd_contact import moving_within_reach
+from cloth_sim.integrators.vbd_kernels import FAR, collider_allowances, colour_groups
 from cloth_sim.physics.forces import BUCKLE_TABLE, spring_energy
 from cloth_sim.scene import load_scene
 

@@ -13,7 +13,8 @@ import pytest
 from cloths import one_spring
 
 from cloth_sim import ClothModel, Simulator, colliders
-from cloth_sim.integrators.vbd import SUBSTEP_RATIO, VBD
+from cloth_sim.integrators.vbd import VBD
+from cloth_sim.integrators.vbd_kernels import SUBSTEP_RATIO
 from cloth_sim.integrators.vbd_residual import G0
 
 NO_GRAVITY = (0.0, 0.0, 0.0)
