@@ -48,6 +48,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import shortest_path
 
 from ..kinds import STRAIN_LIMIT_METHODS
+from ..threads import start_pool
 from . import strain_projection
 
 #: Passes per step unless the simulator is told otherwise.
@@ -552,6 +553,7 @@ class StrainLimit(Stage):
             top = w.max()
             self._w = np.ascontiguousarray(w / top if top > 0 else w)
             self._scratch = strain_projection.Scratch(self._springs, model.positions)
+            start_pool()  # the projection's solve calls the parallel search for springs over τ
         sp = strain_projection
         settings = sp.Settings(self.tau, max_outer=self.passes)
         return sp.project(

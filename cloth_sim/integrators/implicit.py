@@ -32,6 +32,7 @@ from scipy.sparse.linalg import splu
 
 from ..physics import stability as stab
 from ..physics.forces import incidence, spring_sums
+from ..threads import start_pool
 from . import kang_analysis
 from .base import Integrator, Stability, matrices
 from .registry import register
@@ -480,6 +481,8 @@ class ImplicitEuler(_LinearisedImplicitEuler):
         if int(cg_max_iterations) < 1:
             raise ValueError(f"cg_max_iterations must be >= 1, got {cg_max_iterations}")
         self.solver = solver
+        if solver == "cg":  # _pcg calls the parallel products
+            start_pool()
         self.cg_tolerance = float(cg_tolerance)
         self.cg_max_iterations = int(cg_max_iterations)
         self.clamp_compression = bool(clamp_compression)

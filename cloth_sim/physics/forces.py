@@ -46,6 +46,7 @@ from numba.extending import intrinsic
 from scipy.optimize import brentq
 
 from ..model import LINEAR, TENSION_ONLY, ClothModel
+from ..threads import start_pool
 from .bending import bending_row
 
 BUCKLE_TABLE_SIZE = 513
@@ -337,10 +338,11 @@ def spring_forces_gather(x, v, net, base, f, inv_mass, dt, mode, xo, vo, stage):
     (:func:`combine_particle`; ``f`` is ``kv``'s current stage); with :data:`GATHER_KICK_DRIFT` it
     takes symplectic Euler's update, ``v += (f·m⁻¹)·dt; x += v·dt`` into ``xo``, ``vo`` (``x`` and
     ``v`` themselves: separate arguments so that read-only ``x``, ``v`` type-check when there is no
-    update, and ``xo``, ``vo`` are then :data:`_NO_STATE`; ``inv_mass``: (n, 1), 0 on pins), the
-    operations of :func:`kick_drift` in its order. No particle's position is read after the first
-    loop, and each core updates the particles whose forces it summed, while they are in its cache
-    (a separate serial pass cost most of what the second core saved: docs/BENCHMARKS.md §7)."""
+    update, and ``xo``, ``vo`` are then :data:`NO_STATE`; ``inv_mass``: (n, 1), 0 on pins), the
+    operations of :func:`cloth_sim.integrators.explicit.kick_drift` in its order. No
+    particle's position is read after the first loop, and each core updates the particles whose
+    forces it summed, while they are in its cache (a separate serial pass cost most of what the
+    second core saved: docs/BENCHMARKS.md §7)."""
     # (GatherSprings' fields; passed as a plain tuple: numba types a NamedTuple argument on a
     # slow path, ~1 µs a call, keeping objects for its first hundreds of calls)
     springs, rest, k, c, kind, tab, with_damping, ptr, adj, sign, fs, qptr, qidx, qval, fb = net
@@ -413,6 +415,10 @@ def spring_forces_gather(x, v, net, base, f, inv_mass, dt, mode, xo, vo, stage):
             xo[p, 2] += vo[p, 2] * dt
 
 
+#: (Kept beside :func:`spring_forces_gather`: a cached kernel that calls a parallel one from
+#: another module crashed when loaded from numba's cache (numba/numba#8578, open: the outer
+#: function serial, the inner parallel, the fault only from the cache); moved into the integrators'
+#: module, RK4's first step from the cache was a segmentation fault every time.)
 @numba.njit(cache=True)
 def runge_kutta_fused(x, v, A, b, dt, kx, kv, xs, coef, net, base, inv_mass):
     """A whole explicit Runge–Kutta step of tableau ``(A, b)`` in place on ``x``, ``v``, each stage
@@ -444,19 +450,6 @@ def runge_kutta_fused(x, v, A, b, dt, kx, kv, xs, coef, net, base, inv_mass):
             v if last else kx[i + 1],
             (x, v, kx, kv, coef[:m]),
         )
-
-
-@numba.njit(cache=True)
-def kick_drift(x, v, f, inv_mass, dt):
-    """Symplectic Euler's update in one pass: ``v += (f·m⁻¹)·dt``, then ``x += v·dt`` with the new
-    velocity, each particle once (``inv_mass`` (n, 1) is 0 on pins, which keep their velocity). The
-    same operations in the same order as the array expressions it replaced (``a = f·m⁻¹; a *= dt;
-    v += a; x += v·dt``), so the same bits, in one pass over the arrays instead of five."""
-    for p in range(x.shape[0]):
-        w = inv_mass[p, 0]
-        for d in range(3):
-            v[p, d] += (f[p, d] * w) * dt
-            x[p, d] += v[p, d] * dt
 
 
 def incidence(springs: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -549,8 +542,8 @@ def wind_forces(x, tris, wind, normals, f):
 PARALLEL_MIN_SPRINGS = 2000
 # the gather's inverse masses and state outputs when it does not update the state
 _NO_MASS = np.zeros((1, 1))
-_NO_STATE = np.zeros((1, 3))
-_NO_STAGE = (_NO_STATE, _NO_STATE, np.zeros((1, 1, 3)), np.zeros((1, 1, 3)), np.zeros(0))
+NO_STATE = np.zeros((1, 3))
+NO_STAGE = (NO_STATE, NO_STATE, np.zeros((1, 1, 3)), np.zeros((1, 1, 3)), np.zeros(0))
 
 _INCIDENCE: dict = {}
 
@@ -710,9 +703,9 @@ class SpringTerm:
                 _NO_MASS,
                 0.0,
                 GATHER_FORCE,
-                _NO_STATE,
-                _NO_STATE,
-                _NO_STAGE,
+                NO_STATE,
+                NO_STATE,
+                NO_STAGE,
             )
         else:  # the same bits on one core
             spring_forces(
@@ -871,16 +864,18 @@ class Forces:
         # allocate a temporary of the whole array on every evaluation
         self._inv_mass3 = np.repeat(self.inv_mass, 3, axis=1)
         self.evaluations = 0
-        # where the springs run on every core and are the last term, their gather takes the whole
-        # sum from here (gravity's force, or zeros) and the update after it (kick_drift,
-        # acceleration)
-        self._gather_base = None
+        #: where the springs run on every core and are the last term, their gather takes the whole
+        #: sum from here (gravity's force, or zeros) and the update after it
+        #: (:meth:`gather_update`, :meth:`acceleration`); ``None`` otherwise
+        self.gather_base = None
         st = self.spring_term
         if st.parallel and self.terms[-1] is st:
             if len(self.terms) == 2 and isinstance(self.terms[0], GravityTerm):
-                self._gather_base = self.terms[0].force
+                self.gather_base = self.terms[0].force
             elif len(self.terms) == 1:
-                self._gather_base = np.zeros((model.n_particles, 3))
+                self.gather_base = np.zeros((model.n_particles, 3))
+        if self.gather_base is not None:  # runge_kutta_fused calls the parallel gather
+            start_pool()
 
     # the spring term's arrays, which the implicit integrators assemble from
     springs = property(lambda self: self.spring_term.springs)
@@ -913,29 +908,27 @@ class Forces:
         f[:] = 0.0
         return terms
 
-    def kick_drift(self, x: np.ndarray, v: np.ndarray, dt: float, f: np.ndarray) -> None:
-        """Symplectic Euler's step in place: ``f`` = the total force, ``v += (f·m⁻¹)·dt``, then
-        ``x += v·dt``. Where the springs are summed on every core and are the last term, the update
-        runs inside their gather (one parallel pass); otherwise after :meth:`force`. The same bits
-        either way."""
-        base = self._gather_base
-        if base is not None:
-            spring_forces_gather(
-                x,
-                v,
-                self.spring_term.net,
-                base,
-                f,
-                self.inv_mass,
-                dt,
-                GATHER_KICK_DRIFT,
-                x,
-                v,
-                _NO_STAGE,
-            )
-            self.evaluations += 1
-        else:
-            kick_drift(x, v, self.force(x, v, out=f), self.inv_mass, dt)
+    def gather_update(self, x, v, out, dt: float, mode: int, xo, vo, stage=None) -> None:
+        """One force evaluation with an update fused into the springs' gather, where
+        :attr:`fuses_stages` (the springs summed on every core, and the last term): ``mode`` one of
+        :func:`spring_forces_gather`'s (:data:`GATHER_KICK_DRIFT`: symplectic Euler's ``v +=
+        (f·m⁻¹)·dt``, ``x += v·dt`` into ``xo``, ``vo``; :data:`GATHER_RK_STAGE`: a Runge–Kutta
+        stage, ``stage`` its arrays), the summed force in ``out``. The integrators' steps
+        (:mod:`cloth_sim.integrators.explicit`) call it; what the update is belongs to them."""
+        spring_forces_gather(
+            x,
+            v,
+            self.spring_term.net,
+            self.gather_base,
+            out,
+            self.inv_mass,
+            dt,
+            mode,
+            xo,
+            vo,
+            NO_STAGE if stage is None else stage,
+        )
+        self.evaluations += 1
 
     def acceleration(
         self, x: np.ndarray, v: np.ndarray, out: np.ndarray | None = None
@@ -943,7 +936,7 @@ class Forces:
         """``M⁻¹ f``, zero on pinned particles. Where the springs are summed on every core and are
         the last term, the division by the mass runs inside their gather (the same bits)."""
         a = np.empty_like(x) if out is None else out
-        base = self._gather_base
+        base = self.gather_base
         if base is not None:
             spring_forces_gather(
                 x,
@@ -954,9 +947,9 @@ class Forces:
                 self.inv_mass,
                 0.0,
                 GATHER_ACCELERATION,
-                _NO_STATE,
-                _NO_STATE,
-                _NO_STAGE,
+                NO_STATE,
+                NO_STATE,
+                NO_STAGE,
             )
             self.evaluations += 1
             return a
@@ -966,28 +959,8 @@ class Forces:
 
     @property
     def fuses_stages(self) -> bool:
-        """Whether :meth:`runge_kutta_step` applies (the springs on every core, and last)."""
-        return self._gather_base is not None
-
-    def runge_kutta_step(self, x, v, A, b, dt, kx, kv, xs, coef) -> None:
-        """An explicit Runge–Kutta step in place in one call (:func:`runge_kutta_fused`): each
-        stage's forces and the next stage's state in one parallel pass. Only where
-        :attr:`fuses_stages`."""
-        runge_kutta_fused(
-            x,
-            v,
-            A,
-            b,
-            dt,
-            kx,
-            kv,
-            xs,
-            coef,
-            self.spring_term.net,
-            self._gather_base,
-            self.inv_mass,
-        )
-        self.evaluations += len(b)
+        """Whether :meth:`gather_update` applies (the springs on every core, and last)."""
+        return self.gather_base is not None
 
     def implicit_force(self, x: np.ndarray, v: np.ndarray, out: np.ndarray) -> np.ndarray:
         """The force of the terms :meth:`jacobians` differentiates, into ``out``: the springs

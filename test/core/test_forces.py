@@ -282,10 +282,9 @@ def test_spring_forces_are_bit_identical_at_any_thread_count(model_name, monkeyp
     two = min(2, numba.config.NUMBA_NUM_THREADS)
     assert all(np.array_equal(a, b) for a, b in zip(run(1), run(two)))
     # gravity and springs only: symplectic Euler's update runs inside the gather
-    # (Forces.kick_drift)
-    # and the Runge–Kutta stages' forces, mass division and next state in one pass
-    # (Forces.runge_kutta_step); with wind after the springs, the stages' update alone on every
-    # core
+    # (Forces.gather_update) and the Runge–Kutta stages' forces, mass division and next state in
+    # one pass (forces.runge_kutta_fused); with wind after the springs, the stages'
+    # update alone on every core
     kinds = [
         dict(wind=None),
         dict(wind=None, integrator="rk4", steps=60),
