@@ -275,8 +275,8 @@ def pack(meshes) -> tuple:
     function calls another, inlined or not (~5 ns an array, measured), and a contact query takes
     the bank at every vertex near a mesh; the bank of 22 arrays this replaced cost more than the
     query's arithmetic. A plain tuple, spread flat into the colliders' record
-    (:class:`~cloth_sim.contact.colliders.PackedColliders`): numba's parallel loops refuse a tuple
-    held in another.
+    (:class:`~cloth_sim.contact.collider_kernels.PackedColliders`): numba's parallel loops refuse a
+    tuple held in another.
 
     ``reals`` (float64) holds, mesh after mesh: the vertices and their angle-weighted normals
     (3 a vertex each), each triangle's face normal and its three edges' normals (3 and 9), each

@@ -26,7 +26,7 @@ from numba import cuda, float64
 
 # scalar-only numba functions of the CPU's sweep: a CUDA kernel calls them as they are (numba-cuda
 # compiles them for the device; its simulator calls the CPU's build)
-from ..contact.colliders import CONTACT_TOLERANCE
+from ..contact.collider_kernels import CONTACT_TOLERANCE
 from ..integrators.vbd import EPS_V
 from ..integrators.vbd_contact import press, slide, solve3
 from ..integrators.vbd_terms import spring_part
@@ -107,7 +107,7 @@ def bending_at(top, x, w, i):
 @cuda.jit(device=True, inline=True)
 def plane_distance(wor, w, c, x, y, z):
     """World ``w``'s plane ``c``: its outward normal and the signed distance of ``(x, y, z)``
-    from it, in the CPU's arithmetic (:func:`cloth_sim.contact.colliders.sdf`)."""
+    from it, in the CPU's arithmetic (:func:`cloth_sim.contact.collider_kernels.sdf`)."""
     nx, ny, nz = wor.planes[w, c, 0], wor.planes[w, c, 1], wor.planes[w, c, 2]
     dx, dy, dz = x - wor.planes[w, c, 3], y - wor.planes[w, c, 4], z - wor.planes[w, c, 5]
     return nx, ny, nz, nx * dx + ny * dy + nz * dz
@@ -116,12 +116,12 @@ def plane_distance(wor, w, c, x, y, z):
 @cuda.jit(device=True, inline=True)
 def planes_stage(wor, w, sx, sy, sz, px, py, pz, ux, uy, uz, continuous):
     """The contact stage after a step for one free particle and world ``w``'s static planes, in
-    order (:func:`cloth_sim.contact.colliders.resolve_contacts` for a plane): the path from the
-    step's start ``s`` to its end ``p`` marched to the thickness's skin (``continuous``: after a
-    method that does not keep paths off the colliders itself), the end projected out of the skin
-    with friction on the step's motion, and an approaching normal velocity removed, the
-    tangential one shrunk by μ times what was removed (static friction: removed). Returns the
-    end and the velocity."""
+    order (:func:`cloth_sim.contact.collider_kernels.resolve_contacts` for a plane): the path from
+    the step's start ``s`` to its end ``p`` marched to the thickness's skin (``continuous``: after
+    a method that does not keep paths off the colliders itself), the end projected out of the skin
+    with friction on the step's motion, and an approaching normal velocity removed, the tangential
+    one shrunk by μ times what was removed (static friction: removed). Returns the end and the
+    velocity."""
     h = wor.tau[w]
     for c in range(wor.nplanes[w]):
         mu = wor.pmu[w, c]

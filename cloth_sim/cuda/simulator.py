@@ -16,7 +16,7 @@ from numba import cuda
 
 from .. import backends, integrators
 from ..backends import models_of
-from ..contact.colliders import PLANE
+from ..contact.collider_kernels import PLANE
 from ..model import ClothModel
 from ..parameters import SCHEMA
 from ..physics import stability as stab

@@ -23,7 +23,7 @@ import numpy as np
 from numba import cuda
 
 from .. import backends
-from ..contact.colliders import PLANE
+from ..contact.collider_kernels import PLANE
 from ..contact.geometry import positive
 from ..integrators.vbd import VBD
 from ..integrators.vbd_kernels import substeps_needed

@@ -82,16 +82,8 @@ import time
 import numba
 import numpy as np
 
-from ..contact.colliders import (
-    BOX,
-    CAPSULE,
-    CYLINDER,
-    MESH,
-    NO_COLLIDERS,
-    SPHERE,
-    collider_travel,
-    packed_between,
-)
+from ..contact.collider_kernels import BOX, CAPSULE, CYLINDER, MESH, NO_COLLIDERS, SPHERE
+from ..contact.colliders import collider_travel, packed_between
 from ..contact.collision_tree import touching
 from ..kinds import LINEAR
 from ..physics.forces import BUCKLE_TABLE, incidence

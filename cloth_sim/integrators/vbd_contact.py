@@ -11,7 +11,7 @@ import math
 
 import numba
 
-from ..contact.colliders import MESH, beyond_reach, carried, mesh_sdf, pose_change, sdf
+from ..contact.collider_kernels import MESH, beyond_reach, carried, mesh_sdf, pose_change, sdf
 
 
 @numba.njit(cache=True, inline="always")

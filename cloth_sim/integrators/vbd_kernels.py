@@ -22,12 +22,7 @@ import math
 import numba
 import numpy as np
 
-from ..contact.colliders import (
-    MESH,
-    beyond_reach,
-    mesh_sdf,
-    sdf,
-)
+from ..contact.collider_kernels import MESH, beyond_reach, mesh_sdf, sdf
 from ..contact.geometry import segment_parameters, triangle_weights
 from ..contact.triangle_meshes import mesh_closed
 from ..physics.bending import bending_row
@@ -270,8 +265,8 @@ def sweep(verts, lo, hi, state, inertia, sp, co, sc, law, bounds, out):
     * ``inertia = (m_h2, inv_h, drag_h)``: each vertex's ``m/h²``, ``1/h``, the drag's ``d/h``;
     * ``sp``: each vertex's springs (CSR: the other end, rest length, k, c, kind, in the vertex's
       order), Choi–Ko's table, whether any is not smooth, and the bending's rows;
-    * ``co``: the colliders (:class:`~cloth_sim.contact.colliders.PackedColliders`); ``sc``: the
-      self-contact records and pairs (:meth:`VBD._records`);
+    * ``co``: the colliders (:class:`~cloth_sim.contact.collider_kernels.PackedColliders`);
+      ``sc``: the self-contact records and pairs (:meth:`VBD._records`);
     * ``law = (τ, the colliders' penalty stiffness, friction's ε, self-contact's stiffness and
       μ, γ)``; ``bounds = (x_cd, allow, near)``: where the last search was made, each vertex's
       allowance, and whether it may touch a collider;
@@ -499,8 +494,8 @@ def collider_allowances(x, allowance, bounded, co, cdepth, tau, allow, near):
     """How far each vertex may move from ``x`` before the next search (``allow``) and whether it
     can come within the thickness of a collider meanwhile (``near``: the iterations look at the
     colliders only for those); ``co``: the colliders
-    (:class:`~cloth_sim.contact.colliders.PackedColliders`), ``cdepth`` how far in each one's far
-    side is (:meth:`VBD.depths`).
+    (:class:`~cloth_sim.contact.collider_kernels.PackedColliders`), ``cdepth`` how far in each
+    one's far side is (:meth:`VBD.depths`).
 
     ``bounded`` (self-contact): ``allowance`` is each vertex's bound whatever the pairs found,
     kept short of the far side of any collider near it. Otherwise ``allowance`` is only the

@@ -46,7 +46,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from ..contact.colliders import BOX, CAPSULE, CYLINDER, MESH, PLANE, SPHERE
+from ..contact.collider_kernels import BOX, CAPSULE, CYLINDER, MESH, PLANE, SPHERE
 from ..contact.geometry import matrix_quaternion, quaternion_matrix, unit_quaternion, vector
 
 NOISE_MODELS = (None, "kinect")

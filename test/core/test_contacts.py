@@ -180,7 +180,7 @@ def test_the_contact_stage_gives_the_same_bits_at_any_thread_count():
     two threads."""
     import numba
 
-    from cloth_sim.contact.colliders import CONTACT_CHUNK
+    from cloth_sim.contact.collider_kernels import CONTACT_CHUNK
 
     model = ClothModel.grid(24, 24, 0.02, 0.01, stiffness=200.0)
     assert model.n_particles > 2 * CONTACT_CHUNK
@@ -226,7 +226,7 @@ def test_colliders_out_of_reach_change_nothing_where_a_cloth_lies_on_another():
     """A cloth landing on a box: a mesh block beside it (within its reach of the cloth's
     particles, beyond their thickness) and colliders far away leave every position to the bit
     as the box alone does. With more than one collider each touching particle is checked
-    against them all after its projections (``colliders._crease``), which answers a collider
+    against them all after its projections (``collider_kernels.crease``), which answers a collider
     beyond the thickness without its exact distance."""
     import trimesh
 

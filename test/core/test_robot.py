@@ -207,7 +207,8 @@ def test_a_fast_link_is_taken_in_parts_of_a_share_of_the_thickness():
     tip ~9 mm) is taken in substeps in none of which any vertex of its mesh forearm moves more
     than the share of the thickness; collider_travel, which sets their number, is a position's
     move plus the reach times the angle turned."""
-    from cloth_sim.contact.colliders import BOX, NO_COLLIDERS, collider_travel
+    from cloth_sim.contact.collider_kernels import BOX, NO_COLLIDERS
+    from cloth_sim.contact.colliders import collider_travel
 
     n, h, share = 8, 0.005, 0.4
     model = ClothModel.grid(n, n, 0.05, 0.001, stiffness=100.0, pinned=[(n - 1, 0)])

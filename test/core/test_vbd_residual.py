@@ -208,7 +208,8 @@ def test_a_moving_collider_is_taken_in_parts_over_the_substeps():
     sphere (half of a quarter turn about z is an eighth turn)."""
     from scipy.spatial.transform import Rotation
 
-    from cloth_sim.contact.colliders import BOX, NO_COLLIDERS, packed_between
+    from cloth_sim.contact.collider_kernels import BOX, NO_COLLIDERS
+    from cloth_sim.contact.colliders import packed_between
 
     turn = Rotation.from_euler("z", 90, degrees=True).as_matrix()
     packed = NO_COLLIDERS._replace(
