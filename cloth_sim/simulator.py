@@ -25,7 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import backends, integrators
-from .constraints.grippers import Gripper, check_box, check_grasp, check_name, check_pose
+from .constraints.grippers import Grips, check_pose
 from .constraints.strain_limit import DEFAULT_STRAIN_LIMIT_PASSES, StrainLimit
 from .contact.colliders import Contacts
 from .contact.geometry import positive
@@ -134,7 +134,7 @@ class Simulator:
         #: the model as given; ``model`` is it with the held particles pinned while grippers hold
         #: some
         self.base_model = model
-        self._grippers: dict[str, Gripper] = {}
+        self._grips = Grips()
         self._integrator_options = dict(integrator_options or {})
         self._strain_options = (
             SCHEMA["strain_limit_passes"].check(strain_limit_passes),
@@ -239,8 +239,8 @@ class Simulator:
     def reset(self) -> None:
         """Back to the model's initial positions, at rest, at time 0; parameters are kept, every
         gripper is released."""
-        if self._grippers:
-            self._grippers.clear()
+        if self._grips:
+            self._grips.held.clear()
             self._robots.bound.clear()
             self._set_held()
         self.state.x[:] = self.model.positions
@@ -265,11 +265,8 @@ class Simulator:
                 f"{len(self.state.x)}"
             )
         saved.copy_to(self.state)
-        for g in self._grippers.values():  # held particles stay where their grippers are
-            self.state.x[g.indices] = g.places(g.position, g.rotation)
-            self.state.v[g.indices] = 0.0
-            g.moving, g.target = False, None
-        if saved.method != self.integrator or self._grippers:
+        self._grips.settle(self.state.x, self.state.v)  # held particles stay with their grippers
+        if saved.method != self.integrator or self._grips:
             self._integrator.reset(self.state, self.forces, self._dt)
 
     # ------------------------------------------------------------------ parameters
@@ -537,7 +534,7 @@ class Simulator:
         integ, forces, stages = self._integrator, self.forces, self._active_stages
         follow = integ.velocity_follow
         vmax2, xmax = self.max_speed**2, self.max_coordinate
-        grippers = self._grippers
+        grippers = self._grips
         # the wrench reads the step's own end only for methods that evaluate forces past its start
         keep_end = bool(grippers) and integ.force_point > 0
         for _ in range(int(n)):
@@ -545,7 +542,7 @@ class Simulator:
                 self.motion.drive(self, self.time, self.time + dt)
             state.copy_to(checkpoint)
             if grippers:
-                self._grippers_before_step()
+                grippers.before_step(state, integ, dt)
             integ.step(state, forces, dt)
             if keep_end:  # the step's own end, before any correction (for the wrench)
                 np.copyto(self._prestage.x, state.x)
@@ -557,11 +554,12 @@ class Simulator:
             if self._contacts_inside:  # the colliders' poses this step ended at start the next
                 self._contacts.end_step()
             if grippers:
-                self._grippers_after_step()
+                grippers.after_step(state.x)
             if not _state_ok(state.x, state.v, vmax2, xmax):
                 self._diverged()
             if grippers:
-                self._grippers_commit()
+                self._wrench_ready = True
+                grippers.commit()
             state.steps += 1
             self.steps_taken += 1
 
@@ -632,7 +630,7 @@ class Simulator:
     def grippers(self) -> dict:
         """``{name: indices}`` of the particles each gripper holds (see
         :mod:`cloth_sim.constraints.grippers`)."""
-        return {name: g.indices.copy() for name, g in self._grippers.items()}
+        return {name: g.indices.copy() for name, g in self._grips.held.items()}
 
     def gripper_link(self, name: str):
         """The ``(robot, link)`` gripper ``name`` is bound to (it follows that link), or None
@@ -646,8 +644,7 @@ class Simulator:
         keep their offsets in its frame and follow it as the robot's joints move. A name in use,
         a bad point, radius or link, or no particle in reach raises ``ValueError`` and changes
         nothing."""
-        name = self._new_gripper(name)
-        point, radius = check_grasp(point, radius)
+        name = self._grips.new_name(name)
         frame = None
         if link is not None:
             try:
@@ -655,15 +652,8 @@ class Simulator:
             except (TypeError, ValueError):
                 raise ValueError(f"link must be a (robot, link) pair, got {link!r}") from None
             frame = self._robots.link_pose(robot, link_name)
-        held = self.model.pinned
-        d = np.linalg.norm(self.state.x - point, axis=1)
-        idx = np.flatnonzero((d <= radius) & ~held)
-        if len(idx) == 0:
-            near = float(d[~held].min()) if (~held).any() else float("nan")
-            raise ValueError(
-                f"grasp {name!r}: no free particle within radius {radius:g} m of point "
-                f"{point.tolist()} (the nearest is {near:.4g} m away)"
-            )
+        idx = Grips.within(name, self.state.x, self.model.pinned, point, radius)
+        point = np.asarray(point, dtype=np.float64)
         if frame is None:
             return self._hold(name, idx, point)
         held = self._hold(name, idx, frame[0], frame[1])
@@ -675,31 +665,13 @@ class Simulator:
         cloth, say) with a gripper called ``name``, placed at the box's centre with the identity
         orientation; returns their indices. Errors as :meth:`grasp`, and a box with ``lo > hi``
         on an axis."""
-        name = self._new_gripper(name)
-        lo, hi = check_box(lo, hi)
-        held = self.model.pinned
-        idx = np.flatnonzero(np.all((self.state.x >= lo) & (self.state.x <= hi), axis=1) & ~held)
-        if len(idx) == 0:
-            raise ValueError(
-                f"grasp {name!r}: no free particle inside the box {lo.tolist()} .. {hi.tolist()}"
-            )
+        name = self._grips.new_name(name)
+        idx = Grips.inside(name, self.state.x, self.model.pinned, lo, hi)
+        lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
         return self._hold(name, idx, 0.5 * (lo + hi))
 
-    def _new_gripper(self, name) -> str:
-        name = check_name(name)
-        if name in self._grippers:
-            raise ValueError(
-                f"gripper {name!r} already holds {len(self._grippers[name].indices)} "
-                f"particles: release it first"
-            )
-        return name
-
     def _hold(self, name: str, idx: np.ndarray, point: np.ndarray, orientation=None) -> np.ndarray:
-        g = Gripper(name, idx, self.state.x[idx] - point, point)
-        if orientation is not None:  # offsets in the gripper's own frame
-            g.position, g.orientation, g.rotation = check_pose(point, orientation)
-            g.offsets = g.offsets @ g.rotation
-        self._grippers[name] = g
+        self._grips.add(name, idx, self.state.x, point, orientation)
         self._prestage = self.state.copy()
         self._wrench_ready = False
         self.state.v[idx] = 0.0  # the gripper is at rest until it is moved
@@ -713,7 +685,7 @@ class Simulator:
         y, z)``) over the next step: the particles it holds move with the velocity that takes them
         there. With ``teleport`` it and its particles are there now, at rest (the rest of the cloth
         follows by its springs). An unknown name or a non-finite pose raises ``ValueError``."""
-        g = self._gripper(name)
+        g = self._grips.get(name)
         pose = check_pose(position, orientation)
         if not teleport:
             g.target = pose
@@ -726,7 +698,7 @@ class Simulator:
 
     def gripper_pose(self, name: str) -> tuple[np.ndarray, np.ndarray]:
         """``(position, orientation)`` of gripper ``name`` now."""
-        g = self._gripper(name)
+        g = self._grips.get(name)
         return g.position.copy(), g.orientation.copy()
 
     def gripper_wrench(self, name: str) -> tuple[np.ndarray, np.ndarray]:
@@ -734,7 +706,7 @@ class Simulator:
         the springs' pull on the particles it holds, plus the strain limit's constraint force on
         them when it is on (N), and its moment about the gripper's position (N·m), world frame (see
         :mod:`cloth_sim.constraints.grippers`)."""
-        g = self._gripper(name)
+        g = self._grips.get(name)
         term = self.forces.spring_term
         f = np.zeros_like(self.state.x)
         if term is not None and term.active:
@@ -759,27 +731,16 @@ class Simulator:
     def release(self, name: str) -> np.ndarray:
         """Let go: the particles of gripper ``name`` move freely again, with the velocity the
         gripper gave them over the last step. Returns their indices."""
-        g = self._gripper(name)
-        del self._grippers[name]
+        g = self._grips.get(name)
+        del self._grips.held[name]
         self._robots.bound.pop(name, None)
         self._set_held()
         return g.indices.copy()
 
-    def _gripper(self, name) -> Gripper:
-        g = self._grippers.get(name) if isinstance(name, str) else None
-        if g is None:
-            raise ValueError(
-                f"unknown gripper {name!r}; grippers: "
-                f"{', '.join(self._grippers) if self._grippers else 'none (grasp first)'}"
-            )
-        return g
-
     def _set_held(self) -> None:
         """The model with the scene's pins and every held particle pinned; everything built from
         the model is rebuilt around the same state and parameters."""
-        mask = np.array(self.base_model.pinned)
-        for g in self._grippers.values():
-            mask[g.indices] = True
+        mask = self._grips.pinned(self.base_model.pinned)
         if np.array_equal(mask, self.model.pinned):
             return
         model = (
@@ -792,43 +753,15 @@ class Simulator:
         self.forces = self._build_forces()
         self._contacts.set_pinned(model.pinned)
         self._build_stages(model, self._strain.tau, self._self_collision.enabled)
-        self._strain.track_reaction = bool(self._grippers)
+        self._strain.track_reaction = bool(self._grips)
         self._analysis = None
         self._integrator = integrators.get(self.integrator)(model, **self._integrator_options)
         self._integrator.reset(self.state, self.forces, self._dt)
         self._refresh_stages()
 
-    def _grippers_before_step(self) -> None:
-        """Held particles get the velocity that takes them to their places at the gripper's target
-        (zero when it stays)."""
-        x, v, dt = self.state.x, self.state.v, self._dt
-        for g in self._grippers.values():
-            if g.target is not None:
-                g.goal = g.places(g.target[0], g.target[2])
-                v[g.indices] = (g.goal - x[g.indices]) / dt
-                self._integrator.kinematic_velocities(self.state, g.indices, dt)
-            elif g.moving:
-                v[g.indices] = 0.0
-                self._integrator.kinematic_velocities(self.state, g.indices, dt)
-
-    def _grippers_after_step(self) -> None:
-        """Held particles exactly at their places (the integrators' ``x + dt·v`` rounds)."""
-        x = self.state.x
-        for g in self._grippers.values():
-            if g.target is not None:
-                x[g.indices] = g.goal
-
     _prestage = None
     #: whether a step was taken since the grippers changed (the wrench reads its states)
     _wrench_ready = False
-
-    def _grippers_commit(self) -> None:
-        self._wrench_ready = True
-        for g in self._grippers.values():
-            g.moving = g.target is not None
-            if g.target is not None:
-                g.position, g.orientation, g.rotation = g.target
-                g.target = None
 
     # ------------------------------------------------------------------ internals
     def _build_stages(self, model, tau, self_collision: bool) -> None:

@@ -69,3 +69,114 @@ def check_box(lo, hi) -> tuple[np.ndarray, np.ndarray]:
     if np.any(lo > hi):
         raise ValueError(f"box: min {lo.tolist()} must not exceed max {hi.tolist()} on any axis")
     return lo, hi
+
+
+class Grips:
+    """A simulator's grippers by name: which free particles a new grasp takes, where the held
+    particles go over a step, and the pins they add to the model's. The simulator rebuilds what
+    depends on the pins when the set changes; this part knows nothing of the integrator but the
+    hook it calls (``kinematic_velocities``)."""
+
+    def __init__(self):
+        self.held: dict[str, Gripper] = {}
+
+    def __bool__(self) -> bool:
+        return bool(self.held)
+
+    def new_name(self, name) -> str:
+        """``name`` for a new gripper: a non-empty string not in use (``ValueError`` otherwise)."""
+        name = check_name(name)
+        if name in self.held:
+            raise ValueError(
+                f"gripper {name!r} already holds {len(self.held[name].indices)} "
+                f"particles: release it first"
+            )
+        return name
+
+    def get(self, name) -> Gripper:
+        """Gripper ``name`` (``ValueError`` naming the grippers there are otherwise)."""
+        g = self.held.get(name) if isinstance(name, str) else None
+        if g is None:
+            raise ValueError(
+                f"unknown gripper {name!r}; grippers: "
+                f"{', '.join(self.held) if self.held else 'none (grasp first)'}"
+            )
+        return g
+
+    @staticmethod
+    def within(name: str, x: np.ndarray, pinned: np.ndarray, point, radius) -> np.ndarray:
+        """The free particles of ``x`` within ``radius`` of ``point`` (``ValueError`` on a bad
+        point or radius, or when there is none, naming the nearest's distance)."""
+        point, radius = check_grasp(point, radius)
+        d = np.linalg.norm(x - point, axis=1)
+        idx = np.flatnonzero((d <= radius) & ~pinned)
+        if len(idx) == 0:
+            near = float(d[~pinned].min()) if (~pinned).any() else float("nan")
+            raise ValueError(
+                f"grasp {name!r}: no free particle within radius {radius:g} m of point "
+                f"{point.tolist()} (the nearest is {near:.4g} m away)"
+            )
+        return idx
+
+    @staticmethod
+    def inside(name: str, x: np.ndarray, pinned: np.ndarray, lo, hi) -> np.ndarray:
+        """The free particles of ``x`` inside the axis-aligned box ``[lo, hi]`` (``ValueError`` on
+        a bad box or when there is none)."""
+        lo, hi = check_box(lo, hi)
+        idx = np.flatnonzero(np.all((x >= lo) & (x <= hi), axis=1) & ~pinned)
+        if len(idx) == 0:
+            raise ValueError(
+                f"grasp {name!r}: no free particle inside the box {lo.tolist()} .. {hi.tolist()}"
+            )
+        return idx
+
+    def add(self, name: str, idx: np.ndarray, x: np.ndarray, point, orientation=None) -> Gripper:
+        """Hold the particles ``idx`` at ``x[idx]`` with a gripper at ``point`` (and
+        ``orientation``: their offsets are then in its frame)."""
+        g = Gripper(name, idx, x[idx] - point, point)
+        if orientation is not None:
+            g.position, g.orientation, g.rotation = check_pose(point, orientation)
+            g.offsets = g.offsets @ g.rotation
+        self.held[name] = g
+        return g
+
+    def pinned(self, base: np.ndarray) -> np.ndarray:
+        """``base``'s pins and every held particle."""
+        mask = np.array(base)
+        for g in self.held.values():
+            mask[g.indices] = True
+        return mask
+
+    def settle(self, x: np.ndarray, v: np.ndarray) -> None:
+        """Held particles at their grippers' places, at rest, none moving (a state put back)."""
+        for g in self.held.values():
+            x[g.indices] = g.places(g.position, g.rotation)
+            v[g.indices] = 0.0
+            g.moving, g.target = False, None
+
+    def before_step(self, state, integrator, dt: float) -> None:
+        """Held particles get the velocity that takes them to their places at the gripper's target
+        (zero when it stays)."""
+        x, v = state.x, state.v
+        for g in self.held.values():
+            if g.target is not None:
+                g.goal = g.places(g.target[0], g.target[2])
+                v[g.indices] = (g.goal - x[g.indices]) / dt
+                integrator.kinematic_velocities(state, g.indices, dt)
+            elif g.moving:
+                v[g.indices] = 0.0
+                integrator.kinematic_velocities(state, g.indices, dt)
+
+    def after_step(self, x: np.ndarray) -> None:
+        """Held particles exactly at their places (the integrators' ``x + dt·v`` rounds)."""
+        for g in self.held.values():
+            if g.target is not None:
+                x[g.indices] = g.goal
+
+    def commit(self) -> None:
+        """The step is taken: each gripper is at its target."""
+        for g in self.held.values():
+            g.moving = g.target is not None
+            if g.target is not None:
+                g.position, g.orientation, g.rotation = g.target
+                g.target = None
