@@ -20,15 +20,15 @@ from .contact.self_collision import SelfCollision
 from .integrators.explicit import combine_parallel
 from .integrators.vbd import PARALLEL_MIN_VERTICES
 from .model import ClothModel
-from .physics.forces import (
+from .physics.force_kernels import (
     GATHER_ACCELERATION,
     GATHER_FORCE,
     GATHER_KICK_DRIFT,
     GATHER_RK_STAGE,
-    gather_arrays,
     runge_kutta_fused,
     spring_forces_gather,
 )
+from .physics.forces import gather_arrays
 from .sensors.camera import DepthCamera
 from .simulator import Simulator
 

@@ -33,7 +33,8 @@ from .contact.self_collision import SelfCollision, Uncrossed, check_thickness
 from .model import ClothModel
 from .parameters import SCHEMA, ParameterError
 from .physics import stability as stab
-from .physics.forces import Forces, max_spring_strain, spring_strains
+from .physics.force_kernels import max_spring_strain, spring_strains
+from .physics.forces import Forces
 from .robot.placement import Robots
 from .state import SimulationDiverged, State
 

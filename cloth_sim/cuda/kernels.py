@@ -61,7 +61,7 @@ def spring_constants(top, wor, w, q):
 @cuda.jit(device=True, inline=True)
 def normal_at(top, x, w, i):
     """Vertex ``i``'s unit normal: its triangles' area-weighted normals summed (zero without
-    triangles), as :func:`cloth_sim.physics.forces.vertex_normals`."""
+    triangles), as :func:`cloth_sim.physics.force_kernels.vertex_normals`."""
     nx = ny = nz = 0.0
     for e in range(top.tptr[i], top.tptr[i + 1]):
         t = top.tlist[e]

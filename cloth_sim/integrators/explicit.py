@@ -9,7 +9,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from ..physics.forces import GATHER_KICK_DRIFT, combine_particle, runge_kutta_fused
+from ..physics.force_kernels import GATHER_KICK_DRIFT, combine_particle, runge_kutta_fused
 from .base import Integrator, VelocityOrigin, matrices, oscillator_matrix
 from .registry import register
 

@@ -44,7 +44,7 @@ import numba
 import numpy as np
 import scipy.sparse as sp
 
-from ..physics.forces import BUCKLE_TABLE, axial, spring_vector
+from ..physics.force_kernels import BUCKLE_TABLE, axial, spring_vector
 from .base import Integrator, Stability
 from .implicit import cholesky, constant_system, graph_product, same_system, system_key
 from .registry import register

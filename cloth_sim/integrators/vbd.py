@@ -86,7 +86,8 @@ from ..contact.collider_kernels import BOX, CAPSULE, CYLINDER, MESH, NO_COLLIDER
 from ..contact.colliders import collider_travel, packed_between
 from ..contact.collision_tree import touching
 from ..kinds import LINEAR
-from ..physics.forces import BUCKLE_TABLE, incidence
+from ..physics.force_kernels import BUCKLE_TABLE
+from ..physics.forces import incidence
 from .base import Integrator, Stability, VelocityOrigin
 from .registry import register
 from .vbd_contact import moving_within_reach

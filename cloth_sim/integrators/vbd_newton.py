@@ -15,7 +15,7 @@ vertices (``E``: the springs' and the bending's energy; the drag ``d``), whose g
 residual of :mod:`~cloth_sim.integrators.vbd_residual` (the same force, the same measure). Each
 iteration solves ``H Δx = r`` with ``H = M/h² + d/h·I + Q − ∂f_springs/∂x`` assembled into one
 fixed sparsity pattern (the springs' 3×3 blocks of
-:func:`~cloth_sim.physics.forces.spring_jacobian_blocks`, the bending's constant ``Q``) and
+:func:`~cloth_sim.physics.force_kernels.spring_jacobian_blocks`, the bending's constant ``Q``) and
 factorised by QDLDL (an LDLᵀ whose symbolic analysis is kept: a step refactorises numerically),
 then backtracks on ``G`` until it descends. ``H`` is the exact Hessian while its step descends;
 where a compressed spring makes it indefinite and its step does not, the springs' compressive

@@ -18,7 +18,7 @@ import math
 import numba
 
 from ..kinds import LINEAR
-from ..physics.forces import axial
+from ..physics.force_kernels import axial
 from .vbd_contact import press, slide
 
 

@@ -33,7 +33,8 @@ import numba
 import numpy as np
 
 from ..physics import stability as stab
-from ..physics.forces import BUCKLE_TABLE, GravityTerm, WindTerm, axial, spring_vector
+from ..physics.force_kernels import BUCKLE_TABLE, axial, spring_vector
+from ..physics.forces import GravityTerm, WindTerm
 from .base import Integrator, Stability, VelocityOrigin
 from .registry import register
 

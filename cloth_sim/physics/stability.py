@@ -36,7 +36,8 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import eigsh
 
 from ..model import BUCKLING, ClothModel
-from .forces import BUCKLE_TABLE, buckling_h, spring_coupling_matrix, spring_sums
+from .force_kernels import BUCKLE_TABLE, buckling_h
+from .forces import spring_coupling_matrix, spring_sums
 
 
 class Mode(NamedTuple):

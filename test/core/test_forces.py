@@ -5,9 +5,10 @@ import numpy as np
 import pytest
 from cloths import cloth16
 
+import cloth_sim.physics.force_kernels as force_kernels
 import cloth_sim.physics.forces as forces
 from cloth_sim import ClothModel, Simulator
-from cloth_sim.physics.forces import buckling_h, buckling_h_exact
+from cloth_sim.physics.force_kernels import buckling_h, buckling_h_exact
 
 NO_GRAVITY = (0.0, 0.0, 0.0)
 
@@ -253,8 +254,17 @@ def test_spring_forces_are_bit_identical_at_any_thread_count(model_name, monkeyp
     x = model.positions + rng.normal(scale=0.01, size=model.positions.shape)
     v = rng.normal(size=x.shape)
     serial, gathered = np.zeros_like(x), np.zeros_like(x)
-    forces.spring_forces(
-        x, v, term.springs, term.rest, term.k, term.c, term.kind, forces.BUCKLE_TABLE, True, serial
+    force_kernels.spring_forces(
+        x,
+        v,
+        term.springs,
+        term.rest,
+        term.k,
+        term.c,
+        term.kind,
+        force_kernels.BUCKLE_TABLE,
+        True,
+        serial,
     )
     term.add_force(x, v, gathered)
     assert np.array_equal(serial, gathered)
@@ -283,7 +293,7 @@ def test_spring_forces_are_bit_identical_at_any_thread_count(model_name, monkeyp
     assert all(np.array_equal(a, b) for a, b in zip(run(1), run(two)))
     # gravity and springs only: symplectic Euler's update runs inside the gather
     # (Forces.gather_update) and the Runge–Kutta stages' forces, mass division and next state in
-    # one pass (forces.runge_kutta_fused); with wind after the springs, the stages'
+    # one pass (force_kernels.runge_kutta_fused); with wind after the springs, the stages'
     # update alone on every core
     kinds = [
         dict(wind=None),
@@ -417,7 +427,7 @@ def test_the_largest_strain_without_a_root_a_spring_is_the_largest_of_the_strain
     """``max_spring_strain`` (the largest ``(l/L)²``, one square root) gives the largest of
     ``spring_strains`` to rounding on random springs, NaN where a position is NaN (a diverged
     cloth is not hidden), and ``-inf`` for no spring."""
-    from cloth_sim.physics.forces import max_spring_strain, spring_strains
+    from cloth_sim.physics.force_kernels import max_spring_strain, spring_strains
 
     for _ in range(100):
         x = rng.normal(size=(40, 3))

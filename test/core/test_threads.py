@@ -69,8 +69,8 @@ def test_every_serial_kernel_calling_a_parallel_one_is_one_whose_builder_starts_
     and then be listed here."""
     assert _serial_callers_of_parallel_kernels() == {
         (
-            "cloth_sim.physics.forces.runge_kutta_fused",
-            "cloth_sim.physics.forces.spring_forces_gather",
+            "cloth_sim.physics.force_kernels.runge_kutta_fused",
+            "cloth_sim.physics.force_kernels.spring_forces_gather",
         ),
         (
             "cloth_sim.constraints.strain_projection.project",

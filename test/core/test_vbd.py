@@ -19,7 +19,7 @@ from cloth_sim import ClothModel, Simulator, colliders
 from cloth_sim.integrators.vbd import VBD
 from cloth_sim.integrators.vbd_contact import moving_within_reach
 from cloth_sim.integrators.vbd_kernels import FAR, collider_allowances, colour_groups
-from cloth_sim.physics.forces import BUCKLE_TABLE, spring_energy
+from cloth_sim.physics.force_kernels import BUCKLE_TABLE, spring_energy
 from cloth_sim.scene import load_scene
 
 NO_GRAVITY = (0.0, 0.0, 0.0)
