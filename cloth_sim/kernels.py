@@ -13,7 +13,8 @@ import time
 import numpy as np
 
 from . import integrators
-from .constraints.strain_limit import attachment_pass_parallel, nearest_attachments
+from .constraints.strain_limit import nearest_attachments
+from .constraints.strain_limit_kernels import attachment_pass_parallel
 from .contact import colliders as col
 from .contact.colliders import Plane
 from .contact.self_collision import SelfCollision

@@ -379,15 +379,16 @@ def _full_passes(limit, x) -> int:
     """Provot's passes as they were, each over every spring, with the attachments over every
     particle after each (from the public kernels): what ``StrainLimit.correct`` must equal."""
     from cloth_sim.constraints import strain_limit as sl
+    from cloth_sim.constraints import strain_limit_kernels as slk
 
     springs, rest, pinned = limit._springs, limit._rest, limit.model.pinned
     anchor, reach = sl.nearest_attachments(limit.model) if limit.long_range else (None, None)
     attach = anchor is not None and np.any(anchor >= 0)
-    used = 1 if attach and sl.attachment_pass(x, anchor, reach, limit.tau) else 0
+    used = 1 if attach and slk.attachment_pass(x, anchor, reach, limit.tau) else 0
     for _ in range(limit.passes):
-        changed = sl.provot_pass(x, springs, rest, limit.tau, sl.STRAIN_LIMIT_TOLERANCE, pinned)
+        changed = slk.provot_pass(x, springs, rest, limit.tau, sl.STRAIN_LIMIT_TOLERANCE, pinned)
         if attach and changed:
-            sl.attachment_pass(x, anchor, reach, limit.tau)
+            slk.attachment_pass(x, anchor, reach, limit.tau)
         if changed == 0:
             break
         used += 1
