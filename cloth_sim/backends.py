@@ -87,7 +87,8 @@ def refusal(device: str, integrator: str, model: ClothModel, **features) -> tupl
             hint = {
                 "strain_limit": " (vbd converged holds the stretch without one: set strain_limit "
                 "to 0)",
-                "colliders": " (static planes are)",
+                "colliders": " (static planes, spheres, boxes, capsules and cylinders are; a "
+                "mesh collider is not)",
             }.get(name, "")
             return (
                 f"{name}: not on the {device} device yet{hint}; it runs springs, bending, "

@@ -72,9 +72,9 @@ def sdf(kind, pos, rot, geo, c, x, y, z):
     # BOX, CYLINDER: in the shape's frame
     qx, qy, qz = _to_frame(pos, rot, c, x, y, z)
     if kind == CYLINDER:
-        d, lx, ly, lz = _cylinder(geo[c, 0], geo[c, 1], qx, qy, qz)
+        d, lx, ly, lz = cylinder_distance(geo[c, 0], geo[c, 1], qx, qy, qz)
     else:
-        d, lx, ly, lz = _box(geo[c, 0], geo[c, 1], geo[c, 2], qx, qy, qz)
+        d, lx, ly, lz = box_distance(geo[c, 0], geo[c, 1], geo[c, 2], qx, qy, qz)
     nx, ny, nz = _from_frame(rot, c, lx, ly, lz)
     return d, nx, ny, nz
 
@@ -113,7 +113,7 @@ def _from_frame(rot, c, lx, ly, lz):
 
 
 @numba.njit(cache=True, inline="always")
-def _cylinder(radius, half, qx, qy, qz):
+def cylinder_distance(radius, half, qx, qy, qz):
     """A cylinder's signed distance and normal in its own frame (axis z)."""
     r = math.sqrt(qx * qx + qy * qy)
     if r > 1e-300:
@@ -132,7 +132,7 @@ def _cylinder(radius, half, qx, qy, qz):
 
 
 @numba.njit(cache=True, inline="always")
-def _box(gx, gy, gz, qx, qy, qz):
+def box_distance(gx, gy, gz, qx, qy, qz):
     """A box's (half extents ``gx, gy, gz``) signed distance and normal in its own frame."""
     ax, ay, az = abs(qx) - gx, abs(qy) - gy, abs(qz) - gz
     if ax > 0.0 or ay > 0.0 or az > 0.0:
@@ -494,7 +494,7 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
 
 
 #: passes of :func:`crease` at most
-_CREASE_PASSES = 8
+CREASE_PASSES = 8
 
 
 #: a collider whose reach keeps a particle farther than this many ``h`` is not asked by
@@ -526,7 +526,7 @@ def crease(x, p, kinds, pos, rot, geo, reach, bank, h):
     """Particle ``p`` after the colliders' projections, one after the other: where two colliders
     meet (a robot's links at a joint), pushing it out of the later one may have pushed it into an
     earlier one. The projections are repeated, normal only, until it is within none (at most
-    ``_CREASE_PASSES`` passes: they alternate towards the crease, where both are ``h`` away).
+    ``CREASE_PASSES`` passes: they alternate towards the crease, where both are ``h`` away).
 
     Where two links meet face to face (a vertex between the upper arm's end and the forearm's, at
     the elbow) there is no such crease: each pass pushes the particle out of one into the other,
@@ -538,7 +538,7 @@ def crease(x, p, kinds, pos, rot, geo, reach, bank, h):
     asked through :func:`_crease_ask`, which answers a farther one without its exact distance:
     the same moves. Asking every link's mesh in full for each particle lying on a table took
     13 of the 16 ms of the contact stage on Newton's shirt beside the FR3."""
-    for _ in range(_CREASE_PASSES):
+    for _ in range(CREASE_PASSES):
         moved = False
         for c in range(kinds.shape[0]):
             d, nx, ny, nz = _crease_ask(

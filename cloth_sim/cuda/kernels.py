@@ -26,7 +26,16 @@ from numba import cuda, float64
 
 # scalar-only numba functions of the CPU's sweep: a CUDA kernel calls them as they are (numba-cuda
 # compiles them for the device; its simulator calls the CPU's build)
-from ..contact.collider_kernels import CONTACT_TOLERANCE
+from ..contact.collider_kernels import (
+    CAPSULE,
+    CONTACT_TOLERANCE,
+    CREASE_PASSES,
+    CYLINDER,
+    PLANE,
+    SPHERE,
+    box_distance,
+    cylinder_distance,
+)
 from ..integrators.vbd import EPS_V
 from ..integrators.vbd_contact import press, slide, solve3
 from ..integrators.vbd_terms import spring_part
@@ -104,56 +113,140 @@ def bending_at(top, x, w, i):
     return bx, by, bz
 
 
-@cuda.jit(device=True, inline=True)
-def plane_distance(wor, w, c, x, y, z):
-    """World ``w``'s plane ``c``: its outward normal and the signed distance of ``(x, y, z)``
-    from it, in the CPU's arithmetic (:func:`cloth_sim.contact.collider_kernels.sdf`)."""
-    nx, ny, nz = wor.planes[w, c, 0], wor.planes[w, c, 1], wor.planes[w, c, 2]
-    dx, dy, dz = x - wor.planes[w, c, 3], y - wor.planes[w, c, 4], z - wor.planes[w, c, 5]
-    return nx, ny, nz, nx * dx + ny * dy + nz * dz
+@cuda.jit(device=True)
+def collider_at(wor, w, c, x, y, z):
+    """World ``w``'s static collider ``c``: the outward unit normal and the signed distance of
+    ``(x, y, z)`` from it, in the CPU's arithmetic (:func:`cloth_sim.contact.collider_kernels.sdf`:
+    the same operations in the same order, here on the worlds' arrays, which the CPU's function
+    cannot take on numba-cuda's simulator; a box's and a cylinder's in their own frame by the
+    CPU's own scalar functions). A plane, a sphere, a capsule, a box or a cylinder."""
+    kind = wor.ckind[w, c]
+    dx, dy, dz = x - wor.cpos[w, c, 0], y - wor.cpos[w, c, 1], z - wor.cpos[w, c, 2]
+    R = wor.crot
+    g0, g1, g2, g3 = wor.cgeo[w, c, 0], wor.cgeo[w, c, 1], wor.cgeo[w, c, 2], wor.cgeo[w, c, 3]
+    if kind == PLANE or kind == CAPSULE:  # the plane's normal, the capsule's half axis
+        ax = R[w, c, 0, 0] * g0 + R[w, c, 0, 1] * g1 + R[w, c, 0, 2] * g2
+        ay = R[w, c, 1, 0] * g0 + R[w, c, 1, 1] * g1 + R[w, c, 1, 2] * g2
+        az = R[w, c, 2, 0] * g0 + R[w, c, 2, 1] * g1 + R[w, c, 2, 2] * g2
+        if kind == PLANE:
+            return ax, ay, az, ax * dx + ay * dy + az * dz
+        hh = ax * ax + ay * ay + az * az
+        s = 0.0
+        if hh > 0.0:
+            s = (dx * ax + dy * ay + dz * az) / hh
+            s = min(1.0, max(-1.0, s))
+        ex, ey, ez = dx - s * ax, dy - s * ay, dz - s * az
+        r = math.sqrt(ex * ex + ey * ey + ez * ez)
+        if r < 1e-300:  # on the axis: any perpendicular direction
+            if abs(ax) < 0.9 * math.sqrt(hh) or hh == 0.0:
+                px, py, pz = 0.0, az, -ay
+            else:
+                px, py, pz = -az, 0.0, ax
+            u = math.sqrt(px * px + py * py + pz * pz)
+            if u == 0.0:
+                return 0.0, 0.0, 1.0, -g3
+            return px / u, py / u, pz / u, -g3
+        return ex / r, ey / r, ez / r, r - g3
+    if kind == SPHERE:
+        r = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if r < 1e-300:
+            return 0.0, 0.0, 1.0, -g0
+        return dx / r, dy / r, dz / r, r - g0
+    # a box or a cylinder: in its own frame
+    qx = R[w, c, 0, 0] * dx + R[w, c, 1, 0] * dy + R[w, c, 2, 0] * dz
+    qy = R[w, c, 0, 1] * dx + R[w, c, 1, 1] * dy + R[w, c, 2, 1] * dz
+    qz = R[w, c, 0, 2] * dx + R[w, c, 1, 2] * dy + R[w, c, 2, 2] * dz
+    if kind == CYLINDER:
+        d, lx, ly, lz = cylinder_distance(g0, g1, qx, qy, qz)
+    else:
+        d, lx, ly, lz = box_distance(g0, g1, g2, qx, qy, qz)
+    nx = R[w, c, 0, 0] * lx + R[w, c, 0, 1] * ly + R[w, c, 0, 2] * lz
+    ny = R[w, c, 1, 0] * lx + R[w, c, 1, 1] * ly + R[w, c, 1, 2] * lz
+    nz = R[w, c, 2, 0] * lx + R[w, c, 2, 1] * ly + R[w, c, 2, 2] * lz
+    return nx, ny, nz, d
 
 
-@cuda.jit(device=True, inline=True)
-def planes_stage(wor, w, sx, sy, sz, px, py, pz, ux, uy, uz, continuous):
-    """The contact stage after a step for one free particle and world ``w``'s static planes, in
-    order (:func:`cloth_sim.contact.collider_kernels.resolve_contacts` for a plane): the path from
-    the step's start ``s`` to its end ``p`` marched to the thickness's skin (``continuous``: after
-    a method that does not keep paths off the colliders itself), the end projected out of the skin
-    with friction on the step's motion, and an approaching normal velocity removed, the tangential
-    one shrunk by μ times what was removed (static friction: removed). Returns the end and the
-    velocity."""
+@cuda.jit(device=True)
+def carried_at(wor, w, c, x, y, z):
+    """Where the point ``(x, y, z)`` attached to collider ``c`` was at the step's start: for a
+    static collider the point itself, to rounding, in the CPU's arithmetic
+    (:func:`cloth_sim.contact.collider_kernels.carried` with the pose unchanged), so that the
+    stage below starts from the CPU's numbers."""
+    R = wor.crot
+    dx, dy, dz = x - wor.cpos[w, c, 0], y - wor.cpos[w, c, 1], z - wor.cpos[w, c, 2]
+    lx = R[w, c, 0, 0] * dx + R[w, c, 1, 0] * dy + R[w, c, 2, 0] * dz
+    ly = R[w, c, 0, 1] * dx + R[w, c, 1, 1] * dy + R[w, c, 2, 1] * dz
+    lz = R[w, c, 0, 2] * dx + R[w, c, 1, 2] * dy + R[w, c, 2, 2] * dz
+    return (
+        wor.cpos[w, c, 0] + R[w, c, 0, 0] * lx + R[w, c, 0, 1] * ly + R[w, c, 0, 2] * lz,
+        wor.cpos[w, c, 1] + R[w, c, 1, 0] * lx + R[w, c, 1, 1] * ly + R[w, c, 1, 2] * lz,
+        wor.cpos[w, c, 2] + R[w, c, 2, 0] * lx + R[w, c, 2, 1] * ly + R[w, c, 2, 2] * lz,
+    )
+
+
+@cuda.jit(device=True)
+def colliders_stage(wor, w, start, end, velocity, continuous, dt):
+    """The contact stage after a step of ``dt`` for one free particle and world ``w``'s static
+    colliders, in order, as the CPU's (:func:`cloth_sim.contact.collider_kernels.resolve_contacts`
+    for a collider that does not move): the path from the step's ``start`` to its ``end`` marched
+    to the thickness's skin (``continuous``: after a method that does not keep paths off the
+    colliders itself; a start on the skin whose end lies past the solid's middle stays at the
+    start), the end projected out of the skin with friction on the step's motion, an approaching
+    normal velocity removed and the tangential one shrunk by μ times what was removed (static
+    friction: removed); then, touching one of several colliders, :func:`crease_at`. Points and
+    the velocity are three numbers; returns the end and the velocity."""
     h = wor.tau[w]
-    for c in range(wor.nplanes[w]):
-        mu = wor.pmu[w, c]
-        if not continuous:
-            _, _, _, d = plane_distance(wor, w, c, px, py, pz)
+    px, py, pz = end
+    vx, vy, vz = velocity
+    touching = False
+    for c in range(wor.ncol[w]):
+        mu = wor.cmu[w, c]
+        if not continuous and wor.ckind[w, c] == PLANE:
+            # a half-space after a method that kept the path off it: only within its edge
+            _, _, _, d = collider_at(wor, w, c, px, py, pz)
             if d >= h * (1.0 + CONTACT_TOLERANCE):
                 continue
+        sx, sy, sz = carried_at(wor, w, c, start[0], start[1], start[2])
+        cx, cy, cz = carried_at(wor, w, c, px, py, pz)
+        ux, uy, uz = px - cx, py - cy, pz - cz  # the collider's motion under the end: rounding
+        held = False  # the step's motion undone
+        known = False  # the distance and normal at the end asked already
+        nx = ny = nz = d = 0.0
         if continuous:
-            _, _, _, d0 = plane_distance(wor, w, c, sx, sy, sz)
-            d0 -= h
+            mx, my, mz, r0 = collider_at(wor, w, c, sx, sy, sz)
+            d0 = r0 - h
             ex, ey, ez = px - sx, py - sy, pz - sz
             length = math.sqrt(ex * ex + ey * ey + ez * ez)
-            if d0 > CONTACT_TOLERANCE * h and length > d0:
+            if d0 <= CONTACT_TOLERANCE * h:
+                fx, fy, fz, de = collider_at(wor, w, c, px, py, pz)
+                known = True
+                nx, ny, nz, d = fx, fy, fz, de
+                if fx * mx + fy * my + fz * mz < 0.0:
+                    px, py, pz = sx, sy, sz
+                    held = True
+                    nx, ny, nz, d = mx, my, mz, r0
+            elif length > d0:
                 t = 0.0
                 hit = False
                 for _ in range(MARCH_STEPS):
-                    _, _, _, d = plane_distance(wor, w, c, sx + t * ex, sy + t * ey, sz + t * ez)
-                    d -= h
-                    if d <= 1e-3 * h:
+                    nx, ny, nz, d = collider_at(wor, w, c, sx + t * ex, sy + t * ey, sz + t * ez)
+                    if d - h <= 1e-3 * h:
                         hit = True
+                        known = True
                         break
-                    t += d / length
+                    t += (d - h) / length
                     if t >= 1.0:
                         break
                 if not hit and t < 1.0:
                     hit = True
                 if hit:
                     px, py, pz = sx + t * ex, sy + t * ey, sz + t * ez
-        nx, ny, nz, d = plane_distance(wor, w, c, px, py, pz)
+        if not known:
+            nx, ny, nz, d = collider_at(wor, w, c, px, py, pz)
         if d >= h * (1.0 + CONTACT_TOLERANCE):
             continue
-        stuck = False
+        touching = True
+        stuck = held
         if d < h:
             depth = h - d
             px, py, pz = px + depth * nx, py + depth * ny, pz + depth * nz
@@ -162,20 +255,63 @@ def planes_stage(wor, w, sx, sy, sz, px, py, pz, ux, uy, uz, continuous):
             tx, ty, tz = rx - rn * nx, ry - rn * ny, rz - rn * nz
             tl = math.sqrt(tx * tx + ty * ty + tz * tz)
             budget = mu * depth
-            stuck = tl <= budget
+            stuck = stuck or tl <= budget
             if tl > 0.0:
                 f = 1.0 if stuck else budget / tl
                 px, py, pz = px - f * tx, py - f * ty, pz - f * tz
-        vn = ux * nx + uy * ny + uz * nz
+        wx, wy, wz = ux / dt, uy / dt, uz / dt
+        rx, ry, rz = vx - wx, vy - wy, vz - wz
+        vn = rx * nx + ry * ny + rz * nz
         if vn < 0.0 or stuck:
-            tx, ty, tz = ux - vn * nx, uy - vn * ny, uz - vn * nz
+            tx, ty, tz = rx - vn * nx, ry - vn * ny, rz - vn * nz
             tl = math.sqrt(tx * tx + ty * ty + tz * tz)
             keep = 0.0
             if tl > 0.0 and not stuck:
                 keep = max(0.0, 1.0 - mu * (-vn) / tl)
             vn = max(vn, 0.0)
-            ux, uy, uz = vn * nx + keep * tx, vn * ny + keep * ty, vn * nz + keep * tz
-    return px, py, pz, ux, uy, uz
+            vx, vy, vz = (
+                wx + vn * nx + keep * tx,
+                wy + vn * ny + keep * ty,
+                wz + vn * nz + keep * tz,
+            )
+    if touching and wor.ncol[w] > 1:
+        px, py, pz = crease_at(wor, w, px, py, pz, h)
+    return px, py, pz, vx, vy, vz
+
+
+@cuda.jit(device=True)
+def crease_at(wor, w, px, py, pz, h):
+    """The CPU's :func:`cloth_sim.contact.collider_kernels.crease` for one particle at ``p``
+    among world ``w``'s colliders: the projections repeated, normal only, until it is within none
+    (at most ``CREASE_PASSES``), and unsettled inside a solid, moved onto the seam with the
+    collider facing it. The CPU answers a collider beyond its reach without its exact distance;
+    every decision compares the distance with at most ``h·(1 + 1e-6)``, so asking it exactly
+    makes the same moves."""
+    for _ in range(CREASE_PASSES):
+        moved = False
+        for c in range(wor.ncol[w]):
+            nx, ny, nz, d = collider_at(wor, w, c, px, py, pz)
+            if d < h * (1.0 - 1e-6):
+                px, py, pz = px + (h - d) * nx, py + (h - d) * ny, pz + (h - d) * nz
+                moved = True
+        if not moved:
+            return px, py, pz
+    d1 = n1x = n1y = n1z = 0.0  # the deepest solid's
+    for c in range(wor.ncol[w]):
+        nx, ny, nz, d = collider_at(wor, w, c, px, py, pz)
+        if c == 0 or d < d1:
+            d1, n1x, n1y, n1z = d, nx, ny, nz
+    if d1 >= 0.0:
+        return px, py, pz
+    d2 = math.inf
+    for c in range(wor.ncol[w]):
+        nx, ny, nz, d = collider_at(wor, w, c, px, py, pz)
+        if d > d1 and d < h * (1.0 + 1e-6) and nx * n1x + ny * n1y + nz * n1z < -0.5:
+            d2 = min(d2, d)
+    if d2 < math.inf:
+        move = min(0.5 * (d2 - d1), h - d1)
+        px, py, pz = px + move * n1x, py + move * n1y, pz + move * n1z
+    return px, py, pz
 
 
 # --------------------------------------------------------------------------- one vertex's work
@@ -215,8 +351,10 @@ def explicit_at(top, wor, x, v, xo, vo, h, w, i):
         uy += (fy + by) * s
         uz += (fz + bz) * s
     px, py, pz = xi + ux * h, yi + uy * h, zi + uz * h
-    if wor.free[w, i] and wor.nplanes[w]:
-        px, py, pz, ux, uy, uz = planes_stage(wor, w, xi, yi, zi, px, py, pz, ux, uy, uz, True)
+    if wor.free[w, i] and wor.ncol[w]:
+        px, py, pz, ux, uy, uz = colliders_stage(
+            wor, w, (xi, yi, zi), (px, py, pz), (ux, uy, uz), True, h
+        )
     vo[w, i, 0], vo[w, i, 1], vo[w, i, 2] = ux, uy, uz
     xo[w, i, 0], xo[w, i, 1], xo[w, i, 2] = px, py, pz
 
@@ -234,11 +372,11 @@ def copy_back_at(it, w, i):
 def start_at(wor, it, bdf2, w, i):
     """The substep's start ``(sx, sv) ← (x, v)`` (kept under the ``bdf2`` scheme only) and
     ``x^t``, which the initial guess reads (its normals included): ``x`` under backward Euler;
-    under BDF2 (``bdf2``, a history, no planes: as the CPU's ``VBD._substep``) ``x̂ = (4x −
+    under BDF2 (``bdf2``, a history, no colliders: as the CPU's ``VBD._substep``) ``x̂ = (4x −
     px)/3`` with ``v ← (4v − pv)/3`` on a free vertex, and a kinematic one's ``v ← 1.5 v`` (its
     step of ``2h/3`` moves it by ``h v``).
     ``bdf[w]`` says which (every thread writes the same)."""
-    bdf = bdf2 and it.past[w] != 0 and wor.nplanes[w] == 0
+    bdf = bdf2 and it.past[w] != 0 and wor.ncol[w] == 0
     free = wor.free[w, i]
     for d in range(3):
         xi = it.x[w, i, d]
@@ -352,18 +490,18 @@ def newton_at(top, wor, it, h, w, i):
     tau = wor.tau[w]
     kc = wor.kc[w]
     eps = EPS_V * h
-    for c in range(wor.nplanes[w]):
-        nx, ny, nz, d = plane_distance(wor, w, c, xi, yi, zi)
+    for c in range(wor.ncol[w]):
+        nx, ny, nz, d = collider_at(wor, w, c, xi, yi, zi)
         p = tau - d
         if p <= 0.0:
             continue
         # the penalty ½ kc (τ − d)², and IPC's lagged friction on the vertex's motion over the
-        # step (the plane does not move), as the CPU's colliders_at
+        # step (the collider does not move), as the CPU's colliders_at
         lam = kc * p
         f0, f1, f2, h0, h1, h2, h3, h4, h5 = press(
             lam, kc, (nx, ny, nz), (f0, f1, f2, h0, h1, h2, h3, h4, h5)
         )
-        mu = wor.pmu[w, c]
+        mu = wor.cmu[w, c]
         if mu <= 0.0:
             continue
         rn = mx * nx + my * ny + mz * nz
@@ -376,10 +514,10 @@ def newton_at(top, wor, it, h, w, i):
         )
     it.stepped[w, i] = f0 * f0 + f1 * f1 + f2 * f2
     sx, sy, sz = solve3(h0, h1, h2, h3, h4, h5, f0, f1, f2)
-    for c in range(wor.nplanes[w]):
-        # a plane not yet pressed is not in the Hessian: the step stops at its onset (the CPU's
-        # onset)
-        nx, ny, nz, d = plane_distance(wor, w, c, xi, yi, zi)
+    for c in range(wor.ncol[w]):
+        # a collider not yet pressed is not in the Hessian: the step stops at its onset (the
+        # CPU's onset)
+        nx, ny, nz, d = collider_at(wor, w, c, xi, yi, zi)
         if d < tau:
             continue
         over = (tau - d) - (nx * sx + ny * sy + nz * sz)
@@ -424,11 +562,12 @@ def finish_at(wor, it, h, bdf2, w, i):
             it.px[w, i, d] = it.sx[w, i, d]
             it.pv[w, i, d] = it.sv[w, i, d]
     it.past[w] = 1 if bdf2 else 0
-    if free and wor.nplanes[w]:  # the contact stage after the step, as on the CPU
-        px, py, pz, ux, uy, uz = planes_stage(
-            wor, w, it.xt[w, i, 0], it.xt[w, i, 1], it.xt[w, i, 2],
-            it.x[w, i, 0], it.x[w, i, 1], it.x[w, i, 2],
-            it.v[w, i, 0], it.v[w, i, 1], it.v[w, i, 2], False,
+    if free and wor.ncol[w]:  # the contact stage after the step, as on the CPU
+        px, py, pz, ux, uy, uz = colliders_stage(
+            wor, w,
+            (it.xt[w, i, 0], it.xt[w, i, 1], it.xt[w, i, 2]),
+            (it.x[w, i, 0], it.x[w, i, 1], it.x[w, i, 2]),
+            (it.v[w, i, 0], it.v[w, i, 1], it.v[w, i, 2]), False, h,
         )  # fmt: skip
         it.x[w, i, 0], it.x[w, i, 1], it.x[w, i, 2] = px, py, pz
         it.v[w, i, 0], it.v[w, i, 1], it.v[w, i, 2] = ux, uy, uz

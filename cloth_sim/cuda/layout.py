@@ -7,9 +7,10 @@ host with numpy and copied to the device once.
   (no two vertices of a colour share a spring or a bending stencil).
 * :class:`Worlds`, one row a world: masses, which vertices are free, gravity, wind, drag and each
   family's stiffness and damping where a world overrides the model's (``−1``: the model's own);
-  its static planes (``planes[w, c]``: the outward normal and a point of the plane, as the CPU's
-  packed colliders give them; ``pmu`` their friction, ``nplanes`` how many), the thickness ``tau``
-  the cloth keeps from them and ``vbd``'s contact stiffness ``kc``.
+  its static colliders as the CPU's packed colliders give them (``ckind[w, c]`` the shape's code,
+  ``cpos``, ``crot`` its position and rotation, ``cgeo`` its four numbers, ``cmu`` its friction,
+  ``ncol`` how many), the thickness ``tau`` the cloth keeps from them and ``vbd``'s contact
+  stiffness ``kc``.
 * :class:`Iterate`, one ``(worlds, n, 3)`` array a world's positions, velocities and the step's
   scratch: the step's start ``xt``, the inertial target ``y``, the iterate before the sweep ``xs``,
   the Chebyshev history ``prev2``, the last step's acceleration ``aprev``, and each vertex's
@@ -56,9 +57,12 @@ class Worlds(NamedTuple):
     drag: np.ndarray
     kfam: np.ndarray
     cfam: np.ndarray
-    planes: np.ndarray
-    pmu: np.ndarray
-    nplanes: np.ndarray
+    ckind: np.ndarray
+    cpos: np.ndarray
+    crot: np.ndarray
+    cgeo: np.ndarray
+    cmu: np.ndarray
+    ncol: np.ndarray
     tau: np.ndarray
     kc: np.ndarray
 

@@ -16,7 +16,7 @@ from numba import cuda
 
 from .. import backends, integrators
 from ..backends import models_of
-from ..contact.collider_kernels import PLANE
+from ..contact.collider_kernels import MESH
 from ..model import ClothModel
 from ..parameters import SCHEMA
 from ..physics import stability as stab
@@ -62,7 +62,7 @@ class CudaSimulator:
             integrator,
             model,
             strain_limit=cpu_only.get("strain_limit") is not None,
-            colliders=any(c.kind != PLANE for c in colliders),
+            colliders=any(c.kind == MESH for c in colliders),
             self_collision=bool(cpu_only.get("self_collision")),
         )
         if refused is not None:
@@ -315,13 +315,14 @@ class CudaSimulator:
     # none is there
     @property
     def colliders(self) -> list:
-        """The static planes the cloth keeps ``thickness`` from (the device's only colliders)."""
+        """The static colliders the cloth keeps ``thickness`` from (planes, spheres, boxes,
+        capsules and cylinders on the device)."""
         return list(self._colliders)
 
     def set_collider_pose(self, i, position, orientation=None, teleport=False) -> None:
         raise ValueError(
-            "set_collider_pose: moving colliders are not on the cuda device yet (its planes are "
-            "static); device='cpu' moves them"
+            "set_collider_pose: moving colliders are not on the cuda device yet (its colliders "
+            "are static); device='cpu' moves them"
         )
 
     @property

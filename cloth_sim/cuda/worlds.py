@@ -10,8 +10,9 @@ counts them.
 The same methods and defaults as the CPU (:mod:`cloth_sim.integrators.explicit`'s symplectic Euler
 and :class:`~cloth_sim.integrators.vbd.VBD`'s general sweep: substeps chosen from the cloth, a
 relative residual against ``tolerance`` measured every ``check_every`` iterations, Chebyshev's
-``rho``). What stays on the CPU for now: colliders, self-contact, the strain limit, grippers and
-Choi & Ko's nonlinear pairs (:func:`cloth_sim.backends.refusal` names them).
+``rho``), with static colliders (planes, spheres, boxes, capsules, cylinders). What stays on the
+CPU for now: moving and mesh colliders, self-contact, the strain limit, grippers on links and Choi
+& Ko's nonlinear pairs (:func:`cloth_sim.backends.refusal` names them).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import numpy as np
 from numba import cuda
 
 from .. import backends
-from ..contact.collider_kernels import PLANE
+from ..contact.collider_kernels import MESH
 from ..contact.geometry import positive
 from ..integrators.vbd import VBD
 from ..integrators.vbd_kernels import substeps_needed
@@ -57,16 +58,19 @@ def _grid(total: int) -> tuple[int, int]:
     return (total + threads - 1) // threads, threads
 
 
-def plane_rows(colliders) -> np.ndarray:
-    """``(planes, 6)``: each static plane's outward normal and a point of it, as the CPU's packed
-    colliders give them (the normal its rotation times its geometry, the point its position), so
-    that the device measures the same distances; one row of zeros for none."""
-    rows = np.zeros((max(1, len(colliders)), 6))
-    for c, plane in enumerate(colliders):
-        R, g = plane.rotation, plane.geometry
-        rows[c, :3] = [R[k, 0] * g[0] + R[k, 1] * g[1] + R[k, 2] * g[2] for k in range(3)]
-        rows[c, 3:] = plane.position
-    return rows
+def collider_rows(colliders) -> tuple:
+    """``(kinds, positions, rotations, geometry, friction)`` of the static colliders, as the CPU's
+    packed colliders give them (:meth:`cloth_sim.contact.colliders.Contacts.packed`), so that the
+    device asks the same signed distances of the same numbers; one empty row for none."""
+    count = max(1, len(colliders))
+    kinds = np.zeros(count, np.int32)
+    pos, rot = np.zeros((count, 3)), np.zeros((count, 3, 3))
+    geo, mu = np.zeros((count, 4)), np.zeros(count)
+    for c, collider in enumerate(colliders):
+        kinds[c] = collider.kind
+        pos[c], rot[c] = collider.position, collider.rotation
+        geo[c], mu[c] = np.reshape(collider.geometry, 4), collider.friction
+    return kinds, pos, rot, geo, mu
 
 
 class CudaWorlds:
@@ -99,7 +103,7 @@ class CudaWorlds:
         first = models[0]
         colliders = list(colliders or ())
         refused = backends.refusal(
-            "cuda", integrator, first, colliders=any(c.kind != PLANE for c in colliders)
+            "cuda", integrator, first, colliders=any(c.kind == MESH for c in colliders)
         )
         if refused is not None:
             raise ValueError(refused[0])
@@ -148,7 +152,7 @@ class CudaWorlds:
         wind_v = np.zeros(3) if wind is None else np.asarray(wind, np.float64)
         if wind_v.shape != (3,) or not np.all(np.isfinite(wind_v)):
             raise ValueError(f"wind must be None or a finite 3-vector, got {wind!r}")
-        planes = plane_rows(colliders)
+        ckind, cpos, crot, cgeo, cmu = collider_rows(colliders)
         #: each world's model's own pins (what release leaves pinned)
         self._pinned = np.stack([np.asarray(m.pinned, bool) for m in models])
         self._host = Worlds(
@@ -160,9 +164,12 @@ class CudaWorlds:
             drag=np.full(worlds, SCHEMA["drag"].check(drag), real),
             kfam=np.full((worlds, fams), -1.0, real),
             cfam=np.full((worlds, fams), -1.0, real),
-            planes=np.tile(planes.astype(real), (worlds, 1, 1)),
-            pmu=np.tile(np.array([c.friction for c in colliders] or [0.0], real), (worlds, 1)),
-            nplanes=np.full(worlds, len(colliders), np.int32),
+            ckind=np.tile(ckind, (worlds, 1)),
+            cpos=np.tile(cpos.astype(real), (worlds, 1, 1)),
+            crot=np.tile(crot.astype(real), (worlds, 1, 1, 1)),
+            cgeo=np.tile(cgeo.astype(real), (worlds, 1, 1)),
+            cmu=np.tile(cmu.astype(real), (worlds, 1)),
+            ncol=np.full(worlds, len(colliders), np.int32),
             tau=np.full(worlds, positive("thickness", thickness), real),
             kc=np.full(
                 worlds, self.settings.contact_stiffness if self.settings is not None else 0.0, real
