@@ -1,7 +1,7 @@
-"""The physics of the cloth: spring and external forces (:mod:`.forces`), the stability analysis of
-a material and step (:mod:`.stability`), triangle meshes and their springs (:mod:`.mesh`), a
-material's bending (:mod:`.bending`) and the energy balance that tells a chattering run from a
-physical one (:mod:`.energy_balance`).
+"""The physics of the cloth: spring and external forces (:mod:`.forces`, their kernels
+:mod:`.force_kernels`), the stability analysis of a material and step (:mod:`.stability`),
+triangle meshes and their springs (:mod:`.mesh`), a material's bending (:mod:`.bending`) and the
+energy balance that tells a chattering run from a physical one (:mod:`.energy_balance`).
 
 What users call, imported when first used: ``read_mesh`` (a garment's triangles from a file),
 ``Bending``, ``EnergyBalance`` and the stability analysis (``analysis_for``). :mod:`.mesh` and
