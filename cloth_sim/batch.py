@@ -8,6 +8,7 @@ stepped in turn, with the same names, so code written against a batch runs on ei
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -40,7 +41,18 @@ class BatchSimulator:
         backends.check_device(device)
         self.device = "cpu"
         models = backends.models_of(models, worlds)
-        self.sims = [Simulator(m, integrator=integrator, dt=dt, **kwargs) for m in models]
+        colliders = kwargs.pop("colliders", None) or ()
+        # each world its own collider shapes: a world's moved collider is its own
+        self.sims = [
+            Simulator(
+                m,
+                integrator=integrator,
+                dt=dt,
+                colliders=[copy.copy(c) for c in colliders],
+                **kwargs,
+            )
+            for m in models
+        ]
         self.worlds = len(self.sims)
         self.dt = float(dt)
 
@@ -62,10 +74,20 @@ class BatchSimulator:
         return np.array([s.time for s in self.sims])
 
     def set(
-        self, worlds=None, *, gravity=None, wind=None, drag=None, stiffness=None, damping=None
+        self,
+        worlds=None,
+        *,
+        gravity=None,
+        wind=None,
+        drag=None,
+        stiffness=None,
+        damping=None,
+        colliders=None,
     ):
         """As :meth:`cloth_sim.cuda.worlds.CudaWorlds.set`: per-world ``gravity``, ``wind`` (a
-        3-vector or one a world), ``drag``, ``stiffness``/``damping`` ``{family: value}``."""
+        3-vector or one a world), ``drag``, ``stiffness``/``damping`` ``{family: value}``, and
+        ``colliders`` ``{index: (position, orientation)}`` (each world's collider there now, at
+        rest)."""
         ids = self._ids(worlds)
         for r, w in enumerate(ids):
             s = self.sims[w]
@@ -81,6 +103,8 @@ class BatchSimulator:
                 s.set_stiffness(fam, k)
             for fam, c in (damping or {}).items():
                 s.set_damping(fam, c)
+            for index, (position, orientation) in (colliders or {}).items():
+                s.set_collider_pose(index, position, orientation, teleport=True)
 
     def hold(self, worlds, indices, points=None) -> None:
         """Hold vertices ``indices`` of ``worlds`` where ``points`` puts them (``(p, 3)`` or one

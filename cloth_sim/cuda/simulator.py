@@ -9,6 +9,7 @@ run yet (:func:`cloth_sim.backends.refusal`), it raises ``ValueError`` naming th
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -319,11 +320,21 @@ class CudaSimulator:
         capsules and cylinders on the device)."""
         return list(self._colliders)
 
-    def set_collider_pose(self, i, position, orientation=None, teleport=False) -> None:
-        raise ValueError(
-            "set_collider_pose: moving colliders are not on the cuda device yet (its colliders "
-            "are static); device='cpu' moves them"
-        )
+    def set_collider_pose(
+        self, i, position, orientation=(1.0, 0.0, 0.0, 0.0), teleport: bool = False
+    ) -> None:
+        """With ``teleport``: collider ``i`` there now, at rest, as on the CPU. A swept move (the
+        collider's velocity over the next step) is not on the device yet: refused, nothing
+        moved."""
+        if not teleport:
+            raise ValueError(
+                "set_collider_pose: a collider's swept motion is not on the cuda device yet "
+                "(teleport=True puts it there at rest); device='cpu' sweeps it"
+            )
+        self._worlds.set([0], colliders={i: (position, orientation)})
+        shape = copy.copy(self._colliders[i])
+        shape.set_pose(position, orientation)
+        self._colliders[i] = shape
 
     @property
     def robots(self) -> dict:

@@ -17,6 +17,7 @@ CPU for now: moving and mesh colliders, self-contact, the strain limit, grippers
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numba
@@ -102,6 +103,8 @@ class CudaWorlds:
         same_topology(models)
         first = models[0]
         colliders = list(colliders or ())
+        #: the static colliders, as built (their shapes say what a pose means: :meth:`set`)
+        self.colliders = colliders
         refused = backends.refusal(
             "cuda", integrator, first, colliders=any(c.kind == MESH for c in colliders)
         )
@@ -218,12 +221,22 @@ class CudaWorlds:
         return backends.world_ids(worlds, self.worlds)
 
     def set(
-        self, worlds=None, *, gravity=None, wind=None, drag=None, stiffness=None, damping=None
+        self,
+        worlds=None,
+        *,
+        gravity=None,
+        wind=None,
+        drag=None,
+        stiffness=None,
+        damping=None,
+        colliders=None,
     ):
         """Per-world parameters for ``worlds`` (indices; ``None``: all): ``gravity`` and ``wind``
-        (a 3-vector, or one a world), ``drag``, and ``stiffness`` / ``damping`` as ``{family:
-        value}`` (N/m, N·s/m; every spring of the family). Everything is checked before anything
-        changes."""
+        (a 3-vector, or one a world), ``drag``, ``stiffness`` / ``damping`` as ``{family:
+        value}`` (N/m, N·s/m; every spring of the family), and ``colliders`` as ``{index:
+        (position, orientation)}``: collider ``index`` there in those worlds now, at rest (the
+        CPU's ``set_collider_pose(..., teleport=True)``; a pose means what it means for the shape,
+        :mod:`cloth_sim.contact.colliders`). Everything is checked before anything changes."""
         ids = self._ids(worlds)
         h = self._host
         new = {name: getattr(h, name).copy() for name in Worlds._fields}
@@ -259,8 +272,28 @@ class CudaWorlds:
                         f"{name}[{fam!r}] must be a finite number >= 0, got {value!r}"
                     )
                 new[table][ids, self.families.index(fam)] = v
+        for index, pose in (colliders or {}).items():
+            if not (isinstance(index, (int, np.integer)) and 0 <= index < len(self.colliders)):
+                raise ValueError(
+                    f"colliders: index {index!r} must lie in [0, {len(self.colliders) - 1}]"
+                    if self.colliders
+                    else f"colliders: index {index!r}, but these worlds have no collider"
+                )
+            try:
+                position, orientation = pose
+            except (TypeError, ValueError):
+                raise ValueError(
+                    f"colliders[{index}] must be (position, orientation), got {pose!r}"
+                ) from None
+            shape = copy.copy(self.colliders[index])
+            try:
+                shape.set_pose(position, orientation)  # checked as the CPU checks it
+            except ValueError as e:
+                raise ValueError(f"colliders[{index}]: {e}") from None
+            new["cpos"][ids, index] = shape.position
+            new["crot"][ids, index] = shape.rotation
         self._host = Worlds(**new)
-        for name in ("gravity", "wind", "windy", "drag", "kfam", "cfam"):
+        for name in ("gravity", "wind", "windy", "drag", "kfam", "cfam", "cpos", "crot"):
             getattr(self.wor, name).copy_to_device(getattr(self._host, name))
 
     def reset(self, worlds=None) -> None:

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from cloth_sim import BatchSimulator, ClothModel, Simulator, backends
+from cloth_sim.contact.colliders import Sphere
 
 
 def sheet():
@@ -113,3 +114,25 @@ def test_a_cpu_batch_holds_and_releases_vertices():
     assert batch.held(1).tolist() == [0, 3]
     batch.step(20)
     assert batch.positions[1, corner, 2] < 0.05 - 1e-4
+
+
+def test_a_cpu_batch_puts_one_worlds_collider_elsewhere():
+    """``set(worlds, colliders={i: (position, orientation)})`` on the cpu is each named world's
+    ``set_collider_pose(i, ..., teleport=True)``: the other worlds, and the shapes the caller
+    gave, keep theirs (each world has its own copy of the shapes)."""
+    sphere = Sphere(center=(0.07, 0.07, -0.05), radius=0.06, friction=0.3)
+    m = ClothModel.grid(4, 4, 0.05, 0.01, stiffness=1e2, origin=(0, 0, 0.008))
+    kw = dict(integrator="symplectic_euler", dt=1e-3, thickness=0.005, colliders=[sphere])
+    b = BatchSimulator(m, worlds=2, **kw)
+    moved = ((0.02, 0.1, -0.04), (1.0, 0.0, 0.0, 0.0))
+    b.set([1], colliders={0: moved})
+    assert np.allclose(sphere.position, (0.07, 0.07, -0.05))  # the caller's shape: not moved
+    assert np.allclose(b.sims[0].colliders[0].position, (0.07, 0.07, -0.05))
+    b.step(60)
+    still, there = Simulator(m, **kw), Simulator(m, **kw)
+    there.set_collider_pose(0, *moved, teleport=True)
+    still.step(60)
+    there.step(60)
+    x = b.positions_host()
+    assert np.array_equal(x[0], still.positions) and np.array_equal(x[1], there.positions)
+    assert not np.array_equal(x[0], x[1])

@@ -477,3 +477,36 @@ def test_vbd_on_a_sphere_beside_a_plane_converged_is_the_cpus():
     assert np.max(np.abs(gpu.positions - cpu.positions)) < 1e-12
     skin = min(float(np.min(c.signed_distance(gpu.positions))) for c in colliders)
     assert skin == pytest.approx(0.005, abs=1e-9)
+
+
+def test_a_worlds_collider_put_elsewhere_is_the_cpus_teleported_collider():
+    """``BatchSimulator.set(worlds, colliders={i: pose})`` on cuda: the named world's sphere is
+    there at rest from the next step, as ``set_collider_pose(i, ..., teleport=True)`` puts it on
+    the CPU, and the other world keeps its own (the CPU's cloth to rounding in both); bad input
+    changes nothing; a swept move is refused."""
+    sphere = Sphere(center=(0.07, 0.07, -0.05), radius=0.06, friction=0.3)
+    m = ClothModel.grid(4, 4, 0.05, 0.01, stiffness=1e2, damping=0.05, origin=(0, 0, 0.008))
+    kw = dict(integrator="symplectic_euler", dt=1e-3, thickness=0.005, colliders=[sphere])
+    b = BatchSimulator(m, worlds=2, device="cuda", precision="float64", **kw)
+    moved = ((0.02, 0.1, -0.04), (0.96, 0.28, 0.0, 0.0))
+    with pytest.raises(ValueError, match=r"colliders: index 1 must lie in \[0, 0\]"):
+        b.set([1], colliders={1: moved})
+    with pytest.raises(ValueError, match=r"colliders\[0\] must be \(position, orientation\)"):
+        b.set([1], colliders={0: (0.0, 0.1, 0.2)})
+    with pytest.raises(ValueError, match=r"colliders\[0\]: position must be 3 finite numbers"):
+        b.set([1], colliders={0: ((0.0, np.nan, 0.0), (1.0, 0.0, 0.0, 0.0))})
+    b.set([1], colliders={0: moved})
+    b.step(120)
+    still, there = Simulator(m, **kw), Simulator(m, **kw)
+    there.set_collider_pose(0, *moved, teleport=True)
+    still.step(120)
+    there.step(120)
+    x = b.positions_host()
+    assert np.max(np.abs(x[0] - still.positions)) < 1e-15
+    assert np.max(np.abs(x[1] - there.positions)) < 1e-15
+    assert np.max(np.abs(there.positions - still.positions)) > 1e-3  # it did move the sphere
+    one = Simulator(m, device="cuda", precision="float64", **kw)
+    with pytest.raises(ValueError, match=r"swept motion is not on the cuda device yet"):
+        one.set_collider_pose(0, (0.0, 0.0, 0.0))
+    one.set_collider_pose(0, *moved, teleport=True)
+    assert np.allclose(one.colliders[0].position, moved[0])
