@@ -25,7 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import backends, integrators
-from .constraints.grippers import Grips, check_pose
+from .constraints.grippers import Grips, check_box, check_grasp, check_pose
 from .constraints.strain_limit import DEFAULT_STRAIN_LIMIT_PASSES, StrainLimit
 from .contact.colliders import Contacts
 from .contact.geometry import positive
@@ -646,6 +646,7 @@ class Simulator:
         a bad point, radius or link, or no particle in reach raises ``ValueError`` and changes
         nothing."""
         name = self._grips.new_name(name)
+        point, radius = check_grasp(point, radius)
         frame = None
         if link is not None:
             try:
@@ -654,7 +655,6 @@ class Simulator:
                 raise ValueError(f"link must be a (robot, link) pair, got {link!r}") from None
             frame = self._robots.link_pose(robot, link_name)
         idx = Grips.within(name, self.state.x, self.model.pinned, point, radius)
-        point = np.asarray(point, dtype=np.float64)
         if frame is None:
             return self._hold(name, idx, point)
         held = self._hold(name, idx, frame[0], frame[1])
@@ -667,8 +667,8 @@ class Simulator:
         orientation; returns their indices. Errors as :meth:`grasp`, and a box with ``lo > hi``
         on an axis."""
         name = self._grips.new_name(name)
+        lo, hi = check_box(lo, hi)
         idx = Grips.inside(name, self.state.x, self.model.pinned, lo, hi)
-        lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
         return self._hold(name, idx, 0.5 * (lo + hi))
 
     def _hold(self, name: str, idx: np.ndarray, point: np.ndarray, orientation=None) -> np.ndarray:

@@ -105,9 +105,8 @@ class Grips:
 
     @staticmethod
     def within(name: str, x: np.ndarray, pinned: np.ndarray, point, radius) -> np.ndarray:
-        """The free particles of ``x`` within ``radius`` of ``point`` (``ValueError`` on a bad
-        point or radius, or when there is none, naming the nearest's distance)."""
-        point, radius = check_grasp(point, radius)
+        """The free particles of ``x`` within ``radius`` of ``point`` (checked by
+        :func:`check_grasp`); ``ValueError`` when there is none, naming the nearest's distance."""
         d = np.linalg.norm(x - point, axis=1)
         idx = np.flatnonzero((d <= radius) & ~pinned)
         if len(idx) == 0:
@@ -120,9 +119,8 @@ class Grips:
 
     @staticmethod
     def inside(name: str, x: np.ndarray, pinned: np.ndarray, lo, hi) -> np.ndarray:
-        """The free particles of ``x`` inside the axis-aligned box ``[lo, hi]`` (``ValueError`` on
-        a bad box or when there is none)."""
-        lo, hi = check_box(lo, hi)
+        """The free particles of ``x`` inside the axis-aligned box ``[lo, hi]`` (checked by
+        :func:`check_box`); ``ValueError`` when there is none."""
         idx = np.flatnonzero(np.all((x >= lo) & (x <= hi), axis=1) & ~pinned)
         if len(idx) == 0:
             raise ValueError(
