@@ -14,6 +14,7 @@ import math
 import numpy as np
 
 from . import backends
+from .parameters import SCHEMA
 from .simulator import Simulator
 
 
@@ -87,24 +88,70 @@ class BatchSimulator:
         """As :meth:`cloth_sim.cuda.worlds.CudaWorlds.set`: per-world ``gravity``, ``wind`` (a
         3-vector or one a world), ``drag``, ``stiffness``/``damping`` ``{family: value}``, and
         ``colliders`` ``{index: (position, orientation)}`` (each world's collider there now, at
-        rest)."""
+        rest). Everything is checked, for every world named, before anything changes: a bad
+        value raises ``ValueError`` naming it and leaves every world as it was."""
         ids = self._ids(worlds)
-        for r, w in enumerate(ids):
+        plan = [self._checked(s, r, len(ids), gravity, wind, drag, stiffness, damping, colliders)
+                for r, s in enumerate(self.sims[w] for w in ids)]  # fmt: skip
+        for w, (g, a, families, poses) in zip(ids, plan):
             s = self.sims[w]
-            if gravity is not None:
-                g = np.asarray(gravity, np.float64)
-                s.gravity = g[r] if g.ndim == 2 else g
-            if wind is not None:
-                a = np.asarray(wind, np.float64)
-                s.wind = a[r] if a.ndim == 2 else a
+            if g is not None:
+                s.gravity = g
+            if a is not None:
+                s.wind = a
             if drag is not None:
                 s.drag = drag
-            for fam, k in (stiffness or {}).items():
-                s.set_stiffness(fam, k)
-            for fam, c in (damping or {}).items():
-                s.set_damping(fam, c)
-            for index, (position, orientation) in (colliders or {}).items():
+            for what, fam, value in families:
+                (s.set_stiffness if what == "stiffness" else s.set_damping)(fam, value)
+            for index, (position, orientation) in poses:
                 s.set_collider_pose(index, position, orientation, teleport=True)
+
+    @staticmethod
+    def _checked(sim, row, count, gravity, wind, drag, stiffness, damping, colliders):
+        """:meth:`set`'s values for the ``row``-th of ``count`` worlds named, ``sim``, each checked
+        as the simulator's own setters check it (nothing is changed): ``(gravity, wind, [(what,
+        family, value)], [(collider index, (position, orientation))])``."""
+        vectors = []
+        for name, value in (("gravity", gravity), ("wind", wind)):
+            if value is None:
+                vectors.append(None)
+                continue
+            a = np.asarray(value, np.float64)
+            if a.shape not in ((3,), (count, 3)) or not np.all(np.isfinite(a)):
+                raise ValueError(
+                    f"{name} must be a finite 3-vector or one a world ({count}, 3), got {value!r}"
+                )
+            a = a[row] if a.ndim == 2 else a
+            vectors.append(SCHEMA["gravity"].check(a.tolist()) if name == "gravity" else a)
+        if drag is not None:
+            SCHEMA["drag"].check(drag)
+        families = []
+        for what, given in (("stiffness", stiffness), ("damping", damping)):
+            for fam, value in (given or {}).items():
+                sim.model.family_index(fam)  # an unknown family: the model's names
+                spec = SCHEMA.get(f"{what}.{fam}", SCHEMA[f"{what}.structural"])
+                families.append((what, fam, spec.check(value, field=f"{what}.{fam}")))
+        poses = []
+        shapes = sim.colliders
+        for index, pose in (colliders or {}).items():
+            if not (isinstance(index, (int, np.integer)) and 0 <= index < len(shapes)):
+                raise ValueError(
+                    f"colliders: index {index!r} must lie in [0, {len(shapes) - 1}]"
+                    if shapes
+                    else f"colliders: index {index!r}, but these worlds have no collider"
+                )
+            try:
+                position, orientation = pose
+            except (TypeError, ValueError):
+                raise ValueError(
+                    f"colliders[{index}] must be (position, orientation), got {pose!r}"
+                ) from None
+            try:
+                copy.copy(shapes[index]).set_pose(position, orientation)  # as the CPU checks it
+            except ValueError as e:
+                raise ValueError(f"colliders[{index}]: {e}") from None
+            poses.append((int(index), (position, orientation)))
+        return vectors[0], vectors[1], families, poses
 
     def hold(self, worlds, indices, points=None) -> None:
         """Hold vertices ``indices`` of ``worlds`` where ``points`` puts them (``(p, 3)`` or one

@@ -136,3 +136,37 @@ def test_a_cpu_batch_puts_one_worlds_collider_elsewhere():
     x = b.positions_host()
     assert np.array_equal(x[0], still.positions) and np.array_equal(x[1], there.positions)
     assert not np.array_equal(x[0], x[1])
+
+
+def test_a_cpu_batch_set_checks_everything_before_it_changes_a_world():
+    """``set`` on the cpu is atomic, as on cuda: a bad value for any world named (here the last
+    one's collider index, after good values for every world) raises naming it, and no world's
+    gravity, stiffness or collider changed; the good call then changes exactly those."""
+    sphere = Sphere(center=(0.07, 0.07, -0.05), radius=0.06, friction=0.3)
+    m = ClothModel.grid(4, 4, 0.05, 0.01, stiffness=1e2, origin=(0, 0, 0.008))
+    b = BatchSimulator(m, worlds=3, integrator="symplectic_euler", dt=1e-3, colliders=[sphere])
+    before = [(s.gravity, s.stiffness("structural"), s.colliders[0].position) for s in b.sims]
+    good = dict(
+        gravity=[(0.0, 0.0, -1.0), (0.0, 0.0, -2.0), (0.0, 0.0, -3.0)],
+        stiffness={"structural": 50.0},
+    )
+    bad = [
+        (dict(colliders={1: ((0, 0, 0), (1, 0, 0, 0))}), r"colliders: index 1 must lie in \[0, "),
+        (dict(colliders={0: ((0, 0, np.nan), (1, 0, 0, 0))}), r"colliders\[0\]: "),
+        (dict(colliders={0: (0, 0, 0)}), r"colliders\[0\] must be \(position, orientation\)"),
+        (dict(stiffness={"structural": 50.0, "warp": 1.0}), r"unknown spring family 'warp'"),
+        (dict(damping={"shear": -1.0}), r"damping\.shear"),
+        (dict(wind=[(0.0, 0.0, 1.0)] * 2), r"wind must be a finite 3-vector or one a world \(3,"),
+        (dict(drag=-1.0), r"drag"),
+        (dict(gravity=(0.0, 0.0, 1e4)), r"gravity"),
+    ]  # fmt: skip
+    for extra, match in bad:
+        with pytest.raises(ValueError, match=match):
+            b.set(None, **{**good, **extra})
+        for s, (g, k, c) in zip(b.sims, before):
+            assert np.array_equal(s.gravity, g) and np.array_equal(s.stiffness("structural"), k)
+            assert np.array_equal(s.colliders[0].position, c)
+    b.set(None, colliders={0: ((0.0, 0.1, -0.05), (1, 0, 0, 0))}, **good)
+    assert [s.gravity[2] for s in b.sims] == [-1.0, -2.0, -3.0]
+    assert all(np.all(s.stiffness("structural") == 50.0) for s in b.sims)
+    assert all(np.allclose(s.colliders[0].position, (0.0, 0.1, -0.05)) for s in b.sims)
