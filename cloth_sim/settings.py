@@ -402,7 +402,7 @@ def device_refusal(cfg: dict, model, scene: Scene) -> tuple[str, tuple[str, ...]
         cfg["integrator"],
         model,
         strain_limit=bool(cfg["strain_limit"]),
-        colliders=any(kind != "plane" for kind, _ in scene.colliders),
+        colliders=any(kind == "mesh" for kind, _ in scene.colliders),
         self_collision=cfg["self_collision"],
         grippers=bool(scene.grippers),
         robot=scene.robot is not None,

@@ -510,3 +510,25 @@ def test_a_worlds_collider_put_elsewhere_is_the_cpus_teleported_collider():
         one.set_collider_pose(0, (0.0, 0.0, 0.0))
     one.set_collider_pose(0, *moved, teleport=True)
     assert np.allclose(one.colliders[0].position, moved[0])
+
+
+def test_the_node_settings_take_a_scene_of_static_primitives_to_the_device():
+    """``settings.check`` (what the node starts with) accepts ``device=cuda`` for the scenes whose
+    colliders the device has (drape: a sphere and a floor; table: a box and a floor) and builds
+    them on it, and refuses a mesh collider naming it: it had refused every collider but a
+    plane, with a message saying spheres and boxes run there."""
+    from cloth_sim import settings
+    from cloth_sim.cuda.simulator import CudaSimulator
+    from cloth_sim.scene import load_scene
+
+    for name in ("drape", "table"):
+        scene = load_scene(name)
+        checked = settings.check(
+            scene, {"device": "cuda", "strain_limit": 0.0, "rows": 4, "cols": 4}
+        )
+        sim = settings.build(checked)
+        assert isinstance(sim, CudaSimulator) and len(sim.colliders) == len(scene.colliders)
+    scene = load_scene("drape")
+    scene.colliders.append(("mesh", {"file": "x.obj"}))
+    with pytest.raises(settings.Refusal, match=r"colliders: not on the cuda device yet"):
+        settings.check(scene, {"device": "cuda", "strain_limit": 0.0, "rows": 4, "cols": 4})
