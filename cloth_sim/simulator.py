@@ -102,6 +102,10 @@ class Simulator:
             what is missing where no CUDA device can run).
     """
 
+    #: whether :meth:`set_collider_pose` sweeps a collider over the next step (on a device that
+    #: cannot, it places it by teleport only)
+    sweeps_colliders = True
+
     def __new__(cls, *args, device: str = "cpu", **kwargs):
         if cls is Simulator and device != "cpu":  # another device's implementation
             return backends.implementation(device)(*args, **kwargs)

@@ -18,6 +18,7 @@ from numba import cuda
 from .. import backends, integrators
 from ..backends import models_of
 from ..contact.collider_kernels import MESH
+from ..contact.colliders import Collider
 from ..model import ClothModel
 from ..parameters import SCHEMA
 from ..physics import stability as stab
@@ -35,6 +36,9 @@ class CudaSimulator:
     (default) or ``"float64"``."""
 
     device = "cuda"
+    #: a collider's pose changes here by teleport only (:meth:`set_collider_pose`): its swept
+    #: motion over a step is not on the device yet
+    sweeps_colliders = False
 
     def __init__(
         self,
@@ -203,12 +207,18 @@ class CudaSimulator:
 
     def set_integrator(self, name: str, **options) -> None:
         """Switch method on the device; positions and velocities carry over."""
+        self._rebuild(name, options, self._colliders)
+        self._counters = dict(steps=0)
+
+    def _rebuild(self, method: str, options: dict, colliders: list) -> None:
+        """The worlds made again for ``method`` and ``colliders``, the state, time and material
+        carried over (a new method, a collider added or removed)."""
         x, v = self._copy()
         t = self.time
         old = self._worlds
         new = CudaWorlds(
             [self.model],
-            name,
+            method,
             self.dt,
             self._gravity,
             self._wind,
@@ -217,14 +227,14 @@ class CudaSimulator:
             old.precision,
             old.launch,
             old.block_threads,
-            self._colliders,
+            colliders,
             self.thickness,
         )
         self._worlds = new
+        self._colliders = colliders
         self._apply_families()
         self._worlds.write([0], x=x[None], v=v[None])
         self.set_time(t)
-        self._counters = dict(steps=0)
         self._host = None
 
     @property
@@ -335,6 +345,43 @@ class CudaSimulator:
         shape = copy.copy(self._colliders[i])
         shape.set_pose(position, orientation)
         self._colliders[i] = shape
+
+    def add_collider(self, collider) -> int:
+        """As :meth:`cloth_sim.Simulator.add_collider`, for the shapes the device has (a plane, a
+        sphere, a box, a capsule or a cylinder); it stands where it is added. A mesh, a shape of
+        another kind or a name in use raises ``ValueError`` and changes nothing."""
+        if not isinstance(collider, Collider):
+            raise ValueError(
+                f"a collider must be a cloth_sim.contact.colliders shape (Plane, Sphere, Box, "
+                f"Capsule, Cylinder, Mesh), got {type(collider).__name__}"
+            )
+        if collider.kind == MESH:
+            raise ValueError(
+                f"collider {collider.name!r}: a mesh collider is not on the cuda device yet "
+                "(static planes, spheres, boxes, capsules and cylinders are); device='cpu' has it"
+            )
+        if any(c.name == collider.name for c in self._colliders):
+            raise ValueError(
+                f"a collider named {collider.name!r} exists already; colliders: "
+                f"{', '.join(c.name for c in self._colliders)}"
+            )
+        self._rebuild(self.integrator, self._worlds.options, [*self._colliders, collider])
+        return len(self._colliders) - 1
+
+    def remove_collider(self, i: int):
+        """Remove collider ``i`` (the later ones move up by one); returns it. A bad index raises
+        ``ValueError``."""
+        n = len(self._colliders)
+        if isinstance(i, bool) or not isinstance(i, (int, np.integer)) or not -n <= i < n:
+            raise ValueError(
+                f"collider index must be an integer in [0, {n - 1}], got {i!r}"
+                if n
+                else "there are no colliders to remove"
+            )
+        kept = list(self._colliders)
+        gone = kept.pop(i)
+        self._rebuild(self.integrator, self._worlds.options, kept)
+        return gone
 
     @property
     def robots(self) -> dict:

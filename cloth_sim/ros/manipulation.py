@@ -75,8 +75,10 @@ class Manipulation:
             else:
                 p, q = sim.gripper_pose(name)
             q = _turn(q, w, dt)
-            if kind == "collider":
-                sim.set_collider_pose(index[name], p + v * dt, q)
+            if kind == "collider":  # (by teleport on a device that cannot sweep one)
+                sim.set_collider_pose(
+                    index[name], p + v * dt, q, teleport=not sim.sweeps_colliders
+                )
             else:
                 sim.set_gripper_pose(name, p + v * dt, q)
 

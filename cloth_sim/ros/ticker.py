@@ -56,7 +56,15 @@ class Stepper:
                     q = (1 - f) * q0 + f * q1
                     q /= np.linalg.norm(q)
                     if kind == "collider":
-                        sim.set_collider_pose(key, (1 - f) * p0 + f * p1, q)
+                        sweep = sim.sweeps_colliders
+                        if not sweep:
+                            self.manipulation.node.get_logger().warning(
+                                f"on the {sim.device} device a collider moved by its pose topic "
+                                "is placed at rest step by step (its swept motion is not on the "
+                                "device yet: friction does not drag what it carries)",
+                                once=True,
+                            )
+                        sim.set_collider_pose(key, (1 - f) * p0 + f * p1, q, teleport=not sweep)
                     else:  # pose_moves kept only grippers that hold; none is released mid-tick
                         sim.set_gripper_pose(key, (1 - f) * p0 + f * p1, q)
                 if f >= 1.0:

@@ -532,3 +532,52 @@ def test_the_node_settings_take_a_scene_of_static_primitives_to_the_device():
     scene.colliders.append(("mesh", {"file": "x.obj"}))
     with pytest.raises(settings.Refusal, match=r"colliders: not on the cuda device yet"):
         settings.check(scene, {"device": "cuda", "strain_limit": 0.0, "rows": 4, "cols": 4})
+
+
+def test_colliders_added_and_removed_on_the_device_are_the_cpus():
+    """``add_collider`` and ``remove_collider`` between steps, as the node's spawn and delete
+    services call them: the device's cloth is the CPU's to rounding after each (a sphere added
+    under the falling cloth at step 40, a box at 80, the sphere removed at 120, the box then at
+    index 0); a mesh, a name in use, a bad index and no collider are refused naming them, and
+    the cloth and its colliders are as they were."""
+    m = ClothModel.grid(4, 4, 0.05, 0.01, stiffness=1e2, damping=0.05, origin=(0, 0, 0.008))
+    kw = dict(integrator="symplectic_euler", dt=1e-3, thickness=0.005)
+    cpu = Simulator(m, **kw)
+    gpu = Simulator(m, device="cuda", precision="float64", **kw)
+    with pytest.raises(ValueError, match=r"there are no colliders to remove"):
+        gpu.remove_collider(0)
+
+    def both(call):
+        return [call(sim) for sim in (cpu, gpu)]
+
+    for sim in (cpu, gpu):
+        sim.step(40)
+    ball = dict(center=(0.07, 0.07, -0.03), radius=0.03, friction=0.3, name="ball")
+    assert both(lambda s: s.add_collider(Sphere(**ball))) == [0, 0]
+    for sim in (cpu, gpu):
+        sim.step(40)
+    block = dict(center=(0.0, 0.0, -0.06), half_extents=(0.2, 0.2, 0.01), friction=0.5)
+    assert both(lambda s: s.add_collider(Box(**block, name="block"))) == [1, 1]
+    x_before = gpu.positions.copy()
+    v = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    tri = Mesh((v, np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])), name="tet")
+    with pytest.raises(ValueError, match=r"a mesh collider is not on the cuda device yet"):
+        gpu.add_collider(tri)
+    with pytest.raises(ValueError, match=r"a collider named 'ball' exists already"):
+        gpu.add_collider(Sphere(**ball))
+    with pytest.raises(ValueError, match=r"a collider must be a cloth_sim.contact.colliders"):
+        gpu.add_collider("ball")
+    with pytest.raises(ValueError, match=r"collider index must be an integer in \[0, 1\]"):
+        gpu.remove_collider(2)
+    assert [c.name for c in gpu.colliders] == ["ball", "block"]
+    assert np.array_equal(gpu.positions, x_before)
+    for sim in (cpu, gpu):
+        sim.step(40)
+    assert np.max(np.abs(gpu.positions - cpu.positions)) < 1e-15
+    assert [c.name for c in both(lambda s: s.remove_collider(0))] == ["ball", "ball"]
+    assert [c.name for c in gpu.colliders] == ["block"]
+    for sim in (cpu, gpu):
+        sim.step(80)
+    assert np.max(np.abs(gpu.positions - cpu.positions)) < 1e-15
+    assert gpu.time == pytest.approx(cpu.time) and cpu.time == pytest.approx(0.2)
+    assert float(np.min(cpu.colliders[0].signed_distance(cpu.positions))) < 0.006  # on the box
