@@ -404,7 +404,7 @@ def device_refusal(cfg: dict, model, scene: Scene) -> tuple[str, tuple[str, ...]
         strain_limit=bool(cfg["strain_limit"]),
         colliders=any(kind == "mesh" for kind, _ in scene.colliders),
         self_collision=cfg["self_collision"],
-        grippers=bool(scene.grippers),
+        grippers=bool(scene.gripper_links),  # (a gripper moved by its pose runs there)
         robot=scene.robot is not None,
     )
     if refused is None:

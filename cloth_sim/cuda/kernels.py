@@ -729,6 +729,36 @@ def place(it, idx, points, worlds):
         it.aprev[w, i, d] = 0.0
 
 
+@cuda.jit
+def carry(it, idx, points, velocities, worlds):
+    """``x[w, idx[k]] ← points[r, k]`` and ``v ← velocities[r, k]`` for the listed worlds: held
+    vertices where their gripper puts them, moving with it (``x + h v`` over the next step)."""
+    t = cuda.grid(1)
+    p = idx.shape[0]
+    if t >= worlds.shape[0] * p:
+        return
+    r = t // p
+    k = t - r * p
+    w = worlds[r]
+    i = idx[k]
+    for d in range(3):
+        it.x[w, i, d] = points[r, k, d]
+        it.v[w, i, d] = velocities[r, k, d]
+
+
+@cuda.jit
+def restart(it, worlds):
+    """The listed worlds' vertices' last accelerations forgotten (the adaptive initial guess
+    starts again, as after the CPU's ``VBD.reset``)."""
+    t = cuda.grid(1)
+    n = it.x.shape[1]
+    if t < worlds.shape[0] * n:
+        r = t // n
+        i = t - r * n
+        for d in range(3):
+            it.aprev[worlds[r], i, d] = 0.0
+
+
 # --------------------------------------------------------------------------- a frame a launch
 @cuda.jit
 def frames_in_blocks(top, wor, it, cptr, run, out):

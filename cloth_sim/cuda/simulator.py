@@ -17,6 +17,7 @@ from numba import cuda
 
 from .. import backends, integrators
 from ..backends import models_of
+from ..constraints.grippers import Grips, check_box, check_grasp, check_pose
 from ..contact.collider_kernels import MESH
 from ..contact.colliders import Collider
 from ..model import ClothModel
@@ -103,6 +104,7 @@ class CudaSimulator:
         self._counters = dict(steps=0)
         self._forces = None
         self._analysis = None
+        self._grips = Grips()
 
     # ------------------------------------------------------------------ state
     def _copy(self):
@@ -166,6 +168,12 @@ class CudaSimulator:
         self._t_base, self._worlds.steps[0] = t, 0
 
     def reset(self) -> None:
+        """Back to the model's initial positions, at rest, at time 0; parameters are kept, every
+        gripper is released."""
+        if self._grips:
+            self._grips.held.clear()
+            self._worlds.release([0])
+            self._worlds.restart([0])
         self._worlds.reset([0])
         self._t_base = 0.0
         self._host = None
@@ -177,8 +185,15 @@ class CudaSimulator:
         return saved
 
     def restore_state(self, saved: State) -> None:
+        """As the CPU's: the saved positions, velocities and time; held vertices stay with their
+        grippers, at rest."""
         self._worlds.write([0], x=saved.x[None], v=saved.v[None])
         self.set_time(saved.time(self.dt))
+        if self._grips:
+            for g in self._grips.held.values():
+                self._worlds.place([0], g.indices, g.places(g.position, g.rotation))
+                g.moving, g.target = False, None
+            self._worlds.restart([0])
         self._host = None
 
     # ------------------------------------------------------------------ parameters
@@ -387,9 +402,145 @@ class CudaSimulator:
     def robots(self) -> dict:
         return {}
 
+    def add_robot(self, *args, **kwargs):
+        """Refused: a robot's links are not on the cuda device yet (``ValueError``, nothing
+        changed; the node's spawn_entity reports it)."""
+        raise ValueError(
+            "add_robot: a robot's links (moving mesh colliders) are not on the cuda device yet; "
+            "device='cpu' runs robots"
+        )
+
+    def remove_robot(self, name: str):
+        raise ValueError(f"unknown robot {name!r}; robots: none")
+
+    # ------------------------------------------------------------------ grippers
     @property
     def grippers(self) -> dict:
-        return {}
+        """``{name: indices}`` of the vertices each gripper holds (as the CPU's)."""
+        return {name: g.indices.copy() for name, g in self._grips.held.items()}
+
+    def gripper_link(self, name: str):
+        """None: a gripper here is moved by its pose (robots are not on the device)."""
+        self._grips.get(name)
+        return None
+
+    def grasp(self, name: str, point, radius: float, link=None) -> np.ndarray:
+        """As :meth:`cloth_sim.Simulator.grasp`: every free vertex within ``radius`` of ``point``
+        held by a gripper ``name`` there; on the device they leave the solve and move with it
+        (:meth:`set_gripper_pose`). A gripper bound to a robot's ``link`` is refused (robots are
+        not on the device yet), as are a name in use, a bad point or radius and no vertex in
+        reach: ``ValueError``, nothing changed."""
+        name = self._grips.new_name(name)
+        point, radius = check_grasp(point, radius)
+        if link is not None:
+            raise ValueError(
+                "grasp: a gripper bound to a robot's link is not on the cuda device yet (robots "
+                "are not); device='cpu' has it"
+            )
+        idx = Grips.within(name, self.positions, self._held_mask(), point, radius)
+        return self._hold(name, idx, point)
+
+    def grasp_box(self, name: str, lo, hi) -> np.ndarray:
+        """As :meth:`cloth_sim.Simulator.grasp_box`: every free vertex inside ``[lo, hi]``."""
+        name = self._grips.new_name(name)
+        lo, hi = check_box(lo, hi)
+        idx = Grips.inside(name, self.positions, self._held_mask(), lo, hi)
+        return self._hold(name, idx, 0.5 * (lo + hi))
+
+    def _held_mask(self) -> np.ndarray:
+        """The vertices the solve does not move: the model's pins and every held one."""
+        mask = np.zeros(self.model.n_particles, bool)
+        mask[self._worlds.held(0)] = True
+        return mask
+
+    def _hold(self, name: str, idx: np.ndarray, point: np.ndarray) -> np.ndarray:
+        """Gripper ``name`` at ``point`` holding ``idx`` where they are, at rest; the method
+        starts again around the new pins, as the CPU's is made anew."""
+        self._grips.add(name, idx, np.array(self.positions), point)
+        self._worlds.hold([0], idx)
+        self._worlds.restart([0])
+        self._host = None
+        return idx.copy()
+
+    def set_gripper_pose(
+        self, name: str, position, orientation=(1.0, 0.0, 0.0, 0.0), teleport: bool = False
+    ) -> None:
+        """As :meth:`cloth_sim.Simulator.set_gripper_pose`: reached over the next step (the held
+        vertices move with the velocity that takes them there, and end there exactly), or with
+        ``teleport`` there now, at rest. An unknown name or a bad pose raises ``ValueError``."""
+        g = self._grips.get(name)
+        pose = check_pose(position, orientation)
+        if not teleport:
+            g.target = pose
+            return
+        g.position, g.orientation, g.rotation = pose
+        g.target, g.goal, g.moving = None, None, False
+        self._worlds.place([0], g.indices, g.places(g.position, g.rotation))
+        self._host = None
+
+    def gripper_pose(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """``(position, orientation)`` of gripper ``name`` now."""
+        g = self._grips.get(name)
+        return g.position.copy(), g.orientation.copy()
+
+    def gripper_wrench(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """``(force, torque)`` the cloth's springs exert on the vertices gripper ``name`` holds,
+        at the end of the last step (the CPU's for ``vbd``, which evaluates them there; the
+        CPU's symplectic Euler reads them at the step's start), torque about the gripper's
+        position; world frame, from the state copied to the host."""
+        g = self._grips.get(name)
+        x, v = self._copy()
+        f = np.zeros_like(x)
+        term = self.forces.spring_term
+        if term is not None and term.active:
+            term.add_force(x, v, f)
+        fi = f[g.indices]
+        return fi.sum(axis=0), np.cross(x[g.indices] - g.position, fi).sum(axis=0)
+
+    def release(self, name: str) -> np.ndarray:
+        """Let go: the vertices of gripper ``name`` move freely again, with the velocity it gave
+        them over the last step; returns their indices."""
+        g = self._grips.get(name)
+        del self._grips.held[name]
+        self._worlds.release([0], g.indices)
+        self._worlds.restart([0])
+        self._host = None
+        return g.indices.copy()
+
+    def _moving(self) -> bool:
+        """Whether a gripper moves over the next step or moved over the last."""
+        return any(g.target is not None or g.moving for g in self._grips.held.values())
+
+    def _step_holding(self, n: int) -> None:
+        """``n`` steps with grippers that move: the first carries each moving gripper's vertices
+        to its target (velocity to it, then exactly there), and stops those of a gripper that
+        moved over the step before; the rest run as one."""
+        w, dt = self._worlds, self.dt
+        x = self.positions  # (the held vertices: where the last step put them)
+        moved = {}
+        for name, g in self._grips.held.items():
+            here = x[g.indices]
+            if g.target is not None:
+                g.goal = g.places(g.target[0], g.target[2])
+                moved[name] = (g.goal - here) / dt
+                w.carry([0], g.indices, here, moved[name])
+            elif g.moving:
+                w.carry([0], g.indices, here, np.zeros_like(here))
+        w.step(1)
+        for name, g in self._grips.held.items():
+            if name in moved:
+                w.carry([0], g.indices, g.goal, moved[name])
+            g.moving = g.target is not None
+            if g.target is not None:
+                g.position, g.orientation, g.rotation = g.target
+                g.target = None
+        if n > 1:
+            for g in self._grips.held.values():
+                if g.moving:
+                    here = g.goal
+                    w.carry([0], g.indices, here, np.zeros_like(here))
+                    g.moving = False
+            w.step(n - 1)
 
     @property
     def self_collision(self) -> bool:
@@ -451,7 +602,21 @@ class CudaSimulator:
         self._checkpoint[0].copy_to_device(it.x)
         self._checkpoint[1].copy_to_device(it.v)
         steps_before = int(w.steps[0])
-        w.step(n)
+        grips = {
+            name: (g.position, g.orientation, g.rotation, g.target, g.moving)
+            for name, g in self._grips.held.items()
+        }
+        if self.motion is not None:  # the script's gripper poses before each step, as the CPU
+            for _ in range(int(n)):
+                self.motion.drive(self, self.time, self.time + self.dt)
+                if self._moving():
+                    self._step_holding(1)
+                else:
+                    w.step(1)
+        elif n > 0 and self._moving():
+            self._step_holding(int(n))
+        else:
+            w.step(n)
         self._counters["steps"] += int(n)
         self._host = None
         x, v = self._copy()
@@ -463,6 +628,9 @@ class CudaSimulator:
         ):
             it.x.copy_to_device(self._checkpoint[0])
             it.v.copy_to_device(self._checkpoint[1])
+            for name, (p, q, r, target, moving) in grips.items():  # where they were
+                g = self._grips.held[name]
+                g.position, g.orientation, g.rotation, g.target, g.moving = p, q, r, target, moving
             w.forget()
             w.steps[0] = steps_before
             self._host = None

@@ -340,6 +340,34 @@ class CudaWorlds:
             )
         self._place(ids, idx, p)
 
+    def carry(self, worlds, indices, points, velocities) -> None:
+        """Put held vertices ``indices`` of ``worlds`` at ``points`` moving at ``velocities``
+        (each ``(p, 3)``, the same for every world named): a gripper's step (the device moves
+        them by ``h v`` a substep, as the CPU's methods move a kinematic vertex)."""
+        ids = self._ids(worlds)
+        idx = self._vertices(indices)
+        shape = (len(ids), len(idx), 3)
+        p = np.broadcast_to(np.asarray(points, np.float64), shape)
+        v = np.broadcast_to(np.asarray(velocities, np.float64), shape)
+        K.carry[_grid(len(ids) * len(idx))](
+            self.it,
+            cuda.to_device(np.asarray(idx, np.int32)),
+            cuda.to_device(np.ascontiguousarray(p, self.real)),
+            cuda.to_device(np.ascontiguousarray(v, self.real)),
+            cuda.to_device(np.asarray(ids, np.int32)),
+        )
+        self.launches += 1
+
+    def restart(self, worlds=None) -> None:
+        """The method starts again from the state of ``worlds`` (``None``: all), as the CPU's
+        integrator made anew does when the pins change (a grasp, a release): BDF2's history and
+        the last accelerations forgotten."""
+        ids = self._ids(worlds)
+        self.forget(ids)
+        if len(ids):
+            K.restart[_grid(len(ids) * self.n)](self.it, cuda.to_device(np.asarray(ids, np.int32)))
+            self.launches += 1
+
     def hold(self, worlds, indices, points=None) -> None:
         """Hold vertices ``indices`` of ``worlds`` kinematically (a gripper's grasp, a pin added):
         they leave the solve and stay where :meth:`place` puts them (``points``, as there; their

@@ -77,7 +77,10 @@ def spawn(interfaces, request, resource) -> tuple[Result, str]:
             ), ""
         name = next(f"{name}_{k}" for k in range(1, 10_000) if f"{name}_{k}" not in taken)
     sim = interfaces.session.sim
-    sim.add_robot(robot, name=name, position=position, orientation=orientation)
+    try:
+        sim.add_robot(robot, name=name, position=position, orientation=orientation)
+    except ValueError as e:  # a device without robots (cuda): nothing spawned
+        return Result(result=Result.RESULT_FEATURE_UNSUPPORTED, error_message=str(e)), ""
     interfaces.manipulation.colliders_changed()
     return Result(
         result=Result.RESULT_OK,

@@ -581,3 +581,99 @@ def test_colliders_added_and_removed_on_the_device_are_the_cpus():
     assert np.max(np.abs(gpu.positions - cpu.positions)) < 1e-15
     assert gpu.time == pytest.approx(cpu.time) and cpu.time == pytest.approx(0.2)
     assert float(np.min(cpu.colliders[0].signed_distance(cpu.positions))) < 0.006  # on the box
+
+
+def _gripper_script(sim, short=False):
+    """A corner grasped, swung and turned over single steps and a run of steps, teleported, a
+    box of vertices grasped beside it, then both let go; the positions after each part
+    (``short``: fewer steps of each, for ``vbd``'s 120 sweeps on the simulator)."""
+    out = []
+    corner = sim.grasp("hand", (0.15, 0.15, 0.0), 0.03)
+    for k in range(2 if short else 6):
+        turn = (np.cos(0.05 * k), 0.0, 0.0, np.sin(0.05 * k))
+        sim.set_gripper_pose("hand", (0.15 + 0.004 * k, 0.15, 0.01 + 0.01 * k), turn)
+        sim.step()
+    out.append(sim.positions.copy())
+    sim.set_gripper_pose("hand", (0.2, 0.17, 0.06))
+    sim.step(2 if short else 4)  # reached over the first, at rest over the others
+    out.append(sim.positions.copy())
+    sim.set_gripper_pose("hand", (0.18, 0.12, 0.05), teleport=True)
+    edge = sim.grasp_box("edge", (-0.03, 0.07, -0.1), (0.08, 0.13, 0.1))
+    sim.step(1 if short else 3)
+    out.append(sim.positions.copy())
+    sim.set_gripper_pose("edge", (0.05, 0.12, 0.02))
+    sim.step()
+    wrench = sim.gripper_wrench("hand")
+    sim.release("hand")
+    sim.step(1 if short else 5)
+    out.append(sim.positions.copy())
+    return corner, edge, out, wrench
+
+
+@pytest.mark.parametrize("integrator", ["symplectic_euler", "vbd"])
+def test_grippers_on_the_device_are_the_cpus(integrator):
+    """Grasp by radius and by box, moves over one step and over a run of steps, a teleport and a
+    release on the device give the CPU's cloth to rounding (float64, symplectic Euler: < 1e-12 m)
+    and vbd's nearly converged (30 sweeps, no tolerance, one substep: < 1e-9 m, the two colour
+    orders' difference), the same held vertices, poses and (vbd, whose springs are evaluated at
+    the step's end on both) wrench."""
+    m = ClothModel.grid(4, 4, 0.05, 0.01, stiffness=1e2, damping=0.05, pinned=[(0, 0)])
+    if integrator == "vbd":
+        opts = dict(iterations=30, tolerance=0.0, substeps=1)
+        kw = dict(integrator="vbd", dt=1 / 120)
+        cpu = Simulator(m, integrator_options=dict(opts, grid=False), **kw)
+        gpu = Simulator(m, integrator_options=opts, device="cuda", precision="float64", **kw)
+    else:
+        kw = dict(integrator="symplectic_euler", dt=1e-3)
+        cpu, gpu = Simulator(m, **kw), Simulator(m, device="cuda", precision="float64", **kw)
+    short = integrator == "vbd"
+    c_corner, c_edge, c_out, c_wrench = _gripper_script(cpu, short)
+    g_corner, g_edge, g_out, g_wrench = _gripper_script(gpu, short)
+    assert c_corner.tolist() == g_corner.tolist() == [15]
+    assert c_edge.tolist() == g_edge.tolist() and len(c_edge) >= 2
+    for a, b in zip(c_out, g_out):  # (vbd: 1.2e-10 m at 30 sweeps, 1.7e-17 at 60)
+        assert np.max(np.abs(a - b)) < (1e-9 if integrator == "vbd" else 1e-12)
+    assert np.max(np.abs(c_out[0] - m.positions)) > 0.005  # the gripper did move the cloth
+    if integrator == "vbd":
+        for a, b in zip(c_wrench, g_wrench):
+            assert np.allclose(a, b, rtol=1e-6, atol=1e-9)
+    assert gpu.grippers.keys() == {"edge"} and cpu.grippers.keys() == {"edge"}
+    p, q = gpu.gripper_pose("edge")
+    assert np.allclose(p, (0.05, 0.12, 0.02)) and np.allclose(q, (1, 0, 0, 0))
+    assert np.allclose(gpu.positions[c_edge], cpu.positions[c_edge], atol=1e-12)
+
+
+def test_device_grippers_refuse_bad_input_and_leave_the_cloth_alone():
+    """A name in use, an unknown gripper, no vertex in reach, a bad radius, a box the wrong way
+    round, a bad pose and a robot's link are refused naming them, with the cloth, the grippers
+    and the held vertices as they were; reset lets every gripper go; a state put back keeps the
+    held vertices with their gripper."""
+    m = ClothModel.grid(4, 4, 0.05, 0.01, stiffness=1e2, damping=0.05, pinned=[(0, 0)])
+    sim = Simulator(m, integrator="symplectic_euler", dt=1e-3, device="cuda", precision="float64")
+    sim.grasp("hand", (0.15, 0.15, 0.0), 0.01)
+    sim.step(5)
+    x = sim.positions.copy()
+    bad = [
+        (lambda: sim.grasp("hand", (0.0, 0.15, 0.0), 0.01), r"gripper 'hand' already holds 1"),
+        (lambda: sim.grasp("other", (0.15, 0.15, 0.0), 0.01), r"no free particle within radius"),
+        (lambda: sim.grasp("other", (0.0, 0.15, 0.0), -1.0), r"radius must be a finite number"),
+        (lambda: sim.grasp("other", (0.0, 0.15, 0.0), 0.01, link=("arm", "hand")), r"robot"),
+        (lambda: sim.grasp_box("other", (1, 0, 0), (0, 1, 1)), r"box: min \[1.0, 0.0, 0.0\]"),
+        (lambda: sim.set_gripper_pose("foot", (0, 0, 0)), r"unknown gripper 'foot'; grippers"),
+        (lambda: sim.set_gripper_pose("hand", (0, np.nan, 0)), r"position must be 3 finite"),
+        (lambda: sim.release("foot"), r"unknown gripper 'foot'"),
+    ]  # fmt: skip
+    for call, match in bad:
+        with pytest.raises(ValueError, match=match):
+            call()
+        assert np.array_equal(sim.positions, x) and list(sim.grippers) == ["hand"]
+    saved = sim.save_state()
+    sim.set_gripper_pose("hand", (0.1, 0.1, 0.1), teleport=True)
+    sim.restore_state(saved)  # the held vertex stays with its gripper, at (0.1, 0.1, 0.1)
+    assert (
+        np.allclose(sim.positions[15], (0.1, 0.1, 0.1)) and sim.velocities[15].tolist() == [0] * 3
+    )
+    sim.reset()
+    assert sim.grippers == {} and np.array_equal(sim.positions, m.positions)
+    sim.step(20)  # the vertex once held falls with the rest
+    assert sim.positions[15, 2] < -1e-4

@@ -47,20 +47,23 @@ def test_the_node_runs_on_the_cuda_backend():
     assert " rtf=" in text and "max_strain=" in text, text[-3000:]
 
 
-def test_the_node_on_cuda_moves_spawns_and_deletes_colliders():
+def test_the_node_on_cuda_moves_spawns_and_deletes_colliders_and_grasps():
     """On the cuda device the drape scene's ball follows its pose topic (placed at rest step by
     step: the device does not sweep a collider yet, which the node says once in its log), a
     box spawned through ``~/spawn_entity`` joins the colliders and ``~/delete_entity`` takes it
-    away again, and the cloth keeps stepping, finite; the same calls had raised inside the tick
-    and the services (a swept move refused, no ``add_collider`` on the device)."""
+    away again, ``~/grasp`` holds a corner that its gripper's pose topic then lifts (its wrench
+    published), and a robot's spawn is refused naming what is missing; the cloth keeps stepping,
+    finite. The pose, the spawn and the grasp had raised inside the tick and the services (a
+    swept move refused, no ``add_collider``, no ``grasp`` on the device)."""
     import numpy as np
     import rclpy
-    from geometry_msgs.msg import PoseStamped
+    from geometry_msgs.msg import PoseStamped, WrenchStamped
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
     from simulation_interfaces import srv
 
     from cloth_sim.ros.node import ClothSimNode
+    from cloth_sim.srv import Grasp
 
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     ctx = rclpy.Context()
@@ -122,6 +125,34 @@ def test_the_node_on_cuda_moves_spawns_and_deletes_colliders():
         gone = call(srv.DeleteEntity, "delete_entity", srv.DeleteEntity.Request(entity="crate"))
         assert gone.result.result == 1, gone.result.error_message
         assert [c.name for c in node.session.sim.colliders] == ["ball", "floor"]
+        t = node.session.sim.time
+        assert spin_until(lambda: node.session.sim.time > t)
+        # a gripper through ~/grasp, moved by its pose topic; its wrench is published
+        corner = node.session.sim.positions[0]
+        req = Grasp.Request(gripper="hand", radius=0.05)
+        req.point.x, req.point.y, req.point.z = (float(c) for c in corner)
+        held = call(Grasp, "grasp", req)
+        assert held.success and held.count >= 1, held.message
+        wrenches = []
+        client.create_subscription(
+            WrenchStamped, "/cloth_sim/grippers/hand/wrench", wrenches.append, 10
+        )
+        grip = client.create_publisher(PoseStamped, "/cloth_sim/grippers/hand/pose", 10)
+        msg.pose.position.x, msg.pose.position.y = float(corner[0]), float(corner[1])
+        msg.pose.position.z = float(corner[2]) + 0.2
+        assert spin_until(lambda: grip.get_subscription_count() > 0)
+        grip.publish(msg)
+        up = float(corner[2]) + 0.2
+        assert spin_until(lambda: abs(node.session.sim.gripper_pose("hand")[0][2] - up) < 1e-9)
+        assert spin_until(lambda: len(wrenches) > 0)
+        # a robot is refused, naming what is missing; the node goes on
+        arm = "<robot name='arm'><link name='base'/></robot>"
+        refused = call(
+            srv.SpawnEntity, "spawn_entity", srv.SpawnEntity.Request(resource_string=arm)
+        )
+        assert (
+            refused.result.result != 1 and "not on the cuda device" in refused.result.error_message
+        )
         t = node.session.sim.time
         assert spin_until(lambda: node.session.sim.time > t)
         assert np.all(np.isfinite(node.session.sim.positions))
