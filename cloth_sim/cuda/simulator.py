@@ -516,6 +516,7 @@ class CudaSimulator:
         to its target (velocity to it, then exactly there), and stops those of a gripper that
         moved over the step before; the rest run as one."""
         w, dt = self._worlds, self.dt
+        self._host = None  # (a step of this call may have moved them since the last copy)
         x = self.positions  # (the held vertices: where the last step put them)
         moved = {}
         for name, g in self._grips.held.items():
@@ -541,6 +542,7 @@ class CudaSimulator:
                     w.carry([0], g.indices, here, np.zeros_like(here))
                     g.moving = False
             w.step(n - 1)
+        self._host = None
 
     @property
     def self_collision(self) -> bool:
