@@ -167,34 +167,40 @@ def collider_at(wor, w, c, x, y, z):
 
 
 @cuda.jit(device=True)
-def carried_at(wor, w, c, x, y, z):
-    """Where the point ``(x, y, z)`` attached to collider ``c`` was at the step's start: for a
-    static collider the point itself, to rounding, in the CPU's arithmetic
-    (:func:`cloth_sim.contact.collider_kernels.carried` with the pose unchanged), so that the
-    stage below starts from the CPU's numbers."""
-    R = wor.crot
-    dx, dy, dz = x - wor.cpos[w, c, 0], y - wor.cpos[w, c, 1], z - wor.cpos[w, c, 2]
+def carried_at(wor, w, c, x, y, z, forward):
+    """The point ``(x, y, z)`` attached to collider ``c`` carried over the step: with
+    ``forward`` from where the step starts the collider (``cpos0``, ``crot0``) to where it ends
+    (``cpos``, ``crot``), else back; in the CPU's arithmetic
+    (:func:`cloth_sim.contact.collider_kernels.carried`), so that the stage below starts from the
+    CPU's numbers (a collider that stays: the point itself, to rounding)."""
+    if forward:
+        P, R, Q, S = wor.cpos0, wor.crot0, wor.cpos, wor.crot
+    else:
+        P, R, Q, S = wor.cpos, wor.crot, wor.cpos0, wor.crot0
+    dx, dy, dz = x - P[w, c, 0], y - P[w, c, 1], z - P[w, c, 2]
     lx = R[w, c, 0, 0] * dx + R[w, c, 1, 0] * dy + R[w, c, 2, 0] * dz
     ly = R[w, c, 0, 1] * dx + R[w, c, 1, 1] * dy + R[w, c, 2, 1] * dz
     lz = R[w, c, 0, 2] * dx + R[w, c, 1, 2] * dy + R[w, c, 2, 2] * dz
     return (
-        wor.cpos[w, c, 0] + R[w, c, 0, 0] * lx + R[w, c, 0, 1] * ly + R[w, c, 0, 2] * lz,
-        wor.cpos[w, c, 1] + R[w, c, 1, 0] * lx + R[w, c, 1, 1] * ly + R[w, c, 1, 2] * lz,
-        wor.cpos[w, c, 2] + R[w, c, 2, 0] * lx + R[w, c, 2, 1] * ly + R[w, c, 2, 2] * lz,
+        Q[w, c, 0] + S[w, c, 0, 0] * lx + S[w, c, 0, 1] * ly + S[w, c, 0, 2] * lz,
+        Q[w, c, 1] + S[w, c, 1, 0] * lx + S[w, c, 1, 1] * ly + S[w, c, 1, 2] * lz,
+        Q[w, c, 2] + S[w, c, 2, 0] * lx + S[w, c, 2, 1] * ly + S[w, c, 2, 2] * lz,
     )
 
 
 @cuda.jit(device=True)
 def colliders_stage(wor, w, start, end, velocity, continuous, dt):
-    """The contact stage after a step of ``dt`` for one free particle and world ``w``'s static
-    colliders, in order, as the CPU's (:func:`cloth_sim.contact.collider_kernels.resolve_contacts`
-    for a collider that does not move): the path from the step's ``start`` to its ``end`` marched
-    to the thickness's skin (``continuous``: after a method that does not keep paths off the
-    colliders itself; a start on the skin whose end lies past the solid's middle stays at the
-    start), the end projected out of the skin with friction on the step's motion, an approaching
-    normal velocity removed and the tangential one shrunk by μ times what was removed (static
-    friction: removed); then, touching one of several colliders, :func:`crease_at`. Points and
-    the velocity are three numbers; returns the end and the velocity."""
+    """The contact stage after a step of ``dt`` for one free particle and world ``w``'s
+    colliders, in order, as the CPU's
+    (:func:`cloth_sim.contact.collider_kernels.resolve_contacts`): the path from the step's
+    ``start`` (carried with a collider that moves over the step, from ``cpos0``/``crot0`` to
+    ``cpos``/``crot``) to its ``end`` marched to the thickness's skin (``continuous``: after a
+    method that does not keep paths off the colliders itself; a start on the skin whose end lies
+    past the solid's middle stays at the start), the end projected out of the skin with friction
+    on the motion relative to the collider, an approaching normal velocity removed and the
+    tangential one shrunk by μ times what was removed (static friction: removed); then, touching
+    one of several colliders, :func:`crease_at`. Points and the velocity are three numbers;
+    returns the end and the velocity."""
     h = wor.tau[w]
     px, py, pz = end
     vx, vy, vz = velocity
@@ -206,8 +212,8 @@ def colliders_stage(wor, w, start, end, velocity, continuous, dt):
             _, _, _, d = collider_at(wor, w, c, px, py, pz)
             if d >= h * (1.0 + CONTACT_TOLERANCE):
                 continue
-        sx, sy, sz = carried_at(wor, w, c, start[0], start[1], start[2])
-        cx, cy, cz = carried_at(wor, w, c, px, py, pz)
+        sx, sy, sz = carried_at(wor, w, c, start[0], start[1], start[2], True)
+        cx, cy, cz = carried_at(wor, w, c, px, py, pz, False)
         ux, uy, uz = px - cx, py - cy, pz - cz  # the collider's motion under the end: rounding
         held = False  # the step's motion undone
         known = False  # the distance and normal at the end asked already

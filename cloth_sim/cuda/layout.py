@@ -8,7 +8,8 @@ host with numpy and copied to the device once.
 * :class:`Worlds`, one row a world: masses, which vertices are free, gravity, wind, drag and each
   family's stiffness and damping where a world overrides the model's (``−1``: the model's own);
   its static colliders as the CPU's packed colliders give them (``ckind[w, c]`` the shape's code,
-  ``cpos``, ``crot`` its position and rotation, ``cgeo`` its four numbers, ``cmu`` its friction,
+  ``cpos``, ``crot`` its position and rotation, ``cpos0``, ``crot0`` where the step starts them
+  (the same but over a step that sweeps them), ``cgeo`` its four numbers, ``cmu`` its friction,
   ``ncol`` how many), the thickness ``tau`` the cloth keeps from them and ``vbd``'s contact
   stiffness ``kc``.
 * :class:`Iterate`, one ``(worlds, n, 3)`` array a world's positions, velocities and the step's
@@ -60,6 +61,8 @@ class Worlds(NamedTuple):
     ckind: np.ndarray
     cpos: np.ndarray
     crot: np.ndarray
+    cpos0: np.ndarray
+    crot0: np.ndarray
     cgeo: np.ndarray
     cmu: np.ndarray
     ncol: np.ndarray

@@ -37,9 +37,6 @@ class CudaSimulator:
     (default) or ``"float64"``."""
 
     device = "cuda"
-    #: a collider's pose changes here by teleport only (:meth:`set_collider_pose`): its swept
-    #: motion over a step is not on the device yet
-    sweeps_colliders = False
 
     def __init__(
         self,
@@ -105,6 +102,7 @@ class CudaSimulator:
         self._forces = None
         self._analysis = None
         self._grips = Grips()
+        self._swept = False  # a collider's pose was set to be swept over the next step
 
     # ------------------------------------------------------------------ state
     def _copy(self):
@@ -348,18 +346,30 @@ class CudaSimulator:
     def set_collider_pose(
         self, i, position, orientation=(1.0, 0.0, 0.0, 0.0), teleport: bool = False
     ) -> None:
-        """With ``teleport``: collider ``i`` there now, at rest, as on the CPU. A swept move (the
-        collider's velocity over the next step) is not on the device yet: refused, nothing
-        moved."""
-        if not teleport:
+        """As the CPU's: swept there over the next step under symplectic Euler (the contact
+        stage carries the cloth's path with the collider and friction drags what it carries), or
+        with ``teleport`` there now, at rest. Under ``vbd`` a swept move is not on the device yet
+        (its substeps and bounds would take the motion in parts): refused, nothing moved."""
+        if not teleport and not self.sweeps_colliders:
             raise ValueError(
-                "set_collider_pose: a collider's swept motion is not on the cuda device yet "
-                "(teleport=True puts it there at rest); device='cpu' sweeps it"
+                f"set_collider_pose: a collider's swept motion under {self.integrator} is not on "
+                "the cuda device yet (symplectic_euler sweeps it; teleport=True puts it there at "
+                "rest); device='cpu' sweeps it"
             )
-        self._worlds.set([0], colliders={i: (position, orientation)})
+        if teleport:
+            self._worlds.set([0], colliders={i: (position, orientation)})
+        else:
+            self._worlds.sweep([0], i, position, orientation)
+            self._swept = True
         shape = copy.copy(self._colliders[i])
         shape.set_pose(position, orientation)
         self._colliders[i] = shape
+
+    @property
+    def sweeps_colliders(self) -> bool:
+        """Whether :meth:`set_collider_pose` sweeps a collider over the next step here (under
+        symplectic Euler; under ``vbd`` a pose is placed by teleport only)."""
+        return self.integrator == "symplectic_euler"
 
     def add_collider(self, collider) -> int:
         """As :meth:`cloth_sim.Simulator.add_collider`, for the shapes the device has (a plane, a
@@ -508,13 +518,17 @@ class CudaSimulator:
         return g.indices.copy()
 
     def _moving(self) -> bool:
-        """Whether a gripper moves over the next step or moved over the last."""
-        return any(g.target is not None or g.moving for g in self._grips.held.values())
+        """Whether a gripper moves over the next step or moved over the last, or a collider is
+        swept over the next."""
+        return self._swept or any(
+            g.target is not None or g.moving for g in self._grips.held.values()
+        )
 
     def _step_holding(self, n: int) -> None:
-        """``n`` steps with grippers that move: the first carries each moving gripper's vertices
-        to its target (velocity to it, then exactly there), and stops those of a gripper that
-        moved over the step before; the rest run as one."""
+        """``n`` steps with grippers or colliders that move: the first carries each moving
+        gripper's vertices to its target (velocity to it, then exactly there), stops those of a
+        gripper that moved over the step before and sweeps the colliders set moving; the rest run
+        as one, the colliders standing where the first left them."""
         w, dt = self._worlds, self.dt
         self._host = None  # (a step of this call may have moved them since the last copy)
         x = self.positions  # (the held vertices: where the last step put them)
@@ -528,6 +542,9 @@ class CudaSimulator:
             elif g.moving:
                 w.carry([0], g.indices, here, np.zeros_like(here))
         w.step(1)
+        if self._swept:
+            w.settle_colliders()
+            self._swept = False
         for name, g in self._grips.held.items():
             if name in moved:
                 w.carry([0], g.indices, g.goal, moved[name])

@@ -59,6 +59,10 @@ def _grid(total: int) -> tuple[int, int]:
     return (total + threads - 1) // threads, threads
 
 
+#: the colliders' poses and where a step starts them (:class:`Worlds`)
+_POSES = ("cpos", "crot", "cpos0", "crot0")
+
+
 def collider_rows(colliders) -> tuple:
     """``(kinds, positions, rotations, geometry, friction)`` of the static colliders, as the CPU's
     packed colliders give them (:meth:`cloth_sim.contact.colliders.Contacts.packed`), so that the
@@ -170,6 +174,8 @@ class CudaWorlds:
             ckind=np.tile(ckind, (worlds, 1)),
             cpos=np.tile(cpos.astype(real), (worlds, 1, 1)),
             crot=np.tile(crot.astype(real), (worlds, 1, 1, 1)),
+            cpos0=np.tile(cpos.astype(real), (worlds, 1, 1)),
+            crot0=np.tile(crot.astype(real), (worlds, 1, 1, 1)),
             cgeo=np.tile(cgeo.astype(real), (worlds, 1, 1)),
             cmu=np.tile(cmu.astype(real), (worlds, 1)),
             ncol=np.full(worlds, len(colliders), np.int32),
@@ -290,10 +296,42 @@ class CudaWorlds:
                 shape.set_pose(position, orientation)  # checked as the CPU checks it
             except ValueError as e:
                 raise ValueError(f"colliders[{index}]: {e}") from None
-            new["cpos"][ids, index] = shape.position
-            new["crot"][ids, index] = shape.rotation
+            for name in ("cpos", "cpos0"):
+                new[name][ids, index] = shape.position
+            for name in ("crot", "crot0"):
+                new[name][ids, index] = shape.rotation
         self._host = Worlds(**new)
-        for name in ("gravity", "wind", "windy", "drag", "kfam", "cfam", "cpos", "crot"):
+        for name in ("gravity", "wind", "windy", "drag", "kfam", "cfam") + _POSES:
+            getattr(self.wor, name).copy_to_device(getattr(self._host, name))
+
+    def sweep(self, worlds, index: int, position, orientation) -> None:
+        """Collider ``index`` of ``worlds`` to ``position`` and ``orientation`` over the next
+        step: the contact stage sees it sweep there from where the step starts it (the CPU's
+        ``set_collider_pose`` without ``teleport``), until :meth:`settle_colliders`. Checked as
+        :meth:`set` checks a pose; nothing changes on bad input."""
+        ids = self._ids(worlds)
+        if not (isinstance(index, (int, np.integer)) and 0 <= index < len(self.colliders)):
+            raise ValueError(
+                f"collider index must be an integer in [0, {len(self.colliders) - 1}], got "
+                f"{index!r}"
+                if self.colliders
+                else "there are no colliders to move"
+            )
+        shape = copy.copy(self.colliders[index])
+        shape.set_pose(position, orientation)
+        new = {name: getattr(self._host, name).copy() for name in ("cpos", "crot")}
+        new["cpos"][ids, index] = shape.position
+        new["crot"][ids, index] = shape.rotation
+        self._host = self._host._replace(**new)
+        for name in ("cpos", "crot"):
+            getattr(self.wor, name).copy_to_device(getattr(self._host, name))
+
+    def settle_colliders(self) -> None:
+        """Every collider's step starts where it stands now (after a step that swept it)."""
+        self._host = self._host._replace(
+            cpos0=self._host.cpos.copy(), crot0=self._host.crot.copy()
+        )
+        for name in ("cpos0", "crot0"):
             getattr(self.wor, name).copy_to_device(getattr(self._host, name))
 
     def reset(self, worlds=None) -> None:

@@ -59,9 +59,10 @@ class Stepper:
                         sweep = sim.sweeps_colliders
                         if not sweep:
                             self.manipulation.node.get_logger().warning(
-                                f"on the {sim.device} device a collider moved by its pose topic "
-                                "is placed at rest step by step (its swept motion is not on the "
-                                "device yet: friction does not drag what it carries)",
+                                f"on the {sim.device} device under {sim.integrator} a collider "
+                                "moved by its pose topic is placed at rest step by step (its "
+                                "swept motion is not there yet: friction does not drag what it "
+                                "carries)",
                                 once=True,
                             )
                         sim.set_collider_pose(key, (1 - f) * p0 + f * p1, q, teleport=not sweep)

@@ -30,6 +30,8 @@ def signatures(real):
         ckind=np.zeros((w, 1), np.int32),
         cpos=np.zeros((w, 1, 3), real),
         crot=np.zeros((w, 1, 3, 3), real),
+        cpos0=np.zeros((w, 1, 3), real),
+        crot0=np.zeros((w, 1, 3, 3), real),
         cgeo=np.zeros((w, 1, 4), real),
         cmu=np.zeros((w, 1), real),
         ncol=np.zeros(w, np.int32),

@@ -505,11 +505,44 @@ def test_a_worlds_collider_put_elsewhere_is_the_cpus_teleported_collider():
     assert np.max(np.abs(x[0] - still.positions)) < 1e-15
     assert np.max(np.abs(x[1] - there.positions)) < 1e-15
     assert np.max(np.abs(there.positions - still.positions)) > 1e-3  # it did move the sphere
-    one = Simulator(m, device="cuda", precision="float64", **kw)
-    with pytest.raises(ValueError, match=r"swept motion is not on the cuda device yet"):
+    one = Simulator(m, device="cuda", precision="float64", **dict(kw, integrator="vbd"))
+    with pytest.raises(ValueError, match=r"swept motion under vbd is not on the cuda device yet"):
         one.set_collider_pose(0, (0.0, 0.0, 0.0))
+    assert not one.sweeps_colliders
     one.set_collider_pose(0, *moved, teleport=True)
     assert np.allclose(one.colliders[0].position, moved[0])
+
+
+def test_a_collider_swept_on_the_device_is_the_cpus():
+    """A collider moved by ``set_collider_pose`` without ``teleport`` under symplectic Euler is
+    swept over the next step as on the CPU: the cloth's paths carried with it, friction on the
+    motion relative to it (a box under a resting cloth slid and turned carries it along; a
+    sphere swept up through it lifts it), the CPU's cloth to rounding in float64 (< 1e-15 m),
+    through runs of steps as through single ones; a bad index or pose is refused, nothing
+    moved."""
+    box = Box(center=(0.07, 0.07, -0.03), half_extents=(0.2, 0.2, 0.02), friction=0.8)
+    ball = Sphere(center=(0.08, 0.08, -0.2), radius=0.04, friction=0.3)
+    m = ClothModel.grid(4, 4, 0.05, 0.01, stiffness=1e2, damping=0.05, origin=(0, 0, -0.004))
+    kw = dict(integrator="symplectic_euler", dt=1e-3, thickness=0.005, colliders=[box, ball])
+    sims = [Simulator(m, **kw), Simulator(m, device="cuda", precision="float64", **kw)]
+    assert sims[1].sweeps_colliders
+    with pytest.raises(ValueError, match=r"collider index must be an integer in \[0, 1\]"):
+        sims[1].set_collider_pose(2, (0.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match=r"position must be 3 finite numbers"):
+        sims[1].set_collider_pose(0, (0.0, np.inf, 0.0))
+    for sim in sims:
+        sim.step(30)  # settle on the box
+        for k in range(40):
+            turn = (np.cos(0.01 * k), 0.0, 0.0, np.sin(0.01 * k))
+            sim.set_collider_pose(0, (0.07 + 0.001 * k, 0.07, -0.03), turn)
+            sim.set_collider_pose(1, (0.08, 0.08, -0.2 + 0.005 * k))
+            sim.step()
+        sim.set_collider_pose(1, (0.08, 0.08, 0.05))
+        sim.step(5)  # swept over the first, standing over the rest
+    cpu, gpu = sims
+    assert np.max(np.abs(gpu.positions - cpu.positions)) < 1e-15
+    assert np.max(np.abs(cpu.positions[:, 0] - m.positions[:, 0])) > 0.005  # carried along
+    assert np.allclose(gpu.colliders[1].position, (0.08, 0.08, 0.05))
 
 
 def test_the_node_settings_take_a_scene_of_static_primitives_to_the_device():
