@@ -26,7 +26,7 @@ SCENE    ?= hanging
 MAKEFLAGS += --jobs=2
 
 .PHONY: install run test lint docs fuzz bench bench-peers bench-robots bench-learning gpu test-gpu \
-	bench-gpu clean
+	bench-gpu device-wheels clean
 install: $(STAMP) $(KERNELS) $(MSGS)
 
 # uv (pinned in requirements.txt, installed by pip first) installs the pinned set: 23 s where pip
@@ -97,6 +97,17 @@ test-gpu: install $(GPU)
 
 bench-gpu: install $(GPU)
 	$(VENV)/bin/cloth-sim bench gpu
+
+# the wheels tools/device_check.sh installs on a GPU machine lent by the device tool (Python 3.12,
+# numpy, numba and numba-cuda there, no network): the pinned versions of requirements.txt for
+# CPython 3.12 on x86-64 Linux, ~37 MB, in .device/wheels (ignored; carry .device)
+DEVICE_WHEELS := scipy qdldl PyYAML pytest pluggy iniconfig packaging Pygments
+device-wheels: $(STAMP)
+	mkdir -p .device/wheels
+	$(PY) -m pip download -q -d .device/wheels --no-deps --only-binary=:all: \
+		--python-version 3.12 --implementation cp --abi cp312 --abi none \
+		--platform manylinux_2_28_x86_64 --platform manylinux_2_17_x86_64 --platform any \
+		$(foreach p,$(DEVICE_WHEELS),$(shell grep -E '^$(p)==' requirements.txt | cut -d' ' -f1))
 
 # ruff (pinned in requirements.txt, configured in pyproject.toml): the linter and the formatter's check
 lint: $(STAMP)
