@@ -224,8 +224,10 @@ class CudaSimulator:
         self._counters = dict(steps=0)
 
     def _rebuild(self, method: str, options: dict, colliders: list) -> None:
-        """The worlds made again for ``method`` and ``colliders``, the state, time and material
-        carried over (a new method, a collider added or removed)."""
+        """The worlds made again for ``method`` and ``colliders``, the state, time, material and
+        grippers carried over (a new method, a collider added or removed): the held vertices stay
+        held where they are, at rest, and a collider set to be swept over the next step stands
+        at its new pose."""
         x, v = self._copy()
         t = self.time
         old = self._worlds
@@ -245,8 +247,12 @@ class CudaSimulator:
         )
         self._worlds = new
         self._colliders = colliders
+        self._swept = False
         self._apply_families()
         self._worlds.write([0], x=x[None], v=v[None])
+        for g in self._grips.held.values():
+            new.hold([0], g.indices, x[g.indices])
+            g.moving = False
         self.set_time(t)
         self._host = None
 

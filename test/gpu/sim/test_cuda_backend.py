@@ -733,3 +733,20 @@ def test_a_scripted_gripper_on_the_device_is_the_cpus():
     p, q = gpu.gripper_pose("hand")
     assert np.allclose(p, (0.15, 0.12, 0.05)) and np.allclose(q, q1)
     assert np.allclose(gpu.positions[15], (0.15, 0.12, 0.05))
+
+
+def test_a_gripper_holds_through_a_collider_added_and_a_change_of_method():
+    """Adding a collider and switching the method make the device's worlds again: a gripper's
+    vertices stay held there (they had gone back into the solve while the gripper still listed
+    them), and a later move carries them."""
+    m = ClothModel.grid(4, 4, 0.05, 0.01, stiffness=1e2, damping=0.05, pinned=[(0, 0)])
+    sim = Simulator(m, integrator="symplectic_euler", dt=1e-3, device="cuda", precision="float64")
+    held = sim.grasp("hand", (0.15, 0.15, 0.0), 0.01)
+    sim.step(10)
+    sim.add_collider(Plane((0.0, 0.0, 1.0), -0.5, name="floor"))
+    sim.set_integrator("vbd")
+    sim.step(5)
+    assert np.allclose(sim.positions[held], (0.15, 0.15, 0.0))  # held, not fallen
+    sim.set_gripper_pose("hand", (0.15, 0.15, 0.05))
+    sim.step()
+    assert np.allclose(sim.positions[held], (0.15, 0.15, 0.05))
