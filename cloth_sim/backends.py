@@ -9,6 +9,7 @@ that is named but cannot run here is refused by :func:`check_device` with what i
 
 from __future__ import annotations
 
+import copy
 import importlib
 import importlib.util
 
@@ -133,3 +134,28 @@ def models_of(models, worlds: int | None) -> list[ClothModel]:
     if worlds is not None and worlds != len(models):
         raise ValueError(f"worlds={worlds} but {len(models)} models were given")
     return models
+
+
+def placed_collider(shapes: list, index, pose):
+    """A copy of collider ``index`` of ``shapes`` placed at ``pose``, ``(position,
+    orientation)``, checked as the shape checks a pose: what a batch's ``set(worlds,
+    colliders={index: pose})`` puts in those worlds on every device, or ``ValueError`` naming
+    the index or the field (nothing changed)."""
+    if not (isinstance(index, (int, np.integer)) and 0 <= index < len(shapes)):
+        raise ValueError(
+            f"colliders: index {index!r} must lie in [0, {len(shapes) - 1}]"
+            if shapes
+            else f"colliders: index {index!r}, but these worlds have no collider"
+        )
+    try:
+        position, orientation = pose
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"colliders[{index}] must be (position, orientation), got {pose!r}"
+        ) from None
+    shape = copy.copy(shapes[index])
+    try:
+        shape.set_pose(position, orientation)
+    except ValueError as e:
+        raise ValueError(f"colliders[{index}]: {e}") from None
+    return shape

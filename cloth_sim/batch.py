@@ -134,23 +134,8 @@ class BatchSimulator:
         poses = []
         shapes = sim.colliders
         for index, pose in (colliders or {}).items():
-            if not (isinstance(index, (int, np.integer)) and 0 <= index < len(shapes)):
-                raise ValueError(
-                    f"colliders: index {index!r} must lie in [0, {len(shapes) - 1}]"
-                    if shapes
-                    else f"colliders: index {index!r}, but these worlds have no collider"
-                )
-            try:
-                position, orientation = pose
-            except (TypeError, ValueError):
-                raise ValueError(
-                    f"colliders[{index}] must be (position, orientation), got {pose!r}"
-                ) from None
-            try:
-                copy.copy(shapes[index]).set_pose(position, orientation)  # as the CPU checks it
-            except ValueError as e:
-                raise ValueError(f"colliders[{index}]: {e}") from None
-            poses.append((int(index), (position, orientation)))
+            backends.placed_collider(shapes, index, pose)  # (the pose as the shape checks it)
+            poses.append((int(index), tuple(pose)))
         return vectors[0], vectors[1], families, poses
 
     def hold(self, worlds, indices, points=None) -> None:

@@ -719,8 +719,10 @@ def vbd_finish(wor, it, h, hb, bdf2):
 
 
 @cuda.jit
-def place(it, idx, points, worlds):
-    """``x[w, idx[k]] ← points[w, k]`` at rest, for the listed worlds (pins moved, a reset)."""
+def place(it, idx, points, velocities, worlds, moving):
+    """``x[w, idx[k]] ← points[r, k]`` for the listed worlds: with ``moving``, ``v ←
+    velocities[r, k]`` (held vertices moving with their gripper: ``x + h v`` over the next step),
+    else at rest, their last acceleration forgotten (pins moved, a reset, a grasp)."""
     t = cuda.grid(1)
     p = idx.shape[0]
     if t >= worlds.shape[0] * p:
@@ -731,25 +733,11 @@ def place(it, idx, points, worlds):
     i = idx[k]
     for d in range(3):
         it.x[w, i, d] = points[r, k, d]
-        it.v[w, i, d] = 0.0
-        it.aprev[w, i, d] = 0.0
-
-
-@cuda.jit
-def carry(it, idx, points, velocities, worlds):
-    """``x[w, idx[k]] ← points[r, k]`` and ``v ← velocities[r, k]`` for the listed worlds: held
-    vertices where their gripper puts them, moving with it (``x + h v`` over the next step)."""
-    t = cuda.grid(1)
-    p = idx.shape[0]
-    if t >= worlds.shape[0] * p:
-        return
-    r = t // p
-    k = t - r * p
-    w = worlds[r]
-    i = idx[k]
-    for d in range(3):
-        it.x[w, i, d] = points[r, k, d]
-        it.v[w, i, d] = velocities[r, k, d]
+        if moving:
+            it.v[w, i, d] = velocities[r, k, d]
+        else:
+            it.v[w, i, d] = 0.0
+            it.aprev[w, i, d] = 0.0
 
 
 @cuda.jit

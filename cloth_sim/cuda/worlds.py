@@ -279,23 +279,7 @@ class CudaWorlds:
                     )
                 new[table][ids, self.families.index(fam)] = v
         for index, pose in (colliders or {}).items():
-            if not (isinstance(index, (int, np.integer)) and 0 <= index < len(self.colliders)):
-                raise ValueError(
-                    f"colliders: index {index!r} must lie in [0, {len(self.colliders) - 1}]"
-                    if self.colliders
-                    else f"colliders: index {index!r}, but these worlds have no collider"
-                )
-            try:
-                position, orientation = pose
-            except (TypeError, ValueError):
-                raise ValueError(
-                    f"colliders[{index}] must be (position, orientation), got {pose!r}"
-                ) from None
-            shape = copy.copy(self.colliders[index])
-            try:
-                shape.set_pose(position, orientation)  # checked as the CPU checks it
-            except ValueError as e:
-                raise ValueError(f"colliders[{index}]: {e}") from None
+            shape = backends.placed_collider(self.colliders, index, pose)
             for name in ("cpos", "cpos0"):
                 new[name][ids, index] = shape.position
             for name in ("crot", "crot0"):
@@ -353,13 +337,18 @@ class CudaWorlds:
         past[ids] = 0
         self.it.past.copy_to_device(past)
 
-    def _place(self, ids, idx, points) -> None:
-        total = len(ids) * len(idx)
-        K.place[_grid(total)](
+    def _place(self, ids, idx, points, velocities=None) -> None:
+        """``idx`` of worlds ``ids`` at ``points`` (``(len(ids), len(idx), 3)``), moving at
+        ``velocities`` (the same shape), or at rest where None (:func:`kernels.place`)."""
+        moving = velocities is not None
+        v = np.ascontiguousarray(velocities if moving else np.zeros((1, 1, 3)), self.real)
+        K.place[_grid(len(ids) * len(idx))](
             self.it,
             cuda.to_device(np.asarray(idx, np.int32)),
             cuda.to_device(np.ascontiguousarray(points, self.real)),
+            cuda.to_device(v),
             cuda.to_device(np.asarray(ids, np.int32)),
+            moving,
         )
         self.launches += 1
 
@@ -387,14 +376,7 @@ class CudaWorlds:
         shape = (len(ids), len(idx), 3)
         p = np.broadcast_to(np.asarray(points, np.float64), shape)
         v = np.broadcast_to(np.asarray(velocities, np.float64), shape)
-        K.carry[_grid(len(ids) * len(idx))](
-            self.it,
-            cuda.to_device(np.asarray(idx, np.int32)),
-            cuda.to_device(np.ascontiguousarray(p, self.real)),
-            cuda.to_device(np.ascontiguousarray(v, self.real)),
-            cuda.to_device(np.asarray(ids, np.int32)),
-        )
-        self.launches += 1
+        self._place(ids, idx, p, v)
 
     def restart(self, worlds=None) -> None:
         """The method starts again from the state of ``worlds`` (``None``: all), as the CPU's

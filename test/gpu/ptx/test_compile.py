@@ -54,13 +54,13 @@ def signatures(real):
         K.vbd_accelerate: (ty(wor), ty(it), r, numba.boolean),
         K.vbd_residual: (ty(wor), ty(it), numba.float64[::1]),
         K.vbd_finish: (ty(wor), ty(it), r, r, numba.int64),
-        K.place: (ty(it), numba.int32[::1], numba.from_dtype(real)[:, :, ::1], numba.int32[::1]),
-        K.carry: (
+        K.place: (
             ty(it),
             numba.int32[::1],
             numba.from_dtype(real)[:, :, ::1],
             numba.from_dtype(real)[:, :, ::1],
             numba.int32[::1],
+            numba.boolean,
         ),
         K.restart: (ty(it), numba.int32[::1]),
         K.frames_in_blocks: (ty(top), ty(wor), ty(it), numba.int32[::1], run, out),
