@@ -25,7 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import backends, integrators
-from .constraints.grippers import Grips, check_box, check_grasp, check_pose
+from .constraints.grippers import Grips, check_box, check_grasp
 from .constraints.strain_limit import DEFAULT_STRAIN_LIMIT_PASSES, StrainLimit
 from .contact.colliders import Contacts
 from .contact.geometry import positive
@@ -690,13 +690,9 @@ class Simulator:
         y, z)``) over the next step: the particles it holds move with the velocity that takes them
         there. With ``teleport`` it and its particles are there now, at rest (the rest of the cloth
         follows by its springs). An unknown name or a non-finite pose raises ``ValueError``."""
-        g = self._grips.get(name)
-        pose = check_pose(position, orientation)
-        if not teleport:
-            g.target = pose
+        g = self._grips.aim(name, position, orientation, teleport)
+        if g is None:
             return
-        g.position, g.orientation, g.rotation = pose
-        g.target, g.goal, g.moving = None, None, False
         self.state.x[g.indices] = g.places(g.position, g.rotation)
         self.state.v[g.indices] = 0.0
         self._integrator.pins_moved(self.state)

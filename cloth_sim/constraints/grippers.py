@@ -138,6 +138,20 @@ class Grips:
         self.held[name] = g
         return g
 
+    def aim(self, name, position, orientation, teleport: bool) -> Gripper | None:
+        """Gripper ``name``'s next pose (checked: an unknown name or a bad pose raises
+        ``ValueError`` and changes nothing): reached over the next step, or with ``teleport``
+        its pose now, at rest; returns the gripper when teleported (its caller puts the held
+        particles at their places), else None."""
+        g = self.get(name)
+        pose = check_pose(position, orientation)
+        if not teleport:
+            g.target = pose
+            return None
+        g.position, g.orientation, g.rotation = pose
+        g.target, g.goal, g.moving = None, None, False
+        return g
+
     def pinned(self, base: np.ndarray) -> np.ndarray:
         """``base``'s pins and every held particle."""
         mask = np.array(base)

@@ -17,7 +17,7 @@ from numba import cuda
 
 from .. import backends, integrators
 from ..backends import models_of
-from ..constraints.grippers import Grips, check_box, check_grasp, check_pose
+from ..constraints.grippers import Grips, check_box, check_grasp
 from ..contact.collider_kernels import MESH
 from ..contact.colliders import Collider
 from ..model import ClothModel
@@ -484,13 +484,9 @@ class CudaSimulator:
         """As :meth:`cloth_sim.Simulator.set_gripper_pose`: reached over the next step (the held
         vertices move with the velocity that takes them there, and end there exactly), or with
         ``teleport`` there now, at rest. An unknown name or a bad pose raises ``ValueError``."""
-        g = self._grips.get(name)
-        pose = check_pose(position, orientation)
-        if not teleport:
-            g.target = pose
+        g = self._grips.aim(name, position, orientation, teleport)
+        if g is None:
             return
-        g.position, g.orientation, g.rotation = pose
-        g.target, g.goal, g.moving = None, None, False
         self._worlds.place([0], g.indices, g.places(g.position, g.rotation))
         self._host = None
 
