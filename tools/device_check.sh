@@ -9,21 +9,25 @@
 #   bench.log  cloth-sim bench gpu's three tables (docs/gpu.md)
 # Each part runs under its own time limit (seconds: TESTS_S, BENCH_S), so that the figures come back
 # within one call of the tool (10 minutes at most). DEVICE_CHECK_SIMULATOR=1 runs the same script on
-# numba-cuda's simulator with tiny sizes: what a machine without a GPU can check of it.
+# numba-cuda's simulator with tiny sizes: what a machine without a GPU can check of it
+# (DEVICE_PYTHON: a Python 3.12 with numpy, numba and numba-cuda to run it with; python3 there).
 set -uo pipefail
 OUT=${OUT:-$PWD/.device/out}
 mkdir -p "$OUT"
 TESTS_S=${TESTS_S:-240}
 BENCH_S=${BENCH_S:-270}
 SIM=${DEVICE_CHECK_SIMULATOR:-0}
-export PYTHONUNBUFFERED=1 PYTHONPATH=$PWD NUMBA_ENABLE_CUDASIM=$SIM OPENBLAS_NUM_THREADS=1
+export PYTHONUNBUFFERED=1 NUMBA_ENABLE_CUDASIM=$SIM OPENBLAS_NUM_THREADS=1
 
-# a venv over the machine's own numpy, numba and numba-cuda, with the carried wheels
-venv=${DEVICE_VENV:-/tmp/cloth_sim_venv}
-[ -x "$venv/bin/python" ] || python3 -m venv --system-site-packages "$venv" || exit 1
-py=$venv/bin/python
-"$py" -m pip install -q --disable-pip-version-check --no-index --find-links .device/wheels \
-    scipy qdldl PyYAML pytest Pygments || exit 1
+# the carried wheels unpacked onto the path, over the machine's own numpy, numba and numba-cuda
+# (a wheel is a zip of what it installs: no pip or venv needed there)
+py=${DEVICE_PYTHON:-python3}
+lib=/tmp/cloth_sim_lib
+mkdir -p "$lib"
+for w in .device/wheels/*.whl; do
+    "$py" -m zipfile -e "$w" "$lib" || exit 1
+done
+export PYTHONPATH=$lib:$PWD
 
 {
     date -u
