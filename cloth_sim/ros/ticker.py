@@ -40,6 +40,14 @@ class Stepper:
         session, manip = self.session, self.manipulation
         sim = session.sim
         moves = manip.pose_moves() if session.pose_targets and n else None
+        sweep = sim.sweeps_colliders  # (else a collider's pose is placed step by step)
+        if moves and not sweep and any(kind == "collider" for kind, _ in moves):
+            manip.node.get_logger().warning(
+                f"on the {sim.device} device under {sim.integrator} a collider moved by its pose "
+                "topic is placed at rest step by step (its swept motion is not there yet: "
+                "friction does not drag what it carries)",
+                once=True,
+            )
         joints = self.robot_state.joint_move() if n else None  # (robot, from, to)
         links = self.robot_state.tf_move() if n else None  # (robot, {link: transform})
         if links:  # the links' poses from TF: swept there over the first step
@@ -56,15 +64,6 @@ class Stepper:
                     q = (1 - f) * q0 + f * q1
                     q /= np.linalg.norm(q)
                     if kind == "collider":
-                        sweep = sim.sweeps_colliders
-                        if not sweep:
-                            self.manipulation.node.get_logger().warning(
-                                f"on the {sim.device} device under {sim.integrator} a collider "
-                                "moved by its pose topic is placed at rest step by step (its "
-                                "swept motion is not there yet: friction does not drag what it "
-                                "carries)",
-                                once=True,
-                            )
                         sim.set_collider_pose(key, (1 - f) * p0 + f * p1, q, teleport=not sweep)
                     else:  # pose_moves kept only grippers that hold; none is released mid-tick
                         sim.set_gripper_pose(key, (1 - f) * p0 + f * p1, q)
