@@ -136,6 +136,18 @@ def models_of(models, worlds: int | None) -> list[ClothModel]:
     return models
 
 
+def world_vectors(name: str, value, count: int) -> np.ndarray:
+    """``value``, a 3-vector or one a world, as ``(count, 3)`` (a read-only broadcast of one):
+    a batch's ``set(worlds, gravity=..., wind=...)`` on every device, or ``ValueError`` naming
+    ``name``."""
+    a = np.asarray(value, np.float64)
+    if a.shape not in ((3,), (count, 3)) or not np.all(np.isfinite(a)):
+        raise ValueError(
+            f"{name} must be a finite 3-vector or one a world ({count}, 3), got {value!r}"
+        )
+    return np.broadcast_to(a, (count, 3))
+
+
 def placed_collider(shapes: list, index, pose):
     """A copy of collider ``index`` of ``shapes`` placed at ``pose``, ``(position,
     orientation)``, checked as the shape checks a pose: what a batch's ``set(worlds,

@@ -91,14 +91,19 @@ class BatchSimulator:
         rest). Everything is checked, for every world named, before anything changes: a bad
         value raises ``ValueError`` naming it and leaves every world as it was."""
         ids = self._ids(worlds)
-        plan = [self._checked(s, r, len(ids), gravity, wind, drag, stiffness, damping, colliders)
-                for r, s in enumerate(self.sims[w] for w in ids)]  # fmt: skip
-        for w, (g, a, families, poses) in zip(ids, plan):
+        g = None if gravity is None else backends.world_vectors("gravity", gravity, len(ids))
+        a = None if wind is None else backends.world_vectors("wind", wind, len(ids))
+        if g is not None:  # each world's in the simulator's range
+            g = [SCHEMA["gravity"].check(row.tolist()) for row in g]
+        if drag is not None:
+            SCHEMA["drag"].check(drag)
+        plan = [self._checked(self.sims[w], stiffness, damping, colliders) for w in ids]
+        for r, (w, (families, poses)) in enumerate(zip(ids, plan)):
             s = self.sims[w]
             if g is not None:
-                s.gravity = g
+                s.gravity = g[r]
             if a is not None:
-                s.wind = a
+                s.wind = a[r]
             if drag is not None:
                 s.drag = drag
             for what, fam, value in families:
@@ -107,24 +112,10 @@ class BatchSimulator:
                 s.set_collider_pose(index, position, orientation, teleport=True)
 
     @staticmethod
-    def _checked(sim, row, count, gravity, wind, drag, stiffness, damping, colliders):
-        """:meth:`set`'s values for the ``row``-th of ``count`` worlds named, ``sim``, each checked
-        as the simulator's own setters check it (nothing is changed): ``(gravity, wind, [(what,
-        family, value)], [(collider index, (position, orientation))])``."""
-        vectors = []
-        for name, value in (("gravity", gravity), ("wind", wind)):
-            if value is None:
-                vectors.append(None)
-                continue
-            a = np.asarray(value, np.float64)
-            if a.shape not in ((3,), (count, 3)) or not np.all(np.isfinite(a)):
-                raise ValueError(
-                    f"{name} must be a finite 3-vector or one a world ({count}, 3), got {value!r}"
-                )
-            a = a[row] if a.ndim == 2 else a
-            vectors.append(SCHEMA["gravity"].check(a.tolist()) if name == "gravity" else a)
-        if drag is not None:
-            SCHEMA["drag"].check(drag)
+    def _checked(sim, stiffness, damping, colliders):
+        """:meth:`set`'s values for one world named, ``sim``, that depend on its cloth and
+        colliders, checked as the simulator's own setters check them (nothing is changed):
+        ``([(what, family, value)], [(collider index, (position, orientation))])``."""
         families = []
         for what, given in (("stiffness", stiffness), ("damping", damping)):
             for fam, value in (given or {}).items():
@@ -136,7 +127,7 @@ class BatchSimulator:
         for index, pose in (colliders or {}).items():
             backends.placed_collider(shapes, index, pose)  # (the pose as the shape checks it)
             poses.append((int(index), tuple(pose)))
-        return vectors[0], vectors[1], families, poses
+        return families, poses
 
     def hold(self, worlds, indices, points=None) -> None:
         """Hold vertices ``indices`` of ``worlds`` where ``points`` puts them (``(p, 3)`` or one

@@ -247,20 +247,10 @@ class CudaWorlds:
         h = self._host
         new = {name: getattr(h, name).copy() for name in Worlds._fields}
 
-        def rows(name, value):
-            a = np.asarray(value, np.float64)
-            a = np.broadcast_to(a, (len(ids), 3)) if a.shape in ((3,), (len(ids), 3)) else None
-            if a is None or not np.all(np.isfinite(a)):
-                raise ValueError(
-                    f"{name} must be a finite 3-vector or one a world ({len(ids)}, 3), "
-                    f"got {value!r}"
-                )
-            return a
-
         if gravity is not None:
-            new["gravity"][ids] = rows("gravity", gravity)
+            new["gravity"][ids] = backends.world_vectors("gravity", gravity, len(ids))
         if wind is not None:
-            a = rows("wind", wind)
+            a = backends.world_vectors("wind", wind, len(ids))
             new["wind"][ids] = a
             new["windy"][ids] = np.any(a != 0.0, axis=1)
         if drag is not None:
