@@ -69,6 +69,32 @@ def _friction(value) -> float:
     return v
 
 
+def check_new(collider, colliders) -> None:
+    """``collider`` may join ``colliders``: a shape of this module whose name none of them has;
+    ``ValueError`` naming what is wrong otherwise."""
+    if not isinstance(collider, Collider):
+        raise ValueError(
+            f"a collider must be a cloth_sim.contact.colliders shape (Plane, Sphere, Box, "
+            f"Capsule, Cylinder, Mesh), got {type(collider).__name__}"
+        )
+    if any(c.name == collider.name for c in colliders):
+        raise ValueError(
+            f"a collider named {collider.name!r} exists already; colliders: "
+            f"{', '.join(c.name for c in colliders)}"
+        )
+
+
+def check_index(i, count: int, doing: str) -> None:
+    """``i`` indexes one of ``count`` colliders (negative from the end), or ``ValueError``
+    saying the range (or that there is none to ``doing``)."""
+    if isinstance(i, bool) or not isinstance(i, (int, np.integer)) or not -count <= i < count:
+        raise ValueError(
+            f"collider index must be an integer in [0, {count - 1}], got {i!r}"
+            if count
+            else f"there are no colliders to {doing}"
+        )
+
+
 class Collider:
     """Base class: ``kind``, ``friction``, ``name``, a pose (``position``, ``rotation``) and the
     shape's local parameters ``geometry`` (4 numbers)."""
@@ -407,23 +433,14 @@ class Contacts:
 
     def add(self, collider) -> int:
         """Append a collider (its pose now is where its first step starts); returns its index."""
-        if not isinstance(collider, Collider):
-            raise ValueError(
-                f"a collider must be a cloth_sim.contact.colliders shape (Plane, Sphere, Box, "
-                f"Capsule, Cylinder, Mesh), got {type(collider).__name__}"
-            )
-        if any(c.name == collider.name for c in self.colliders):
-            raise ValueError(
-                f"a collider named {collider.name!r} exists already; colliders: "
-                f"{', '.join(c.name for c in self.colliders)}"
-            )
+        check_new(collider, self.colliders)
         self.colliders.append(collider)
         self._repack()
         return len(self.colliders) - 1
 
     def remove(self, i: int):
         """Remove collider ``i``; returns it."""
-        self._index(i, "remove")
+        check_index(i, len(self.colliders), "remove")
         c = self.colliders.pop(i)
         self._repack()
         return c
@@ -439,13 +456,7 @@ class Contacts:
                 self._pos0[k], self._rot0[k] = starts[id(c)]
 
     def _index(self, i, doing: str) -> None:
-        n = len(self.colliders)
-        if isinstance(i, bool) or not isinstance(i, (int, np.integer)) or not -n <= i < n:
-            raise ValueError(
-                f"collider index must be an integer in [0, {n - 1}], got {i!r}"
-                if n
-                else f"there are no colliders to {doing}"
-            )
+        check_index(i, len(self.colliders), doing)
 
     def place(self, placements, teleport: bool = False) -> None:
         """Several colliders at once, ``[(collider, 4×4 transform)]``, from the package's own

@@ -19,7 +19,7 @@ from .. import backends, integrators
 from ..backends import models_of
 from ..constraints.grippers import Grips, check_box, check_grasp
 from ..contact.collider_kernels import MESH
-from ..contact.colliders import Collider
+from ..contact.colliders import Collider, check_index, check_new
 from ..model import ClothModel
 from ..parameters import SCHEMA
 from ..physics import stability as stab
@@ -381,34 +381,19 @@ class CudaSimulator:
         """As :meth:`cloth_sim.Simulator.add_collider`, for the shapes the device has (a plane, a
         sphere, a box, a capsule or a cylinder); it stands where it is added. A mesh, a shape of
         another kind or a name in use raises ``ValueError`` and changes nothing."""
-        if not isinstance(collider, Collider):
-            raise ValueError(
-                f"a collider must be a cloth_sim.contact.colliders shape (Plane, Sphere, Box, "
-                f"Capsule, Cylinder, Mesh), got {type(collider).__name__}"
-            )
-        if collider.kind == MESH:
+        if isinstance(collider, Collider) and collider.kind == MESH:
             raise ValueError(
                 f"collider {collider.name!r}: a mesh collider is not on the cuda device yet "
                 "(static planes, spheres, boxes, capsules and cylinders are); device='cpu' has it"
             )
-        if any(c.name == collider.name for c in self._colliders):
-            raise ValueError(
-                f"a collider named {collider.name!r} exists already; colliders: "
-                f"{', '.join(c.name for c in self._colliders)}"
-            )
+        check_new(collider, self._colliders)
         self._rebuild(self.integrator, self._worlds.options, [*self._colliders, collider])
         return len(self._colliders) - 1
 
     def remove_collider(self, i: int):
         """Remove collider ``i`` (the later ones move up by one); returns it. A bad index raises
         ``ValueError``."""
-        n = len(self._colliders)
-        if isinstance(i, bool) or not isinstance(i, (int, np.integer)) or not -n <= i < n:
-            raise ValueError(
-                f"collider index must be an integer in [0, {n - 1}], got {i!r}"
-                if n
-                else "there are no colliders to remove"
-            )
+        check_index(i, len(self._colliders), "remove")
         kept = list(self._colliders)
         gone = kept.pop(i)
         self._rebuild(self.integrator, self._worlds.options, kept)
