@@ -155,6 +155,45 @@ class BatchSimulator:
             for name in names:
                 sim.release(name)
 
+    def _pairs(self, worlds, indices):
+        w = self._ids(np.asarray(worlds, np.int64).ravel())
+        i = np.asarray(indices, np.int64).ravel()
+        if len(w) != len(i):
+            raise ValueError(
+                f"worlds and indices: one vertex a row, got {len(w)} worlds and {len(i)} indices"
+            )
+        return w, i
+
+    def hold_pairs(self, worlds, indices) -> None:
+        """Hold vertex ``indices[r]`` of world ``worlds[r]`` where it is, one a row (a gripper
+        ``hold:<index>`` each, as :meth:`hold`; at rest until :meth:`drag` moves it)."""
+        for w, i in zip(*self._pairs(worlds, indices)):
+            x = self.sims[w].positions[i]
+            self.sims[w].grasp_box(f"hold:{i}", x, x)
+
+    def release_pairs(self, worlds, indices) -> None:
+        """Let vertex ``indices[r]`` of world ``worlds[r]`` go, one a row."""
+        for w, i in zip(*self._pairs(worlds, indices)):
+            self.sims[w].release(f"hold:{i}")
+
+    def drag(self, worlds, indices, ends, steps: int, starts=None) -> None:
+        """``steps`` steps while held vertex ``indices[r]`` of world ``worlds[r]`` (one a row)
+        moves in a straight line at constant speed from ``starts[r]`` (where it is when None) to
+        ``ends[r]``: its gripper set to the line's point at each step's end
+        (:meth:`Simulator.set_gripper_pose`)."""
+        w, i = self._pairs(worlds, indices)
+        end = np.reshape(np.asarray(ends, np.float64), (len(w), 3))
+        if starts is not None:
+            start = np.reshape(np.asarray(starts, np.float64), (len(w), 3))
+        else:
+            start = np.array([self.sims[a].positions[b] for a, b in zip(w, i)]).reshape(-1, 3)
+        moving = [r for r in range(len(w)) if not np.array_equal(start[r], end[r])]
+        for s in range(1, steps + 1):
+            for r in moving:
+                p = start[r] + (end[r] - start[r]) * (s / steps)
+                self.sims[w[r]].set_gripper_pose(f"hold:{i[r]}", p)
+            self.step()
+
     def held(self, world: int) -> np.ndarray:
         """The vertices of ``world`` the solve does not move (the model's pins, what is held)."""
         sim = self.sims[int(self._ids([world])[0])]
@@ -163,6 +202,16 @@ class BatchSimulator:
     def reset(self, worlds=None) -> None:
         for w in self._ids(worlds):
             self.sims[w].reset()
+
+    def write(self, worlds, x=None, v=None) -> None:
+        """Set whole worlds' positions and/or velocities (``(len(worlds), n, 3)``), as the
+        simulator's ``positions`` and ``velocities`` setters do (checked there)."""
+        ids = self._ids(worlds)
+        for r, w in enumerate(ids):
+            if x is not None:
+                self.sims[w].positions = x[r]
+            if v is not None:
+                self.sims[w].velocities = v[r]
 
     def step(self, n: int = 1) -> None:
         for s in self.sims:

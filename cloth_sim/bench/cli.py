@@ -191,6 +191,14 @@ def _bench_gpu(args) -> int:
     return 0
 
 
+def _bench_vector_env(args) -> int:
+    from .vector_env import print_vector_table
+
+    kw = {k: v for k, v in (("precision", args.precision), ("launch", args.launch)) if v}
+    print_vector_table(args.device, tuple(args.envs), args.async_envs, args.steps, **kw)
+    return 0
+
+
 def _bench_flex_peer(args) -> int:
     from .flex_peer import print_flex_table
 
@@ -396,6 +404,23 @@ def add_parser(sub) -> argparse.ArgumentParser:
         help="a tiny run on numba-cuda's simulator (NUMBA_ENABLE_CUDASIM=1): the script's check",
     )
     gp.set_defaults(func=_bench_gpu)
+    ve = bsub.add_parser(
+        "vector-env",
+        help="ClothFold as one vector env (every world in one batch, cpu or cuda) beside "
+        "Gymnasium's AsyncVectorEnv: env steps a second",
+    )
+    ve.add_argument("--device", choices=["cpu", "cuda"], default="cpu")
+    ve.add_argument("--envs", type=int, nargs="+", default=[1, 2, 16], help="num_envs, a row each")
+    ve.add_argument(
+        "--async-envs",
+        type=int,
+        default=None,
+        help="the AsyncVectorEnv's processes (default: the machine's cores)",
+    )
+    ve.add_argument("--steps", type=int, default=20, help="timed env steps a row")
+    ve.add_argument("--precision", choices=["float32", "float64"], default=None)
+    ve.add_argument("--launch", choices=["auto", "blocks", "grid", "stages"], default=None)
+    ve.set_defaults(func=_bench_vector_env)
     fp = bsub.add_parser(
         "flex-peer",
         help="MuJoCo's flex cloth beside cloth_sim on the drape scene "

@@ -11,6 +11,8 @@ Three tables, each measured in one process:
    convergence --accuracy`` against symplectic Euler at 0.9 of its stable step, also on the GPU.
 3. **Many worlds**: ``N`` worlds of 32×32 cotton (and 64×64), each with its own wind, stepped
    together: world-seconds a second for ``vbd`` and symplectic Euler, from 1 world to 16,384.
+4. **ClothFold's vector env** on the GPU, 1 to 4,096 envs, beside Gymnasium's ``AsyncVectorEnv``
+   on the machine's CPU cores (:mod:`cloth_sim.bench.vector_env`): env steps a second.
 
 ``--simulator`` runs a tiny version on numba-cuda's simulator (``NUMBA_ENABLE_CUDASIM=1``): what
 CI checks of this script; its figures mean nothing.
@@ -26,12 +28,15 @@ from .. import backends
 from ..batch import BatchSimulator
 from ..simulator import Simulator
 from .convergence import REFERENCE_SHARE, accuracy, hanging, trajectory
+from .vector_env import print_vector_table
 
 #: sizes and world counts of a run on a GPU
 SIZES = (128, 256)
 WORLDS = (1, 16, 128, 1024, 4096, 16384)
 #: the wind's strength range a world draws from (N per unit of normal projection)
 WIND = 0.02
+#: ClothFold vector envs' sizes on a GPU
+VECTOR_ENVS = (1, 64, 1024, 4096)
 
 
 def _worlds_rate(model, worlds: int, integrator: str, dt: float, seconds: float, rng) -> dict:
@@ -125,4 +130,10 @@ def print_gpu_tables(sizes=SIZES, worlds=WORLDS, seconds: float = 2.0, simulator
                 f"{n:>4} {count:>7} {v['rate']:>11.0f} {v['launches']:>9.1f} {e['rate']:>13.0f}",
                 flush=True,
             )
+    print("4. ClothFold's vector env on the GPU, beside the CPU's AsyncVectorEnv")
+    if simulator:  # (a 4x4 cloth, a frame an env step, two processes)
+        tiny = dict(cloth_size=(4, 4), spacing=0.1, action_repeat=1)
+        figures["vector"] = print_vector_table("cuda", (1, 2), 2, 1, tiny, launch="stages")
+    else:
+        figures["vector"] = print_vector_table("cuda", VECTOR_ENVS, None, 10)
     return figures

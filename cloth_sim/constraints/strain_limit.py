@@ -70,23 +70,41 @@ PARALLEL_MIN_PARTICLES = 2048
 STRAIN_LIMIT_TOLERANCE = 1e-4
 
 
-def nearest_attachments(model, count: int = 2) -> tuple[np.ndarray, np.ndarray]:
+def nearest_attachments(model, count: int = 2, pinned=None) -> tuple[np.ndarray, np.ndarray]:
     """``(anchor, reach)``, ``(n, count)``: each free particle's ``count`` nearest pins by rest
     geodesic distance (shortest paths along all springs, weighted by rest length) and those
-    distances; ``-1`` where there is none (a pin itself, or no pin reachable)."""
-    n = model.n_particles
-    anchor = np.full((n, count), -1, dtype=np.int64)
-    reach = np.zeros((n, count))
-    pins = np.flatnonzero(model.pinned)
+    distances; ``-1`` where there is none (a pin itself, or no pin reachable). ``pinned``: the
+    pins, the model's own when None."""
+    pinned = np.asarray(model.pinned if pinned is None else pinned, bool)
+    pins = np.flatnonzero(pinned)
     if len(pins) == 0 or model.n_springs == 0:
-        return anchor, reach
+        return attachments_from(np.zeros((0, model.n_particles)), pinned, count)
+    return attachments_from(geodesic_distances(model, pins), pinned, count)
+
+
+def geodesic_distances(model, sources=None) -> np.ndarray:
+    """``(len(sources), n)``: the rest geodesic distance from each of ``sources`` (every particle
+    when None) to every particle, along the springs weighted by their rest lengths (Dijkstra from
+    each source: the same numbers whichever sources are asked)."""
+    n = model.n_particles
     s = model.springs
     graph = sp.csr_matrix((model.rest_lengths, (s[:, 0], s[:, 1])), shape=(n, n))
-    dist = shortest_path(graph, directed=False, indices=pins)  # (pins, n)
+    return shortest_path(graph, method="D", directed=False, indices=sources)
+
+
+def attachments_from(dist: np.ndarray, pinned: np.ndarray, count: int = 2):
+    """:func:`nearest_attachments` from ``dist``, the pins' rows of :func:`geodesic_distances`
+    (``(pins, n)``, the pins in index order)."""
+    n = len(pinned)
+    anchor = np.full((n, count), -1, dtype=np.int64)
+    reach = np.zeros((n, count))
+    pins = np.flatnonzero(pinned)
+    if len(pins) == 0:
+        return anchor, reach
     k = min(count, len(pins))
     order = np.argsort(dist, axis=0, kind="stable")[:k]  # (k, n)
     near = np.take_along_axis(dist, order, axis=0)
-    ok = np.isfinite(near) & ~model.pinned[None, :]
+    ok = np.isfinite(near) & ~pinned[None, :]
     anchor[:, :k] = np.where(ok, pins[order], -1).T
     reach[:, :k] = np.where(ok, near, 0.0).T
     return anchor, reach

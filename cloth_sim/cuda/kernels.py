@@ -22,7 +22,9 @@ from __future__ import annotations
 
 import math
 
-from numba import cuda, float64
+from numba import cuda, float64, int32
+
+from ..constraints.strain_limit import STRAIN_LIMIT_TOLERANCE
 
 # scalar-only numba functions of the CPU's sweep: a CUDA kernel calls them as they are (numba-cuda
 # compiles them for the device; its simulator calls the CPU's build)
@@ -50,6 +52,8 @@ MAX_BLOCK = 1024
 MARCH_STEPS = 64
 #: standard gravity, the residual's unit of force per unit of mass (as on the CPU)
 G0 = 9.80665
+#: strain above τ a pass of the limit tolerates (the CPU's ``STRAIN_LIMIT_TOLERANCE``)
+STRAIN_TOLERANCE = STRAIN_LIMIT_TOLERANCE
 
 
 # --------------------------------------------------------------------------- per-vertex parts
@@ -322,10 +326,12 @@ def crease_at(wor, w, px, py, pz, h):
 
 # --------------------------------------------------------------------------- one vertex's work
 @cuda.jit(device=True, inline=True)
-def explicit_at(top, wor, x, v, xo, vo, h, w, i):
+def explicit_at(top, wor, x, v, xo, vo, h, w, i, collide):
     """Symplectic Euler for vertex ``i`` of world ``w``: the force at ``(x, v)`` (springs and their
     damping, bending, gravity, wind, drag), ``v' = v + h f/m`` on a free vertex (a pin keeps its
-    velocity), ``x' = x + h v'``, written to ``(xo, vo)``."""
+    velocity), ``x' = x + h v'``, written to ``(xo, vo)``; the colliders' stage after it where
+    ``collide`` (else :func:`limit_end_at` runs it, after the strain limit, as the CPU orders
+    its stages)."""
     xi, yi, zi = x[w, i, 0], x[w, i, 1], x[w, i, 2]
     ux, uy, uz = v[w, i, 0], v[w, i, 1], v[w, i, 2]
     if wor.free[w, i]:
@@ -357,12 +363,153 @@ def explicit_at(top, wor, x, v, xo, vo, h, w, i):
         uy += (fy + by) * s
         uz += (fz + bz) * s
     px, py, pz = xi + ux * h, yi + uy * h, zi + uz * h
-    if wor.free[w, i] and wor.ncol[w]:
+    if collide and wor.free[w, i] and wor.ncol[w]:
         px, py, pz, ux, uy, uz = colliders_stage(
             wor, w, (xi, yi, zi), (px, py, pz), (ux, uy, uz), True, h
         )
     vo[w, i, 0], vo[w, i, 1], vo[w, i, 2] = ux, uy, uz
     xo[w, i, 0], xo[w, i, 1], xo[w, i, 2] = px, py, pz
+
+
+@cuda.jit(device=True, inline=True)
+def attach_at(lim, wor, x, tau, w, p):
+    """Vertex ``p``'s long-range attachments in world ``w`` (the CPU's ``_attach``): pulled back
+    along the line to each anchor (a pin) when farther than ``(1 + τ)`` times its rest geodesic
+    distance; 1 if it moved. An attachment reads only pins, which none moves: every vertex at
+    once."""
+    moved = 0
+    if not wor.free[w, p]:
+        return moved
+    for a in range(2):
+        q = lim.anchor[w, p, a]
+        if q < 0:
+            continue
+        dx, dy, dz = x[w, p, 0] - x[w, q, 0], x[w, p, 1] - x[w, q, 1], x[w, p, 2] - x[w, q, 2]
+        length = math.sqrt(dx * dx + dy * dy + dz * dz)
+        lmax = (1.0 + tau) * lim.reach[w, p, a]
+        if length > lmax:
+            f = lmax / length
+            x[w, p, 0] = x[w, q, 0] + f * dx
+            x[w, p, 1] = x[w, q, 1] + f * dy
+            x[w, p, 2] = x[w, q, 2] + f * dz
+            moved = 1
+    return moved
+
+
+@cuda.jit(device=True, inline=True)
+def shorten_at(lim, wor, x, tau, w, s):
+    """Limited spring ``s`` of world ``w`` shortened to strain ``τ`` if it exceeds ``τ +``
+    :data:`STRAIN_TOLERANCE`, both ends moving equally, or only the free one (the CPU's
+    ``_shorten``); whether it was. A colour's springs share no vertex: all at once."""
+    i, j = lim.ends[s, 0], lim.ends[s, 1]
+    fi, fj = wor.free[w, i], wor.free[w, j]
+    if not fi and not fj:
+        return False
+    dx, dy, dz = x[w, j, 0] - x[w, i, 0], x[w, j, 1] - x[w, i, 1], x[w, j, 2] - x[w, i, 2]
+    length = math.sqrt(dx * dx + dy * dy + dz * dz)
+    rest = lim.rest[s]
+    lmax = (1.0 + tau) * rest
+    if length <= lmax + STRAIN_TOLERANCE * rest:
+        return False
+    excess = (length - lmax) / length
+    wi = 0.5 if fi and fj else (1.0 if fi else 0.0)
+    wj = 0.5 if fi and fj else (1.0 if fj else 0.0)
+    x[w, i, 0] += wi * excess * dx
+    x[w, i, 1] += wi * excess * dy
+    x[w, i, 2] += wi * excess * dz
+    x[w, j, 0] -= wj * excess * dx
+    x[w, j, 1] -= wj * excess * dy
+    x[w, j, 2] -= wj * excess * dz
+    return True
+
+
+@cuda.jit(device=True, inline=True)
+def limit_start_at(lim, wor, before, x, tau, w, p):
+    """The limit's start for vertex ``p``: the step's end kept in ``before``, then its
+    attachments."""
+    for d in range(3):
+        before[w, p, d] = x[w, p, d]
+    attach_at(lim, wor, x, tau, w, p)
+
+
+@cuda.jit(device=True, inline=True)
+def limit_end_at(wor, before, start, x, v, h, w, p):
+    """After the limit's passes, vertex ``p``: its velocity follows its correction ``Δx = x −
+    before`` by ``Δx/h``, the correction shortened to at most the step's own motion ``|before −
+    start|`` (the CPU's ``follow_corrections``: a larger one undoes stretch that was there
+    before, and divided by ``h`` it would be a false speed); then the colliders' stage from the
+    step's start to the corrected end."""
+    if not wor.free[w, p]:
+        return
+    d0, d1, d2 = (
+        x[w, p, 0] - before[w, p, 0],
+        x[w, p, 1] - before[w, p, 1],
+        x[w, p, 2] - before[w, p, 2],
+    )
+    corr2 = d0 * d0 + d1 * d1 + d2 * d2
+    if corr2 > 0.0:
+        m0, m1, m2 = (
+            before[w, p, 0] - start[w, p, 0],
+            before[w, p, 1] - start[w, p, 1],
+            before[w, p, 2] - start[w, p, 2],
+        )
+        move2 = m0 * m0 + m1 * m1 + m2 * m2
+        scale = 1.0 / h
+        if corr2 > move2:
+            scale *= math.sqrt(move2 / corr2)
+        v[w, p, 0] += scale * d0
+        v[w, p, 1] += scale * d1
+        v[w, p, 2] += scale * d2
+    if wor.ncol[w]:
+        px, py, pz, ux, uy, uz = colliders_stage(
+            wor,
+            w,
+            (start[w, p, 0], start[w, p, 1], start[w, p, 2]),
+            (x[w, p, 0], x[w, p, 1], x[w, p, 2]),
+            (v[w, p, 0], v[w, p, 1], v[w, p, 2]),
+            True,
+            h,
+        )
+        x[w, p, 0], x[w, p, 1], x[w, p, 2] = px, py, pz
+        v[w, p, 0], v[w, p, 1], v[w, p, 2] = ux, uy, uz
+
+
+@cuda.jit(device=True, inline=True)
+def limit_in_block(lim, wor, before, start, x, v, run, w, flags, count):
+    """Provot's strain limit on world ``w`` by its block's threads after a symplectic Euler step
+    from ``start`` to ``(x, v)`` (the CPU's :class:`~cloth_sim.constraints.strain_limit.
+    StrainLimit` with its attachments): the attachments, then up to ``run.passes`` passes over
+    the limited springs a colour at a time, stopping after one that shortens nothing, each
+    followed by the attachments; then :func:`limit_end_at`. ``count``: the passes the launch has
+    run so far (the flag a pass writes is ``flags[count % 3]``, the block's own: shared memory,
+    zero at the launch's start); returns it updated."""
+    tid = cuda.threadIdx.x
+    size = cuda.blockDim.x
+    n = x.shape[1]
+    tau = run.limit
+    for i in range(tid, n, size):
+        limit_start_at(lim, wor, before, x, tau, w, i)
+    cuda.syncthreads()
+    colours = lim.sptr.shape[0] - 1
+    for _ in range(run.passes):
+        slot = count % 3
+        if tid == 0:
+            flags[(count + 1) % 3] = 0
+        for c in range(colours):
+            for s in range(lim.sptr[c] + tid, lim.sptr[c + 1], size):
+                if shorten_at(lim, wor, x, tau, w, s):
+                    flags[slot] = 1
+            cuda.syncthreads()
+        count += 1
+        if flags[slot] == 0:
+            break
+        for i in range(tid, n, size):
+            attach_at(lim, wor, x, tau, w, i)
+        cuda.syncthreads()
+    for i in range(tid, n, size):
+        limit_end_at(wor, before, start, x, v, run.h, w, i)
+    cuda.syncthreads()
+    return count
 
 
 @cuda.jit(device=True, inline=True)
@@ -603,10 +750,10 @@ def chebyshev_omega(k, rho, omega):
 
 # --------------------------------------------------------------------------- a launch a stage
 @cuda.jit
-def explicit_substep(top, wor, it, h, forward):
-    """One symplectic Euler step of ``h`` for every vertex of every world (:func:`explicit_at`).
-    ``forward``: read ``(x, v)`` and write ``(xt, y)``, else the other way (two buffers, so every
-    thread reads the step's start)."""
+def explicit_substep(top, wor, it, h, forward, collide):
+    """One symplectic Euler step of ``h`` for every vertex of every world (:func:`explicit_at`,
+    the colliders' stage where ``collide``). ``forward``: read ``(x, v)`` and write ``(xt, y)``,
+    else the other way (two buffers, so every thread reads the step's start)."""
     t = cuda.grid(1)
     n = wor.masses.shape[1]
     if t >= wor.masses.shape[0] * n:
@@ -614,9 +761,55 @@ def explicit_substep(top, wor, it, h, forward):
     w = t // n
     i = t - w * n
     if forward:
-        explicit_at(top, wor, it.x, it.v, it.xt, it.y, h, w, i)
+        explicit_at(top, wor, it.x, it.v, it.xt, it.y, h, w, i, collide)
     else:
-        explicit_at(top, wor, it.xt, it.y, it.x, it.v, h, w, i)
+        explicit_at(top, wor, it.xt, it.y, it.x, it.v, h, w, i, collide)
+
+
+@cuda.jit
+def limit_begin(lim, wor, it, tau):
+    """The strain limit's start after :func:`explicit_substep` (forward: the step's end in
+    ``it.xt``), for every vertex of every world: :func:`limit_start_at`, the end kept in
+    ``it.xs``."""
+    t = cuda.grid(1)
+    n = wor.masses.shape[1]
+    if t < wor.masses.shape[0] * n:
+        limit_start_at(lim, wor, it.xs, it.xt, tau, t // n, t % n)
+
+
+@cuda.jit
+def limit_colour(lim, wor, it, tau, lo, count, first):
+    """One colour of a pass of the limit (springs ``lo:lo + count``) in every world that takes
+    the pass (its last shortened something: ``lim.flags[w, 1]``, or ``first``);
+    ``lim.flags[w, 0]`` set where one was shortened."""
+    t = cuda.grid(1)
+    worlds = wor.masses.shape[0]
+    if t < worlds * count:
+        w = t // count
+        if (first or lim.flags[w, 1]) and shorten_at(lim, wor, it.xt, tau, w, lo + t - w * count):
+            lim.flags[w, 0] = 1
+
+
+@cuda.jit
+def limit_attach(lim, wor, it, tau):
+    """The attachments after a pass, every vertex of every world whose pass shortened
+    something (``lim.flags[w, 0]``)."""
+    t = cuda.grid(1)
+    n = wor.masses.shape[1]
+    if t < wor.masses.shape[0] * n:
+        w = t // n
+        if lim.flags[w, 0]:
+            attach_at(lim, wor, it.xt, tau, w, t % n)
+
+
+@cuda.jit
+def limit_end(wor, it, h):
+    """:func:`limit_end_at` for every vertex of every world (the step from ``it.x`` to
+    ``(it.xt, it.y)``)."""
+    t = cuda.grid(1)
+    n = wor.masses.shape[1]
+    if t < wor.masses.shape[0] * n:
+        limit_end_at(wor, it.xs, it.x, it.xt, it.y, h, t // n, t % n)
 
 
 @cuda.jit
@@ -741,6 +934,34 @@ def place(it, idx, points, velocities, worlds, moving):
 
 
 @cuda.jit
+def place_pairs(it, worlds, idx, points, velocities):
+    """``x[worlds[r], idx[r]] ← points[r]``, ``v ← velocities[r]``: vertices one a row, each in
+    its own world (held vertices that differ from world to world, moving with their grippers)."""
+    r = cuda.grid(1)
+    if r >= worlds.shape[0]:
+        return
+    w = worlds[r]
+    i = idx[r]
+    for d in range(3):
+        it.x[w, i, d] = points[r, d]
+        it.v[w, i, d] = velocities[r, d]
+
+
+@cuda.jit
+def stop_pairs(it, worlds, idx):
+    """Vertex ``idx[r]`` of world ``worlds[r]`` at rest where it is, its last acceleration
+    forgotten (one a row: a grasp)."""
+    r = cuda.grid(1)
+    if r >= worlds.shape[0]:
+        return
+    w = worlds[r]
+    i = idx[r]
+    for d in range(3):
+        it.v[w, i, d] = 0.0
+        it.aprev[w, i, d] = 0.0
+
+
+@cuda.jit
 def restart(it, worlds):
     """The listed worlds' vertices' last accelerations forgotten (the adaptive initial guess
     starts again, as after the CPU's ``VBD.reset``)."""
@@ -755,14 +976,15 @@ def restart(it, worlds):
 
 # --------------------------------------------------------------------------- a frame a launch
 @cuda.jit
-def frames_in_blocks(top, wor, it, cptr, run, out):
+def frames_in_blocks(top, wor, it, cptr, lim, run, out):
     """``run.steps`` steps of every world in one launch, one thread block a world (its threads
     share its vertices, :func:`cuda.syncthreads` between stages): symplectic Euler
     (``run.method`` 0) or ``vbd`` (1) in ``run.substeps`` substeps of ``run.h``, each iterating
     until the world's own residual is at most ``run.tolerance`` (measured every
     ``run.check_every`` sweeps) or ``run.iterations`` sweeps. ``out[w]``: the last step's
     residual (its substeps' worst), the sweeps done, the steps that ended above the tolerance
-    (as :class:`cloth_sim.integrators.vbd.VBD` counts them)."""
+    (as :class:`cloth_sim.integrators.vbd.VBD` counts them). Symplectic Euler's steps are each
+    followed by the strain limit where ``run.limit >= 0`` (:func:`limit_in_block`)."""
     w = cuda.blockIdx.x
     tid = cuda.threadIdx.x
     size = cuda.blockDim.x
@@ -770,17 +992,32 @@ def frames_in_blocks(top, wor, it, cptr, run, out):
     h = run.h
     sums = cuda.shared.array(MAX_BLOCK, dtype=float64)
     counts = cuda.shared.array(MAX_BLOCK, dtype=float64)
+    flags = cuda.shared.array(3, dtype=int32)
+    if tid < 3:
+        flags[tid] = 0
+    cuda.syncthreads()
     worst = 0.0
     sweeps = 0
     missed = 0
     if run.method == 0:
+        limited = run.limit >= 0.0
+        passes = 0
         for k in range(run.steps):
             for i in range(tid, n, size):
                 if k % 2 == 0:
-                    explicit_at(top, wor, it.x, it.v, it.xt, it.y, h, w, i)
+                    explicit_at(top, wor, it.x, it.v, it.xt, it.y, h, w, i, not limited)
                 else:
-                    explicit_at(top, wor, it.xt, it.y, it.x, it.v, h, w, i)
+                    explicit_at(top, wor, it.xt, it.y, it.x, it.v, h, w, i, not limited)
             cuda.syncthreads()
+            if limited:
+                if k % 2 == 0:
+                    passes = limit_in_block(
+                        lim, wor, it.xs, it.x, it.xt, it.y, run, w, flags, passes
+                    )
+                else:
+                    passes = limit_in_block(
+                        lim, wor, it.xs, it.xt, it.x, it.v, run, w, flags, passes
+                    )
         if run.steps % 2 == 1:
             for i in range(tid, n, size):
                 copy_back_at(it, w, i)
@@ -874,8 +1111,59 @@ def grid_residual(wor, it, partial, w, rank, size):
     return math.sqrt(total / count) if count > 0 else 0.0
 
 
+@cuda.jit(device=True, inline=True)
+def limit_on_grid(lim, wor, before, start, x, v, run, count):
+    """:func:`limit_in_block` over a cooperative launch's whole grid, every world at once, the
+    grid synchronised between stages. Each world stops after its own pass that shortened
+    nothing, as in a block (``lim.flags[w, count % 3]``: whether world ``w``'s pass did; a world
+    takes a pass while its last did), so a world's bits do not depend on the others."""
+    g = cuda.cg.this_grid()
+    rank = cuda.grid(1)
+    size = cuda.gridsize(1)
+    worlds = wor.masses.shape[0]
+    n = x.shape[1]
+    total = worlds * n
+    tau = run.limit
+    for t in range(rank, total, size):
+        limit_start_at(lim, wor, before, x, tau, t // n, t % n)
+    g.sync()
+    colours = lim.sptr.shape[0] - 1
+    for p in range(run.passes):
+        slot = count % 3
+        prev = (count + 2) % 3
+        for w in range(rank, worlds, size):
+            lim.flags[w, (count + 1) % 3] = 0
+        for c in range(colours):
+            lo = lim.sptr[c]
+            m = lim.sptr[c + 1] - lo
+            for t in range(rank, worlds * m, size):
+                w = t // m
+                if (p == 0 or lim.flags[w, prev]) and shorten_at(
+                    lim, wor, x, tau, w, lo + t - w * m
+                ):
+                    lim.flags[w, slot] = 1
+            g.sync()
+        count += 1
+        more = False
+        for w in range(worlds):
+            if lim.flags[w, slot]:
+                more = True
+                break
+        if not more:
+            break
+        for t in range(rank, total, size):
+            w = t // n
+            if lim.flags[w, slot]:
+                attach_at(lim, wor, x, tau, w, t - w * n)
+        g.sync()
+    for t in range(rank, total, size):
+        limit_end_at(wor, before, start, x, v, run.h, t // n, t % n)
+    g.sync()
+    return count
+
+
 @cuda.jit
-def frames_on_grid(top, wor, it, cptr, run, out, partial):
+def frames_on_grid(top, wor, it, cptr, lim, run, out, partial):
     """:func:`frames_in_blocks` for worlds too large for a block: every thread of a cooperative
     launch (as many blocks as the GPU holds at once) strides over every world's vertices, and the
     whole grid synchronises between stages (``cuda.cg.this_grid().sync()``): one launch for the
@@ -889,14 +1177,21 @@ def frames_on_grid(top, wor, it, cptr, run, out, partial):
     total = worlds * n
     h = run.h
     if run.method == 0:
+        limited = run.limit >= 0.0
+        passes = 0
         for k in range(run.steps):
             for t in range(rank, total, size):
                 w = t // n
                 if k % 2 == 0:
-                    explicit_at(top, wor, it.x, it.v, it.xt, it.y, h, w, t - w * n)
+                    explicit_at(top, wor, it.x, it.v, it.xt, it.y, h, w, t - w * n, not limited)
                 else:
-                    explicit_at(top, wor, it.xt, it.y, it.x, it.v, h, w, t - w * n)
+                    explicit_at(top, wor, it.xt, it.y, it.x, it.v, h, w, t - w * n, not limited)
             g.sync()
+            if limited:
+                if k % 2 == 0:
+                    passes = limit_on_grid(lim, wor, it.xs, it.x, it.xt, it.y, run, passes)
+                else:
+                    passes = limit_on_grid(lim, wor, it.xs, it.xt, it.x, it.v, run, passes)
         if run.steps % 2 == 1:
             for t in range(rank, total, size):
                 copy_back_at(it, t // n, t % n)

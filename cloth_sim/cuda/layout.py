@@ -16,6 +16,9 @@ host with numpy and copied to the device once.
   scratch: the step's start ``xt``, the inertial target ``y``, the iterate before the sweep ``xs``,
   the Chebyshev history ``prev2``, the last step's acceleration ``aprev``, and each vertex's
   squared force from the last sweep ``stepped``.
+* :class:`Limits`, Provot's strain limit: the limited springs grouped by colour (no two springs of
+  a colour share a vertex, so a colour's are shortened at once) and each world's long-range
+  attachments to its pins (held vertices included).
 * :class:`Run`, the scalars of a launch that runs whole steps.
 
 Floating-point arrays are ``float32`` or ``float64`` (the backend's ``precision``); indices int32.
@@ -94,11 +97,28 @@ class Iterate(NamedTuple):
     bdf: np.ndarray
 
 
+class Limits(NamedTuple):
+    """Provot's strain limit (:mod:`cloth_sim.constraints.strain_limit`) on the device: the
+    model's strain-limited springs ``ends`` ``(m, 2)`` with their ``rest`` lengths, grouped by
+    colour (colour ``c`` is ``sptr[c]:sptr[c + 1]``; no two springs of a colour share a vertex);
+    each world's long-range attachments, ``anchor`` ``(worlds, n, 2)`` (a pin, or −1) and
+    ``reach`` (its rest geodesic distance); ``flags`` ``(worlds, 3)``: whether a world's pass
+    shortened anything (three in turn: one written, the last read, the next cleared)."""
+
+    ends: np.ndarray
+    rest: np.ndarray
+    sptr: np.ndarray
+    anchor: np.ndarray
+    reach: np.ndarray
+    flags: np.ndarray
+
+
 class Run(NamedTuple):
     """What :func:`~cloth_sim.cuda.kernels.frames_in_blocks` runs: ``steps`` steps of ``substeps``
     substeps of ``h`` by ``method`` (0: symplectic Euler, 1: vbd with its ``iterations``,
     ``tolerance``, ``check_every`` and ``rho``; ``bdf2`` 1 where its substeps are BDF2's, each
-    then backward Euler's of ``hb = 2h/3``)."""
+    then backward Euler's of ``hb = 2h/3``); after each symplectic Euler step, Provot's strain
+    limit ``limit`` (τ; negative: none) in at most ``passes`` passes (:class:`Limits`)."""
 
     h: float
     hb: float
@@ -110,6 +130,8 @@ class Run(NamedTuple):
     tolerance: float
     check_every: int
     rho: float
+    limit: float
+    passes: int
 
 
 def _csr(owner: np.ndarray, item: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -155,6 +177,45 @@ def topology(model: ClothModel, real) -> tuple[Topology, np.ndarray]:
         cverts=cverts.astype(np.int32),
     )
     return top, cptr
+
+
+def spring_colours(springs: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(order, sptr)``: ``springs`` (``(m, 2)``) reordered so that each colour's are together
+    (colour ``c``: ``order[sptr[c]:sptr[c + 1]]``), no two of a colour sharing a vertex; greedy,
+    in the springs' order, each taking the least colour free at both ends (a grid's structural
+    and shear springs take 8)."""
+    m = len(springs)
+    colour = np.zeros(m, np.int64)
+    used: list[set] = [set() for _ in range(n)]
+    for s in range(m):
+        i, j = int(springs[s, 0]), int(springs[s, 1])
+        c = 0
+        while c in used[i] or c in used[j]:
+            c += 1
+        colour[s] = c
+        used[i].add(c)
+        used[j].add(c)
+    order = np.argsort(colour, kind="stable")
+    sptr = np.zeros((colour.max() + 2) if m else 1, np.int32)
+    np.cumsum(np.bincount(colour, minlength=len(sptr) - 1), out=sptr[1:])
+    return order, sptr
+
+
+def limits(model: ClothModel, worlds: int, real) -> Limits:
+    """The model's :class:`Limits` on the host, every world without attachments (``anchor``
+    −1: :meth:`~cloth_sim.cuda.worlds.CudaWorlds` fills them from each world's pins)."""
+    sel = np.flatnonzero(model.strain_limited)
+    springs = np.asarray(model.springs, np.int64)[sel]
+    order, sptr = spring_colours(springs, model.n_particles)
+    n = model.n_particles
+    return Limits(
+        ends=np.ascontiguousarray(springs[order], np.int32).reshape(-1, 2),
+        rest=np.asarray(model.rest_lengths, real)[sel][order],
+        sptr=sptr,
+        anchor=np.full((worlds, n, 2), -1, np.int32),
+        reach=np.zeros((worlds, n, 2), real),
+        flags=np.zeros((worlds, 3), np.int32),
+    )
 
 
 def same_topology(models: list[ClothModel]) -> None:

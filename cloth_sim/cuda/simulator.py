@@ -27,9 +27,15 @@ from ..physics.forces import Forces
 from ..state import SimulationDiverged, State
 from .worlds import CudaWorlds
 
-#: :class:`cloth_sim.Simulator`'s arguments that only tune what the device refuses (a strain
-#: limit's passes, the thickness contacts keep)
-_IGNORED = ("strain_limit_passes", "strain_limit_long_range", "strain_limit_method", "thickness")
+#: :class:`cloth_sim.Simulator`'s arguments for the stages (the strain limit's, the thickness
+#: contacts keep)
+_STAGES = (
+    "strain_limit",
+    "strain_limit_passes",
+    "strain_limit_long_range",
+    "strain_limit_method",
+    "thickness",
+)
 
 
 class CudaSimulator:
@@ -54,17 +60,20 @@ class CudaSimulator:
         block_threads: int | None = None,
         **cpu_only,
     ):
-        unknown = sorted(
-            set(cpu_only) - {"strain_limit", "colliders", "self_collision"} - set(_IGNORED)
-        )
+        unknown = sorted(set(cpu_only) - {"colliders", "self_collision"} - set(_STAGES))
         if unknown:
             raise TypeError(f"unexpected argument(s) {', '.join(unknown)}")
         colliders = list(cpu_only.get("colliders") or ())
+        tau = cpu_only.get("strain_limit")
+        limit_method = SCHEMA["strain_limit_method"].check(
+            cpu_only.get("strain_limit_method", "provot")
+        )
         refused = backends.refusal(
             "cuda",
             integrator,
             model,
-            strain_limit=cpu_only.get("strain_limit") is not None,
+            strain_limit=tau is not None,
+            strain_limit_method=tau is not None and limit_method != "provot",
             colliders=any(c.kind == MESH for c in colliders),
             self_collision=bool(cpu_only.get("self_collision")),
         )
@@ -91,6 +100,12 @@ class CudaSimulator:
             colliders,
             self.thickness,
         )
+        self._worlds.set_strain_limit(
+            tau,
+            cpu_only.get("strain_limit_passes"),
+            cpu_only.get("strain_limit_long_range", True),
+        )
+        self._strain_method = limit_method
         self._colliders = colliders
         self._k = np.array(model.stiffness, dtype=np.float64)
         self._c = np.array(model.damping, dtype=np.float64)
@@ -244,6 +259,9 @@ class CudaSimulator:
             old.block_threads,
             colliders,
             self.thickness,
+        )
+        new.set_strain_limit(
+            old.strain_limit, old.strain_limit_passes, old.strain_limit_long_range
         )
         self._worlds = new
         self._colliders = colliders
@@ -553,24 +571,45 @@ class CudaSimulator:
         return False
 
     @property
-    def strain_limit(self):
-        return None
+    def strain_limit(self) -> float | None:
+        """Provot's ``τc`` after each symplectic Euler step (None: none), as the CPU's; refused
+        after ``vbd`` and with the projection method."""
+        return self._worlds.strain_limit
 
     @strain_limit.setter
     def strain_limit(self, tau) -> None:
-        if tau:
+        if tau is not None and self._strain_method != "provot":
             raise ValueError(
-                "strain_limit: not on the cuda device yet (vbd converged holds the stretch "
-                "without one: set strain_limit to 0)"
+                backends.refusal("cuda", self.integrator, self.model, strain_limit_method=True)[0]
             )
+        self._worlds.set_strain_limit(tau)
 
-    # the strain limit's own settings, kept for when it runs (as the CPU keeps them while off)
-    strain_limit_passes = 20
-    strain_limit_method = "provot"
+    @property
+    def strain_limit_passes(self) -> int:
+        return self._worlds.strain_limit_passes
+
+    @strain_limit_passes.setter
+    def strain_limit_passes(self, passes: int) -> None:
+        self._worlds.set_strain_limit(self._worlds.strain_limit, passes)
+
+    @property
+    def strain_limit_method(self) -> str:
+        """``"provot"`` (the device's); ``"projection"`` is kept while the limit is off and
+        refused while it is on."""
+        return self._strain_method
+
+    @strain_limit_method.setter
+    def strain_limit_method(self, method: str) -> None:
+        method = SCHEMA["strain_limit_method"].check(method)
+        if method != "provot" and self.strain_limit is not None:
+            raise ValueError(
+                backends.refusal("cuda", self.integrator, self.model, strain_limit_method=True)[0]
+            )
+        self._strain_method = method
 
     @property
     def active_stages(self) -> tuple[str, ...]:
-        return ()
+        return ("strain_limit",) if self.strain_limit is not None else ()
 
     @property
     def active_terms(self) -> tuple[str, ...]:
@@ -691,9 +730,12 @@ class CudaBatchSimulator(CudaWorlds):
         worlds: int | None = None,
         integrator: str = "vbd",
         dt: float = 1 / 60,
+        strain_limit: float | None = None,
+        strain_limit_passes: int | None = None,
         **kwargs,
     ):
         super().__init__(models_of(models, worlds), integrator, dt, **kwargs)
+        self.set_strain_limit(strain_limit, strain_limit_passes)
 
     @property
     def time(self) -> np.ndarray:

@@ -10,9 +10,11 @@ counts them.
 The same methods and defaults as the CPU (:mod:`cloth_sim.integrators.explicit`'s symplectic Euler
 and :class:`~cloth_sim.integrators.vbd.VBD`'s general sweep: substeps chosen from the cloth, a
 relative residual against ``tolerance`` measured every ``check_every`` iterations, Chebyshev's
-``rho``), with static colliders (planes, spheres, boxes, capsules, cylinders). What stays on the
-CPU for now: moving and mesh colliders, self-contact, the strain limit, grippers on links and Choi
-& Ko's nonlinear pairs (:func:`cloth_sim.backends.refusal` names them).
+``rho``), with static colliders (planes, spheres, boxes, capsules, cylinders) and, after
+symplectic Euler, Provot's strain limit (:meth:`CudaWorlds.set_strain_limit`: the CPU's passes
+and long-range attachments, a pass taking its springs a colour at a time). What stays on the CPU
+for now: mesh colliders, self-contact, the strain limit after ``vbd`` and its projection, grippers
+on links and Choi & Ko's nonlinear pairs (:func:`cloth_sim.backends.refusal` names them).
 """
 
 from __future__ import annotations
@@ -25,6 +27,12 @@ import numpy as np
 from numba import cuda
 
 from .. import backends
+from ..constraints.strain_limit import (
+    DEFAULT_STRAIN_LIMIT_PASSES,
+    attachments_from,
+    geodesic_distances,
+    nearest_attachments,
+)
 from ..contact.collider_kernels import MESH
 from ..contact.geometry import positive
 from ..integrators.vbd import VBD
@@ -33,7 +41,7 @@ from ..model import ClothModel
 from ..parameters import SCHEMA
 from . import kernels as K
 from . import simulated
-from .layout import Iterate, Run, Topology, Worlds, same_topology, topology
+from .layout import Iterate, Limits, Run, Topology, Worlds, limits, same_topology, topology
 
 #: floating point on the device: float32 (the default: half the bytes a sweep moves) or float64
 PRECISIONS = {"float32": np.float32, "float64": np.float64}
@@ -221,6 +229,95 @@ class CudaWorlds:
         self._residual = cuda.device_array(worlds, np.float64)
         self._substeps_key = None
         self._substeps = 1
+        #: Provot's strain limit τ after each symplectic Euler step (None: none), its passes a
+        #: step at most and whether long-range attachments to the pins come first
+        #: (:meth:`set_strain_limit`)
+        self.strain_limit = None
+        self.strain_limit_passes = DEFAULT_STRAIN_LIMIT_PASSES
+        self.strain_limit_long_range = True
+        self._lim_host = None
+        self.lim = Limits(
+            *(
+                cuda.to_device(a)
+                for a in Limits(
+                    ends=np.zeros((1, 2), np.int32),
+                    rest=np.zeros(1, real),
+                    sptr=np.zeros(1, np.int32),
+                    anchor=np.full((1, 1, 2), -1, np.int32),
+                    reach=np.zeros((1, 1, 2), real),
+                    flags=np.zeros((1, 3), np.int32),
+                )
+            )
+        )
+        self._attached = None  # the pins the attachments were made for (worlds, n), or None
+        self._geodesic = None  # every particle's rest geodesic distances (n, n), or None
+
+    # ------------------------------------------------------------------ the strain limit
+    def set_strain_limit(self, tau, passes=None, long_range=None) -> None:
+        """Provot's strain limit ``tau`` (``None``: none) after every symplectic Euler step in
+        every world, in at most ``passes`` passes (unchanged when None), after long-range
+        attachments to each world's pins and held vertices where ``long_range`` (as the CPU's
+        :class:`~cloth_sim.constraints.strain_limit.StrainLimit` with ``method="provot"``).
+        Checked first; ``vbd`` is refused (its substeps take the limit in parts, which the
+        device does not do)."""
+        if tau is not None:
+            tau = SCHEMA["strain_limit"].check(tau)
+            if self.method != "symplectic_euler":
+                refused = backends.refusal("cuda", self.method, self.models[0], strain_limit=True)
+                raise ValueError(refused[0])
+        if passes is not None:
+            passes = SCHEMA["strain_limit_passes"].check(passes)
+        if tau is not None and self._lim_host is None:
+            self._lim_host = limits(self.models[0], self.worlds, self.real)
+            self.lim = Limits(*(cuda.to_device(a) for a in self._lim_host))
+            self._attached = None
+        self.strain_limit = tau
+        if passes is not None:
+            self.strain_limit_passes = passes
+        if long_range is not None and bool(long_range) != self.strain_limit_long_range:
+            self.strain_limit_long_range = bool(long_range)
+            self._attached = None
+
+    _limit_now = False  # (whether the step being taken is limited)
+
+    def _limited(self) -> bool:
+        """Whether the strain limit runs after this step; its attachments made for the pins now
+        where they are not."""
+        if self.strain_limit is None or self.method != "symplectic_euler":
+            return False
+        pins = self._host.free == 0
+        if self._attached is None:
+            changed = np.arange(self.worlds)
+        else:
+            changed = np.flatnonzero(np.any(pins != self._attached, axis=1))
+            if not len(changed):
+                return True
+        h = self._lim_host
+        for w in changed:
+            if not self.strain_limit_long_range:
+                h.anchor[w], h.reach[w] = -1, 0.0
+            else:
+                h.anchor[w], h.reach[w] = self._attachments(w, pins[w])
+        self.lim.anchor.copy_to_device(h.anchor)
+        self.lim.reach.copy_to_device(h.reach)
+        self._attached = pins
+        return True
+
+    #: up to this many particles the rest geodesic distances between every two are kept (8 bytes
+    #: each: 32 MB at the most), so that a grasp's new attachments are a lookup, not a search
+    GEODESIC_ALL_MAX = 2048
+
+    def _attachments(self, w: int, pins: np.ndarray):
+        """World ``w``'s long-range attachments to ``pins`` (the CPU's
+        :func:`~cloth_sim.constraints.strain_limit.nearest_attachments`, the same numbers)."""
+        model = self.models[w]
+        if not np.any(pins) or model.n_springs == 0:
+            return -1, 0.0
+        if self.n <= self.GEODESIC_ALL_MAX:
+            if self._geodesic is None:  # (every world's springs and rest lengths: one topology)
+                self._geodesic = geodesic_distances(model)
+            return attachments_from(self._geodesic[np.flatnonzero(pins)], pins)
+        return nearest_attachments(model, 2, pins)
 
     # ------------------------------------------------------------------ per world
     def _ids(self, worlds) -> np.ndarray:
@@ -400,6 +497,93 @@ class CudaWorlds:
         free[np.ix_(ids, idx)] = ~self._pinned[np.ix_(ids, idx)]
         self._upload_free(free)
 
+    def _pairs(self, worlds, indices) -> tuple[np.ndarray, np.ndarray]:
+        """``(worlds, indices)`` as rows, one vertex a row (each checked)."""
+        w = self._ids(np.asarray(worlds, np.int64).ravel())
+        i = self._vertices(indices)
+        if len(w) != len(i):
+            raise ValueError(
+                f"worlds and indices: one vertex a row, got {len(w)} worlds and {len(i)} indices"
+            )
+        return w, i
+
+    def hold_pairs(self, worlds, indices) -> None:
+        """Hold vertex ``indices[r]`` of world ``worlds[r]``, one a row, where it is, at rest
+        (:meth:`carry_pairs` and :meth:`drag` move it): :meth:`hold` for vertices that differ
+        from world to world, in one upload and one launch."""
+        w, i = self._pairs(worlds, indices)
+        free = self._host.free.copy()
+        free[w, i] = 0
+        self._upload_free(free)
+        if len(w):
+            K.stop_pairs[_grid(len(w))](
+                self.it, cuda.to_device(w.astype(np.int32)), cuda.to_device(i.astype(np.int32))
+            )
+            self.launches += 1
+
+    def release_pairs(self, worlds, indices) -> None:
+        """Let vertex ``indices[r]`` of world ``worlds[r]`` go, one a row (a model's own pin stays
+        pinned), with the velocity it has."""
+        w, i = self._pairs(worlds, indices)
+        free = self._host.free.copy()
+        free[w, i] = ~self._pinned[w, i]
+        self._upload_free(free)
+
+    def carry_pairs(self, worlds, indices, points, velocities) -> None:
+        """Held vertex ``indices[r]`` of world ``worlds[r]`` to ``points[r]``, moving at
+        ``velocities[r]`` (one a row; the device moves a held vertex by ``h v`` a step)."""
+        w, i = self._pairs(worlds, indices)
+        p = np.ascontiguousarray(np.reshape(points, (len(w), 3)), self.real)
+        v = np.ascontiguousarray(np.reshape(velocities, (len(w), 3)), self.real)
+        if not (np.all(np.isfinite(p)) and np.all(np.isfinite(v))):
+            raise ValueError("points and velocities must be finite")
+        if len(w):
+            K.place_pairs[_grid(len(w))](
+                self.it,
+                cuda.to_device(w.astype(np.int32)),
+                cuda.to_device(i.astype(np.int32)),
+                cuda.to_device(p),
+                cuda.to_device(v),
+            )
+            self.launches += 1
+
+    def drag(self, worlds, indices, ends, steps: int, starts=None) -> None:
+        """``steps`` steps while held vertex ``indices[r]`` of world ``worlds[r]`` (one a row)
+        moves in a straight line at constant speed from ``starts[r]`` (where it is when None) to
+        ``ends[r]``, where the last step leaves it with that velocity (a gripper dragging it, as
+        the CPU's :meth:`cloth_sim.batch.BatchSimulator.drag`): two launches and the steps'."""
+        w, i = self._pairs(worlds, indices)
+        end = np.reshape(np.asarray(ends, np.float64), (len(w), 3))
+        if starts is not None:
+            start = np.reshape(np.asarray(starts, np.float64), (len(w), 3))
+        else:
+            start = self.positions_host()[w, i] if len(w) else end
+        v = (end - start) / (steps * self.dt)
+        self._settle_dragged()
+        self.carry_pairs(w, i, start, v)
+        self.step(steps)
+        self.carry_pairs(w, i, end, v)
+        self._dragged = (w, i)
+
+    _dragged = None  # the rows the last drag left moving: (worlds, indices), or None
+
+    def _settle_dragged(self) -> None:
+        """The vertices the last :meth:`drag` left moving and still held stop where they are (a
+        gripper that moved over the last step and stays): their velocity, kept until now for a
+        release, would move them on."""
+        if self._dragged is None:
+            return
+        w, i = self._dragged
+        self._dragged = None
+        still = self._host.free[w, i] == 0
+        if np.any(still):
+            K.stop_pairs[_grid(int(still.sum()))](
+                self.it,
+                cuda.to_device(w[still].astype(np.int32)),
+                cuda.to_device(i[still].astype(np.int32)),
+            )
+            self.launches += 1
+
     def held(self, world: int) -> np.ndarray:
         """The vertices of ``world`` that do not move by the solve (the model's pins and what
         :meth:`hold` holds)."""
@@ -500,7 +684,9 @@ class CudaWorlds:
         if n <= 0:
             return
         before = self.launches
+        self._settle_dragged()
         mode = self.launch_mode()
+        self._limit_now = self._limited()
         if mode in ("blocks", "grid"):
             self._run_whole(n, mode)
         else:
@@ -539,16 +725,18 @@ class CudaWorlds:
             tolerance=s.tolerance if vbd else 0.0,
             check_every=s.check_every if vbd else 1,
             rho=s.rho if vbd else 0.0,
+            limit=self.strain_limit if self._limit_now else -1.0,
+            passes=self.strain_limit_passes,
         )
         if mode == "blocks":
             K.frames_in_blocks[self.worlds, self.threads()](
-                self.top, self.wor, self.it, self._cptr_device, run, self._out
+                self.top, self.wor, self.it, self._cptr_device, self.lim, run, self._out
             )
         else:
             blocks, threads = self._grid_shape(run)
-            K.frames_on_grid[blocks, threads](
-                self.top, self.wor, self.it, self._cptr_device, run, self._out, self._partial
-            )
+            if self._limit_now:
+                self.lim.flags.copy_to_device(np.zeros((self.worlds, 3), np.int32))
+            K.frames_on_grid[blocks, threads](*self._grid_args(run))
         self.launches += 1
         self.last_substeps = parts
         if vbd:
@@ -557,6 +745,19 @@ class CudaWorlds:
             self.iterations += out[:, 1].astype(np.int64)
             self.last_iterations = int(out[:, 1].max()) // n
             self.unconverged_steps += out[:, 2].astype(np.int64)
+
+    def _grid_args(self, run) -> tuple:
+        """:func:`kernels.frames_on_grid`'s arguments for ``run``."""
+        return (
+            self.top,
+            self.wor,
+            self.it,
+            self._cptr_device,
+            self.lim,
+            run,
+            self._out,
+            self._partial,
+        )
 
     def _grid_shape(self, run) -> tuple[int, int]:
         """The cooperative launch's blocks (as many as the GPU holds at once, at most one a
@@ -567,8 +768,7 @@ class CudaWorlds:
         if simulated():
             blocks = 1  # (the simulator's cooperative grids have one block)
         else:
-            args = (self.top, self.wor, self.it, self._cptr_device, run, self._out, self._partial)
-            sig = tuple(numba.typeof(a) for a in args)
+            sig = tuple(numba.typeof(a) for a in self._grid_args(run))
             K.frames_on_grid.compile(sig)
             blocks = min(
                 blocks, K.frames_on_grid.overloads[sig].max_cooperative_grid_blocks(threads)
@@ -581,10 +781,43 @@ class CudaWorlds:
         total = self.worlds * self.n
         launch = _grid(total)
         h = self.real(self.dt)
-        K.explicit_substep[launch](self.top, self.wor, self.it, h, True)
+        limited = self._limit_now
+        K.explicit_substep[launch](self.top, self.wor, self.it, h, True, not limited)
+        self.launches += 1
+        if limited:
+            self._limit_stages(h)
         K.copy_back[launch](self.it)
-        self.launches += 2
+        self.launches += 1
         self.last_substeps = 1
+
+    def _limit_stages(self, h) -> None:
+        """The strain limit after :func:`kernels.explicit_substep`, a launch a stage: the start,
+        a colour of a pass at a time (each pass's flag read back: the passes stop after one that
+        shortens nothing), the attachments after a pass, the velocities and colliders."""
+        launch = _grid(self.worlds * self.n)
+        tau = self.real(self.strain_limit)
+        lim = self.lim
+        K.limit_begin[launch](lim, self.wor, self.it, tau)
+        self.launches += 1
+        sptr = self._lim_host.sptr
+        flags = np.zeros((self.worlds, 3), np.int32)
+        for p in range(self.strain_limit_passes):
+            lim.flags.copy_to_device(flags)
+            for c in range(len(sptr) - 1):
+                count = int(sptr[c + 1] - sptr[c])
+                K.limit_colour[_grid(self.worlds * count)](
+                    lim, self.wor, self.it, tau, int(sptr[c]), count, p == 0
+                )
+            self.launches += len(sptr) - 1
+            flags = lim.flags.copy_to_host()
+            if not flags[:, 0].any():
+                break
+            K.limit_attach[launch](lim, self.wor, self.it, tau)
+            self.launches += 1
+            flags[:, 1] = flags[:, 0]  # (a world takes the next pass if this one shortened)
+            flags[:, 0] = 0
+        K.limit_end[launch](self.wor, self.it, h)
+        self.launches += 1
 
     def _vbd_step(self) -> None:
         s = self.settings

@@ -15,6 +15,11 @@ points):
 =================================  =========================================================
 
 Every keyword of :class:`~cloth_sim.envs.cloth_env.ClothEnv` can be passed to ``gymnasium.make``.
+
+``gymnasium.make_vec("cloth_sim/ClothFold-v0", num_envs=N)`` makes
+:class:`~cloth_sim.envs.vector.ClothFoldVectorEnv` (its vector entry point: every world in one
+batch of cloths, ``device="cuda"`` on a GPU); ``vectorization_mode="sync"`` or ``"async"`` makes
+Gymnasium's vector envs of single envs instead, as for the other ids.
 """
 
 from __future__ import annotations
@@ -24,11 +29,13 @@ import gymnasium
 from .cloth_env import ClothEnv
 from .garments import GarmentEnv, TshirtFlattenEnv, TshirtFoldEnv
 from .tasks import ClothDropEnv, ClothFlattenEnv, ClothFoldEnv
+from .vector import ClothFoldVectorEnv
 
 __all__ = [
     "ClothEnv",
     "ClothFlattenEnv",
     "ClothFoldEnv",
+    "ClothFoldVectorEnv",
     "ClothDropEnv",
     "GarmentEnv",
     "TshirtFlattenEnv",
@@ -50,6 +57,8 @@ _ENVS = {
     "cloth_sim/TshirtFold-v0": ("garments:TshirtFoldEnv", {}),
 }
 ENV_IDS = tuple(_ENVS)
+#: the ids with a vector env of their own (``gymnasium.make_vec``'s default for them)
+_VECTOR = {"cloth_sim/ClothFold-v0": "cloth_sim.envs.vector:ClothFoldVectorEnv"}
 
 
 def register() -> None:
@@ -58,7 +67,12 @@ def register() -> None:
         if env_id not in gymnasium.registry:
             module, _, name = cls.rpartition(":")
             entry = f"cloth_sim.envs.{module or 'tasks'}:{name}"
-            gymnasium.register(id=env_id, entry_point=entry, kwargs=kwargs)
+            gymnasium.register(
+                id=env_id,
+                entry_point=entry,
+                vector_entry_point=_VECTOR.get(env_id),
+                kwargs=kwargs,
+            )
 
 
 register()

@@ -60,7 +60,9 @@ def _choice(name, value, allowed):
     return value
 
 
-def _integer(name, value, lo, hi=None):
+def check_integer(name, value, lo, hi=None):
+    """``value`` as an int in ``[lo, hi]`` (``hi`` None: no upper bound), else ``ValueError``
+    naming ``name`` and the range."""
     if (
         isinstance(value, bool)
         or not isinstance(value, (int, np.integer))
@@ -124,21 +126,21 @@ class ClothEnv(gym.Env):
         self.render_mode = (
             None if render_mode is None else _choice("render_mode", render_mode, RENDER_MODES)
         )
-        self.num_picker = _integer("num_picker", num_picker, 1, 8)
+        self.num_picker = check_integer("num_picker", num_picker, 1, 8)
         try:
             rows, cols = cloth_size
         except (TypeError, ValueError):
             raise ValueError(
                 f"cloth_size = {cloth_size!r} is not accepted: expected (rows, cols)"
             ) from None
-        self.rows = _integer("cloth_size[0] (rows)", rows, 4, 256)
-        self.cols = _integer("cloth_size[1] (cols)", cols, 4, 256)
+        self.rows = check_integer("cloth_size[0] (rows)", rows, 4, 256)
+        self.cols = check_integer("cloth_size[1] (cols)", cols, 4, 256)
         self.spacing = _positive("spacing", spacing)
         default_repeat = 1 if action_mode == "pickerpickplace" else self.defaults["action_repeat"]
-        self.horizon = _integer(
+        self.horizon = check_integer(
             "horizon", self.defaults["horizon"] if horizon is None else horizon, 1
         )
-        self.action_repeat = _integer(
+        self.action_repeat = check_integer(
             "action_repeat", default_repeat if action_repeat is None else action_repeat, 1, 1000
         )
         if self.action_mode == "pickerpickplace" and self.action_repeat != 1:
@@ -146,9 +148,9 @@ class ClothEnv(gym.Env):
                 f"action_repeat = {action_repeat!r} is not accepted with action_mode "
                 f"'pickerpickplace': expected 1 (a pick-and-place is one env step)"
             )
-        self.num_variations = _integer("num_variations", num_variations, 1)
-        self.image_size = _integer("image_size", image_size, 8, 2048)
-        self.max_points = _integer("max_points", max_points, 1)
+        self.num_variations = check_integer("num_variations", num_variations, 1)
+        self.image_size = check_integer("image_size", image_size, 8, 2048)
+        self.max_points = check_integer("max_points", max_points, 1)
         if not isinstance(self_collision, (bool, np.bool_)):
             raise ValueError(
                 f"self_collision = {self_collision!r} is not accepted: expected True or False"
@@ -256,17 +258,20 @@ class ClothEnv(gym.Env):
     #: simulation steps a frame (each ``FRAME / substeps``)
     substeps = SUBSTEPS
 
-    def _simulator(self) -> Simulator:
-        """Symplectic Euler, ``substeps`` steps a frame, Provot's strain limit, a floor."""
-        return Simulator(
-            self.model,
-            "symplectic_euler",
+    def simulator_options(self) -> dict:
+        """The simulator's arguments: symplectic Euler, ``substeps`` steps a frame, Provot's
+        strain limit, a floor (:mod:`.vector` steps many worlds with the same)."""
+        return dict(
+            integrator="symplectic_euler",
             dt=FRAME / self.substeps,
             strain_limit=0.1,
             colliders=[colliders.Plane(normal=(0, 0, 1), offset=0.0, friction=0.5, name="floor")],
             thickness=self.thickness,
             self_collision=self.self_collision,
         )
+
+    def _simulator(self) -> Simulator:
+        return Simulator(self.model, **self.simulator_options())
 
     def _key_points(self) -> np.ndarray:
         """The particles ``"key_point"`` observes: the grid's four corners."""
@@ -326,7 +331,7 @@ class ClothEnv(gym.Env):
         if unknown:
             raise ValueError(f"reset options: unknown {sorted(unknown)}; accepted: 'variation'")
         if "variation" in options:
-            self.variation = _integer(
+            self.variation = check_integer(
                 "options['variation']", options["variation"], 0, self.num_variations - 1
             )
         else:

@@ -14,6 +14,7 @@ from gymnasium.utils.env_checker import check_env  # noqa: E402
 
 import cloth_sim.envs  # noqa: E402
 from cloth_sim.envs import initial_states, metrics, policies  # noqa: E402
+from cloth_sim.envs.vector import ClothFoldVectorEnv  # noqa: E402
 
 TASKS = ("ClothFlatten", "ClothFold", "ClothDrop")
 
@@ -276,6 +277,96 @@ def test_sync_and_async_vector_envs_agree(cache):
         assert out[mode].shape == (4, 2, 18)
         assert list(info["normalized_performance"].shape) == [2]
     assert out["sync"].tobytes() == out["async"].tobytes()
+
+
+def _recorded_folds(cache, seeds):
+    """The scripted fold on the single env, seed by seed: its actions and what each step
+    returned."""
+    runs = []
+    for seed in seeds:
+        env = make("ClothFold", cache, num_variations=1000)
+        env.reset(seed=seed)
+        steps = []
+        for a in policies.fold(env.unwrapped):
+            obs, r, term, trunc, info = env.step(a)
+            steps.append((a, obs, r, trunc, info["picked"]))
+            if trunc:
+                break
+        runs.append(steps)
+    return runs
+
+
+def test_the_vector_env_on_the_cpu_is_the_single_envs_cloth(cache):
+    """ClothFoldVectorEnv's worlds, each given the actions the scripted fold gave a single env of
+    the same seed: the same observations and rewards to rounding (5.6e-14 measured: a held
+    particle's straight line is computed from its own place, not the picker's), the same grasps,
+    and both folds succeed."""
+    runs = _recorded_folds(cache, (0, 1))
+    vec = ClothFoldVectorEnv(num_envs=2, num_variations=1000, cache_dir=cache)
+    obs, info = vec.reset(seed=[0, 1])
+    assert obs.shape == (2, 18) and obs.dtype == np.float32
+    for k in range(max(len(r) for r in runs)):
+        a = np.stack([r[min(k, len(r) - 1)][0] for r in runs])
+        obs, rew, term, trunc, info = vec.step(a)
+        for w, run in enumerate(runs):
+            if k < len(run):
+                _, o, r, t, picked = run[k]
+                assert np.max(np.abs(obs[w] - o)) < 1e-12 and abs(rew[w] - r) < 1e-12
+                assert trunc[w] == t and info["picked"][w].tolist() == picked
+    assert np.all(info["normalized_performance"] > 0.8)
+    assert any(p for run in runs for *_, p in run if any(p))  # it did grasp
+
+
+def test_the_vector_env_resets_a_world_at_its_horizon_next_step(cache):
+    """Gymnasium's next-step autoreset: the step after a world's last returns its first
+    observation with reward 0 and ignores its action; the other worlds go on."""
+    vec = ClothFoldVectorEnv(num_envs=2, num_variations=3, cache_dir=cache, horizon=2)
+    first, _ = vec.reset(seed=[5, 6])
+    down = np.tile(np.float32([0, 0, -0.01, 0]), (2, 2))
+    vec.step(down)
+    *_, trunc, _ = vec.step(down)
+    assert trunc.tolist() == [True, True]
+    obs, rew, term, trunc, info = vec.step(down)
+    assert rew.tolist() == [0.0, 0.0] and not trunc.any() and not term.any()
+    assert vec.steps.tolist() == [0, 0]
+    # a reset world starts again: its cloth is its variation's initial state, the pickers placed
+    single = make("ClothFold", cache, num_variations=3)
+    for w in range(2):
+        single.unwrapped.reset(options=dict(variation=int(info["variation"][w])))
+        assert np.array_equal(obs[w], single.unwrapped.key_point_state())
+
+
+@pytest.mark.parametrize(
+    "kw, words",
+    [
+        (
+            dict(observation_mode="depth"),
+            "observation_mode = 'depth' is not accepted by the vector",
+        ),
+        (dict(action_mode="pickerpickplace"), "action_mode = 'pickerpickplace' is not accepted"),
+        (dict(precision="float64"), "precision: the cuda device's options; device='cpu'"),
+        (dict(num_envs=0), "num_envs = 0 is not accepted"),
+        (dict(device="tpu"), "device"),
+    ],
+)
+def test_the_vector_env_refuses_what_it_cannot_run(kw, words, cache):
+    kw = dict(dict(num_envs=2, num_variations=1, cache_dir=cache), **kw)
+    with pytest.raises(ValueError, match=words.replace("(", r"\(").replace(")", r"\)")):
+        ClothFoldVectorEnv(**kw)
+
+
+def test_the_vector_env_checks_actions_before_it_steps(cache):
+    vec = gym.make_vec("cloth_sim/ClothFold-v0", num_envs=2, num_variations=1, cache_dir=cache)
+    assert isinstance(vec, ClothFoldVectorEnv)  # (the id's vector entry point)
+    vec.reset(seed=0)
+    before = vec.sim.positions_host()
+    with pytest.raises(ValueError, match=r"actions: expected shape \(2, 8\)"):
+        vec.step(np.zeros(8))
+    bad = np.zeros((2, 8))
+    bad[1, 6] = np.nan
+    with pytest.raises(ValueError, match=r"actions\[1, 6\] = nan is not finite"):
+        vec.step(bad)
+    assert np.array_equal(vec.sim.positions_host(), before) and vec.steps.tolist() == [0, 0]
 
 
 # ---------------------------------------------------------------- render

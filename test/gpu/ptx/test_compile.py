@@ -8,7 +8,7 @@ from numba import cuda
 
 from cloth_sim import ClothModel
 from cloth_sim.cuda import kernels as K
-from cloth_sim.cuda.layout import Iterate, Run, Worlds, topology
+from cloth_sim.cuda.layout import Iterate, Run, Worlds, limits, topology
 
 SM90 = (9, 0)
 
@@ -43,10 +43,15 @@ def signatures(real):
     it = Iterate(*([x] * 7), np.zeros((w, n), real), *([x] * 4), flags, flags)
     ty = numba.typeof
     r = ty(real(1))
-    run = ty(Run(real(1e-3), real(2e-3 / 3), 1, 1, 1, 1, 10, 1e-2, 5, 0.8))
+    run = ty(Run(real(1e-3), real(2e-3 / 3), 1, 1, 1, 1, 10, 1e-2, 5, 0.8, 0.1, 20))
+    lim = ty(limits(model, w, real))
     out = numba.float64[:, ::1]
     return {
-        K.explicit_substep: (ty(top), ty(wor), ty(it), r, numba.boolean),
+        K.explicit_substep: (ty(top), ty(wor), ty(it), r, numba.boolean, numba.boolean),
+        K.limit_begin: (lim, ty(wor), ty(it), r),
+        K.limit_colour: (lim, ty(wor), ty(it), r, numba.int64, numba.int64, numba.boolean),
+        K.limit_attach: (lim, ty(wor), ty(it), r),
+        K.limit_end: (ty(wor), ty(it), r),
         K.copy_back: (ty(it),),
         K.vbd_start: (ty(wor), ty(it), numba.int64),
         K.vbd_guess: (ty(top), ty(wor), ty(it), r, r),
@@ -62,9 +67,17 @@ def signatures(real):
             numba.int32[::1],
             numba.boolean,
         ),
+        K.place_pairs: (
+            ty(it),
+            numba.int32[::1],
+            numba.int32[::1],
+            numba.from_dtype(real)[:, ::1],
+            numba.from_dtype(real)[:, ::1],
+        ),
+        K.stop_pairs: (ty(it), numba.int32[::1], numba.int32[::1]),
         K.restart: (ty(it), numba.int32[::1]),
-        K.frames_in_blocks: (ty(top), ty(wor), ty(it), numba.int32[::1], run, out),
-        K.frames_on_grid: (ty(top), ty(wor), ty(it), numba.int32[::1], run, out, out),
+        K.frames_in_blocks: (ty(top), ty(wor), ty(it), numba.int32[::1], lim, run, out),
+        K.frames_on_grid: (ty(top), ty(wor), ty(it), numba.int32[::1], lim, run, out, out),
     }
 
 

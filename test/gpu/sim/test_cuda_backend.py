@@ -207,7 +207,10 @@ def test_a_list_of_models_must_share_one_topology():
     "kwargs, match",
     [
         (dict(integrator="rk4"), r"integrator 'rk4' has no cuda backend; on cuda: "),
-        (dict(strain_limit=0.1), r"strain_limit: not on the cuda device yet \(vbd converged"),
+        (
+            dict(integrator="vbd", strain_limit=0.1),
+            r"strain_limit: not on the cuda device yet after vbd \(after symplectic_euler",
+        ),
         (dict(self_collision=True), r"self_collision: not on the cuda device"),
         (
             dict(integrator="vbd", integrator_options={"collider_share": 0.4}),
@@ -346,7 +349,7 @@ def test_worlds_in_blocks_stop_at_their_own_tolerance():
 
 
 def test_the_gpu_benchmark_runs(capsys):
-    """``cloth-sim bench gpu --simulator``: the script's three tables on a tiny cloth (the figures
+    """``cloth-sim bench gpu --simulator``: the script's four tables on a tiny cloth (the figures
     on the simulator mean nothing; the same-cloth check still holds)."""
     from cloth_sim.bench.gpu import print_gpu_tables
 
@@ -357,6 +360,13 @@ def test_the_gpu_benchmark_runs(capsys):
     assert all(f["end"] < 1e-4 for f in figures["same"])
     assert figures["large"][0]["launch"] == "blocks" and figures["large"][0]["unconverged"] == 0
     assert [w["worlds"] for w in figures["worlds"]] == [1, 2]
+    assert "4. ClothFold's vector env" in out
+    assert [(r["kind"], r["envs"]) for r in figures["vector"]] == [
+        ("ClothFoldVectorEnv cuda", 1),
+        ("ClothFoldVectorEnv cuda", 2),
+        ("AsyncVectorEnv cpu", 2),
+    ]
+    assert all(r["rate"] > 0 for r in figures["vector"])
 
 
 def test_held_vertices_are_pins_a_world_sets():
@@ -750,3 +760,32 @@ def test_a_gripper_holds_through_a_collider_added_and_a_change_of_method():
     sim.set_gripper_pose("hand", (0.15, 0.15, 0.05))
     sim.step()
     assert np.allclose(sim.positions[held], (0.15, 0.15, 0.05))
+
+
+def test_vertices_held_and_dragged_one_a_world_are_the_cpus():
+    """``hold_pairs``, ``drag`` and ``release_pairs`` (a vertex a row, each in its own world: a
+    vector env's pickers) give the CPU batch's cloth to rounding (symplectic Euler, float64): the
+    dragged vertices end at their ends, and let go they fall; rows that do not pair up are
+    refused before anything changes."""
+    m = sheet()
+    kw = dict(worlds=2, integrator="symplectic_euler", dt=1e-3)
+    cpu = BatchSimulator(m, **kw)
+    gpu = BatchSimulator(m, device="cuda", precision="float64", launch="stages", **kw)
+    worlds, idx = [0, 1], [m.index(3, 3), m.index(2, 1)]
+    ends = [[0.2, 0.2, 0.05], [0.1, 0.0, 0.08]]
+    for b in (cpu, gpu):
+        b.hold_pairs(worlds, idx)
+        b.drag(worlds, idx, ends, 5)
+        b.step(3)  # held where the drag left them
+    xc, xg = cpu.positions_host(), gpu.positions_host()
+    assert np.max(np.abs(xg - xc)) < 1e-14
+    assert np.allclose(xg[[0, 1], idx], ends, atol=1e-15)
+    assert np.max(np.abs(xg[0] - xg[1])) > 0.02
+    for b in (cpu, gpu):
+        b.release_pairs(worlds, idx)
+        b.step(10)
+    xc, xg = cpu.positions_host(), gpu.positions_host()
+    assert np.max(np.abs(xg - xc)) < 1e-14
+    assert xg[1, idx[1], 2] < 0.08 - 1e-4
+    with pytest.raises(ValueError, match="one vertex a row, got 2 worlds and 1 indices"):
+        gpu.hold_pairs([0, 1], [3])
