@@ -203,6 +203,15 @@ class BatchSimulator:
         for w in self._ids(worlds):
             self.sims[w].reset()
 
+    def gather(self, indices, extra=None) -> np.ndarray:
+        """``(worlds, 3 (k + e))`` float32: each world's vertices ``indices``, then its ``extra``
+        points (``(worlds, e, 3)``, or none), each point's ``x, y, z`` in turn (on cuda the same
+        on the device)."""
+        x = self.positions_host()[:, np.asarray(indices, np.int64)].reshape(self.worlds, -1)
+        if extra is None:
+            return x.astype(np.float32)
+        return np.concatenate([x, np.reshape(extra, (self.worlds, -1))], axis=1).astype(np.float32)
+
     def write(self, worlds, x=None, v=None) -> None:
         """Set whole worlds' positions and/or velocities (``(len(worlds), n, 3)``), as the
         simulator's ``positions`` and ``velocities`` setters do (checked there)."""

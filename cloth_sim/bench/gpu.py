@@ -11,8 +11,9 @@ Three tables, each measured in one process:
    convergence --accuracy`` against symplectic Euler at 0.9 of its stable step, also on the GPU.
 3. **Many worlds**: ``N`` worlds of 32×32 cotton (and 64×64), each with its own wind, stepped
    together: world-seconds a second for ``vbd`` and symplectic Euler, from 1 world to 16,384.
-4. **ClothFold's vector env** on the GPU, 1 to 4,096 envs, beside Gymnasium's ``AsyncVectorEnv``
-   on the machine's CPU cores (:mod:`cloth_sim.bench.vector_env`): env steps a second.
+4. **ClothFold's vector env** on the GPU (observations on the device), 1 to 4,096 envs, beside
+   Gymnasium's ``AsyncVectorEnv`` on the machine's CPU cores (:mod:`cloth_sim.bench.vector_env`):
+   env steps a second.
 
 ``--simulator`` runs a tiny version on numba-cuda's simulator (``NUMBA_ENABLE_CUDASIM=1``): what
 CI checks of this script; its figures mean nothing.
@@ -133,7 +134,11 @@ def print_gpu_tables(sizes=SIZES, worlds=WORLDS, seconds: float = 2.0, simulator
     print("4. ClothFold's vector env on the GPU, beside the CPU's AsyncVectorEnv")
     if simulator:  # (a 4x4 cloth, a frame an env step, two processes)
         tiny = dict(cloth_size=(4, 4), spacing=0.1, action_repeat=1)
-        figures["vector"] = print_vector_table("cuda", (1, 2), 2, 1, tiny, launch="stages")
+        figures["vector"] = print_vector_table(
+            "cuda", (1, 2), 2, 1, tiny, launch="stages", observations="device"
+        )
     else:
-        figures["vector"] = print_vector_table("cuda", VECTOR_ENVS, None, 10)
+        figures["vector"] = print_vector_table(
+            "cuda", VECTOR_ENVS, None, 10, observations="device"
+        )
     return figures

@@ -78,8 +78,12 @@ def nearest_attachments(model, count: int = 2, pinned=None) -> tuple[np.ndarray,
     pinned = np.asarray(model.pinned if pinned is None else pinned, bool)
     pins = np.flatnonzero(pinned)
     if len(pins) == 0 or model.n_springs == 0:
-        return attachments_from(np.zeros((0, model.n_particles)), pinned, count)
-    return attachments_from(geodesic_distances(model, pins), pinned, count)
+        pins = pins[:0]
+        dist = np.zeros((0, model.n_particles))
+    else:
+        dist = geodesic_distances(model, pins)
+    anchor, reach = attachments_from(dist[None], pins[None], pinned[None], count)
+    return anchor[0], reach[0]
 
 
 def geodesic_distances(model, sources=None) -> np.ndarray:
@@ -92,21 +96,29 @@ def geodesic_distances(model, sources=None) -> np.ndarray:
     return shortest_path(graph, method="D", directed=False, indices=sources)
 
 
-def attachments_from(dist: np.ndarray, pinned: np.ndarray, count: int = 2):
-    """:func:`nearest_attachments` from ``dist``, the pins' rows of :func:`geodesic_distances`
-    (``(pins, n)``, the pins in index order)."""
-    n = len(pinned)
-    anchor = np.full((n, count), -1, dtype=np.int64)
-    reach = np.zeros((n, count))
-    pins = np.flatnonzero(pinned)
-    if len(pins) == 0:
+def attachments_from(dist, pins, pinned, count: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`nearest_attachments` of ``W`` cloths of one topology at once, each with ``k``
+    pins: ``dist`` ``(W, k, n)`` the rest geodesic distances from each one's pins ``pins``
+    ``(W, k)`` (in index order), ``pinned`` ``(W, n)``; ``(anchor, reach)``, each
+    ``(W, n, count)``."""
+    w, k, n = dist.shape
+    anchor = np.full((w, n, count), -1, dtype=np.int64)
+    reach = np.zeros((w, n, count))
+    if k == 0:
         return anchor, reach
-    k = min(count, len(pins))
-    order = np.argsort(dist, axis=0, kind="stable")[:k]  # (k, n)
-    near = np.take_along_axis(dist, order, axis=0)
-    ok = np.isfinite(near) & ~pinned[None, :]
-    anchor[:, :k] = np.where(ok, pins[order], -1).T
-    reach[:, :k] = np.where(ok, near, 0.0).T
+    m = min(count, k)
+    if k == 1:
+        order = np.zeros((w, 1, n), np.int64)
+    elif k == 2:  # (the stable sort of two: the first unless the second is nearer)
+        second = (dist[:, 1] < dist[:, 0]).astype(np.int64)
+        order = np.stack([second, 1 - second], axis=1)[:, :m]
+    else:
+        order = np.argsort(dist, axis=1, kind="stable")[:, :m]  # (W, m, n)
+    near = np.take_along_axis(dist, order, axis=1)
+    who = np.take_along_axis(np.broadcast_to(pins[:, :, None], dist.shape), order, axis=1)
+    ok = np.isfinite(near) & ~pinned[:, None, :]
+    anchor[:, :, :m] = np.where(ok, who, -1).transpose(0, 2, 1)
+    reach[:, :, :m] = np.where(ok, near, 0.0).transpose(0, 2, 1)
     return anchor, reach
 
 

@@ -948,6 +948,26 @@ def place_pairs(it, worlds, idx, points, velocities):
 
 
 @cuda.jit
+def gather_points(it, idx, extra, out):
+    """``out[w] = (x[w, idx[0]], …, x[w, idx[k - 1]], extra[w, 0], …)``, each point's three
+    numbers in a row, for every world (an observation made on the device: a thread a number)."""
+    t = cuda.grid(1)
+    worlds = out.shape[0]
+    width = out.shape[1]
+    if t >= worlds * width:
+        return
+    w = t // width
+    c = t - w * width
+    q = c // 3
+    d = c - 3 * q
+    k = idx.shape[0]
+    if q < k:
+        out[w, c] = it.x[w, idx[q], d]
+    else:
+        out[w, c] = extra[w, q - k, d]
+
+
+@cuda.jit
 def stop_pairs(it, worlds, idx):
     """Vertex ``idx[r]`` of world ``worlds[r]`` at rest where it is, its last acceleration
     forgotten (one a row: a grasp)."""

@@ -293,31 +293,30 @@ class CudaWorlds:
             if not len(changed):
                 return True
         h = self._lim_host
-        for w in changed:
-            if not self.strain_limit_long_range:
-                h.anchor[w], h.reach[w] = -1, 0.0
-            else:
-                h.anchor[w], h.reach[w] = self._attachments(w, pins[w])
+        if not self.strain_limit_long_range or self.models[0].n_springs == 0:
+            h.anchor[changed], h.reach[changed] = -1, 0.0
+        elif self.n > self.GEODESIC_ALL_MAX:
+            for w in changed:
+                h.anchor[w], h.reach[w] = nearest_attachments(self.models[w], 2, pins[w])
+        else:
+            if self._geodesic is None:  # (every world's springs and rest lengths: one topology)
+                self._geodesic = geodesic_distances(self.models[0])
+            count = pins[changed].sum(axis=1)
+            for k in np.unique(count):  # the worlds with k pins at once
+                ws = changed[count == k]
+                rows, cols = np.nonzero(pins[ws])
+                pin = cols.reshape(len(ws), k)
+                h.anchor[ws], h.reach[ws] = attachments_from(self._geodesic[pin], pin, pins[ws])
         self.lim.anchor.copy_to_device(h.anchor)
         self.lim.reach.copy_to_device(h.reach)
         self._attached = pins
         return True
 
     #: up to this many particles the rest geodesic distances between every two are kept (8 bytes
-    #: each: 32 MB at the most), so that a grasp's new attachments are a lookup, not a search
+    #: each: 32 MB at the most), so that new pins' attachments (a grasp) are a lookup for every
+    #: world at once (:func:`~cloth_sim.constraints.strain_limit.attachments_from`: the CPU's
+    #: numbers), not a search a world
     GEODESIC_ALL_MAX = 2048
-
-    def _attachments(self, w: int, pins: np.ndarray):
-        """World ``w``'s long-range attachments to ``pins`` (the CPU's
-        :func:`~cloth_sim.constraints.strain_limit.nearest_attachments`, the same numbers)."""
-        model = self.models[w]
-        if not np.any(pins) or model.n_springs == 0:
-            return -1, 0.0
-        if self.n <= self.GEODESIC_ALL_MAX:
-            if self._geodesic is None:  # (every world's springs and rest lengths: one topology)
-                self._geodesic = geodesic_distances(model)
-            return attachments_from(self._geodesic[np.flatnonzero(pins)], pins)
-        return nearest_attachments(model, 2, pins)
 
     # ------------------------------------------------------------------ per world
     def _ids(self, worlds) -> np.ndarray:
@@ -626,6 +625,26 @@ class CudaWorlds:
             host[ids] = a
             getattr(self.it, name).copy_to_device(host.astype(self.real))
         self.forget(ids)
+
+    def gather(self, indices, extra=None):
+        """``(worlds, 3 (k + e))`` float32 on the device: each world's vertices ``indices`` (``k``
+        of them), then its ``extra`` points (``(worlds, e, 3)`` from the host, or none), each
+        point's ``x, y, z`` in turn (an observation torch or CuPy read without a copy)."""
+        idx = self._vertices(indices).astype(np.int32)
+        more = np.zeros((self.worlds, 0, 3)) if extra is None else np.asarray(extra, np.float64)
+        if more.ndim != 3 or more.shape[0] != self.worlds or more.shape[2] != 3:
+            raise ValueError(f"extra: expected ({self.worlds}, e, 3) points, got {more.shape}")
+        out = cuda.device_array((self.worlds, 3 * (len(idx) + more.shape[1])), np.float32)
+        if not more.shape[1]:  # (a point that is never read: no zero-sized array to copy)
+            more = np.zeros((self.worlds, 1, 3))
+        K.gather_points[_grid(out.size)](
+            self.it,
+            cuda.to_device(idx),
+            cuda.to_device(np.ascontiguousarray(more, self.real)),
+            out,
+        )
+        self.launches += 1
+        return out
 
     def times(self) -> np.ndarray:
         return self.steps * self.dt

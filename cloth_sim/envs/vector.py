@@ -23,9 +23,11 @@ its keywords. What differs, and why:
   is reset by the next :meth:`step`, which ignores its action and returns its first observation,
   reward 0. Every world steps in every call (the batch steps together); a world being reset is
   put back to its initial state after the call's frames.
-* Observations, rewards and infos are numpy arrays on the host (the metric reads every particle:
-  one copy of the positions a step); :attr:`positions` is the device array
-  (``__cuda_array_interface__``: torch and CuPy read it without a copy).
+* Rewards and infos are numpy arrays on the host (the metric reads every particle: one copy of
+  the positions a step). Observations are too, or with ``observations="device"`` (cuda) a
+  ``(num_envs, 18)`` float32 device array gathered by a kernel (``__cuda_array_interface__``:
+  ``torch.as_tensor`` and ``cupy.asarray`` read it without a copy), the same numbers;
+  :attr:`positions` is every particle on the device.
 
 With ``device="cpu"`` the cloth is the single env's to rounding (the tests hold it to
 ``SyncVectorEnv``'s); with ``device="cuda"`` the strain limit's passes visit the springs a colour
@@ -47,16 +49,31 @@ from .tasks import ClothFoldEnv
 
 class ClothFoldVectorEnv(VectorEnv):
     """``num_envs`` ClothFold worlds on ``device`` (``"cpu"`` or ``"cuda"``); ``precision`` and
-    ``launch`` are the cuda device's (:class:`~cloth_sim.cuda.worlds.CudaWorlds`), the rest
+    ``launch`` are the cuda device's (:class:`~cloth_sim.cuda.worlds.CudaWorlds`),
+    ``observations`` ``"host"`` (numpy) or, on cuda, ``"device"``; the rest
     :class:`~cloth_sim.envs.tasks.ClothFoldEnv`'s keywords. Bad input raises ``ValueError``
     naming it."""
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
     def __init__(
-        self, num_envs: int = 1, device: str = "cpu", precision=None, launch=None, **env_kwargs
+        self,
+        num_envs: int = 1,
+        device: str = "cpu",
+        precision=None,
+        launch=None,
+        observations: str = "host",
+        **env_kwargs,
     ):
         self.num_envs = check_integer("num_envs", num_envs, 1)
+        if observations not in ("host", "device") or (
+            observations == "device" and device != "cuda"
+        ):
+            raise ValueError(
+                f"observations = {observations!r} is not accepted on device={device!r}: "
+                "expected 'host'" + (" or 'device'" if device == "cuda" else "")
+            )
+        self.observations = observations
         for name, value, allowed in (
             ("observation_mode", env_kwargs.get("observation_mode", "key_point"), "key_point"),
             ("action_mode", env_kwargs.get("action_mode", "picker"), "picker"),
@@ -300,8 +317,11 @@ class ClothFoldVectorEnv(VectorEnv):
         fixation = np.mean(np.linalg.norm(x[:, b] - start[:, b], axis=2), axis=1)
         return -group - 1.2 * fixation, group, fixation
 
-    def _observe(self, x) -> np.ndarray:
-        """``"key_point"``: each world's four corners, then its pickers, float32."""
+    def _observe(self, x):
+        """``"key_point"``: each world's four corners, then its pickers, float32 (on the device
+        where ``observations="device"``)."""
+        if self.observations == "device":
+            return self.sim.gather(self.env.corners, self.pickers)
         corners = x[:, self.env.corners].reshape(self.num_envs, -1)
         return np.concatenate([corners, self.pickers.reshape(self.num_envs, -1)], axis=1).astype(
             np.float32

@@ -346,6 +346,7 @@ def test_the_vector_env_resets_a_world_at_its_horizon_next_step(cache):
         (dict(action_mode="pickerpickplace"), "action_mode = 'pickerpickplace' is not accepted"),
         (dict(precision="float64"), "precision: the cuda device's options; device='cpu'"),
         (dict(num_envs=0), "num_envs = 0 is not accepted"),
+        (dict(observations="device"), "observations = 'device' is not accepted on device='cpu'"),
         (dict(device="tpu"), "device"),
     ],
 )

@@ -75,6 +75,12 @@ def signatures(real):
             numba.from_dtype(real)[:, ::1],
         ),
         K.stop_pairs: (ty(it), numba.int32[::1], numba.int32[::1]),
+        K.gather_points: (
+            ty(it),
+            numba.int32[::1],
+            numba.from_dtype(real)[:, :, ::1],
+            numba.float32[:, ::1],
+        ),
         K.restart: (ty(it), numba.int32[::1]),
         K.frames_in_blocks: (ty(top), ty(wor), ty(it), numba.int32[::1], lim, run, out),
         K.frames_on_grid: (ty(top), ty(wor), ty(it), numba.int32[::1], lim, run, out, out),

@@ -21,6 +21,7 @@ def _episode(device, cache, **extra):
         **extra,
     )
     obs, _ = vec.reset(seed=[0, 1])
+    obs = _host(vec, obs)
     x = vec.sim.positions_host()
     vec.pickers[:, 0] = x[:, vec.env.corners[0]] + (0.0, 0.0, 0.01)  # just above a corner
     out = [(obs, None, None, None, x)]
@@ -29,16 +30,34 @@ def _episode(device, cache, **extra):
         if k < 3:  # picker 0 picks the corner and carries it up and over; picker 1 idles
             a[:, 0], a[:, 2], a[:, 3] = 0.01, 0.01, 1.0
         obs, rew, _, trunc, info = vec.step(a)
-        out.append((obs, rew, trunc, info["picked"].copy(), vec.sim.positions_host()))
+        out.append((_host(vec, obs), rew, trunc, info["picked"].copy(), vec.sim.positions_host()))
     return vec, out
+
+
+def _host(vec, obs):
+    """A device observation copied to the host, checked against the key points made here from
+    the positions and pickers: the same float32 numbers."""
+    if vec.observations == "host":
+        return obs
+    got = obs.copy_to_host()
+    x = vec.sim.positions_host()
+    want = np.concatenate(
+        [x[:, vec.env.corners].reshape(vec.num_envs, -1), vec.pickers.reshape(vec.num_envs, -1)],
+        axis=1,
+    ).astype(np.float32)
+    assert got.dtype == np.float32 and np.array_equal(got, want)
+    return got
 
 
 def test_the_vector_env_on_the_device_is_the_cpus(tmp_path):
     """The same grasps, observations, rewards and cloth as on the CPU (float64: 2.7e-16 m
     measured, the strain limit holding the lifted cloth at 10 %: the two orders of its passes
-    agree here), and the next-step autoreset puts both worlds back where a reset puts them."""
+    agree here), and the next-step autoreset puts both worlds back where a reset puts them. The
+    device's observations stay on the device, the same numbers as the host's."""
     cpu_env, cpu = _episode("cpu", tmp_path)
-    gpu_env, gpu = _episode("cuda", tmp_path, precision="float64", launch="stages")
+    gpu_env, gpu = _episode(
+        "cuda", tmp_path, precision="float64", launch="stages", observations="device"
+    )
     m = cpu_env.env.model
     springs, rest = m.springs[m.strain_limited], m.rest_lengths[m.strain_limited]
     worst = 0.0
