@@ -557,20 +557,27 @@ def test_a_collider_swept_on_the_device_is_the_cpus():
 
 def test_the_node_settings_take_a_scene_of_static_primitives_to_the_device():
     """``settings.check`` (what the node starts with) accepts ``device=cuda`` for the scenes whose
-    colliders the device has (drape: a sphere and a floor; table: a box and a floor) and builds
-    them on it, and refuses a mesh collider naming it: it had refused every collider but a
-    plane, with a message saying spheres and boxes run there."""
+    colliders and strain limit the device has (drape: a sphere and a floor; table: a box and a
+    floor; both symplectic Euler with Provot's limit) and builds them on it, and refuses a mesh
+    collider naming it: it had refused every collider but a plane, with a message saying spheres
+    and boxes run there."""
     from cloth_sim import settings
     from cloth_sim.cuda.simulator import CudaSimulator
     from cloth_sim.scene import load_scene
 
     for name in ("drape", "table"):
         scene = load_scene(name)
-        checked = settings.check(
-            scene, {"device": "cuda", "strain_limit": 0.0, "rows": 4, "cols": 4}
-        )
+        checked = settings.check(scene, {"device": "cuda", "rows": 4, "cols": 4})
         sim = settings.build(checked)
         assert isinstance(sim, CudaSimulator) and len(sim.colliders) == len(scene.colliders)
+        assert sim.strain_limit == 0.1 and sim.active_stages == ("strain_limit",)
+    # a scene whose limit is the projection: refused naming the method, run with Provot's passes
+    with pytest.raises(settings.Refusal, match=r"strain_limit_method: not on the cuda device"):
+        settings.check("hanging", {"device": "cuda", "rows": 4, "cols": 4})
+    checked = settings.check(
+        "hanging", {"device": "cuda", "rows": 4, "cols": 4, "strain_limit_method": "provot"}
+    )
+    assert settings.build(checked).strain_limit == 0.1
     scene = load_scene("drape")
     scene.colliders.append(("mesh", {"file": "x.obj"}))
     with pytest.raises(settings.Refusal, match=r"colliders: not on the cuda device yet"):
