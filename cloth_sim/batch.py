@@ -203,6 +203,25 @@ class BatchSimulator:
         for w in self._ids(worlds):
             self.sims[w].reset()
 
+    def nearest_free(self, worlds, points) -> tuple[np.ndarray, np.ndarray]:
+        """For each row ``r``, the particle of world ``worlds[r]`` nearest to ``points[r]`` among
+        those not pinned (nor held): ``(indices, positions)``, ``−1`` (and 0) where none is (the
+        first of the nearest, as ``np.argmin`` takes it)."""
+        w = self._ids(np.asarray(worlds, np.int64).ravel())
+        p = np.asarray(points, np.float64).reshape(len(w), 3)
+        idx = np.full(len(w), -1, np.int64)
+        at = np.zeros((len(w), 3))
+        for r, world in enumerate(w):
+            sim = self.sims[world]
+            free = ~sim.model.pinned
+            if not free.any():
+                continue
+            d = np.linalg.norm(sim.positions - p[r], axis=1)
+            d[~free] = np.inf
+            idx[r] = int(np.argmin(d))
+            at[r] = sim.positions[idx[r]]
+        return idx, at
+
     def gather(self, indices, extra=None) -> np.ndarray:
         """``(worlds, 3 (k + e))`` float32: each world's vertices ``indices``, then its ``extra``
         points (``(worlds, e, 3)``, or none), each point's ``x, y, z`` in turn (on cuda the same

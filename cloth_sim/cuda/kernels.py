@@ -968,6 +968,49 @@ def gather_points(it, idx, extra, out):
 
 
 @cuda.jit
+def nearest_free(it, wor, worlds, points, out_i, out_x):
+    """Row ``r`` (a block of :data:`REDUCE` threads): the free vertex of world ``worlds[r]``
+    nearest to ``points[r]`` (the lowest index of the nearest where two are as near), its index
+    in ``out_i[r]`` (−1 where none is free) and its position in ``out_x[r]``."""
+    r = cuda.blockIdx.x
+    tid = cuda.threadIdx.x
+    w = worlds[r]
+    n = wor.free.shape[1]
+    near = cuda.shared.array(REDUCE, dtype=float64)
+    which = cuda.shared.array(REDUCE, dtype=int32)
+    best = math.inf
+    at = -1
+    for i in range(tid, n, cuda.blockDim.x):  # (each thread's in increasing order)
+        if wor.free[w, i]:
+            dx = it.x[w, i, 0] - points[r, 0]
+            dy = it.x[w, i, 1] - points[r, 1]
+            dz = it.x[w, i, 2] - points[r, 2]
+            d = dx * dx + dy * dy + dz * dz
+            if d < best:
+                best, at = d, i
+    near[tid] = best
+    which[tid] = at
+    cuda.syncthreads()
+    step = cuda.blockDim.x // 2
+    while step > 0:
+        if tid < step:
+            o = tid + step
+            if which[o] >= 0 and (
+                which[tid] < 0
+                or near[o] < near[tid]
+                or (near[o] == near[tid] and which[o] < which[tid])
+            ):
+                near[tid] = near[o]
+                which[tid] = which[o]
+        cuda.syncthreads()
+        step //= 2
+    if tid == 0:
+        out_i[r] = which[0]
+        for d in range(3):
+            out_x[r, d] = it.x[w, which[0], d] if which[0] >= 0 else 0.0
+
+
+@cuda.jit
 def stop_pairs(it, worlds, idx):
     """Vertex ``idx[r]`` of world ``worlds[r]`` at rest where it is, its last acceleration
     forgotten (one a row: a grasp)."""

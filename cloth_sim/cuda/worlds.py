@@ -626,6 +626,27 @@ class CudaWorlds:
             getattr(self.it, name).copy_to_device(host.astype(self.real))
         self.forget(ids)
 
+    def nearest_free(self, worlds, points) -> tuple[np.ndarray, np.ndarray]:
+        """For each row ``r``, the vertex of world ``worlds[r]`` nearest to ``points[r]`` among
+        those the solve moves (not pinned, not held): ``(indices, positions)``, ``−1`` (and 0)
+        where none is (a launch, a block a row; only the rows come back)."""
+        w = self._ids(np.asarray(worlds, np.int64).ravel())
+        p = np.asarray(points, np.float64).reshape(len(w), 3)
+        if not len(w):
+            return np.zeros(0, np.int64), np.zeros((0, 3))
+        out_i = cuda.device_array(len(w), np.int32)
+        out_x = cuda.device_array((len(w), 3), self.real)
+        K.nearest_free[len(w), K.REDUCE](
+            self.it,
+            self.wor,
+            cuda.to_device(w.astype(np.int32)),
+            cuda.to_device(np.ascontiguousarray(p, self.real)),
+            out_i,
+            out_x,
+        )
+        self.launches += 1
+        return out_i.copy_to_host().astype(np.int64), out_x.copy_to_host().astype(np.float64)
+
     def gather(self, indices, extra=None):
         """``(worlds, 3 (k + e))`` float32 on the device: each world's vertices ``indices`` (``k``
         of them), then its ``extra`` points (``(worlds, e, 3)`` from the host, or none), each

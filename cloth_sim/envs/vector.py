@@ -267,26 +267,20 @@ class ClothFoldVectorEnv(VectorEnv):
     def _grasp(self, want) -> None:
         """Pickers ``want`` (``(worlds, pickers)``) take the nearest particle within reach that
         is free: not pinned, not held by another picker (a world's pickers in turn, every world
-        at once)."""
-        x = self.sim.positions_host()
+        at once: :meth:`~cloth_sim.BatchSimulator.nearest_free`, on the device a launch that
+        returns the rows alone)."""
         reach = self.env.pickers.reach
-        free = np.broadcast_to(~self._pinned, (self.num_envs, len(self._pinned))).copy()
-        w, p = np.nonzero(self.held >= 0)
-        free[w, self.held[w, p]] = False
         for p in range(self.held.shape[1]):
-            w = np.flatnonzero(want[:, p] & free.any(axis=1))
+            w = np.flatnonzero(want[:, p])
             if not len(w):
                 continue
-            d = np.linalg.norm(x[w] - self.pickers[w, p, None], axis=2)
-            d[~free[w]] = np.inf
-            j = np.argmin(d, axis=1)
-            ok = d[np.arange(len(w)), j] <= reach
-            w, j = w[ok], j[ok]
-            if len(w):
-                self.sim.hold_pairs(w, j)
-                self.held[w, p] = j
-                self.offset[w, p] = x[w, j] - self.pickers[w, p]
-                free[w, j] = False
+            j, at = self.sim.nearest_free(w, self.pickers[w, p])
+            offset = at - self.pickers[w, p]
+            ok = (j >= 0) & (np.linalg.norm(offset, axis=1) <= reach)
+            if ok.any():
+                self.sim.hold_pairs(w[ok], j[ok])
+                self.held[w[ok], p] = j[ok]
+                self.offset[w[ok], p] = offset[ok]
 
     def _check(self, actions) -> np.ndarray:
         w, p = self.num_envs, self.env.num_picker

@@ -75,6 +75,14 @@ def signatures(real):
             numba.from_dtype(real)[:, ::1],
         ),
         K.stop_pairs: (ty(it), numba.int32[::1], numba.int32[::1]),
+        K.nearest_free: (
+            ty(it),
+            ty(wor),
+            numba.int32[::1],
+            numba.from_dtype(real)[:, ::1],
+            numba.int32[::1],
+            numba.from_dtype(real)[:, ::1],
+        ),
         K.gather_points: (
             ty(it),
             numba.int32[::1],

@@ -796,3 +796,29 @@ def test_vertices_held_and_dragged_one_a_world_are_the_cpus():
     assert xg[1, idx[1], 2] < 0.08 - 1e-4
     with pytest.raises(ValueError, match="one vertex a row, got 2 worlds and 1 indices"):
         gpu.hold_pairs([0, 1], [3])
+
+
+def test_the_nearest_free_vertex_is_the_cpus():
+    """``nearest_free`` (a vector env's grasp): a world's vertex nearest a point among those the
+    solve moves, pins and held vertices passed over, −1 where none is left; the same
+    answers and positions on the device as on the CPU batch."""
+    m = sheet()
+    kw = dict(worlds=3, integrator="symplectic_euler", dt=1e-3)
+    cpu = BatchSimulator(m, **kw)
+    gpu = BatchSimulator(m, device="cuda", precision="float64", **kw)
+    rest = np.flatnonzero(~m.pinned)
+    for b in (cpu, gpu):
+        b.step(5)
+        b.hold_pairs([1], [m.index(1, 1)])
+        b.hold_pairs(np.full(len(rest), 2), rest)
+    worlds = [0, 1, 1, 2]
+    near = cpu.positions_host()[0, m.index(1, 1)] + (0.002, 0.0, 0.001)
+    points = [near, near, m.positions[0], near]
+    ci, cx = cpu.nearest_free(worlds, points)
+    gi, gx = gpu.nearest_free(worlds, points)
+    assert ci.tolist() == gi.tolist()
+    assert ci[0] == m.index(1, 1) and ci[1] != m.index(1, 1)  # held in world 1, not in 0
+    assert ci[2] not in (0, 3)  # the pins, at the point asked, are passed over
+    assert ci[3] == -1  # every vertex of world 2 held or pinned
+    assert np.max(np.abs(cx - gx)) < 1e-15
+    assert np.allclose(cx[:3], cpu.positions_host()[worlds[:3], ci[:3]])
