@@ -56,6 +56,8 @@ class BatchSimulator:
         ]
         self.worlds = len(self.sims)
         self.dt = float(dt)
+        #: the positions each world was last set to (:meth:`write`, :meth:`reset`)
+        self._set = np.stack([m.positions for m in models]).astype(np.float64)
 
     def _ids(self, worlds) -> np.ndarray:
         return backends.world_ids(worlds, self.worlds)
@@ -202,6 +204,7 @@ class BatchSimulator:
     def reset(self, worlds=None) -> None:
         for w in self._ids(worlds):
             self.sims[w].reset()
+            self._set[w] = self.sims[w].positions
 
     def nearest_free(self, worlds, points) -> tuple[np.ndarray, np.ndarray]:
         """For each row ``r``, the particle of world ``worlds[r]`` nearest to ``points[r]`` among
@@ -238,8 +241,20 @@ class BatchSimulator:
         for r, w in enumerate(ids):
             if x is not None:
                 self.sims[w].positions = x[r]
+                self._set[w] = self.sims[w].positions
             if v is not None:
                 self.sims[w].velocities = v[r]
+
+    def mean_distance(self, a, b, reference: bool = False) -> np.ndarray:
+        """``(worlds,)``: each world's mean over ``k`` of ``|x[a[k]] − x[b[k]]|`` (with
+        ``reference``, ``x[b[k]]`` where the world was last set: :meth:`write`, :meth:`reset`)
+        (on cuda computed on the device)."""
+        a, b = np.asarray(a, np.int64).ravel(), np.asarray(b, np.int64).ravel()
+        if len(a) != len(b):
+            raise ValueError(f"a and b: one vertex each a pair, got {len(a)} and {len(b)}")
+        x = self.positions_host()
+        y = self._set if reference else x
+        return np.mean(np.linalg.norm(x[:, a] - y[:, b], axis=2), axis=1)
 
     def step(self, n: int = 1) -> None:
         for s in self.sims:

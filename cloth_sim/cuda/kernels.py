@@ -1011,6 +1011,25 @@ def nearest_free(it, wor, worlds, points, out_i, out_x):
 
 
 @cuda.jit
+def mean_pair_distance(x, a, y, b, out):
+    """``out[w]``: the mean over ``k`` of ``|x[w, a[k]] − y[w, b[k]]|`` (a block of
+    :data:`REDUCE` threads a world, the sum in float64 in a fixed order: the same bits run to
+    run)."""
+    w = cuda.blockIdx.x
+    sums = cuda.shared.array(REDUCE, dtype=float64)
+    counts = cuda.shared.array(REDUCE, dtype=float64)
+    s = 0.0
+    for k in range(cuda.threadIdx.x, a.shape[0], cuda.blockDim.x):
+        dx = x[w, a[k], 0] - y[w, b[k], 0]
+        dy = x[w, a[k], 1] - y[w, b[k], 1]
+        dz = x[w, a[k], 2] - y[w, b[k], 2]
+        s += math.sqrt(dx * dx + dy * dy + dz * dz)
+    total, _ = block_sum(sums, counts, s, 0.0)
+    if cuda.threadIdx.x == 0:
+        out[w] = total / a.shape[0] if a.shape[0] > 0 else 0.0
+
+
+@cuda.jit
 def stop_pairs(it, worlds, idx):
     """Vertex ``idx[r]`` of world ``worlds[r]`` at rest where it is, its last acceleration
     forgotten (one a row: a grasp)."""

@@ -195,6 +195,10 @@ class CudaWorlds:
         self.wor = Worlds(*(cuda.to_device(a) for a in self._host))
         x0 = np.stack([np.asarray(m.positions, real) for m in models])
         self._x0 = x0
+        #: the positions each world was last set to (:meth:`write`, :meth:`reset`), on the host
+        #: and the device: :meth:`mean_distance`'s reference
+        self._set_host = x0.copy()
+        self._set = cuda.to_device(x0)
         per_vertex = {"stepped": np.zeros((worlds, n), real)}
         per_world = ("past", "bdf")
         self.it = Iterate(
@@ -414,6 +418,8 @@ class CudaWorlds:
         self._place(ids, idx, self._x0[ids])
         self.forget(ids)
         self.steps[ids] = 0
+        self._set_host[ids] = self._x0[ids]
+        self._set.copy_to_device(self._set_host)
 
     def forget(self, worlds=None) -> None:
         """BDF2's history of ``worlds`` (``None``: all) no longer serves: their state was set, so
@@ -624,7 +630,30 @@ class CudaWorlds:
             host = getattr(self.it, name).copy_to_host()
             host[ids] = a
             getattr(self.it, name).copy_to_device(host.astype(self.real))
+            if name == "x":
+                self._set_host[ids] = a
+                self._set.copy_to_device(self._set_host)
         self.forget(ids)
+
+    def mean_distance(self, a, b, reference: bool = False) -> np.ndarray:
+        """``(worlds,)``: each world's mean over ``k`` of ``|x[a[k]] − x[b[k]]|`` (with
+        ``reference``, ``x[b[k]]`` where the world was last set: :meth:`write`, :meth:`reset`),
+        on the device, only the means copied back (a task's metric: ClothFold's pairs and
+        drift)."""
+        a = self._vertices(a).astype(np.int32)
+        b = self._vertices(b).astype(np.int32)
+        if len(a) != len(b):
+            raise ValueError(f"a and b: one vertex each a pair, got {len(a)} and {len(b)}")
+        out = cuda.device_array(self.worlds, np.float64)
+        K.mean_pair_distance[self.worlds, K.REDUCE](
+            self.it.x,
+            cuda.to_device(a),
+            self._set if reference else self.it.x,
+            cuda.to_device(b),
+            out,
+        )
+        self.launches += 1
+        return out.copy_to_host()
 
     def nearest_free(self, worlds, points) -> tuple[np.ndarray, np.ndarray]:
         """For each row ``r``, the vertex of world ``worlds[r]`` nearest to ``points[r]`` among

@@ -23,11 +23,11 @@ its keywords. What differs, and why:
   is reset by the next :meth:`step`, which ignores its action and returns its first observation,
   reward 0. Every world steps in every call (the batch steps together); a world being reset is
   put back to its initial state after the call's frames.
-* Rewards and infos are numpy arrays on the host (the metric reads every particle: one copy of
-  the positions a step). Observations are too, or with ``observations="device"`` (cuda) a
+* Rewards and infos are numpy arrays on the host (on the device the metric is computed there and
+  only its means come back). Observations are too, or with ``observations="device"`` (cuda) a
   ``(num_envs, 18)`` float32 device array gathered by a kernel (``__cuda_array_interface__``:
   ``torch.as_tensor`` and ``cupy.asarray`` read it without a copy), the same numbers;
-  :attr:`positions` is every particle on the device.
+  :attr:`positions` is every particle on the device. An env step copies no cloth to the host.
 
 With ``device="cpu"`` the cloth is the single env's to rounding (the tests hold it to
 ``SyncVectorEnv``'s); with ``device="cuda"`` the strain limit's passes visit the springs a colour
@@ -127,7 +127,6 @@ class ClothFoldVectorEnv(VectorEnv):
         self.variation = np.zeros(w, np.int64)
         self.steps = np.zeros(w, np.int64)
         self.group_a, self.group_b = metrics.fold_groups(env.rows, env.cols)
-        self.start_positions = np.zeros((w, env.model.n_particles, 3))
         self.performance_start = np.zeros(w)
         self._pinned = np.asarray(env.model.pinned, bool)
         self._ended = np.zeros(w, bool)
@@ -162,8 +161,7 @@ class ClothFoldVectorEnv(VectorEnv):
             ]
         self._reset_worlds(np.arange(w), variations)
         self._ended[:] = False
-        x = self.sim.positions_host()
-        return self._observe(x), self._infos(x)
+        return self._observe(), self._infos()
 
     def step(self, actions):
         a = self._check(actions)
@@ -177,8 +175,7 @@ class ClothFoldVectorEnv(VectorEnv):
         if len(renew):
             self._reset_worlds(renew, None)
         self.steps[act] += 1
-        x = self.sim.positions_host()
-        obs, infos = self._observe(x), self._infos(x)
+        obs, infos = self._observe(), self._infos()
         reward = np.where(act, infos["performance"], 0.0)
         terminated = np.zeros(self.num_envs, bool)
         truncated = act & (self.steps >= self.env.horizon)
@@ -218,8 +215,7 @@ class ClothFoldVectorEnv(VectorEnv):
         self.steps[ids] = 0
         mid = x[:, env.corners[:2]].mean(axis=1)
         self._place_pickers(ids, np.column_stack([mid[:, 0], mid[:, 1], np.full(len(ids), 0.1)]))
-        self.start_positions[ids] = x
-        self.performance_start[ids] = self._fold(x, x)[0]
+        self.performance_start[ids] = self._fold()[0][ids]
 
     def _place_pickers(self, ids, centers) -> None:
         """:meth:`Pickers.reset <cloth_sim.envs.pickers.Pickers.reset>` for worlds ``ids``: the
@@ -303,26 +299,25 @@ class ClothFoldVectorEnv(VectorEnv):
         return a.reshape(w, p, 4)
 
     # ------------------------------------------------------------------ what is seen
-    def _fold(self, x, start):
+    def _fold(self):
         """ClothFold's metric (:func:`~cloth_sim.envs.metrics.fold_distance`) of every world:
-        ``(performance, group distance, fixation distance)``, each ``(num_envs,)``."""
-        a, b = self.group_a, self.group_b
-        group = np.mean(np.linalg.norm(x[:, a] - x[:, b], axis=2), axis=1)
-        fixation = np.mean(np.linalg.norm(x[:, b] - start[:, b], axis=2), axis=1)
+        ``(performance, group distance, fixation distance)``, each ``(num_envs,)``, the drift
+        measured from where the world was reset (:meth:`BatchSimulator.mean_distance
+        <cloth_sim.BatchSimulator.mean_distance>`: on the device, only the means come back)."""
+        group = self.sim.mean_distance(self.group_a, self.group_b)
+        fixation = self.sim.mean_distance(self.group_b, self.group_b, reference=True)
         return -group - 1.2 * fixation, group, fixation
 
-    def _observe(self, x):
-        """``"key_point"``: each world's four corners, then its pickers, float32 (on the device
-        where ``observations="device"``)."""
-        if self.observations == "device":
-            return self.sim.gather(self.env.corners, self.pickers)
-        corners = x[:, self.env.corners].reshape(self.num_envs, -1)
-        return np.concatenate([corners, self.pickers.reshape(self.num_envs, -1)], axis=1).astype(
-            np.float32
-        )
+    def _observe(self):
+        """``"key_point"``: each world's four corners, then its pickers, float32 (gathered on the
+        device on cuda, and left there where ``observations="device"``)."""
+        obs = self.sim.gather(self.env.corners, self.pickers)
+        if self.device == "cuda" and self.observations == "host":
+            return obs.copy_to_host()
+        return obs
 
-    def _infos(self, x) -> dict:
-        performance, group, fixation = self._fold(x, self.start_positions)
+    def _infos(self) -> dict:
+        performance, group, fixation = self._fold()
         base = self.performance_start
         span = 0.0 - base
         normalized = np.divide(

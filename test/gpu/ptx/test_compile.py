@@ -75,6 +75,13 @@ def signatures(real):
             numba.from_dtype(real)[:, ::1],
         ),
         K.stop_pairs: (ty(it), numba.int32[::1], numba.int32[::1]),
+        K.mean_pair_distance: (
+            ty(x),
+            numba.int32[::1],
+            ty(x),
+            numba.int32[::1],
+            numba.float64[::1],
+        ),
         K.nearest_free: (
             ty(it),
             ty(wor),

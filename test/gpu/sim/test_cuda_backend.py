@@ -822,3 +822,28 @@ def test_the_nearest_free_vertex_is_the_cpus():
     assert ci[3] == -1  # every vertex of world 2 held or pinned
     assert np.max(np.abs(cx - gx)) < 1e-15
     assert np.allclose(cx[:3], cpu.positions_host()[worlds[:3], ci[:3]])
+
+
+def test_mean_distances_are_measured_on_the_device_as_on_the_cpu():
+    """``mean_distance`` (a vector env's metric): each world's mean distance between paired
+    vertices, or from where the world was last set (``write``, ``reset``), the CPU batch's to
+    rounding; 0 from the state just written."""
+    m = sheet()
+    kw = dict(worlds=2, integrator="symplectic_euler", dt=1e-3)
+    cpu = BatchSimulator(m, **kw)
+    gpu = BatchSimulator(m, device="cuda", precision="float64", **kw)
+    a, b = [0, 1, 4, 5], [3, 2, 7, 6]  # the left columns and their mirror images
+    start = np.stack([m.positions, m.positions + (0.0, 0.0, 0.1)])
+    got = {}
+    for name, s in (("cpu", cpu), ("gpu", gpu)):
+        s.write([0, 1], start, np.zeros_like(start))
+        zero = s.mean_distance(b, b, reference=True)
+        s.step(20)
+        got[name] = (zero, s.mean_distance(a, b), s.mean_distance(b, b, reference=True))
+    assert got["gpu"][0].tolist() == [0.0, 0.0]
+    for c, g in zip(got["cpu"], got["gpu"]):
+        assert np.allclose(c, g, rtol=0, atol=1e-15)
+    flat = np.mean(np.linalg.norm(m.positions[a] - m.positions[b], axis=1))
+    assert got["gpu"][1][0] == pytest.approx(flat, rel=0.2) and got["gpu"][2][0] > 1e-4
+    gpu.reset([1])
+    assert gpu.mean_distance(b, b, reference=True)[1] == 0.0
