@@ -41,6 +41,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from .. import backends
 from ..batch import BatchSimulator
 from . import metrics
 from .cloth_env import check_integer
@@ -66,6 +67,10 @@ class ClothFoldVectorEnv(VectorEnv):
         **env_kwargs,
     ):
         self.num_envs = check_integer("num_envs", num_envs, 1)
+        try:  # (before the single env is made: its initial states take seconds)
+            backends.check_device(device)
+        except ValueError as e:
+            raise ValueError(f"device = {device!r} is not accepted: {e}") from None
         if observations not in ("host", "device") or (
             observations == "device" and device != "cuda"
         ):

@@ -347,7 +347,7 @@ def test_the_vector_env_resets_a_world_at_its_horizon_next_step(cache):
         (dict(precision="float64"), "precision: the cuda device's options; device='cpu'"),
         (dict(num_envs=0), "num_envs = 0 is not accepted"),
         (dict(observations="device"), "observations = 'device' is not accepted on device='cpu'"),
-        (dict(device="tpu"), "device"),
+        (dict(device="tpu"), "device = 'tpu' is not accepted: device must be one of cpu, cuda"),
     ],
 )
 def test_the_vector_env_refuses_what_it_cannot_run(kw, words, cache):
