@@ -70,7 +70,7 @@ def check_method(method: str, device: str) -> None:
 
 def refusal(device: str, integrator: str, model: ClothModel, **features) -> tuple[str, str] | None:
     """Why ``device`` cannot step ``model`` with ``integrator`` and ``features`` (keyword: a
-    feature's name and whether it is asked for: ``strain_limit``, ``strain_limit_method`` (a
+    feature's name and whether it is asked for: ``strain_limit_method`` (a strain limit by a
     method other than Provot's passes), ``colliders``,
     ``self_collision``, ``grippers``, ``robot``), as ``(reason, the argument it names)``, or
     ``None``. Nothing is refused on the cpu; what :mod:`cloth_sim.cuda` does not run yet is
@@ -85,12 +85,8 @@ def refusal(device: str, integrator: str, model: ClothModel, **features) -> tupl
             "integrator",
         )
     for name, asked in features.items():
-        if name == "strain_limit" and integrator == "symplectic_euler":
-            continue  # (Provot's passes after each step: cloth_sim.cuda.worlds)
         if asked:
             hint = {
-                "strain_limit": f" after {integrator} (after symplectic_euler it is; vbd "
-                "converged holds the stretch without one: set strain_limit to 0)",
                 "strain_limit_method": " (the projection is not; Provot's passes, "
                 "strain_limit_method provot, are)",
                 "colliders": " (static planes, spheres, boxes, capsules and cylinders are; a "

@@ -401,7 +401,6 @@ def device_refusal(cfg: dict, model, scene: Scene) -> tuple[str, tuple[str, ...]
         device,
         cfg["integrator"],
         model,
-        strain_limit=bool(cfg["strain_limit"]),
         strain_limit_method=bool(cfg["strain_limit"]) and cfg["strain_limit_method"] != "provot",
         colliders=any(kind == "mesh" for kind, _ in scene.colliders),
         self_collision=cfg["self_collision"],

@@ -433,12 +433,13 @@ def limit_start_at(lim, wor, before, x, tau, w, p):
 
 
 @cuda.jit(device=True, inline=True)
-def limit_end_at(wor, before, start, x, v, h, w, p):
+def limit_end_at(wor, before, start, x, v, h, w, p, collide):
     """After the limit's passes, vertex ``p``: its velocity follows its correction ``Δx = x −
     before`` by ``Δx/h``, the correction shortened to at most the step's own motion ``|before −
     start|`` (the CPU's ``follow_corrections``: a larger one undoes stretch that was there
-    before, and divided by ``h`` it would be a false speed); then the colliders' stage from the
-    step's start to the corrected end."""
+    before, and divided by ``h`` it would be a false speed); then, where ``collide`` (after
+    symplectic Euler: ``vbd``'s colliders act inside its substeps), the colliders' stage from
+    the step's start to the corrected end."""
     if not wor.free[w, p]:
         return
     d0, d1, d2 = (
@@ -460,7 +461,7 @@ def limit_end_at(wor, before, start, x, v, h, w, p):
         v[w, p, 0] += scale * d0
         v[w, p, 1] += scale * d1
         v[w, p, 2] += scale * d2
-    if wor.ncol[w]:
+    if collide and wor.ncol[w]:
         px, py, pz, ux, uy, uz = colliders_stage(
             wor,
             w,
@@ -507,7 +508,7 @@ def limit_in_block(lim, wor, before, start, x, v, run, w, flags, count):
             attach_at(lim, wor, x, tau, w, i)
         cuda.syncthreads()
     for i in range(tid, n, size):
-        limit_end_at(wor, before, start, x, v, run.h, w, i)
+        limit_end_at(wor, before, start, x, v, run.h, w, i, run.method == 0)
     cuda.syncthreads()
     return count
 
@@ -767,18 +768,18 @@ def explicit_substep(top, wor, it, h, forward, collide):
 
 
 @cuda.jit
-def limit_begin(lim, wor, it, tau):
-    """The strain limit's start after :func:`explicit_substep` (forward: the step's end in
-    ``it.xt``), for every vertex of every world: :func:`limit_start_at`, the end kept in
-    ``it.xs``."""
+def limit_begin(lim, wor, it, tau, explicit):
+    """The strain limit's start for every vertex of every world (:func:`limit_start_at`, the end
+    kept in ``it.xs``): after :func:`explicit_substep` (``explicit``, forward: the step's end in
+    ``it.xt``) or a ``vbd`` substep (its end in ``it.x``)."""
     t = cuda.grid(1)
     n = wor.masses.shape[1]
     if t < wor.masses.shape[0] * n:
-        limit_start_at(lim, wor, it.xs, it.xt, tau, t // n, t % n)
+        limit_start_at(lim, wor, it.xs, it.xt if explicit else it.x, tau, t // n, t % n)
 
 
 @cuda.jit
-def limit_colour(lim, wor, it, tau, lo, count, first):
+def limit_colour(lim, wor, it, tau, lo, count, first, explicit):
     """One colour of a pass of the limit (springs ``lo:lo + count``) in every world that takes
     the pass (its last shortened something: ``lim.flags[w, 1]``, or ``first``);
     ``lim.flags[w, 0]`` set where one was shortened."""
@@ -786,12 +787,13 @@ def limit_colour(lim, wor, it, tau, lo, count, first):
     worlds = wor.masses.shape[0]
     if t < worlds * count:
         w = t // count
-        if (first or lim.flags[w, 1]) and shorten_at(lim, wor, it.xt, tau, w, lo + t - w * count):
+        x = it.xt if explicit else it.x
+        if (first or lim.flags[w, 1]) and shorten_at(lim, wor, x, tau, w, lo + t - w * count):
             lim.flags[w, 0] = 1
 
 
 @cuda.jit
-def limit_attach(lim, wor, it, tau):
+def limit_attach(lim, wor, it, tau, explicit):
     """The attachments after a pass, every vertex of every world whose pass shortened
     something (``lim.flags[w, 0]``)."""
     t = cuda.grid(1)
@@ -799,17 +801,21 @@ def limit_attach(lim, wor, it, tau):
     if t < wor.masses.shape[0] * n:
         w = t // n
         if lim.flags[w, 0]:
-            attach_at(lim, wor, it.xt, tau, w, t % n)
+            attach_at(lim, wor, it.xt if explicit else it.x, tau, w, t % n)
 
 
 @cuda.jit
-def limit_end(wor, it, h):
-    """:func:`limit_end_at` for every vertex of every world (the step from ``it.x`` to
-    ``(it.xt, it.y)``)."""
+def limit_end(wor, it, h, explicit):
+    """:func:`limit_end_at` for every vertex of every world: the explicit step from ``it.x`` to
+    ``(it.xt, it.y)``, the colliders' stage after it; or a ``vbd`` substep from ``it.xt`` to
+    ``(it.x, it.v)``, whose colliders act inside it."""
     t = cuda.grid(1)
     n = wor.masses.shape[1]
     if t < wor.masses.shape[0] * n:
-        limit_end_at(wor, it.xs, it.x, it.xt, it.y, h, t // n, t % n)
+        if explicit:
+            limit_end_at(wor, it.xs, it.x, it.xt, it.y, h, t // n, t % n, True)
+        else:
+            limit_end_at(wor, it.xs, it.xt, it.x, it.v, h, t // n, t % n, False)
 
 
 @cuda.jit
@@ -1065,8 +1071,9 @@ def frames_in_blocks(top, wor, it, cptr, lim, run, out):
     until the world's own residual is at most ``run.tolerance`` (measured every
     ``run.check_every`` sweeps) or ``run.iterations`` sweeps. ``out[w]``: the last step's
     residual (its substeps' worst), the sweeps done, the steps that ended above the tolerance
-    (as :class:`cloth_sim.integrators.vbd.VBD` counts them). Symplectic Euler's steps are each
-    followed by the strain limit where ``run.limit >= 0`` (:func:`limit_in_block`)."""
+    (as :class:`cloth_sim.integrators.vbd.VBD` counts them). Symplectic Euler's steps and
+    ``vbd``'s substeps are each followed by the strain limit where ``run.limit >= 0``
+    (:func:`limit_in_block`)."""
     w = cuda.blockIdx.x
     tid = cuda.threadIdx.x
     size = cuda.blockDim.x
@@ -1105,6 +1112,7 @@ def frames_in_blocks(top, wor, it, cptr, lim, run, out):
                 copy_back_at(it, w, i)
     else:
         colours = cptr.shape[0] - 1
+        passes = 0
         for part in range(run.steps * run.substeps):
             if part % run.substeps == 0:
                 worst = 0.0
@@ -1154,6 +1162,8 @@ def frames_in_blocks(top, wor, it, cptr, lim, run, out):
             for i in range(tid, n, size):
                 finish_at(wor, it, hw, run.bdf2, w, i)
             cuda.syncthreads()
+            if run.limit >= 0.0:  # (after each substep, from its start: backward Euler's)
+                passes = limit_in_block(lim, wor, it.xs, it.xt, it.x, it.v, run, w, flags, passes)
             worst = max(worst, res)
             sweeps += done
             if part % run.substeps == run.substeps - 1 and worst > run.tolerance:
@@ -1239,7 +1249,7 @@ def limit_on_grid(lim, wor, before, start, x, v, run, count):
                 attach_at(lim, wor, x, tau, w, t - w * n)
         g.sync()
     for t in range(rank, total, size):
-        limit_end_at(wor, before, start, x, v, run.h, t // n, t % n)
+        limit_end_at(wor, before, start, x, v, run.h, t // n, t % n, run.method == 0)
     g.sync()
     return count
 
@@ -1282,6 +1292,7 @@ def frames_on_grid(top, wor, it, cptr, lim, run, out, partial):
     missed = 0
     sweeps = 0
     worst = 0.0
+    passes = 0
     for part in range(run.steps * run.substeps):
         if part % run.substeps == 0:
             worst = 0.0
@@ -1326,6 +1337,8 @@ def frames_on_grid(top, wor, it, cptr, lim, run, out, partial):
             w = t // n
             finish_at(wor, it, step_of(it, h, run.hb, w), run.bdf2, w, t - w * n)
         g.sync()
+        if run.limit >= 0.0:  # (after each substep, from its start: backward Euler's)
+            passes = limit_on_grid(lim, wor, it.xs, it.xt, it.x, it.v, run, passes)
         worst = max(worst, res)
         sweeps += done
         if part % run.substeps == run.substeps - 1 and worst > run.tolerance:

@@ -72,7 +72,6 @@ class CudaSimulator:
             "cuda",
             integrator,
             model,
-            strain_limit=tau is not None,
             strain_limit_method=tau is not None and limit_method != "provot",
             colliders=any(c.kind == MESH for c in colliders),
             self_collision=bool(cpu_only.get("self_collision")),
@@ -572,8 +571,8 @@ class CudaSimulator:
 
     @property
     def strain_limit(self) -> float | None:
-        """Provot's ``τc`` after each symplectic Euler step (None: none), as the CPU's; refused
-        after ``vbd`` and with the projection method."""
+        """Provot's ``τc`` after each step (symplectic Euler) or substep (``vbd``), None for none,
+        as the CPU's; refused with the projection method."""
         return self._worlds.strain_limit
 
     @strain_limit.setter

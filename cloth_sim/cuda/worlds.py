@@ -10,11 +10,11 @@ counts them.
 The same methods and defaults as the CPU (:mod:`cloth_sim.integrators.explicit`'s symplectic Euler
 and :class:`~cloth_sim.integrators.vbd.VBD`'s general sweep: substeps chosen from the cloth, a
 relative residual against ``tolerance`` measured every ``check_every`` iterations, Chebyshev's
-``rho``), with static colliders (planes, spheres, boxes, capsules, cylinders) and, after
-symplectic Euler, Provot's strain limit (:meth:`CudaWorlds.set_strain_limit`: the CPU's passes
-and long-range attachments, a pass taking its springs a colour at a time). What stays on the CPU
-for now: mesh colliders, self-contact, the strain limit after ``vbd`` and its projection, grippers
-on links and Choi & Ko's nonlinear pairs (:func:`cloth_sim.backends.refusal` names them).
+``rho``), with static colliders (planes, spheres, boxes, capsules, cylinders) and Provot's
+strain limit (:meth:`CudaWorlds.set_strain_limit`: the CPU's passes and long-range attachments,
+a pass taking its springs a colour at a time). What stays on the CPU for now: mesh colliders,
+self-contact, the strain limit's projection, grippers on links and Choi & Ko's nonlinear pairs
+(:func:`cloth_sim.backends.refusal` names them).
 """
 
 from __future__ import annotations
@@ -233,8 +233,8 @@ class CudaWorlds:
         self._residual = cuda.device_array(worlds, np.float64)
         self._substeps_key = None
         self._substeps = 1
-        #: Provot's strain limit τ after each symplectic Euler step (None: none), its passes a
-        #: step at most and whether long-range attachments to the pins come first
+        #: Provot's strain limit τ after each step or vbd substep (None: none), its passes at
+        #: most and whether long-range attachments to the pins come first
         #: (:meth:`set_strain_limit`)
         self.strain_limit = None
         self.strain_limit_passes = DEFAULT_STRAIN_LIMIT_PASSES
@@ -258,17 +258,14 @@ class CudaWorlds:
 
     # ------------------------------------------------------------------ the strain limit
     def set_strain_limit(self, tau, passes=None, long_range=None) -> None:
-        """Provot's strain limit ``tau`` (``None``: none) after every symplectic Euler step in
-        every world, in at most ``passes`` passes (unchanged when None), after long-range
-        attachments to each world's pins and held vertices where ``long_range`` (as the CPU's
-        :class:`~cloth_sim.constraints.strain_limit.StrainLimit` with ``method="provot"``).
-        Checked first; ``vbd`` is refused (its substeps take the limit in parts, which the
-        device does not do)."""
+        """Provot's strain limit ``tau`` (``None``: none) in every world after every symplectic
+        Euler step, or every ``vbd`` substep (from the substep's start, which is then backward
+        Euler's, as the CPU's ``VBD`` applies it), in at most ``passes`` passes (unchanged when
+        None), after long-range attachments to each world's pins and held vertices where
+        ``long_range`` (as the CPU's :class:`~cloth_sim.constraints.strain_limit.StrainLimit`
+        with ``method="provot"``). Checked first."""
         if tau is not None:
             tau = SCHEMA["strain_limit"].check(tau)
-            if self.method != "symplectic_euler":
-                refused = backends.refusal("cuda", self.method, self.models[0], strain_limit=True)
-                raise ValueError(refused[0])
         if passes is not None:
             passes = SCHEMA["strain_limit_passes"].check(passes)
         if tau is not None and self._lim_host is None:
@@ -287,7 +284,7 @@ class CudaWorlds:
     def _limited(self) -> bool:
         """Whether the strain limit runs after this step; its attachments made for the pins now
         where they are not."""
-        if self.strain_limit is None or self.method != "symplectic_euler":
+        if self.strain_limit is None:
             return False
         pins = self._host.free == 0
         if self._attached is None:
@@ -776,7 +773,14 @@ class CudaWorlds:
         return h
 
     def _bdf2(self) -> int:
-        return int(self.settings is not None and self.settings.scheme == "bdf2")
+        """Whether ``vbd``'s substeps are BDF2's: its scheme, but backward Euler's under the
+        strain limit (as on the CPU: the limit's velocity follows ``Δx/h``, backward Euler's
+        relation)."""
+        return int(
+            self.settings is not None
+            and self.settings.scheme == "bdf2"
+            and self.strain_limit is None
+        )
 
     def _run_whole(self, n: int, mode: str) -> None:
         s = self.settings
@@ -866,7 +870,8 @@ class CudaWorlds:
         launch = _grid(self.worlds * self.n)
         tau = self.real(self.strain_limit)
         lim = self.lim
-        K.limit_begin[launch](lim, self.wor, self.it, tau)
+        explicit = self.method != "vbd"
+        K.limit_begin[launch](lim, self.wor, self.it, tau, explicit)
         self.launches += 1
         sptr = self._lim_host.sptr
         flags = np.zeros((self.worlds, 3), np.int32)
@@ -875,17 +880,17 @@ class CudaWorlds:
             for c in range(len(sptr) - 1):
                 count = int(sptr[c + 1] - sptr[c])
                 K.limit_colour[_grid(self.worlds * count)](
-                    lim, self.wor, self.it, tau, int(sptr[c]), count, p == 0
+                    lim, self.wor, self.it, tau, int(sptr[c]), count, p == 0, explicit
                 )
             self.launches += len(sptr) - 1
             flags = lim.flags.copy_to_host()
             if not flags[:, 0].any():
                 break
-            K.limit_attach[launch](lim, self.wor, self.it, tau)
+            K.limit_attach[launch](lim, self.wor, self.it, tau, explicit)
             self.launches += 1
             flags[:, 1] = flags[:, 0]  # (a world takes the next pass if this one shortened)
             flags[:, 0] = 0
-        K.limit_end[launch](self.wor, self.it, h)
+        K.limit_end[launch](self.wor, self.it, h, explicit)
         self.launches += 1
 
     def _vbd_step(self) -> None:
@@ -944,4 +949,6 @@ class CudaWorlds:
             res = self._measure()
         K.vbd_finish[launch](wor, it, h, hb, bdf2)
         self.launches += 1
+        if self._limit_now:  # (after each substep, from its start: backward Euler's)
+            self._limit_stages(h)
         return done, res

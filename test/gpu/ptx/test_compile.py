@@ -48,10 +48,19 @@ def signatures(real):
     out = numba.float64[:, ::1]
     return {
         K.explicit_substep: (ty(top), ty(wor), ty(it), r, numba.boolean, numba.boolean),
-        K.limit_begin: (lim, ty(wor), ty(it), r),
-        K.limit_colour: (lim, ty(wor), ty(it), r, numba.int64, numba.int64, numba.boolean),
-        K.limit_attach: (lim, ty(wor), ty(it), r),
-        K.limit_end: (ty(wor), ty(it), r),
+        K.limit_begin: (lim, ty(wor), ty(it), r, numba.boolean),
+        K.limit_colour: (
+            lim,
+            ty(wor),
+            ty(it),
+            r,
+            numba.int64,
+            numba.int64,
+            numba.boolean,
+            numba.boolean,
+        ),
+        K.limit_attach: (lim, ty(wor), ty(it), r, numba.boolean),
+        K.limit_end: (ty(wor), ty(it), r, numba.boolean),
         K.copy_back: (ty(it),),
         K.vbd_start: (ty(wor), ty(it), numba.int64),
         K.vbd_guess: (ty(top), ty(wor), ty(it), r, r),

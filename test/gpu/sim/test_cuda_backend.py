@@ -208,8 +208,8 @@ def test_a_list_of_models_must_share_one_topology():
     [
         (dict(integrator="rk4"), r"integrator 'rk4' has no cuda backend; on cuda: "),
         (
-            dict(integrator="vbd", strain_limit=0.1),
-            r"strain_limit: not on the cuda device yet after vbd \(after symplectic_euler",
+            dict(strain_limit=0.1, strain_limit_method="projection"),
+            r"strain_limit_method: not on the cuda device yet \(the projection is not",
         ),
         (dict(self_collision=True), r"self_collision: not on the cuda device"),
         (
