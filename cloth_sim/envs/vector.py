@@ -133,7 +133,6 @@ class ClothFoldVectorEnv(VectorEnv):
         self.steps = np.zeros(w, np.int64)
         self.group_a, self.group_b = metrics.fold_groups(env.rows, env.cols)
         self.performance_start = np.zeros(w)
-        self._pinned = np.asarray(env.model.pinned, bool)
         self._ended = np.zeros(w, bool)
         self._rngs = [None] * w
 
