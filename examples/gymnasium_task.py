@@ -33,7 +33,15 @@ for _ in range(10 if quick else env.unwrapped.horizon):
 print(f"random actions: normalized performance {info['normalized_performance']:.3f}")
 env.close()
 
-if not quick:  # four envs in four processes
+# ClothFold's own vector env: every world in one batch of cloths, in this process
+# (device="cuda" steps them all in the same launches on a GPU: docs/gpu.md)
+envs = gym.make_vec("cloth_sim/ClothFold-v0", num_envs=4)
+obs, info = envs.reset(seed=0)
+obs, reward, terminated, truncated, info = envs.step(envs.action_space.sample())
+print(type(envs).__name__, "observations", obs.shape, "rewards", reward.shape)
+envs.close()
+
+if not quick:  # four envs in four processes (any task, any observation)
     envs = gym.make_vec("cloth_sim/ClothFlatten-v0", num_envs=4, vectorization_mode="async")
     obs, info = envs.reset(seed=0)
     obs, reward, terminated, truncated, info = envs.step(envs.action_space.sample())

@@ -16,7 +16,11 @@ EXAMPLES = ROOT / "examples"
 EXPECTED = {
     "python_api.py": ["integrators: explicit_euler, symplectic_euler", "stable_dt", "holding"],
     "garment.py": ["2296 vertices", "landmarks: hem_left", "from_mesh: 2296 vertices"],
-    "gymnasium_task.py": ["scripted fold: normalized performance 0.8", "frame (128, 128, 3)"],
+    "gymnasium_task.py": [
+        "scripted fold: normalized performance 0.8",
+        "frame (128, 128, 3)",
+        "ClothFoldVectorEnv observations (4, 18) rewards (4,)",
+    ],
     "depth_camera.py": ["depth (60, 80)", "triangles in view", "the centre pixel sees"],
     "sweep.py": ["runs by status: {'ok': 4}", "(complete)"],
     "contacts.py": ["closest to the ball's surface: 0.00", "after moving the ball"],
