@@ -433,13 +433,17 @@ def limit_start_at(lim, wor, before, x, tau, w, p):
 
 
 @cuda.jit(device=True, inline=True)
-def limit_end_at(wor, before, start, x, v, h, w, p, collide):
+def limit_end_at(lim, wor, before, start, x, v, h, w, p, collide, first):
     """After the limit's passes, vertex ``p``: its velocity follows its correction ``Δx = x −
     before`` by ``Δx/h``, the correction shortened to at most the step's own motion ``|before −
     start|`` (the CPU's ``follow_corrections``: a larger one undoes stretch that was there
     before, and divided by ``h`` it would be a false speed); then, where ``collide`` (after
     symplectic Euler: ``vbd``'s colliders act inside its substeps), the colliders' stage from
-    the step's start to the corrected end."""
+    the step's start to the corrected end. ``lim.gained`` gathers the correction's ``Δx/h``
+    over the step (``first``: the step's first application of the limit starts it again)."""
+    if first:
+        for d in range(3):
+            lim.gained[w, p, d] = 0.0
     if not wor.free[w, p]:
         return
     d0, d1, d2 = (
@@ -448,6 +452,9 @@ def limit_end_at(wor, before, start, x, v, h, w, p, collide):
         x[w, p, 2] - before[w, p, 2],
     )
     corr2 = d0 * d0 + d1 * d1 + d2 * d2
+    lim.gained[w, p, 0] += d0 / h
+    lim.gained[w, p, 1] += d1 / h
+    lim.gained[w, p, 2] += d2 / h
     if corr2 > 0.0:
         m0, m1, m2 = (
             before[w, p, 0] - start[w, p, 0],
@@ -476,7 +483,7 @@ def limit_end_at(wor, before, start, x, v, h, w, p, collide):
 
 
 @cuda.jit(device=True, inline=True)
-def limit_in_block(lim, wor, before, start, x, v, run, w, flags, count):
+def limit_in_block(lim, wor, before, start, x, v, run, w, flags, count, first):
     """Provot's strain limit on world ``w`` by its block's threads after a symplectic Euler step
     from ``start`` to ``(x, v)`` (the CPU's :class:`~cloth_sim.constraints.strain_limit.
     StrainLimit` with its attachments): the attachments, then up to ``run.passes`` passes over
@@ -508,7 +515,7 @@ def limit_in_block(lim, wor, before, start, x, v, run, w, flags, count):
             attach_at(lim, wor, x, tau, w, i)
         cuda.syncthreads()
     for i in range(tid, n, size):
-        limit_end_at(wor, before, start, x, v, run.h, w, i, run.method == 0)
+        limit_end_at(lim, wor, before, start, x, v, run.h, w, i, run.method == 0, first)
     cuda.syncthreads()
     return count
 
@@ -805,7 +812,7 @@ def limit_attach(lim, wor, it, tau, explicit):
 
 
 @cuda.jit
-def limit_end(wor, it, h, explicit):
+def limit_end(lim, wor, it, h, explicit, first):
     """:func:`limit_end_at` for every vertex of every world: the explicit step from ``it.x`` to
     ``(it.xt, it.y)``, the colliders' stage after it; or a ``vbd`` substep from ``it.xt`` to
     ``(it.x, it.v)``, whose colliders act inside it."""
@@ -813,9 +820,9 @@ def limit_end(wor, it, h, explicit):
     n = wor.masses.shape[1]
     if t < wor.masses.shape[0] * n:
         if explicit:
-            limit_end_at(wor, it.xs, it.x, it.xt, it.y, h, t // n, t % n, True)
+            limit_end_at(lim, wor, it.xs, it.x, it.xt, it.y, h, t // n, t % n, True, first)
         else:
-            limit_end_at(wor, it.xs, it.xt, it.x, it.v, h, t // n, t % n, False)
+            limit_end_at(lim, wor, it.xs, it.xt, it.x, it.v, h, t // n, t % n, False, first)
 
 
 @cuda.jit
@@ -1101,11 +1108,11 @@ def frames_in_blocks(top, wor, it, cptr, lim, run, out):
             if limited:
                 if k % 2 == 0:
                     passes = limit_in_block(
-                        lim, wor, it.xs, it.x, it.xt, it.y, run, w, flags, passes
+                        lim, wor, it.xs, it.x, it.xt, it.y, run, w, flags, passes, True
                     )
                 else:
                     passes = limit_in_block(
-                        lim, wor, it.xs, it.xt, it.x, it.v, run, w, flags, passes
+                        lim, wor, it.xs, it.xt, it.x, it.v, run, w, flags, passes, True
                     )
         if run.steps % 2 == 1:
             for i in range(tid, n, size):
@@ -1163,7 +1170,19 @@ def frames_in_blocks(top, wor, it, cptr, lim, run, out):
                 finish_at(wor, it, hw, run.bdf2, w, i)
             cuda.syncthreads()
             if run.limit >= 0.0:  # (after each substep, from its start: backward Euler's)
-                passes = limit_in_block(lim, wor, it.xs, it.xt, it.x, it.v, run, w, flags, passes)
+                passes = limit_in_block(
+                    lim,
+                    wor,
+                    it.xs,
+                    it.xt,
+                    it.x,
+                    it.v,
+                    run,
+                    w,
+                    flags,
+                    passes,
+                    part % run.substeps == 0,
+                )
             worst = max(worst, res)
             sweeps += done
             if part % run.substeps == run.substeps - 1 and worst > run.tolerance:
@@ -1204,7 +1223,7 @@ def grid_residual(wor, it, partial, w, rank, size):
 
 
 @cuda.jit(device=True, inline=True)
-def limit_on_grid(lim, wor, before, start, x, v, run, count):
+def limit_on_grid(lim, wor, before, start, x, v, run, count, first):
     """:func:`limit_in_block` over a cooperative launch's whole grid, every world at once, the
     grid synchronised between stages. Each world stops after its own pass that shortened
     nothing, as in a block (``lim.flags[w, count % 3]``: whether world ``w``'s pass did; a world
@@ -1249,7 +1268,7 @@ def limit_on_grid(lim, wor, before, start, x, v, run, count):
                 attach_at(lim, wor, x, tau, w, t - w * n)
         g.sync()
     for t in range(rank, total, size):
-        limit_end_at(wor, before, start, x, v, run.h, t // n, t % n, run.method == 0)
+        limit_end_at(lim, wor, before, start, x, v, run.h, t // n, t % n, run.method == 0, first)
     g.sync()
     return count
 
@@ -1281,9 +1300,9 @@ def frames_on_grid(top, wor, it, cptr, lim, run, out, partial):
             g.sync()
             if limited:
                 if k % 2 == 0:
-                    passes = limit_on_grid(lim, wor, it.xs, it.x, it.xt, it.y, run, passes)
+                    passes = limit_on_grid(lim, wor, it.xs, it.x, it.xt, it.y, run, passes, True)
                 else:
-                    passes = limit_on_grid(lim, wor, it.xs, it.xt, it.x, it.v, run, passes)
+                    passes = limit_on_grid(lim, wor, it.xs, it.xt, it.x, it.v, run, passes, True)
         if run.steps % 2 == 1:
             for t in range(rank, total, size):
                 copy_back_at(it, t // n, t % n)
@@ -1338,7 +1357,9 @@ def frames_on_grid(top, wor, it, cptr, lim, run, out, partial):
             finish_at(wor, it, step_of(it, h, run.hb, w), run.bdf2, w, t - w * n)
         g.sync()
         if run.limit >= 0.0:  # (after each substep, from its start: backward Euler's)
-            passes = limit_on_grid(lim, wor, it.xs, it.xt, it.x, it.v, run, passes)
+            passes = limit_on_grid(
+                lim, wor, it.xs, it.xt, it.x, it.v, run, passes, part % run.substeps == 0
+            )
         worst = max(worst, res)
         sweeps += done
         if part % run.substeps == run.substeps - 1 and worst > run.tolerance:

@@ -103,7 +103,9 @@ class Limits(NamedTuple):
     colour (colour ``c`` is ``sptr[c]:sptr[c + 1]``; no two springs of a colour share a vertex);
     each world's long-range attachments, ``anchor`` ``(worlds, n, 2)`` (a pin, or −1) and
     ``reach`` (its rest geodesic distance); ``flags`` ``(worlds, 3)``: whether a world's pass
-    shortened anything (three in turn: one written, the last read, the next cleared)."""
+    shortened anything (three in turn: one written, the last read, the next cleared);
+    ``gained`` ``(worlds, n, 3)``: each vertex's corrections over the last step, ``Σ Δx/h`` (the
+    limit's reaction on the pins: a gripper's wrench)."""
 
     ends: np.ndarray
     rest: np.ndarray
@@ -111,6 +113,7 @@ class Limits(NamedTuple):
     anchor: np.ndarray
     reach: np.ndarray
     flags: np.ndarray
+    gained: np.ndarray
 
 
 class Run(NamedTuple):
@@ -215,6 +218,7 @@ def limits(model: ClothModel, worlds: int, real) -> Limits:
         anchor=np.full((worlds, n, 2), -1, np.int32),
         reach=np.zeros((worlds, n, 2), real),
         flags=np.zeros((worlds, 3), np.int32),
+        gained=np.zeros((worlds, n, 3), real),
     )
 
 

@@ -499,16 +499,21 @@ class CudaSimulator:
 
     def gripper_wrench(self, name: str) -> tuple[np.ndarray, np.ndarray]:
         """``(force, torque)`` the cloth's springs exert on the vertices gripper ``name`` holds,
-        at the end of the last step (the CPU's for ``vbd``, which evaluates them there; the
-        CPU's symplectic Euler reads them at the step's start), torque about the gripper's
-        position; world frame, from the state copied to the host."""
+        at the end of the last step (the CPU's for ``vbd``, which evaluates them there, before
+        the strain limit's last correction; the CPU's symplectic Euler reads them at the step's
+        start), plus the strain limit's force on them over the last step when it is on (as the
+        CPU's), torque about the gripper's position; world frame, from the state copied to the
+        host."""
         g = self._grips.get(name)
         x, v = self._copy()
+        # under vbd with the limit, the springs where the CPU's reads them: the last substep
+        # solved, before the limit's last correction (its stage)
+        xs, vs = self._worlds.before_limit(0) or (x, v)
         f = np.zeros_like(x)
         term = self.forces.spring_term
         if term is not None and term.active:
-            term.add_force(x, v, f)
-        fi = f[g.indices]
+            term.add_force(xs, vs, f)
+        fi = f[g.indices] + self._worlds.limit_reaction(0)[g.indices]
         return fi.sum(axis=0), np.cross(x[g.indices] - g.position, fi).sum(axis=0)
 
     def release(self, name: str) -> np.ndarray:

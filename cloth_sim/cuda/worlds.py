@@ -250,6 +250,7 @@ class CudaWorlds:
                     anchor=np.full((1, 1, 2), -1, np.int32),
                     reach=np.zeros((1, 1, 2), real),
                     flags=np.zeros((1, 3), np.int32),
+                    gained=np.zeros((1, 1, 3), real),
                 )
             )
         )
@@ -312,6 +313,39 @@ class CudaWorlds:
         self.lim.reach.copy_to_device(h.reach)
         self._attached = pins
         return True
+
+    def before_limit(self, world: int):
+        """``(x, v)`` of ``world`` at the end of the last step before the strain limit's last
+        correction (what the CPU's ``vbd`` leaves to its stages: its last substep solved; the
+        velocity ``(x − x^t)/h`` of a free vertex), or None where the last step was not a
+        limited ``vbd`` step."""
+        if not (self._limit_now and self.method == "vbd" and self.steps.any()):
+            return None
+        w = int(self._ids([world])[0])
+        x = self.it.xs[w].copy_to_host().astype(np.float64)
+        v = self.it.v[w].copy_to_host().astype(np.float64)
+        free = self._host.free[w] != 0
+        start = self.it.xt[w].copy_to_host().astype(np.float64)
+        v[free] = (x[free] - start[free]) / (self.dt / self.last_substeps)
+        return x, v
+
+    def limit_reaction(self, world: int) -> np.ndarray:
+        """``(n, 3)``: the force (N) the strain limit's corrections over the last step put on
+        each pin of ``world`` (the CPU's ``StrainLimit.reaction``: each free vertex's ``−m Σ
+        Δx/h / dt`` on its nearest pin by rest geodesic distance); zero without a limit."""
+        w = int(self._ids([world])[0])
+        out = np.zeros((self.n, 3))
+        if self.strain_limit is None or self._lim_host is None:
+            return out
+        if self.strain_limit_long_range and self._attached is not None:
+            near = self._lim_host.anchor[w, :, 0].astype(np.int64)
+        else:
+            near = nearest_attachments(self.models[w], 1, self._host.free[w] == 0)[0][:, 0]
+        gained = self.lim.gained[w].copy_to_host().astype(np.float64)
+        ok = near >= 0
+        m = self._host.masses[w].astype(np.float64)
+        np.add.at(out, near[ok], -(m[ok, None] * gained[ok]) / self.dt)
+        return out
 
     #: up to this many particles the rest geodesic distances between every two are kept (8 bytes
     #: each: 32 MB at the most), so that new pins' attachments (a grasp) are a lookup for every
@@ -858,12 +892,12 @@ class CudaWorlds:
         K.explicit_substep[launch](self.top, self.wor, self.it, h, True, not limited)
         self.launches += 1
         if limited:
-            self._limit_stages(h)
+            self._limit_stages(h, True)
         K.copy_back[launch](self.it)
         self.launches += 1
         self.last_substeps = 1
 
-    def _limit_stages(self, h) -> None:
+    def _limit_stages(self, h, first: bool) -> None:
         """The strain limit after :func:`kernels.explicit_substep`, a launch a stage: the start,
         a colour of a pass at a time (each pass's flag read back: the passes stop after one that
         shortens nothing), the attachments after a pass, the velocities and colliders."""
@@ -890,7 +924,7 @@ class CudaWorlds:
             self.launches += 1
             flags[:, 1] = flags[:, 0]  # (a world takes the next pass if this one shortened)
             flags[:, 0] = 0
-        K.limit_end[launch](self.wor, self.it, h, explicit)
+        K.limit_end[launch](lim, self.wor, self.it, h, explicit, first)
         self.launches += 1
 
     def _vbd_step(self) -> None:
@@ -898,8 +932,8 @@ class CudaWorlds:
         parts = self.substeps()
         iterations, worst = 0, np.zeros(self.worlds)
         h = self._substep_length(parts)
-        for _ in range(parts):
-            done, res = self._vbd_substep(h)
+        for part in range(parts):
+            done, res = self._vbd_substep(h, part == 0)
             iterations += done
             worst = np.maximum(worst, res)
         self.last_iterations = iterations
@@ -913,7 +947,7 @@ class CudaWorlds:
         self.launches += 1
         return self._residual.copy_to_host()
 
-    def _vbd_substep(self, dt: float):
+    def _vbd_substep(self, dt: float, first: bool):
         s = self.settings
         top, wor, it = self.top, self.wor, self.it
         total = self.worlds * self.n
@@ -950,5 +984,5 @@ class CudaWorlds:
         K.vbd_finish[launch](wor, it, h, hb, bdf2)
         self.launches += 1
         if self._limit_now:  # (after each substep, from its start: backward Euler's)
-            self._limit_stages(h)
+            self._limit_stages(h, first)
         return done, res

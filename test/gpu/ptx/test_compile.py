@@ -60,7 +60,7 @@ def signatures(real):
             numba.boolean,
         ),
         K.limit_attach: (lim, ty(wor), ty(it), r, numba.boolean),
-        K.limit_end: (ty(wor), ty(it), r, numba.boolean),
+        K.limit_end: (lim, ty(wor), ty(it), r, numba.boolean, numba.boolean),
         K.copy_back: (ty(it),),
         K.vbd_start: (ty(wor), ty(it), numba.int64),
         K.vbd_guess: (ty(top), ty(wor), ty(it), r, r),

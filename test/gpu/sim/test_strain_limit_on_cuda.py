@@ -218,3 +218,36 @@ def test_vbd_substeps_are_limited_as_the_cpus():
     worst = np.max(gpu.strains(limited_only=True))  # (0.100107 on both)
     assert worst == pytest.approx(np.max(cpu.strains(limited_only=True)), abs=1e-9)
     assert worst < TAU + 2e-4 and np.max(free.strains(limited_only=True)) > TAU + 0.1
+
+
+def test_a_grippers_wrench_takes_the_limits_pull_as_the_cpus():
+    """A cloth hanging from a gripper at a corner (no other pin), lifted 1 cm, the limit holding
+    its stretch: the wrench is the springs' pull where the CPU's ``vbd`` reads it (its last
+    substep solved, before the limit's last correction) plus the force the limit's corrections
+    put on the held vertex over the step (each vertex's momentum change on its nearest pin, the
+    CPU's ``StrainLimit.reaction``): the CPU's to 1e-9 N with the cloth the CPU's to 1e-11 m,
+    where the springs at the step's end alone are a third off. (Lifted 5 cm in one step under a
+    pin elsewhere, the limit's large first corrections take the two orders of its passes 1e-4 m
+    apart.)"""
+    m = ClothModel.grid(4, 4, 0.05, 0.01, stiffness=20.0, damping=0.05, pinned=[])
+    opts = dict(iterations=30, tolerance=0.0, substeps=2)
+    kw = dict(integrator="vbd", dt=1 / 60, strain_limit=TAU)
+    cpu = Simulator(m, integrator_options=dict(opts, grid=False), **kw)
+    gpu = Simulator(
+        m, integrator_options=opts, device="cuda", precision="float64", launch="stages", **kw
+    )
+    corner = m.positions[m.index(0, 0)]
+    wrenches = []
+    for s in (cpu, gpu):
+        s.grasp("hand", corner, 1e-6)
+        s.set_gripper_pose("hand", corner + (0.0, 0.0, 0.01))
+        s.step(4)
+        wrenches.append(s.gripper_wrench("hand"))
+    assert np.max(np.abs(gpu.positions - cpu.positions)) < 1e-11
+    assert np.max(cpu.strains(limited_only=True)) == pytest.approx(TAU, abs=1e-6)
+    (fc, tc), (fg, tg) = wrenches
+    assert np.allclose(fg, fc, rtol=0, atol=1e-9) and np.allclose(tg, tc, rtol=0, atol=1e-9)
+    x, v = gpu.positions, gpu.velocities
+    springs = np.zeros_like(x)
+    gpu.forces.spring_term.add_force(x, v, springs)
+    assert np.linalg.norm(fg - springs[m.index(0, 0)]) > 0.25 * np.linalg.norm(fg)
