@@ -122,6 +122,20 @@ def world_ids(worlds, count: int):
     return ids
 
 
+def world_pairs(worlds, indices, count: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(worlds, indices)`` as rows, one vertex ``indices[r]`` of world ``worlds[r]`` a row, the
+    worlds checked as :func:`world_ids` and the vertices against ``n``."""
+    w = world_ids(np.asarray(worlds, np.int64).ravel(), count)
+    i = np.asarray(indices, np.int64).ravel()
+    if len(w) != len(i):
+        raise ValueError(
+            f"worlds and indices: one vertex a row, got {len(w)} worlds and {len(i)} indices"
+        )
+    if i.size and (i.min() < 0 or i.max() >= n):
+        raise ValueError(f"indices must lie in [0, {n - 1}]")
+    return w, i
+
+
 def models_of(models, worlds: int | None) -> list[ClothModel]:
     """One model ``worlds`` times, or the list given (``worlds`` then its length, or None)."""
     if isinstance(models, ClothModel):

@@ -14,6 +14,7 @@ import math
 import numpy as np
 
 from . import backends
+from .constraints.grippers import Grips
 from .parameters import SCHEMA
 from .simulator import Simulator
 
@@ -158,13 +159,7 @@ class BatchSimulator:
                 sim.release(name)
 
     def _pairs(self, worlds, indices):
-        w = self._ids(np.asarray(worlds, np.int64).ravel())
-        i = np.asarray(indices, np.int64).ravel()
-        if len(w) != len(i):
-            raise ValueError(
-                f"worlds and indices: one vertex a row, got {len(w)} worlds and {len(i)} indices"
-            )
-        return w, i
+        return backends.world_pairs(worlds, indices, self.worlds, self.sims[0].model.n_particles)
 
     def hold_pairs(self, worlds, indices) -> None:
         """Hold vertex ``indices[r]`` of world ``worlds[r]`` where it is, one a row (a gripper
@@ -216,13 +211,9 @@ class BatchSimulator:
         at = np.zeros((len(w), 3))
         for r, world in enumerate(w):
             sim = self.sims[world]
-            free = ~sim.model.pinned
-            if not free.any():
-                continue
-            d = np.linalg.norm(sim.positions - p[r], axis=1)
-            d[~free] = np.inf
-            idx[r] = int(np.argmin(d))
-            at[r] = sim.positions[idx[r]]
+            idx[r] = Grips.nearest(sim.positions, sim.model.pinned, p[r])[0]
+            if idx[r] >= 0:
+                at[r] = sim.positions[idx[r]]
         return idx, at
 
     def gather(self, indices, extra=None) -> np.ndarray:

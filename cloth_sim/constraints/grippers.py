@@ -104,6 +104,18 @@ class Grips:
         return g
 
     @staticmethod
+    def nearest(x: np.ndarray, pinned: np.ndarray, point) -> tuple[int, float]:
+        """``(index, distance)`` of the free particle of ``x`` nearest to ``point`` (the first of
+        the nearest, as ``np.argmin`` takes it), ``(-1, inf)`` where none is free (a picker's
+        grasp)."""
+        if not (~pinned).any():
+            return -1, np.inf
+        d = np.linalg.norm(x - point, axis=1)
+        d[pinned] = np.inf
+        j = int(np.argmin(d))
+        return j, float(d[j])
+
+    @staticmethod
     def within(name: str, x: np.ndarray, pinned: np.ndarray, point, radius) -> np.ndarray:
         """The free particles of ``x`` within ``radius`` of ``point`` (checked by
         :func:`check_grasp`); ``ValueError`` when there is none, naming the nearest's distance."""

@@ -38,6 +38,11 @@ _STAGES = (
 )
 
 
+def projection_refused(integrator: str, model: ClothModel) -> ValueError:
+    """The error for a strain limit by projection on the device (Provot's passes run there)."""
+    return ValueError(backends.refusal("cuda", integrator, model, strain_limit_method=True)[0])
+
+
 class CudaSimulator:
     """One cloth on the CUDA device (see the module docstring); ``precision`` ``"float32"``
     (default) or ``"float64"``."""
@@ -583,9 +588,7 @@ class CudaSimulator:
     @strain_limit.setter
     def strain_limit(self, tau) -> None:
         if tau is not None and self._strain_method != "provot":
-            raise ValueError(
-                backends.refusal("cuda", self.integrator, self.model, strain_limit_method=True)[0]
-            )
+            raise projection_refused(self.integrator, self.model)
         self._worlds.set_strain_limit(tau)
 
     @property
@@ -606,9 +609,7 @@ class CudaSimulator:
     def strain_limit_method(self, method: str) -> None:
         method = SCHEMA["strain_limit_method"].check(method)
         if method != "provot" and self.strain_limit is not None:
-            raise ValueError(
-                backends.refusal("cuda", self.integrator, self.model, strain_limit_method=True)[0]
-            )
+            raise projection_refused(self.integrator, self.model)
         self._strain_method = method
 
     @property
@@ -736,10 +737,16 @@ class CudaBatchSimulator(CudaWorlds):
         dt: float = 1 / 60,
         strain_limit: float | None = None,
         strain_limit_passes: int | None = None,
+        strain_limit_long_range: bool = True,
+        strain_limit_method: str = "provot",
         **kwargs,
     ):
-        super().__init__(models_of(models, worlds), integrator, dt, **kwargs)
-        self.set_strain_limit(strain_limit, strain_limit_passes)
+        models = models_of(models, worlds)
+        method = SCHEMA["strain_limit_method"].check(strain_limit_method)
+        if strain_limit is not None and method != "provot":
+            raise projection_refused(integrator, models[0])
+        super().__init__(models, integrator, dt, **kwargs)
+        self.set_strain_limit(strain_limit, strain_limit_passes, strain_limit_long_range)
 
     @property
     def time(self) -> np.ndarray:

@@ -534,14 +534,7 @@ class CudaWorlds:
         self._upload_free(free)
 
     def _pairs(self, worlds, indices) -> tuple[np.ndarray, np.ndarray]:
-        """``(worlds, indices)`` as rows, one vertex a row (each checked)."""
-        w = self._ids(np.asarray(worlds, np.int64).ravel())
-        i = self._vertices(indices)
-        if len(w) != len(i):
-            raise ValueError(
-                f"worlds and indices: one vertex a row, got {len(w)} worlds and {len(i)} indices"
-            )
-        return w, i
+        return backends.world_pairs(worlds, indices, self.worlds, self.n)
 
     def hold_pairs(self, worlds, indices) -> None:
         """Hold vertex ``indices[r]`` of world ``worlds[r]``, one a row, where it is, at rest

@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..constraints.grippers import Grips
+
 
 class Pickers:
     """``count`` pickers; :meth:`reset` places them, :meth:`frame` moves them over one frame."""
@@ -42,22 +44,13 @@ class Pickers:
         circle of radius ``2·radius·√(count − 1)`` about ``center``."""
         for i in range(self.count):
             self._release(sim, i)
-        center = np.asarray(center, float)
+        center = np.asarray(center, float)[None]
         if bounds is None:
-            low, high = self._span[0].copy(), self._span[1].copy()
-            shift = center[:2] - (low[:2] + high[:2]) / 2
-            low[:2] += shift
-            high[:2] += shift
+            low, high = centred_bounds(center, *self._span)
         else:
-            low, high = (np.array(b, float) for b in bounds)
-        self.low, self.high = low, high
-        r = np.sqrt(self.count - 1) * self.radius * 2.0
-        a = 2 * np.pi * np.arange(self.count) / self.count
-        pts = np.stack(
-            [center[0] + np.sin(a) * r, center[1] + np.cos(a) * r, np.full(self.count, center[2])],
-            axis=1,
-        )
-        self.positions = np.array([self.clip(p) for p in pts])
+            low, high = (np.array(b, float)[None] for b in bounds)
+        self.low, self.high = low[0], high[0]
+        self.positions = on_circle(center, self.count, self.radius, low, high)[0]
 
     def place(self, positions) -> None:
         """Put the pickers at ``positions`` (clipped to the bounds) without moving anything
@@ -97,13 +90,8 @@ class Pickers:
 
     def _grasp(self, sim, i: int) -> None:
         x = sim.positions
-        free = ~sim.model.pinned
-        if not free.any():
-            return
-        d = np.linalg.norm(x - self.positions[i], axis=1)
-        d[~free] = np.inf
-        j = int(np.argmin(d))
-        if d[j] > self.reach:
+        j, d = Grips.nearest(x, sim.model.pinned, self.positions[i])
+        if j < 0 or d > self.reach:
             return
         sim.grasp(self.names[i], x[j], 1e-12)
         self.held[i] = x[j] - self.positions[i]
@@ -112,3 +100,26 @@ class Pickers:
         if self.held[i] is not None:
             sim.release(self.names[i])
             self.held[i] = None
+
+
+def centred_bounds(centers, low, high) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds ``low``–``high`` (each ``(3,)``) moved horizontally to be centred on each of
+    ``centers`` (``(W, 3)``): ``(lows, highs)``, each ``(W, 3)`` (SoftGym's ``Picker.reset``)."""
+    lows = np.tile(np.asarray(low, float), (len(centers), 1))
+    highs = np.tile(np.asarray(high, float), (len(centers), 1))
+    shift = centers[:, :2] - (lows[:, :2] + highs[:, :2]) / 2
+    lows[:, :2] += shift
+    highs[:, :2] += shift
+    return lows, highs
+
+
+def on_circle(centers, count: int, radius: float, lows, highs) -> np.ndarray:
+    """``(W, count, 3)``: ``count`` pickers of ``radius`` on a circle of radius ``2·radius·√(count
+    − 1)`` about each of ``centers`` (``(W, 3)``), each clipped to its world's bounds."""
+    r = np.sqrt(count - 1) * radius * 2.0
+    a = 2 * np.pi * np.arange(count) / count
+    pts = np.empty((len(centers), count, 3))
+    pts[:, :, 0] = centers[:, None, 0] + np.sin(a) * r
+    pts[:, :, 1] = centers[:, None, 1] + np.cos(a) * r
+    pts[:, :, 2] = centers[:, None, 2]
+    return np.clip(pts, lows[:, None], highs[:, None])

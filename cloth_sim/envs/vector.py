@@ -45,6 +45,7 @@ from .. import backends
 from ..batch import BatchSimulator
 from . import metrics
 from .cloth_env import check_integer
+from .pickers import centred_bounds, on_circle
 from .tasks import ClothFoldEnv
 
 
@@ -225,19 +226,8 @@ class ClothFoldVectorEnv(VectorEnv):
         """:meth:`Pickers.reset <cloth_sim.envs.pickers.Pickers.reset>` for worlds ``ids``: the
         bounds centred on ``centers`` horizontally, the pickers on a circle about them."""
         pk = self.env.pickers
-        low, high = self._span
-        shift = centers[:, :2] - (low[:2] + high[:2]) / 2
-        self.low[ids] = low
-        self.high[ids] = high
-        self.low[ids, :2] += shift
-        self.high[ids, :2] += shift
-        r = np.sqrt(pk.count - 1) * pk.radius * 2.0
-        a = 2 * np.pi * np.arange(pk.count) / pk.count
-        pts = np.empty((len(ids), pk.count, 3))
-        pts[:, :, 0] = centers[:, None, 0] + np.sin(a) * r
-        pts[:, :, 1] = centers[:, None, 1] + np.cos(a) * r
-        pts[:, :, 2] = centers[:, None, 2]
-        self.pickers[ids] = np.clip(pts, self.low[ids, None], self.high[ids, None])
+        self.low[ids], self.high[ids] = centred_bounds(centers, *self._span)
+        self.pickers[ids] = on_circle(centers, pk.count, pk.radius, self.low[ids], self.high[ids])
 
     def _frame(self, delta, pick) -> None:
         """One frame of every world (:meth:`Pickers.frame <cloth_sim.envs.pickers.Pickers.frame>`

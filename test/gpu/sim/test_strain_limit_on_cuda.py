@@ -251,3 +251,27 @@ def test_a_grippers_wrench_takes_the_limits_pull_as_the_cpus():
     springs = np.zeros_like(x)
     gpu.forces.spring_term.add_force(x, v, springs)
     assert np.linalg.norm(fg - springs[m.index(0, 0)]) > 0.25 * np.linalg.norm(fg)
+
+
+def test_a_batch_takes_the_limits_options_as_the_cpu_batch():
+    """``BatchSimulator(..., device="cuda")`` takes the strain limit's options the CPU batch
+    takes: long-range attachments off runs Provot's passes alone (the chain's passes then leave
+    the free end's excess, as the single simulator's do), and the projection is refused naming
+    it."""
+    kw = dict(worlds=2, integrator="symplectic_euler", dt=1e-3, gravity=(0, 0, 0))
+    model = chain()
+    gpu = BatchSimulator(
+        model,
+        device="cuda",
+        precision="float64",
+        strain_limit=TAU,
+        strain_limit_passes=4,
+        strain_limit_long_range=False,
+        **kw,
+    )
+    gpu.step()
+    assert gpu.positions_host()[1, 2, 0] == pytest.approx(2.2 * L + 0.04 / 2**3, abs=1e-12)
+    with pytest.raises(ValueError, match=r"strain_limit_method: not on the cuda device yet"):
+        BatchSimulator(
+            model, device="cuda", strain_limit=TAU, strain_limit_method="projection", **kw
+        )
