@@ -71,10 +71,9 @@ def check_method(method: str, device: str) -> None:
 def refusal(device: str, integrator: str, model: ClothModel, **features) -> tuple[str, str] | None:
     """Why ``device`` cannot step ``model`` with ``integrator`` and ``features`` (keyword: a
     feature's name and whether it is asked for: ``strain_limit_method`` (a strain limit by a
-    method other than Provot's passes), ``colliders``,
-    ``self_collision``, ``grippers``, ``robot``), as ``(reason, the argument it names)``, or
-    ``None``. Nothing is refused on the cpu; what :mod:`cloth_sim.cuda` does not run yet is
-    refused on cuda."""
+    method other than Provot's passes), ``self_collision``, ``grippers``, ``robot``), as
+    ``(reason, the argument it names)``, or ``None``. Nothing is refused on the cpu; what
+    :mod:`cloth_sim.cuda` does not run yet is refused on cuda."""
     if device == "cpu":
         return None
     methods = METHODS[device]
@@ -89,12 +88,11 @@ def refusal(device: str, integrator: str, model: ClothModel, **features) -> tupl
             hint = {
                 "strain_limit_method": " (the projection is not; Provot's passes, "
                 "strain_limit_method provot, are)",
-                "colliders": " (static planes, spheres, boxes, capsules and cylinders are; a "
-                "mesh collider is not)",
             }.get(name, "")
             return (
                 f"{name}: not on the {device} device yet{hint}; it runs springs, bending, "
-                "gravity, wind, drag and pins, and device='cpu' has the rest",
+                "gravity, wind, drag, pins, grippers, colliders (a mesh from its distance grid) "
+                "and Provot's strain limit, and device='cpu' has the rest",
                 name,
             )
     if len(model.kind) and int(max(model.kind)) != LINEAR:

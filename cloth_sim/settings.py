@@ -402,7 +402,6 @@ def device_refusal(cfg: dict, model, scene: Scene) -> tuple[str, tuple[str, ...]
         cfg["integrator"],
         model,
         strain_limit_method=bool(cfg["strain_limit"]) and cfg["strain_limit_method"] != "provot",
-        colliders=any(kind == "mesh" for kind, _ in scene.colliders),
         self_collision=cfg["self_collision"],
         grippers=bool(scene.gripper_links),  # (a gripper moved by its pose runs there)
         robot=scene.robot is not None,

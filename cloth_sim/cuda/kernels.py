@@ -33,11 +33,13 @@ from ..contact.collider_kernels import (
     CONTACT_TOLERANCE,
     CREASE_PASSES,
     CYLINDER,
+    MESH,
     PLANE,
     SPHERE,
     box_distance,
     cylinder_distance,
 )
+from ..contact.distance_grid import outside, trilinear
 from ..integrators.vbd import EPS_V
 from ..integrators.vbd_contact import press, slide, solve3
 from ..integrators.vbd_terms import spring_part
@@ -117,13 +119,40 @@ def bending_at(top, x, w, i):
     return bx, by, bz
 
 
+@cuda.jit(device=True, inline=True)
+def mesh_at(wor, m, qx, qy, qz):
+    """Mesh ``m``'s distance and outward normal at ``q`` in its own frame, read from its baked
+    distance grid (``wor.gbox``, ``gdim``, ``gval``): the trilinear interpolation of the cell's
+    eight nodes and its normalised gradient inside the grid, the band plus the distance from the
+    grid's box outside it, by the CPU's own :func:`~cloth_sim.contact.distance_grid.trilinear`
+    and :func:`~cloth_sim.contact.distance_grid.outside`
+    (:meth:`cloth_sim.contact.distance_grid.DistanceGrid.at`, the same numbers)."""
+    ox, oy, oz, h = wor.gbox[m, 0], wor.gbox[m, 1], wor.gbox[m, 2], wor.gbox[m, 3]
+    nx, ny, nz, start = wor.gdim[m, 0], wor.gdim[m, 1], wor.gdim[m, 2], wor.gdim[m, 3]
+    fx, fy, fz = (qx - ox) / h, (qy - oy) / h, (qz - oz) / h
+    if not (0.0 <= fx <= nx - 1 and 0.0 <= fy <= ny - 1 and 0.0 <= fz <= nz - 1):
+        return outside((ox, oy, oz, h, wor.gbox[m, 4]), nx, ny, nz, qx, qy, qz)
+    i, j, k = min(int(fx), nx - 2), min(int(fy), ny - 2), min(int(fz), nz - 2)
+    v = wor.gval
+    a = start + (i * ny + j) * nz + k  # (x slowest, z fastest)
+    b = a + ny * nz  # the next node along x
+    return trilinear(
+        (v[a], v[b], v[a + nz], v[b + nz], v[a + 1], v[b + 1], v[a + nz + 1], v[b + nz + 1]),
+        fx - i,
+        fy - j,
+        fz - k,
+        h,
+    )
+
+
 @cuda.jit(device=True)
 def collider_at(wor, w, c, x, y, z):
     """World ``w``'s static collider ``c``: the outward unit normal and the signed distance of
     ``(x, y, z)`` from it, in the CPU's arithmetic (:func:`cloth_sim.contact.collider_kernels.sdf`:
     the same operations in the same order, here on the worlds' arrays, which the CPU's function
     cannot take on numba-cuda's simulator; a box's and a cylinder's in their own frame by the
-    CPU's own scalar functions). A plane, a sphere, a capsule, a box or a cylinder."""
+    CPU's own scalar functions). A plane, a sphere, a capsule, a box, a cylinder, or a mesh from
+    its distance grid (:func:`mesh_at`, in its own frame)."""
     kind = wor.ckind[w, c]
     dx, dy, dz = x - wor.cpos[w, c, 0], y - wor.cpos[w, c, 1], z - wor.cpos[w, c, 2]
     R = wor.crot
@@ -162,6 +191,8 @@ def collider_at(wor, w, c, x, y, z):
     qz = R[w, c, 0, 2] * dx + R[w, c, 1, 2] * dy + R[w, c, 2, 2] * dz
     if kind == CYLINDER:
         d, lx, ly, lz = cylinder_distance(g0, g1, qx, qy, qz)
+    elif kind == MESH:
+        d, lx, ly, lz = mesh_at(wor, int(g0), qx, qy, qz)
     else:
         d, lx, ly, lz = box_distance(g0, g1, g2, qx, qy, qz)
     nx = R[w, c, 0, 0] * lx + R[w, c, 0, 1] * ly + R[w, c, 0, 2] * lz

@@ -11,7 +11,10 @@ host with numpy and copied to the device once.
   ``cpos``, ``crot`` its position and rotation, ``cpos0``, ``crot0`` where the step starts them
   (the same but over a step that sweeps them), ``cgeo`` its four numbers, ``cmu`` its friction,
   ``ncol`` how many), the thickness ``tau`` the cloth keeps from them and ``vbd``'s contact
-  stiffness ``kc``.
+  stiffness ``kc``; a mesh collider's baked distance grid (``cgeo[w, c, 0]`` its index), shared
+  by every world: ``gbox`` (its first node, cell and band), ``gdim`` (its nodes along x, y, z and
+  its first value) and ``gval`` (every grid's values,
+  :func:`cloth_sim.contact.distance_grid.pack_grids`).
 * :class:`Iterate`, one ``(worlds, n, 3)`` array a world's positions, velocities and the step's
   scratch: the step's start ``xt``, the inertial target ``y``, the iterate before the sweep ``xs``,
   the Chebyshev history ``prev2``, the last step's acceleration ``aprev``, and each vertex's
@@ -71,6 +74,9 @@ class Worlds(NamedTuple):
     ncol: np.ndarray
     tau: np.ndarray
     kc: np.ndarray
+    gbox: np.ndarray
+    gdim: np.ndarray
+    gval: np.ndarray
 
 
 class Iterate(NamedTuple):

@@ -18,8 +18,7 @@ from numba import cuda
 from .. import backends, integrators
 from ..backends import models_of
 from ..constraints.grippers import Grips, check_box, check_grasp
-from ..contact.collider_kernels import MESH
-from ..contact.colliders import Collider, check_index, check_new
+from ..contact.colliders import check_index, check_new
 from ..model import ClothModel
 from ..parameters import SCHEMA
 from ..physics import stability as stab
@@ -78,7 +77,6 @@ class CudaSimulator:
             integrator,
             model,
             strain_limit_method=tau is not None and limit_method != "provot",
-            colliders=any(c.kind == MESH for c in colliders),
             self_collision=bool(cpu_only.get("self_collision")),
         )
         if refused is not None:
@@ -400,14 +398,9 @@ class CudaSimulator:
         return self.integrator == "symplectic_euler"
 
     def add_collider(self, collider) -> int:
-        """As :meth:`cloth_sim.Simulator.add_collider`, for the shapes the device has (a plane, a
-        sphere, a box, a capsule or a cylinder); it stands where it is added. A mesh, a shape of
-        another kind or a name in use raises ``ValueError`` and changes nothing."""
-        if isinstance(collider, Collider) and collider.kind == MESH:
-            raise ValueError(
-                f"collider {collider.name!r}: a mesh collider is not on the cuda device yet "
-                "(static planes, spheres, boxes, capsules and cylinders are); device='cpu' has it"
-            )
+        """As :meth:`cloth_sim.Simulator.add_collider` (a mesh read from its distance grid,
+        :mod:`cloth_sim.contact.distance_grid`); it stands where it is added. Something not a
+        collider or a name in use raises ``ValueError`` and changes nothing."""
         check_new(collider, self._colliders)
         self._rebuild(self.integrator, self._worlds.options, [*self._colliders, collider])
         return len(self._colliders) - 1

@@ -10,10 +10,11 @@ counts them.
 The same methods and defaults as the CPU (:mod:`cloth_sim.integrators.explicit`'s symplectic Euler
 and :class:`~cloth_sim.integrators.vbd.VBD`'s general sweep: substeps chosen from the cloth, a
 relative residual against ``tolerance`` measured every ``check_every`` iterations, Chebyshev's
-``rho``), with static colliders (planes, spheres, boxes, capsules, cylinders) and Provot's
-strain limit (:meth:`CudaWorlds.set_strain_limit`: the CPU's passes and long-range attachments,
-a pass taking its springs a colour at a time). What stays on the CPU for now: mesh colliders,
-self-contact, the strain limit's projection, grippers on links and Choi & Ko's nonlinear pairs
+``rho``), with colliders (planes, spheres, boxes, capsules, cylinders, and meshes read from a
+distance grid baked at load: :mod:`cloth_sim.contact.distance_grid`) and Provot's strain limit
+(:meth:`CudaWorlds.set_strain_limit`: the CPU's passes and long-range attachments, a pass taking
+its springs a colour at a time). What stays on the CPU for now: robots' links, self-contact, the
+strain limit's projection, grippers on links and Choi & Ko's nonlinear pairs
 (:func:`cloth_sim.backends.refusal` names them).
 """
 
@@ -34,6 +35,7 @@ from ..constraints.strain_limit import (
     nearest_attachments,
 )
 from ..contact.collider_kernels import MESH
+from ..contact.distance_grid import grid_for, pack_grids
 from ..contact.geometry import positive
 from ..integrators.vbd import VBD
 from ..integrators.vbd_kernels import substeps_needed
@@ -74,16 +76,29 @@ _POSES = ("cpos", "crot", "cpos0", "crot0")
 def collider_rows(colliders) -> tuple:
     """``(kinds, positions, rotations, geometry, friction)`` of the static colliders, as the CPU's
     packed colliders give them (:meth:`cloth_sim.contact.colliders.Contacts.packed`), so that the
-    device asks the same signed distances of the same numbers; one empty row for none."""
+    device asks the same signed distances of the same numbers (a mesh's geometry: the index of
+    its distance grid, :func:`mesh_grids`); one empty row for none."""
     count = max(1, len(colliders))
     kinds = np.zeros(count, np.int32)
     pos, rot = np.zeros((count, 3)), np.zeros((count, 3, 3))
     geo, mu = np.zeros((count, 4)), np.zeros(count)
+    meshes = 0
     for c, collider in enumerate(colliders):
         kinds[c] = collider.kind
         pos[c], rot[c] = collider.position, collider.rotation
         geo[c], mu[c] = np.reshape(collider.geometry, 4), collider.friction
+        if collider.kind == MESH:
+            geo[c] = (meshes, 0.0, 0.0, 0.0)
+            meshes += 1
     return kinds, pos, rot, geo, mu
+
+
+def mesh_grids(colliders, thickness: float, real) -> tuple:
+    """The mesh colliders' distance grids for a cloth keeping ``thickness`` from them, in their
+    order (:func:`collider_rows` numbers them so), packed as the kernels read them (``gbox, gdim,
+    gval``: :func:`cloth_sim.contact.distance_grid.pack_grids`)."""
+    grids = [grid_for(c.mesh, thickness) for c in colliders if c.kind == MESH]
+    return pack_grids(grids, real)
 
 
 class CudaWorlds:
@@ -117,9 +132,7 @@ class CudaWorlds:
         colliders = list(colliders or ())
         #: the static colliders, as built (their shapes say what a pose means: :meth:`set`)
         self.colliders = colliders
-        refused = backends.refusal(
-            "cuda", integrator, first, colliders=any(c.kind == MESH for c in colliders)
-        )
+        refused = backends.refusal("cuda", integrator, first)
         if refused is not None:
             raise ValueError(refused[0])
         if precision not in PRECISIONS:
@@ -168,6 +181,8 @@ class CudaWorlds:
         if wind_v.shape != (3,) or not np.all(np.isfinite(wind_v)):
             raise ValueError(f"wind must be None or a finite 3-vector, got {wind!r}")
         ckind, cpos, crot, cgeo, cmu = collider_rows(colliders)
+        thickness = positive("thickness", thickness)
+        gbox, gdim, gval = mesh_grids(colliders, thickness, real)
         #: each world's model's own pins (what release leaves pinned)
         self._pinned = np.stack([np.asarray(m.pinned, bool) for m in models])
         self._host = Worlds(
@@ -187,10 +202,13 @@ class CudaWorlds:
             cgeo=np.tile(cgeo.astype(real), (worlds, 1, 1)),
             cmu=np.tile(cmu.astype(real), (worlds, 1)),
             ncol=np.full(worlds, len(colliders), np.int32),
-            tau=np.full(worlds, positive("thickness", thickness), real),
+            tau=np.full(worlds, thickness, real),
             kc=np.full(
                 worlds, self.settings.contact_stiffness if self.settings is not None else 0.0, real
             ),
+            gbox=gbox,
+            gdim=gdim,
+            gval=gval,
         )
         self.wor = Worlds(*(cuda.to_device(a) for a in self._host))
         x0 = np.stack([np.asarray(m.positions, real) for m in models])
@@ -376,7 +394,8 @@ class CudaWorlds:
         :mod:`cloth_sim.contact.colliders`). Everything is checked before anything changes."""
         ids = self._ids(worlds)
         h = self._host
-        new = {name: getattr(h, name).copy() for name in Worlds._fields}
+        changed = ("gravity", "wind", "windy", "drag", "kfam", "cfam") + _POSES
+        new = {name: getattr(h, name).copy() for name in changed}
 
         if gravity is not None:
             new["gravity"][ids] = backends.world_vectors("gravity", gravity, len(ids))
@@ -405,8 +424,8 @@ class CudaWorlds:
                 new[name][ids, index] = shape.position
             for name in ("crot", "crot0"):
                 new[name][ids, index] = shape.rotation
-        self._host = Worlds(**new)
-        for name in ("gravity", "wind", "windy", "drag", "kfam", "cfam") + _POSES:
+        self._host = h._replace(**new)
+        for name in changed:
             getattr(self.wor, name).copy_to_device(getattr(self._host, name))
 
     def sweep(self, worlds, index: int, position, orientation) -> None:

@@ -37,6 +37,9 @@ def signatures(real):
         ncol=np.zeros(w, np.int32),
         tau=np.zeros(w, real),
         kc=np.zeros(w, real),
+        gbox=np.zeros((1, 5), real),
+        gdim=np.zeros((1, 4), np.int32),
+        gval=np.zeros(8, real),
     )
     x = np.zeros((w, n, 3), real)
     flags = np.zeros(w, np.int8)

@@ -8,7 +8,7 @@ import pytest
 from numba import cuda
 
 from cloth_sim import BatchSimulator, ClothModel, SimulationDiverged, Simulator
-from cloth_sim.contact.colliders import Box, Capsule, Cylinder, Mesh, Plane, Sphere
+from cloth_sim.contact.colliders import Box, Capsule, Cylinder, Plane, Sphere
 from cloth_sim.cuda import simulated
 
 WIND = (0.3, 0.1, 0.5)
@@ -224,11 +224,7 @@ def test_what_the_device_does_not_run_is_named(kwargs, match):
         Simulator(sheet(), device="cuda", **kwargs)
 
 
-def test_mesh_colliders_and_choi_ko_are_refused():
-    v = np.array([[0, 0, -1.0], [1, 0, -1.0], [0, 1, -1.0], [0, 0, -0.5]])  # a tetrahedron
-    mesh = Mesh((v, np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])))
-    with pytest.raises(ValueError, match=r"colliders: not on the cuda device yet \(static planes"):
-        Simulator(sheet(), device="cuda", colliders=[Sphere((0, 0, -1), 0.5), mesh])
+def test_choi_ko_is_refused():
     choi = ClothModel.grid(4, 4, 0.05, 0.01, stiffness=1e2, model="choi_ko")
     with pytest.raises(ValueError, match=r"model 'choi_ko': Choi & Ko's"):
         Simulator(choi, device="cuda")
@@ -558,9 +554,8 @@ def test_a_collider_swept_on_the_device_is_the_cpus():
 def test_the_node_settings_take_a_scene_of_static_primitives_to_the_device():
     """``settings.check`` (what the node starts with) accepts ``device=cuda`` for the scenes whose
     colliders and strain limit the device has (drape: a sphere and a floor; table: a box and a
-    floor; both symplectic Euler with Provot's limit) and builds them on it, and refuses a mesh
-    collider naming it: it had refused every collider but a plane, with a message saying spheres
-    and boxes run there."""
+    floor; both symplectic Euler with Provot's limit) and builds them on it, with a mesh collider
+    added too; a scene whose strain limit is the projection is refused naming the method."""
     from cloth_sim import settings
     from cloth_sim.cuda.simulator import CudaSimulator
     from cloth_sim.scene import load_scene
@@ -578,17 +573,21 @@ def test_the_node_settings_take_a_scene_of_static_primitives_to_the_device():
         "hanging", {"device": "cuda", "rows": 4, "cols": 4, "strain_limit_method": "provot"}
     )
     assert settings.build(checked).strain_limit == 0.1
+    # a mesh collider too, read from its distance grid
     scene = load_scene("drape")
-    scene.colliders.append(("mesh", {"file": "x.obj"}))
-    with pytest.raises(settings.Refusal, match=r"colliders: not on the cuda device yet"):
-        settings.check(scene, {"device": "cuda", "strain_limit": 0.0, "rows": 4, "cols": 4})
+    v = np.array([[0.0, 0.0, -1.0], [0.1, 0.0, -1.0], [0.0, 0.1, -1.0], [0.0, 0.0, -0.95]])
+    tet = (v, np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]))
+    scene.colliders.append(("mesh", {"source": tet, "name": "tet"}))
+    checked = settings.check(scene, {"device": "cuda", "rows": 4, "cols": 4})
+    sim = settings.build(checked)
+    assert isinstance(sim, CudaSimulator) and sim.colliders[-1].name == "tet"
 
 
 def test_colliders_added_and_removed_on_the_device_are_the_cpus():
     """``add_collider`` and ``remove_collider`` between steps, as the node's spawn and delete
     services call them: the device's cloth is the CPU's to rounding after each (a sphere added
     under the falling cloth at step 40, a box at 80, the sphere removed at 120, the box then at
-    index 0); a mesh, a name in use, a bad index and no collider are refused naming them, and
+    index 0); a name in use, a bad index and no collider are refused naming them, and
     the cloth and its colliders are as they were."""
     m = ClothModel.grid(4, 4, 0.05, 0.01, stiffness=1e2, damping=0.05, origin=(0, 0, 0.008))
     kw = dict(integrator="symplectic_euler", dt=1e-3, thickness=0.005)
@@ -609,10 +608,6 @@ def test_colliders_added_and_removed_on_the_device_are_the_cpus():
     block = dict(center=(0.0, 0.0, -0.06), half_extents=(0.2, 0.2, 0.01), friction=0.5)
     assert both(lambda s: s.add_collider(Box(**block, name="block"))) == [1, 1]
     x_before = gpu.positions.copy()
-    v = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
-    tri = Mesh((v, np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])), name="tet")
-    with pytest.raises(ValueError, match=r"a mesh collider is not on the cuda device yet"):
-        gpu.add_collider(tri)
     with pytest.raises(ValueError, match=r"a collider named 'ball' exists already"):
         gpu.add_collider(Sphere(**ball))
     with pytest.raises(ValueError, match=r"a collider must be a cloth_sim.contact.colliders"):
