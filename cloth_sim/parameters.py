@@ -650,10 +650,12 @@ def _schema() -> dict[str, Param]:
             str,
             "",
             "Where the cloth is stepped: cpu, or cuda (an NVIDIA GPU through numba-cuda: make "
-            "gpu; symplectic_euler and vbd, springs, bending, gravity, wind, drag and pins). "
+            "gpu; symplectic_euler and vbd: springs, bending, gravity, wind, drag, pins, "
+            "grippers, colliders (a mesh from its distance grid) and Provot's strain limit). "
             "Changing it rebuilds the cloth on that device and resets it; cuda is refused, and "
             "the cpu keeps running, where no CUDA device can run or the scene needs what the "
-            "device does not have (colliders, a strain limit, self-collision, grippers).",
+            "device does not have (robots, self-collision, the strain limit's projection: a "
+            "scene's own projection runs there as Provot's passes when the node starts on cuda).",
             apply="rebuild",
             choices=DEVICES,
             simulator="device",

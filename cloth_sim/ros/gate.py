@@ -99,7 +99,8 @@ class ParameterGate:
         except ValueError as e:
             raise StartupError(str(e)) from None
         defaults = P.defaults(scene)
-        for name in ("integrator", "dt"):  # where the scene's step was carried (_carry)
+        # where the scene's step or its strain limit's method was carried (_carry)
+        for name in ("integrator", "dt", "strain_limit_method"):
             if name not in overrides:
                 defaults[name] = checked.cfg[name]
         for name in SCHEMA:  # declared once the values are known to be good
@@ -125,8 +126,28 @@ class ParameterGate:
         """The scene's own step refused for the cloth asked for (a material, a finer grid: the
         scene's explicit method above its stable step), with neither the method nor ``dt`` given:
         the same method at :data:`CARRY_SHARE` of its stable step, or ``vbd`` where the method
-        has no stable step; a ``device`` that cannot run here or cannot run the scene: the cpu.
-        Each said in the log. Any other refusal stops the start-up as before."""
+        has no stable step; the scene's strain limit method not on the ``device`` asked for (the
+        projection on cuda), and not given: that device with Provot's passes; a ``device`` that
+        cannot run here or cannot run the scene: the cpu. Each said in the log. Any other refusal
+        stops the start-up as before."""
+        if (
+            "strain_limit_method" in refused.named
+            and "strain_limit_method" not in values
+            and "device" in values
+        ):
+            # the scene's strain limit method is not on the device asked for: that device with
+            # Provot's passes, which every device runs (and its step carried below if need be)
+            self.node.get_logger().warning(
+                f"scene {scene.name}: {refused}. Instead: running on {values['device']} with "
+                "Provot's passes (strain_limit_method provot)"
+            )
+            values = {**values, "strain_limit_method": "provot"}
+            try:
+                return settings.check(scene, values, model=self._model)
+            except settings.Refusal as e:
+                refused = e
+            except ValueError as e:
+                raise StartupError(str(e)) from None
         if "device" in refused.named and values.get("device", "cpu") != "cpu":
             # a device that cannot run here, or cannot run this scene: the cpu instead
             self.node.get_logger().warning(
