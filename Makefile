@@ -100,10 +100,10 @@ bench-gpu: install $(GPU)
 
 # the wheels tools/device_check.sh installs on a GPU machine lent by the device tool (Python 3.12,
 # numpy, numba and numba-cuda there, no network): the pinned versions of requirements.txt for
-# CPython 3.12 on x86-64 Linux (gymnasium and its three for the vector env), ~38 MB, in
-# .device/wheels (ignored; carry .device)
+# CPython 3.12 on x86-64 Linux (gymnasium and its three for the vector env; yourdfpy, lxml, six
+# and trimesh for the robots on the device), ~45 MB, in .device/wheels (ignored; carry .device)
 DEVICE_WHEELS := scipy qdldl PyYAML pytest pluggy iniconfig packaging Pygments gymnasium \
-	cloudpickle farama-notifications typing_extensions
+	cloudpickle farama-notifications typing_extensions yourdfpy lxml six trimesh
 device-wheels: $(STAMP)
 	mkdir -p .device/wheels
 	$(PY) -m pip download -q -d .device/wheels --no-deps --only-binary=:all: \

@@ -88,11 +88,16 @@ def refusal(device: str, integrator: str, model: ClothModel, **features) -> tupl
             hint = {
                 "strain_limit_method": " (the projection is not; Provot's passes, "
                 "strain_limit_method provot, are)",
+                "robot": f" under {integrator} (a robot's links sweep over each step; under "
+                "symplectic_euler they do)",
+                "grippers": f" on a robot's links under {integrator} (under symplectic_euler "
+                "they are)",
             }.get(name, "")
             return (
                 f"{name}: not on the {device} device yet{hint}; it runs springs, bending, "
-                "gravity, wind, drag, pins, grippers, colliders (a mesh from its distance grid) "
-                "and Provot's strain limit, and device='cpu' has the rest",
+                "gravity, wind, drag, pins, grippers, colliders (a mesh from its distance grid), "
+                "Provot's strain limit and robots under symplectic_euler, and device='cpu' has "
+                "the rest",
                 name,
             )
     if len(model.kind) and int(max(model.kind)) != LINEAR:

@@ -403,8 +403,10 @@ def device_refusal(cfg: dict, model, scene: Scene) -> tuple[str, tuple[str, ...]
         model,
         strain_limit_method=bool(cfg["strain_limit"]) and cfg["strain_limit_method"] != "provot",
         self_collision=cfg["self_collision"],
-        grippers=bool(scene.gripper_links),  # (a gripper moved by its pose runs there)
-        robot=scene.robot is not None,
+        # a robot's links, and the grippers bound to them, sweep over each step: the device's
+        # symplectic Euler takes that, its vbd not yet (a gripper moved by its pose runs there)
+        grippers=bool(scene.gripper_links) and cfg["integrator"] != "symplectic_euler",
+        robot=scene.robot is not None and cfg["integrator"] != "symplectic_euler",
     )
     if refused is None:
         return None

@@ -35,7 +35,7 @@ from .parameters import SCHEMA, ParameterError
 from .physics import stability as stab
 from .physics.force_kernels import max_spring_strain, spring_strains
 from .physics.forces import Forces
-from .robot.placement import Robots
+from .robot.placement import RobotMethods, Robots
 from .state import SimulationDiverged, State
 
 
@@ -63,7 +63,7 @@ def _finite_vector(name: str, value) -> np.ndarray:
     return a
 
 
-class Simulator:
+class Simulator(RobotMethods):
     """Advances a :class:`~cloth_sim.model.ClothModel` in time.
 
     >>> from cloth_sim import ClothModel, Simulator
@@ -163,7 +163,7 @@ class Simulator:
             np.ascontiguousarray(model.rest_lengths[sel]),
         )
         self._contacts = Contacts(model, colliders or (), thickness)
-        self._robots = Robots(
+        self.robot_placement = Robots(
             self.add_collider,
             self._contacts.place,
             self.remove_collider,
@@ -246,7 +246,7 @@ class Simulator:
         gripper is released."""
         if self._grips:
             self._grips.held.clear()
-            self._robots.bound.clear()
+            self.robot_placement.bound.clear()
             self._set_held()
         self.state.x[:] = self.model.positions
         self.state.v[:] = 0.0
@@ -430,62 +430,8 @@ class Simulator:
     motion = None
 
     # ------------------------------------------------------------------ robots
-    @property
-    def robots(self) -> dict:
-        """``{name: Robot}``: the robots in the scene (:mod:`cloth_sim.robot`)."""
-        return {name: p.robot for name, p in self._robots.placed.items()}
-
-    def add_robot(
-        self,
-        robot,
-        name: str | None = None,
-        position=(0.0, 0.0, 0.0),
-        orientation=(1.0, 0.0, 0.0, 0.0),
-        joints: dict | None = None,
-        friction: float = 0.5,
-    ) -> str:
-        """Put ``robot`` (a :class:`cloth_sim.robot.Robot`) in the scene as ``name`` (its URDF's
-        name unless given), its root link at ``position``, ``orientation``: every ``<collision>``
-        of its links becomes a collider ``name/link`` (``name/link/k`` where a link has several)
-        with Coulomb ``friction``, at the joint positions ``joints`` (0 for those not named).
-        Returns the name. A name in use, a bad pose or joint raises ``ValueError`` and adds
-        nothing."""
-        return self._robots.add(robot, name, position, orientation, joints, friction)
-
-    def remove_robot(self, name: str):
-        """Take robot ``name`` and its colliders out of the scene (grippers bound to its links stay
-        where they are); returns the Robot."""
-        return self._robots.remove(name)
-
-    def set_joint_positions(self, name: str, positions: dict, teleport: bool = False) -> None:
-        """Robot ``name``'s joints to ``positions`` (joint name to rad or m; joints not named keep
-        their value): forward kinematics places every link, which sweeps there over the next step
-        (with ``teleport``, is there now, at rest), and grippers bound to its links follow. An
-        unknown robot or joint, or a non-finite value, raises ``ValueError`` and moves nothing."""
-        self._robots.set_joints(name, positions, teleport)
-
-    def set_link_transforms(self, name: str, transforms: dict, teleport: bool = False) -> None:
-        """Place links of robot ``name`` directly: ``{link: 4×4 transform in the robot's root
-        frame}`` (where something else computes the poses, as TF does for the node's
-        ``robot.source: tf``); they sweep there over the next step, and override the links'
-        forward kinematics from then on. An unknown robot or link, or a non-finite transform,
-        raises ``ValueError``."""
-        self._robots.set_link_transforms(name, transforms, teleport)
-
-    def joint_positions(self, name: str) -> dict:
-        """Robot ``name``'s joint positions now (every movable joint)."""
-        return self._robots.joints(name)
-
-    def link_wrench(self, name: str, link: str) -> tuple[np.ndarray, np.ndarray]:
-        """``(force, torque)`` the cloth exerted on link ``link`` of robot ``name`` over the last
-        step (its colliders' :meth:`collider_wrench` summed; torque about the link's origin):
-        what a finger feels when it holds the cloth by friction."""
-        return self._robots.link_wrench(name, link, self.collider_wrench)
-
-    def link_pose(self, name: str, link: str) -> tuple[np.ndarray, np.ndarray]:
-        """``(position, orientation (w, x, y, z))`` of link ``link`` of robot ``name`` in the
-        world, at its current joint positions."""
-        return self._robots.link_pose(name, link)
+    # (add_robot, remove_robot, set_joint_positions, set_link_transforms, joint_positions,
+    # link_wrench, link_pose, gripper_link: RobotMethods, over robot_placement)
 
     @property
     def thickness(self) -> float:
@@ -637,11 +583,6 @@ class Simulator:
         :mod:`cloth_sim.constraints.grippers`)."""
         return {name: g.indices.copy() for name, g in self._grips.held.items()}
 
-    def gripper_link(self, name: str):
-        """The ``(robot, link)`` gripper ``name`` is bound to (it follows that link), or None
-        for a gripper moved by its pose."""
-        return self._robots.bound.get(name)
-
     def grasp(self, name: str, point, radius: float, link=None) -> np.ndarray:
         """Hold every free particle within ``radius`` of ``point`` with a gripper called ``name``,
         placed at ``point`` with the identity orientation; returns their indices. With ``link``,
@@ -653,16 +594,12 @@ class Simulator:
         point, radius = check_grasp(point, radius)
         frame = None
         if link is not None:
-            try:
-                robot, link_name = link
-            except (TypeError, ValueError):
-                raise ValueError(f"link must be a (robot, link) pair, got {link!r}") from None
-            frame = self._robots.link_pose(robot, link_name)
+            frame, bound = self.link_frame(link)
         idx = Grips.within(name, self.state.x, self.model.pinned, point, radius)
         if frame is None:
             return self._hold(name, idx, point)
         held = self._hold(name, idx, frame[0], frame[1])
-        self._robots.bound[name] = (robot, link_name)
+        self.robot_placement.bound[name] = bound
         return held
 
     def grasp_box(self, name: str, lo, hi) -> np.ndarray:
@@ -734,7 +671,7 @@ class Simulator:
         gripper gave them over the last step. Returns their indices."""
         g = self._grips.get(name)
         del self._grips.held[name]
-        self._robots.bound.pop(name, None)
+        self.robot_placement.bound.pop(name, None)
         self._set_held()
         return g.indices.copy()
 

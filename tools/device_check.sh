@@ -6,7 +6,7 @@
 #   gpu.txt    nvidia-smi and the versions
 #   tests.log  the kernels' tests (test/gpu/sim) on the GPU itself, not the simulator; the node's
 #              test needs ROS 2, which that machine has not, and is left out
-#   bench.log  cloth-sim bench gpu's three tables (docs/gpu.md)
+#   bench.log  cloth-sim bench gpu's five tables (docs/gpu.md)
 # Each part runs under its own time limit (seconds: TESTS_S, BENCH_S), so that the figures come back
 # within one call of the tool (10 minutes at most). DEVICE_CHECK_SIMULATOR=1 runs the same script on
 # numba-cuda's simulator with tiny sizes: what a machine without a GPU can check of it

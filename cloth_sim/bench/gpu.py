@@ -1,6 +1,6 @@
 """``cloth-sim bench gpu``: the CUDA backend's figures (docs/gpu.md), on a GPU.
 
-Three tables, each measured in one process:
+Five tables, each measured in one process:
 
 1. **The same cloth**: 1 m of cotton hanging from two corners at 32×32, ``vbd`` with its defaults
    at 1/60 s for 1 s, on the GPU (float32 and float64) against the CPU (float64): the largest
@@ -14,6 +14,11 @@ Three tables, each measured in one process:
 4. **ClothFold's vector env** on the GPU (observations on the device), 1 to 4,096 envs, beside
    Gymnasium's ``AsyncVectorEnv`` on the machine's CPU cores (:mod:`cloth_sim.bench.vector_env`):
    env steps a second.
+5. **Colliders and a robot**: the robots issue's 32×32 cloth resting on a box, the Box primitive
+   against the same box as a 12-triangle mesh (read from its distance grid), ms a step on the GPU
+   and their ratio (``python -m cloth_sim.bench.robot`` prints the CPU's); and the ``robot_pick``
+   scene (its gripper's pads swept by symplectic Euler, its scripted lift) on the GPU: wall
+   seconds a simulated second.
 
 ``--simulator`` runs a tiny version on numba-cuda's simulator (``NUMBA_ENABLE_CUDASIM=1``): what
 CI checks of this script; its figures mean nothing.
@@ -25,8 +30,10 @@ import time
 
 import numpy as np
 
-from .. import backends
+from .. import backends, settings
 from ..batch import BatchSimulator
+from ..contact import colliders
+from ..model import ClothModel
 from ..simulator import Simulator
 from .convergence import REFERENCE_SHARE, accuracy, hanging, trajectory
 from .vector_env import print_vector_table
@@ -53,7 +60,7 @@ def _worlds_rate(model, worlds: int, integrator: str, dt: float, seconds: float,
 
 
 def print_gpu_tables(sizes=SIZES, worlds=WORLDS, seconds: float = 2.0, simulator=False) -> dict:
-    """Print the three tables (module docstring); return their figures."""
+    """Print the five tables (module docstring); return their figures."""
     why = backends.problem("cuda")
     if why is not None:
         raise SystemExit(f"cloth-sim bench gpu: {why}")
@@ -141,4 +148,72 @@ def print_gpu_tables(sizes=SIZES, worlds=WORLDS, seconds: float = 2.0, simulator
         figures["vector"] = print_vector_table(
             "cuda", VECTOR_ENVS, None, 10, observations="device"
         )
+    figures["colliders"] = print_collider_table(simulator)
+    return figures
+
+
+def _box_mesh(half):
+    """A box's 8 corners and 12 outward triangles."""
+    hx, hy, hz = half
+    v = np.array(
+        [[sx * hx, sy * hy, sz * hz] for sz in (-1, 1) for sy in (-1, 1) for sx in (-1, 1)]
+    )
+    f = [
+        [0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
+        [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5],
+    ]  # fmt: skip
+    return v, np.array(f)
+
+
+def print_collider_table(simulator=False) -> dict:
+    """Table 5 (module docstring): the box as a primitive and as a mesh under a resting cloth,
+    each method's median of its rounds taken in turn, and robot_pick's wall time a simulated
+    second; returns the figures."""
+    half = (0.3, 0.3, 0.1)
+    n, rounds, steps = (4, 1, 2) if simulator else (32, 7, 400)
+    print("5. colliders and a robot on the GPU: a cloth resting on a box, primitive and mesh")
+    print(f"{'method':>16} {'Box ms/step':>12} {'Mesh ms/step':>13} {'ratio':>6}")
+    figures = {"box": []}
+    for integrator, dt in (("symplectic_euler", 1e-3), ("vbd", 1 / 60)):
+        sims = {}
+        for kind in ("box", "mesh"):
+            model = ClothModel.grid(
+                n, n, 0.02, 0.001, stiffness=300.0, damping=0.01, origin=(-0.31, -0.31, 0.11)
+            )
+            shape = (
+                colliders.Box(half_extents=half, friction=0.5)
+                if kind == "box"
+                else colliders.Mesh(_box_mesh(half), friction=0.5)
+            )
+            options = {"iterations": 10} if integrator == "vbd" else None
+            sims[kind] = Simulator(
+                model, integrator=integrator, dt=dt, colliders=[shape], drag=0.01,
+                integrator_options=options, device="cuda",
+            )  # fmt: skip
+            sims[kind].step(1 if simulator else 20)
+        count = steps if integrator != "vbd" else max(1, steps // 8)
+        walls = {kind: [] for kind in sims}
+        for _ in range(rounds):
+            for kind, sim in sims.items():
+                t = time.perf_counter()
+                sim.step(count)  # (its state checked on the host: the launches waited for)
+                walls[kind].append((time.perf_counter() - t) / count)
+        box, mesh = (float(np.median(walls[kind])) for kind in ("box", "mesh"))
+        figures["box"].append({"integrator": integrator, "box": box, "mesh": mesh})
+        print(
+            f"{integrator:>16} {box * 1e3:>12.3f} {mesh * 1e3:>13.3f} {mesh / box:>6.2f}",
+            flush=True,
+        )
+    values = {"device": "cuda"} | ({"rows": 4, "cols": 4} if simulator else {})
+    sim = settings.build(settings.check("robot_pick", values))
+    seconds = 2 * sim.dt if simulator else 2.0
+    sim.step()
+    t = time.perf_counter()
+    sim.advance(sim.time + seconds)
+    wall = (time.perf_counter() - t) / seconds
+    figures["robot_pick"] = wall
+    print(
+        f"robot_pick on the GPU ({sim.model.n_particles} vertices, dt {sim.dt:g} s, its script): "
+        f"{wall:.3f} wall s a simulated s ({1 / wall:.2f}x real time)"
+    )
     return figures

@@ -224,7 +224,7 @@ def carried_at(wor, w, c, x, y, z, forward):
 
 
 @cuda.jit(device=True)
-def colliders_stage(wor, w, start, end, velocity, continuous, dt):
+def colliders_stage(wor, w, i, start, end, velocity, continuous, dt):
     """The contact stage after a step of ``dt`` for one free particle and world ``w``'s
     colliders, in order, as the CPU's
     (:func:`cloth_sim.contact.collider_kernels.resolve_contacts`): the path from the step's
@@ -235,11 +235,19 @@ def colliders_stage(wor, w, start, end, velocity, continuous, dt):
     on the motion relative to the collider, an approaching normal velocity removed and the
     tangential one shrunk by μ times what was removed (static friction: removed); then, touching
     one of several colliders, :func:`crease_at`. Points and the velocity are three numbers;
-    returns the end and the velocity."""
+    returns the end and the velocity. Where the worlds record them (``wor.cimp`` sized for every
+    vertex: :meth:`~cloth_sim.cuda.worlds.CudaWorlds.record_wrenches`), particle ``i``'s impulse
+    on each collider in the velocity filter (``m·Δv``, N·s) and its moment about the collider's
+    position go to ``wor.cimp[w, i, c]``, as the CPU's ``push`` and ``turn`` gather them."""
     h = wor.tau[w]
     px, py, pz = end
     vx, vy, vz = velocity
     touching = False
+    record = wor.cimp.shape[1] == wor.masses.shape[1]
+    if record:
+        for c in range(wor.cimp.shape[2]):
+            for k in range(6):
+                wor.cimp[w, i, c, k] = 0.0
     for c in range(wor.ncol[w]):
         mu = wor.cmu[w, c]
         if not continuous and wor.ckind[w, c] == PLANE:
@@ -310,11 +318,22 @@ def colliders_stage(wor, w, start, end, velocity, continuous, dt):
             if tl > 0.0 and not stuck:
                 keep = max(0.0, 1.0 - mu * (-vn) / tl)
             vn = max(vn, 0.0)
+            jx, jy, jz = vx, vy, vz
             vx, vy, vz = (
                 wx + vn * nx + keep * tx,
                 wy + vn * ny + keep * ty,
                 wz + vn * nz + keep * tz,
             )
+            if record:  # the impulse the particle gave the collider, and its moment
+                m = wor.masses[w, i]
+                jx, jy, jz = m * (jx - vx), m * (jy - vy), m * (jz - vz)
+                ax, ay, az = px - wor.cpos[w, c, 0], py - wor.cpos[w, c, 1], pz - wor.cpos[w, c, 2]
+                wor.cimp[w, i, c, 0] = jx
+                wor.cimp[w, i, c, 1] = jy
+                wor.cimp[w, i, c, 2] = jz
+                wor.cimp[w, i, c, 3] = ay * jz - az * jy
+                wor.cimp[w, i, c, 4] = az * jx - ax * jz
+                wor.cimp[w, i, c, 5] = ax * jy - ay * jx
     if touching and wor.ncol[w] > 1:
         px, py, pz = crease_at(wor, w, px, py, pz, h)
     return px, py, pz, vx, vy, vz
@@ -396,7 +415,7 @@ def explicit_at(top, wor, x, v, xo, vo, h, w, i, collide):
     px, py, pz = xi + ux * h, yi + uy * h, zi + uz * h
     if collide and wor.free[w, i] and wor.ncol[w]:
         px, py, pz, ux, uy, uz = colliders_stage(
-            wor, w, (xi, yi, zi), (px, py, pz), (ux, uy, uz), True, h
+            wor, w, i, (xi, yi, zi), (px, py, pz), (ux, uy, uz), True, h
         )
     vo[w, i, 0], vo[w, i, 1], vo[w, i, 2] = ux, uy, uz
     xo[w, i, 0], xo[w, i, 1], xo[w, i, 2] = px, py, pz
@@ -503,6 +522,7 @@ def limit_end_at(lim, wor, before, start, x, v, h, w, p, collide, first):
         px, py, pz, ux, uy, uz = colliders_stage(
             wor,
             w,
+            p,
             (start[w, p, 0], start[w, p, 1], start[w, p, 2]),
             (x[w, p, 0], x[w, p, 1], x[w, p, 2]),
             (v[w, p, 0], v[w, p, 1], v[w, p, 2]),
@@ -756,7 +776,7 @@ def finish_at(wor, it, h, bdf2, w, i):
     it.past[w] = 1 if bdf2 else 0
     if free and wor.ncol[w]:  # the contact stage after the step, as on the CPU
         px, py, pz, ux, uy, uz = colliders_stage(
-            wor, w,
+            wor, w, i,
             (it.xt[w, i, 0], it.xt[w, i, 1], it.xt[w, i, 2]),
             (it.x[w, i, 0], it.x[w, i, 1], it.x[w, i, 2]),
             (it.v[w, i, 0], it.v[w, i, 1], it.v[w, i, 2]), False, h,

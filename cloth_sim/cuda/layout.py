@@ -14,7 +14,9 @@ host with numpy and copied to the device once.
   stiffness ``kc``; a mesh collider's baked distance grid (``cgeo[w, c, 0]`` its index), shared
   by every world: ``gbox`` (its first node, cell and band), ``gdim`` (its nodes along x, y, z and
   its first value) and ``gval`` (every grid's values,
-  :func:`cloth_sim.contact.distance_grid.pack_grids`).
+  :func:`cloth_sim.contact.distance_grid.pack_grids`); and what the contact stage writes where
+  the worlds record it, ``cimp`` ``(worlds, n, colliders, 6)`` (each vertex's impulse on each
+  collider and its moment, for the colliders' wrenches; ``(worlds, 0, 1, 6)`` where not).
 * :class:`Iterate`, one ``(worlds, n, 3)`` array a world's positions, velocities and the step's
   scratch: the step's start ``xt``, the inertial target ``y``, the iterate before the sweep ``xs``,
   the Chebyshev history ``prev2``, the last step's acceleration ``aprev``, and each vertex's
@@ -77,6 +79,7 @@ class Worlds(NamedTuple):
     gbox: np.ndarray
     gdim: np.ndarray
     gval: np.ndarray
+    cimp: np.ndarray
 
 
 class Iterate(NamedTuple):

@@ -23,6 +23,7 @@ from ..model import ClothModel
 from ..parameters import SCHEMA
 from ..physics import stability as stab
 from ..physics.forces import Forces
+from ..robot.placement import RobotMethods, Robots
 from ..state import SimulationDiverged, State
 from .worlds import CudaWorlds
 
@@ -37,12 +38,21 @@ _STAGES = (
 )
 
 
+def robots_refused(integrator: str) -> ValueError:
+    """The error for a robot under a method other than symplectic Euler on the device."""
+    return ValueError(
+        f"robot: a robot's links under {integrator} are not on the cuda device yet (they sweep "
+        "over each step, which the device's vbd does not take yet; symplectic_euler sweeps "
+        "them); device='cpu' runs robots under every method"
+    )
+
+
 def projection_refused(integrator: str, model: ClothModel) -> ValueError:
     """The error for a strain limit by projection on the device (Provot's passes run there)."""
     return ValueError(backends.refusal("cuda", integrator, model, strain_limit_method=True)[0])
 
 
-class CudaSimulator:
+class CudaSimulator(RobotMethods):
     """One cloth on the CUDA device (see the module docstring); ``precision`` ``"float32"``
     (default) or ``"float64"``."""
 
@@ -120,6 +130,14 @@ class CudaSimulator:
         self._analysis = None
         self._grips = Grips()
         self._swept = False  # a collider's pose was set to be swept over the next step
+        self._worlds.record_wrenches()
+        self.robot_placement = Robots(
+            self.add_collider,
+            self._place_colliders,
+            self.remove_collider,
+            lambda: self._colliders,
+            self.set_gripper_pose,
+        )
 
     # ------------------------------------------------------------------ state
     def _copy(self):
@@ -187,6 +205,7 @@ class CudaSimulator:
         gripper is released."""
         if self._grips:
             self._grips.held.clear()
+            self.robot_placement.bound.clear()
             self._worlds.release([0])
             self._worlds.restart([0])
         self._worlds.reset([0])
@@ -236,7 +255,11 @@ class CudaSimulator:
         return dict(self._worlds.options)
 
     def set_integrator(self, name: str, **options) -> None:
-        """Switch method on the device; positions and velocities carry over."""
+        """Switch method on the device; positions and velocities carry over. A robot's links
+        sweep over each step, which only symplectic Euler takes here (:meth:`add_robot`): with a
+        robot in the scene another method raises ``ValueError`` and nothing changes."""
+        if self.robot_placement.placed and name != "symplectic_euler":
+            raise robots_refused(name)
         self._rebuild(name, options, self._colliders)
         self._counters = dict(steps=0)
 
@@ -265,6 +288,7 @@ class CudaSimulator:
         new.set_strain_limit(
             old.strain_limit, old.strain_limit_passes, old.strain_limit_long_range
         )
+        new.record_wrenches()
         self._worlds = new
         self._colliders = colliders
         self._swept = False
@@ -414,20 +438,44 @@ class CudaSimulator:
         self._rebuild(self.integrator, self._worlds.options, kept)
         return gone
 
-    @property
-    def robots(self) -> dict:
-        return {}
+    def collider_wrench(self, i: int) -> tuple[np.ndarray, np.ndarray]:
+        """As :meth:`cloth_sim.Simulator.collider_wrench`: the impulses the last step's contact
+        stage took from the vertices touching collider ``i`` (recorded on the device, summed on
+        the host), over its step (under ``vbd``, its last substep's: the device's stage runs
+        after each)."""
+        check_index(i, len(self._colliders), "read")
+        w = self._worlds
+        h = self.dt if self.integrator == "symplectic_euler" else self.dt / w.last_substeps
+        return w.collider_wrench(0, int(i) % len(self._colliders), h)
 
-    def add_robot(self, *args, **kwargs):
-        """Refused: a robot's links are not on the cuda device yet (``ValueError``, nothing
-        changed; the node's spawn_entity reports it)."""
-        raise ValueError(
-            "add_robot: a robot's links (moving mesh colliders) are not on the cuda device yet; "
-            "device='cpu' runs robots"
-        )
+    def add_robot(
+        self,
+        robot,
+        name: str | None = None,
+        position=(0.0, 0.0, 0.0),
+        orientation=(1.0, 0.0, 0.0, 0.0),
+        joints: dict | None = None,
+        friction: float = 0.5,
+    ) -> str:
+        """As :meth:`cloth_sim.Simulator.add_robot`: its links are colliders on the device (a
+        mesh read from its distance grid), swept over each step by symplectic Euler's contact
+        stage as the joints move. Under ``vbd`` the device does not sweep a collider yet:
+        ``ValueError`` naming it, nothing added."""
+        if self.integrator != "symplectic_euler":
+            raise robots_refused(self.integrator)
+        return super().add_robot(robot, name, position, orientation, joints, friction)
 
-    def remove_robot(self, name: str):
-        raise ValueError(f"unknown robot {name!r}; robots: none")
+    def _place_colliders(self, placements, teleport: bool = False) -> None:
+        """``[(collider, 4×4 transform)]`` from a robot's kinematics (the CPU's
+        :meth:`~cloth_sim.contact.colliders.Contacts.place`): each collider object placed, and
+        on the device swept there over the next step or, with ``teleport``, there now."""
+        index = {id(c): i for i, c in enumerate(self._colliders)}
+        rows = []
+        for collider, transform in placements:
+            collider.place(transform)
+            rows.append((index[id(collider)], collider.position, collider.rotation))
+        self._worlds.place_colliders([0], rows, teleport)
+        self._swept = self._swept or not teleport
 
     # ------------------------------------------------------------------ grippers
     @property
@@ -435,26 +483,23 @@ class CudaSimulator:
         """``{name: indices}`` of the vertices each gripper holds (as the CPU's)."""
         return {name: g.indices.copy() for name, g in self._grips.held.items()}
 
-    def gripper_link(self, name: str):
-        """None: a gripper here is moved by its pose (robots are not on the device)."""
-        self._grips.get(name)
-        return None
-
     def grasp(self, name: str, point, radius: float, link=None) -> np.ndarray:
         """As :meth:`cloth_sim.Simulator.grasp`: every free vertex within ``radius`` of ``point``
         held by a gripper ``name`` there; on the device they leave the solve and move with it
-        (:meth:`set_gripper_pose`). A gripper bound to a robot's ``link`` is refused (robots are
-        not on the device yet), as are a name in use, a bad point or radius and no vertex in
-        reach: ``ValueError``, nothing changed."""
+        (:meth:`set_gripper_pose`), or with ``link`` (a ``(robot, link)`` pair) they follow that
+        link. A name in use, a bad point, radius or link and no vertex in reach raise
+        ``ValueError``, nothing changed."""
         name = self._grips.new_name(name)
         point, radius = check_grasp(point, radius)
+        frame = bound = None
         if link is not None:
-            raise ValueError(
-                "grasp: a gripper bound to a robot's link is not on the cuda device yet (robots "
-                "are not); device='cpu' has it"
-            )
+            frame, bound = self.link_frame(link)
         idx = Grips.within(name, self.positions, self._held_mask(), point, radius)
-        return self._hold(name, idx, point)
+        if frame is None:
+            return self._hold(name, idx, point)
+        held = self._hold(name, idx, frame[0], frame[1])
+        self.robot_placement.bound[name] = bound
+        return held
 
     def grasp_box(self, name: str, lo, hi) -> np.ndarray:
         """As :meth:`cloth_sim.Simulator.grasp_box`: every free vertex inside ``[lo, hi]``."""
@@ -469,10 +514,11 @@ class CudaSimulator:
         mask[self._worlds.held(0)] = True
         return mask
 
-    def _hold(self, name: str, idx: np.ndarray, point: np.ndarray) -> np.ndarray:
-        """Gripper ``name`` at ``point`` holding ``idx`` where they are, at rest; the method
-        starts again around the new pins, as the CPU's is made anew."""
-        self._grips.add(name, idx, np.array(self.positions), point)
+    def _hold(self, name: str, idx: np.ndarray, point: np.ndarray, orientation=None) -> np.ndarray:
+        """Gripper ``name`` at ``point`` (turned by ``orientation``: a link's) holding ``idx``
+        where they are, at rest; the method starts again around the new pins, as the CPU's is
+        made anew."""
+        self._grips.add(name, idx, np.array(self.positions), point, orientation)
         self._worlds.hold([0], idx)
         self._worlds.restart([0])
         self._host = None
@@ -519,6 +565,7 @@ class CudaSimulator:
         them over the last step; returns their indices."""
         g = self._grips.get(name)
         del self._grips.held[name]
+        self.robot_placement.bound.pop(name, None)
         self._worlds.release([0], g.indices)
         self._worlds.restart([0])
         self._host = None

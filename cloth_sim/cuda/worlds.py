@@ -13,9 +13,11 @@ relative residual against ``tolerance`` measured every ``check_every`` iteration
 ``rho``), with colliders (planes, spheres, boxes, capsules, cylinders, and meshes read from a
 distance grid baked at load: :mod:`cloth_sim.contact.distance_grid`) and Provot's strain limit
 (:meth:`CudaWorlds.set_strain_limit`: the CPU's passes and long-range attachments, a pass taking
-its springs a colour at a time). What stays on the CPU for now: robots' links, self-contact, the
-strain limit's projection, grippers on links and Choi & Ko's nonlinear pairs
-(:func:`cloth_sim.backends.refusal` names them).
+its springs a colour at a time); a collider moved over a step is swept by symplectic Euler's
+contact stage (a robot's links: :meth:`CudaWorlds.place_colliders`), which can record each
+vertex's impulse on each collider for their wrenches (:meth:`CudaWorlds.record_wrenches`). What
+stays on the CPU for now: colliders swept under ``vbd``, self-contact, the strain limit's
+projection and Choi & Ko's nonlinear pairs (:func:`cloth_sim.backends.refusal` names them).
 """
 
 from __future__ import annotations
@@ -209,6 +211,7 @@ class CudaWorlds:
             gbox=gbox,
             gdim=gdim,
             gval=gval,
+            cimp=np.zeros((worlds, 0, max(1, len(colliders)), 6), real),
         )
         self.wor = Worlds(*(cuda.to_device(a) for a in self._host))
         x0 = np.stack([np.asarray(m.positions, real) for m in models])
@@ -450,6 +453,21 @@ class CudaWorlds:
         for name in ("cpos", "crot"):
             getattr(self.wor, name).copy_to_device(getattr(self._host, name))
 
+    def place_colliders(self, worlds, rows, teleport: bool) -> None:
+        """Colliders of ``worlds`` placed from the package's own kinematics (a robot's links), no
+        checks: ``rows`` ``[(index, position, rotation matrix)]``; swept there over the next step
+        (:meth:`sweep`), or with ``teleport`` there now, at rest (:meth:`set`). One copy to the
+        device for all of them."""
+        ids = self._ids(worlds)
+        names = _POSES if teleport else ("cpos", "crot")
+        new = {name: getattr(self._host, name).copy() for name in names}
+        for index, position, rotation in rows:
+            for name in names:
+                new[name][ids, index] = position if name.startswith("cpos") else rotation
+        self._host = self._host._replace(**new)
+        for name in names:
+            getattr(self.wor, name).copy_to_device(getattr(self._host, name))
+
     def settle_colliders(self) -> None:
         """Every collider's step starts where it stands now (after a step that swept it)."""
         self._host = self._host._replace(
@@ -648,6 +666,34 @@ class CudaWorlds:
     def _upload_free(self, free: np.ndarray) -> None:
         self._host = self._host._replace(free=free.astype(np.int8))
         self.wor.free.copy_to_device(self._host.free)
+        if self.records_wrenches:  # a vertex held now gave no impulse over the last step
+            self.wor.cimp.copy_to_device(np.zeros(self.wor.cimp.shape, self.real))
+
+    # ------------------------------------------------------------------ colliders' wrenches
+    @property
+    def records_wrenches(self) -> bool:
+        """Whether the contact stage records each vertex's impulse on each collider
+        (:meth:`record_wrenches`)."""
+        return self.wor.cimp.shape[1] == self.n
+
+    def record_wrenches(self) -> None:
+        """From the next step on, the contact stage records each vertex's impulse on each collider
+        (``(worlds, n, colliders, 6)`` numbers on the device), so that :meth:`collider_wrench`
+        can give the colliders' wrenches."""
+        if not self.records_wrenches:
+            cimp = np.zeros((self.worlds, self.n, self._host.cimp.shape[2], 6), self.real)
+            self._host = self._host._replace(cimp=cimp[:, :0])
+            self.wor = self.wor._replace(cimp=cuda.to_device(cimp))
+
+    def collider_wrench(self, w: int, c: int, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(force, torque)`` the cloth of world ``w`` exerted on collider ``c`` over its last
+        contact stage of ``dt`` (N, N·m; torque about the collider's position): the impulses
+        the stage recorded, summed in the vertices' order, over ``dt`` (the CPU's
+        :meth:`~cloth_sim.contact.colliders.Contacts.wrench`); zeros where nothing is recorded."""
+        if not self.records_wrenches or c >= self.wor.cimp.shape[2]:
+            return np.zeros(3), np.zeros(3)
+        imp = self.wor.cimp[w].copy_to_host()[:, c].astype(np.float64).sum(axis=0)
+        return imp[:3] / dt, imp[3:] / dt
 
     # ------------------------------------------------------------------ state
     @property

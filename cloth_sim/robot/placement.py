@@ -181,3 +181,83 @@ class Robots:
             if c is collider:
                 return i
         raise LookupError(f"collider {collider.name!r} is no longer in the simulation")
+
+
+class RobotMethods:
+    """The robot methods every simulator has (the CPU's :class:`cloth_sim.Simulator` and the
+    cuda device's), over its :attr:`robot_placement`: a :class:`Robots` made with its own
+    colliders and grippers, and its ``collider_wrench``."""
+
+    #: the simulator's robots (set by the simulator)
+    robot_placement: Robots
+
+    @property
+    def robots(self) -> dict:
+        """``{name: Robot}``: the robots in the scene (:mod:`cloth_sim.robot`)."""
+        return {name: p.robot for name, p in self.robot_placement.placed.items()}
+
+    def add_robot(
+        self,
+        robot,
+        name: str | None = None,
+        position=(0.0, 0.0, 0.0),
+        orientation=(1.0, 0.0, 0.0, 0.0),
+        joints: dict | None = None,
+        friction: float = 0.5,
+    ) -> str:
+        """Put ``robot`` (a :class:`cloth_sim.robot.Robot`) in the scene as ``name`` (its URDF's
+        name unless given), its root link at ``position``, ``orientation``: every ``<collision>``
+        of its links becomes a collider ``name/link`` (``name/link/k`` where a link has several)
+        with Coulomb ``friction``, at the joint positions ``joints`` (0 for those not named).
+        Returns the name. A name in use, a bad pose or joint raises ``ValueError`` and adds
+        nothing."""
+        return self.robot_placement.add(robot, name, position, orientation, joints, friction)
+
+    def remove_robot(self, name: str):
+        """Take robot ``name`` and its colliders out of the scene (grippers bound to its links stay
+        where they are); returns the Robot."""
+        return self.robot_placement.remove(name)
+
+    def set_joint_positions(self, name: str, positions: dict, teleport: bool = False) -> None:
+        """Robot ``name``'s joints to ``positions`` (joint name to rad or m; joints not named keep
+        their value): forward kinematics places every link, which sweeps there over the next step
+        (with ``teleport``, is there now, at rest), and grippers bound to its links follow. An
+        unknown robot or joint, or a non-finite value, raises ``ValueError`` and moves nothing."""
+        self.robot_placement.set_joints(name, positions, teleport)
+
+    def set_link_transforms(self, name: str, transforms: dict, teleport: bool = False) -> None:
+        """Place links of robot ``name`` directly: ``{link: 4×4 transform in the robot's root
+        frame}`` (where something else computes the poses, as TF does for the node's
+        ``robot.source: tf``); they sweep there over the next step, and override the links'
+        forward kinematics from then on. An unknown robot or link, or a non-finite transform,
+        raises ``ValueError``."""
+        self.robot_placement.set_link_transforms(name, transforms, teleport)
+
+    def joint_positions(self, name: str) -> dict:
+        """Robot ``name``'s joint positions now (every movable joint)."""
+        return self.robot_placement.joints(name)
+
+    def link_wrench(self, name: str, link: str) -> tuple[np.ndarray, np.ndarray]:
+        """``(force, torque)`` the cloth exerted on link ``link`` of robot ``name`` over the last
+        step (its colliders' ``collider_wrench`` summed; torque about the link's origin): what a
+        finger feels when it holds the cloth by friction."""
+        return self.robot_placement.link_wrench(name, link, self.collider_wrench)
+
+    def link_pose(self, name: str, link: str) -> tuple[np.ndarray, np.ndarray]:
+        """``(position, orientation (w, x, y, z))`` of link ``link`` of robot ``name`` in the
+        world, at its current joint positions."""
+        return self.robot_placement.link_pose(name, link)
+
+    def gripper_link(self, name: str):
+        """The ``(robot, link)`` gripper ``name`` is bound to (it follows that link), or None
+        for a gripper moved by its pose."""
+        return self.robot_placement.bound.get(name)
+
+    def link_frame(self, link):
+        """``((position, orientation), (robot, link))``: the pose of a ``(robot, link)`` pair a
+        gripper is to be bound to, and the pair (``ValueError`` for anything else)."""
+        try:
+            robot, link_name = link
+        except (TypeError, ValueError):
+            raise ValueError(f"link must be a (robot, link) pair, got {link!r}") from None
+        return self.robot_placement.link_pose(robot, link_name), (robot, link_name)

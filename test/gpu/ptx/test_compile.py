@@ -40,6 +40,7 @@ def signatures(real):
         gbox=np.zeros((1, 5), real),
         gdim=np.zeros((1, 4), np.int32),
         gval=np.zeros(8, real),
+        cimp=np.zeros((w, n, 1, 6), real),
     )
     x = np.zeros((w, n, 3), real)
     flags = np.zeros(w, np.int8)

@@ -345,7 +345,7 @@ def test_worlds_in_blocks_stop_at_their_own_tolerance():
 
 
 def test_the_gpu_benchmark_runs(capsys):
-    """``cloth-sim bench gpu --simulator``: the script's four tables on a tiny cloth (the figures
+    """``cloth-sim bench gpu --simulator``: the script's five tables on a tiny cloth (the figures
     on the simulator mean nothing; the same-cloth check still holds)."""
     from cloth_sim.bench.gpu import print_gpu_tables
 
@@ -363,6 +363,9 @@ def test_the_gpu_benchmark_runs(capsys):
         ("AsyncVectorEnv cpu", 2),
     ]
     assert all(r["rate"] > 0 for r in figures["vector"])
+    assert "5. colliders and a robot" in out and "robot_pick on the GPU" in out
+    assert [r["integrator"] for r in figures["colliders"]["box"]] == ["symplectic_euler", "vbd"]
+    assert figures["colliders"]["robot_pick"] > 0
 
 
 def test_held_vertices_are_pins_a_world_sets():

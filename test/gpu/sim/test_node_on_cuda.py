@@ -57,9 +57,10 @@ def test_the_node_on_cuda_moves_spawns_and_deletes_colliders_and_grasps():
     step: the device does not sweep a collider yet, which the node says once in its log), a
     box spawned through ``~/spawn_entity`` joins the colliders and ``~/delete_entity`` takes it
     away again, ``~/grasp`` holds a corner that its gripper's pose topic then lifts (its wrench
-    published), and a robot's spawn is refused naming what is missing; the cloth keeps stepping,
-    finite. The pose, the spawn and the grasp had raised inside the tick and the services (a
-    swept move refused, no ``add_collider``, no ``grasp`` on the device)."""
+    published), and a robot spawned from its description joins with its link's wrench published;
+    the cloth keeps stepping, finite. The pose, the spawn and the grasp had raised inside the
+    tick and the services (a swept move refused, no ``add_collider``, no ``grasp`` on the
+    device), and a robot's spawn was refused."""
     import numpy as np
     import rclpy
     from geometry_msgs.msg import PoseStamped, WrenchStamped
@@ -150,14 +151,24 @@ def test_the_node_on_cuda_moves_spawns_and_deletes_colliders_and_grasps():
         up = float(corner[2]) + 0.2
         assert spin_until(lambda: abs(node.session.sim.gripper_pose("hand")[0][2] - up) < 1e-9)
         assert spin_until(lambda: len(wrenches) > 0)
-        # a robot is refused, naming what is missing; the node goes on
-        arm = "<robot name='arm'><link name='base'/></robot>"
-        refused = call(
-            srv.SpawnEntity, "spawn_entity", srv.SpawnEntity.Request(resource_string=arm)
+        # a robot spawned from its description: its link a collider on the device, its wrench
+        # published every tick
+        arm = (
+            "<robot name='arm'><link name='paddle'><collision><geometry>"
+            "<box size='0.2 0.2 0.02'/></geometry></collision></link></robot>"
         )
-        assert (
-            refused.result.result != 1 and "not on the cuda device" in refused.result.error_message
+        req = srv.SpawnEntity.Request(resource_string=arm)
+        req.initial_pose.header.frame_id = "cloth"
+        req.initial_pose.pose.position.z = -0.8
+        req.initial_pose.pose.orientation.w = 1.0
+        spawned = call(srv.SpawnEntity, "spawn_entity", req)
+        assert spawned.result.result == 1, spawned.result.error_message
+        assert "arm/paddle" in [c.name for c in node.session.sim.colliders]
+        paddle = []
+        client.create_subscription(
+            WrenchStamped, "/cloth_sim/robots/arm/paddle/wrench", paddle.append, 10
         )
+        assert spin_until(lambda: len(paddle) > 0)
         t = node.session.sim.time
         assert spin_until(lambda: node.session.sim.time > t)
         assert np.all(np.isfinite(node.session.sim.positions))
