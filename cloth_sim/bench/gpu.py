@@ -33,6 +33,7 @@ import numpy as np
 from .. import backends, settings
 from ..batch import BatchSimulator
 from ..contact import colliders
+from ..contact.triangle_meshes import box_triangles
 from ..model import ClothModel
 from ..simulator import Simulator
 from .convergence import REFERENCE_SHARE, accuracy, hanging, trajectory
@@ -152,19 +153,6 @@ def print_gpu_tables(sizes=SIZES, worlds=WORLDS, seconds: float = 2.0, simulator
     return figures
 
 
-def _box_mesh(half):
-    """A box's 8 corners and 12 outward triangles."""
-    hx, hy, hz = half
-    v = np.array(
-        [[sx * hx, sy * hy, sz * hz] for sz in (-1, 1) for sy in (-1, 1) for sx in (-1, 1)]
-    )
-    f = [
-        [0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
-        [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5],
-    ]  # fmt: skip
-    return v, np.array(f)
-
-
 def print_collider_table(simulator=False) -> dict:
     """Table 5 (module docstring): the box as a primitive and as a mesh under a resting cloth,
     each method's median of its rounds taken in turn, and robot_pick's wall time a simulated
@@ -183,7 +171,7 @@ def print_collider_table(simulator=False) -> dict:
             shape = (
                 colliders.Box(half_extents=half, friction=0.5)
                 if kind == "box"
-                else colliders.Mesh(_box_mesh(half), friction=0.5)
+                else colliders.Mesh(box_triangles(half), friction=0.5)
             )
             options = {"iterations": 10} if integrator == "vbd" else None
             sims[kind] = Simulator(

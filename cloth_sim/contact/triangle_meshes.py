@@ -368,6 +368,21 @@ def pack(meshes) -> tuple:
 EMPTY = pack([])
 
 
+def box_triangles(half_extents) -> tuple[np.ndarray, np.ndarray]:
+    """A box centred at the origin, ``half_extents`` along x, y and z, as 8 corners and 12
+    outward triangles, ``(vertices (8, 3), triangles (12, 3))``: a
+    :class:`~cloth_sim.contact.colliders.Mesh` source, the Box primitive as a mesh."""
+    hx, hy, hz = (float(h) for h in half_extents)
+    v = np.array(
+        [[sx * hx, sy * hy, sz * hz] for sz in (-1, 1) for sy in (-1, 1) for sx in (-1, 1)]
+    )
+    f = [
+        [0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
+        [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5],
+    ]  # fmt: skip
+    return v, np.array(f, np.int64)
+
+
 @numba.njit(cache=True, inline="always")
 def _bank_triangle_d2(bank, k, x, y, z):
     """The nearest point of the bank's triangle ``k`` (:func:`.geometry.corners_d2`)."""

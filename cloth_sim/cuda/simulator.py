@@ -448,22 +448,11 @@ class CudaSimulator(RobotMethods):
         h = self.dt if self.integrator == "symplectic_euler" else self.dt / w.last_substeps
         return w.collider_wrench(0, int(i) % len(self._colliders), h)
 
-    def add_robot(
-        self,
-        robot,
-        name: str | None = None,
-        position=(0.0, 0.0, 0.0),
-        orientation=(1.0, 0.0, 0.0, 0.0),
-        joints: dict | None = None,
-        friction: float = 0.5,
-    ) -> str:
-        """As :meth:`cloth_sim.Simulator.add_robot`: its links are colliders on the device (a
-        mesh read from its distance grid), swept over each step by symplectic Euler's contact
-        stage as the joints move. Under ``vbd`` the device does not sweep a collider yet:
-        ``ValueError`` naming it, nothing added."""
-        if self.integrator != "symplectic_euler":
-            raise robots_refused(self.integrator)
-        return super().add_robot(robot, name, position, orientation, joints, friction)
+    def robot_refusal(self) -> ValueError | None:
+        """A robot's links are colliders on the device (a mesh read from its distance grid),
+        swept over each step by symplectic Euler's contact stage as the joints move; under
+        ``vbd`` the device sweeps no collider yet: the error naming it."""
+        return None if self.integrator == "symplectic_euler" else robots_refused(self.integrator)
 
     def _place_colliders(self, placements, teleport: bool = False) -> None:
         """``[(collider, 4×4 transform)]`` from a robot's kinematics (the CPU's

@@ -209,9 +209,17 @@ class RobotMethods:
         name unless given), its root link at ``position``, ``orientation``: every ``<collision>``
         of its links becomes a collider ``name/link`` (``name/link/k`` where a link has several)
         with Coulomb ``friction``, at the joint positions ``joints`` (0 for those not named).
-        Returns the name. A name in use, a bad pose or joint raises ``ValueError`` and adds
-        nothing."""
+        Returns the name. A name in use, a bad pose or joint, or a simulator that cannot move
+        a robot's links (:meth:`robot_refusal`) raises ``ValueError`` and adds nothing."""
+        refused = self.robot_refusal()
+        if refused is not None:
+            raise refused
         return self.robot_placement.add(robot, name, position, orientation, joints, friction)
+
+    def robot_refusal(self) -> ValueError | None:
+        """Why a robot cannot be added here now, or ``None``: every method sweeps a robot's
+        links on the CPU; a device names what it lacks."""
+        return None
 
     def remove_robot(self, name: str):
         """Take robot ``name`` and its colliders out of the scene (grippers bound to its links stay

@@ -137,29 +137,19 @@ class ParameterGate:
         ):
             # the scene's strain limit method is not on the device asked for: that device with
             # Provot's passes, which every device runs (and its step carried below if need be)
-            self.node.get_logger().warning(
-                f"scene {scene.name}: {refused}. Instead: running on {values['device']} with "
-                "Provot's passes (strain_limit_method provot)"
+            how = (
+                f"running on {values['device']} with Provot's passes (strain_limit_method provot)"
             )
             values = {**values, "strain_limit_method": "provot"}
-            try:
-                return settings.check(scene, values, model=self._model)
-            except settings.Refusal as e:
-                refused = e
-            except ValueError as e:
-                raise StartupError(str(e)) from None
+            checked, refused = self._again(scene, values, refused, how)
+            if checked is not None:
+                return checked
         if "device" in refused.named and values.get("device", "cpu") != "cpu":
             # a device that cannot run here, or cannot run this scene: the cpu instead
-            self.node.get_logger().warning(
-                f"scene {scene.name}: {refused}. Instead: running on the cpu"
-            )
             values = {**values, "device": "cpu"}
-            try:
-                return settings.check(scene, values, model=self._model)
-            except settings.Refusal as e:
-                refused = e
-            except ValueError as e:
-                raise StartupError(str(e)) from None
+            checked, refused = self._again(scene, values, refused, "running on the cpu")
+            if checked is not None:
+                return checked
         if refused.named != ("dt",) or "dt" in values or "integrator" in values:
             raise StartupError(str(refused)) from None
         try:
@@ -183,6 +173,18 @@ class ParameterGate:
         )
         self.node.get_logger().warning(f"scene {scene.name}: {refused}. Instead: {how}")
         return checked
+
+    def _again(self, scene, values: dict, refused: settings.Refusal, how: str):
+        """``values`` checked again in place of those ``refused`` (the log says so, and ``how``
+        the node runs instead): ``(the checked values, refused)``, or ``(None, the new
+        refusal)``; any other error stops the start-up."""
+        self.node.get_logger().warning(f"scene {scene.name}: {refused}. Instead: {how}")
+        try:
+            return settings.check(scene, values, model=self._model), refused
+        except settings.Refusal as e:
+            return None, e
+        except ValueError as e:
+            raise StartupError(str(e)) from None
 
     def open(self, manipulation, publishing, ticker, robot_state) -> None:
         """Take changes from now on."""

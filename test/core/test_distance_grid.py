@@ -9,21 +9,9 @@ import pytest
 
 from cloth_sim.contact import distance_grid as dg
 from cloth_sim.contact.colliders import Mesh
+from cloth_sim.contact.triangle_meshes import box_triangles
 
 TAU = 0.005
-
-
-def box_mesh(half):
-    """A box's 8 corners and 12 outward triangles."""
-    hx, hy, hz = half
-    v = np.array(
-        [[sx * hx, sy * hy, sz * hz] for sz in (-1, 1) for sy in (-1, 1) for sx in (-1, 1)]
-    )
-    f = [
-        [0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
-        [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5],
-    ]  # fmt: skip
-    return v, np.array(f)
 
 
 def box_distance(p, half):
@@ -36,7 +24,7 @@ def box_distance(p, half):
 @pytest.fixture(scope="module")
 def box():
     half = np.array([0.1, 0.08, 0.03])
-    mesh = Mesh(box_mesh(half))
+    mesh = Mesh(box_triangles(half))
     return half, mesh, dg.grid_for(mesh.mesh, TAU)
 
 
@@ -118,9 +106,9 @@ def test_its_sizes_hold_their_limits_and_a_grid_is_baked_once():
     """Cells of half the thickness where they fit; a long mesh's cells grow until at most
     ``MAX_NODES_ALONG`` nodes lie along it and ``MAX_NODES`` in all, the band at least three
     thicknesses and two cells; the same mesh and thickness give the same grid, baked once."""
-    small = Mesh(box_mesh((0.05, 0.04, 0.02)))
+    small = Mesh(box_triangles((0.05, 0.04, 0.02)))
     assert dg.cell_for(small.mesh, TAU) == (0.5 * TAU, dg.BAND_THICKNESS * TAU)
-    long = Mesh(box_mesh((1.0, 0.6, 0.5)))
+    long = Mesh(box_triangles((1.0, 0.6, 0.5)))
     cell, band = dg.cell_for(long.mesh, 0.001)
     dims = np.ceil((np.array([2.0, 1.2, 1.0]) + 2 * band) / cell) + 1
     assert dims.max() <= dg.MAX_NODES_ALONG and np.prod(dims) <= dg.MAX_NODES
@@ -133,7 +121,7 @@ def test_packed_grids_are_read_as_the_device_reads_them(box):
     """Two grids packed: each grid's box, its nodes and first value, and its values with z fastest,
     so that value ``start + (i·ny + j)·nz + k`` is node ``(i, j, k)``."""
     _, _, grid = box
-    other = dg.grid_for(Mesh(box_mesh((0.02, 0.02, 0.02))).mesh, TAU)
+    other = dg.grid_for(Mesh(box_triangles((0.02, 0.02, 0.02))).mesh, TAU)
     gbox, gdim, gval = dg.pack_grids([grid, other], np.float64)
     for m, g in enumerate((grid, other)):
         nx, ny, nz, start = gdim[m]

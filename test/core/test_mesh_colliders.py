@@ -10,23 +10,11 @@ import numpy as np
 import pytest
 
 from cloth_sim import ClothModel, Simulator, colliders, integrators
+from cloth_sim.contact.triangle_meshes import box_triangles
 from cloth_sim.sensors import DepthCamera
 
 G = 9.81
 H = 0.005
-
-
-def box_mesh(half):
-    """A box's 8 corners and 12 triangles (an independent construction, not trimesh's)."""
-    hx, hy, hz = half
-    v = np.array(
-        [[sx * hx, sy * hy, sz * hz] for sz in (-1, 1) for sy in (-1, 1) for sx in (-1, 1)]
-    )
-    f = [
-        [0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
-        [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5],
-    ]  # fmt: skip
-    return v, np.array(f)
 
 
 def quad(size):
@@ -48,7 +36,7 @@ def test_a_closed_box_mesh_is_the_box_signed_distance_from_every_point():
     pts = np.random.default_rng(0).uniform(-0.4, 0.7, (3000, 3))
     db = box.signed_distance(pts)
     assert (db < 0).sum() > 50 and (db > 0).sum() > 50
-    v, f = box_mesh(half)
+    v, f = box_triangles(half)
     unwelded = (v[f].reshape(-1, 3), np.arange(3 * len(f)).reshape(-1, 3))
     for source in ((v, f), unwelded, (v, f[:, ::-1])):
         mesh = colliders.Mesh(source, position=(0.1, 0.2, 0.3), orientation=q)
@@ -60,7 +48,7 @@ def test_an_open_mesh_is_two_sided():
     """The box without its top (two triangles removed) is open: both sides of every triangle are
     surfaces, so its distance is unsigned, the distance to the nearest remaining triangle."""
     half = (0.2, 0.15, 0.1)
-    v, f = box_mesh(half)
+    v, f = box_triangles(half)
     top = np.all(v[f][:, :, 2] > 0, axis=1)
     mesh = colliders.Mesh((v, f[~top]))
     assert not mesh.mesh.closed
@@ -176,7 +164,7 @@ def test_a_cloth_on_a_box_mesh_rests_as_on_the_box(integrator):
 
     half = (0.15, 0.15, 0.1)
     a = run(colliders.Box(half_extents=half, friction=0.5))
-    b = run(colliders.Mesh(box_mesh(half), friction=0.5))
+    b = run(colliders.Mesh(box_triangles(half), friction=0.5))
     for sim in (a, b):
         d = sim.colliders[0].signed_distance(sim.positions)
         assert d.min() >= H * (1 - 0.1)
@@ -189,7 +177,7 @@ def test_a_cloth_on_a_box_mesh_rests_as_on_the_box(integrator):
 
 def test_the_camera_sees_mesh_and_cylinder_colliders_and_labels_them():
     model = ClothModel.grid(2, 2, 0.01, 0.01, stiffness=1.0, origin=(5, 5, 5))
-    mesh = colliders.Mesh(box_mesh((0.1, 0.1, 0.1)), position=(-0.2, 0, 0))
+    mesh = colliders.Mesh(box_triangles((0.1, 0.1, 0.1)), position=(-0.2, 0, 0))
     cyl = colliders.Cylinder(center=(0.2, 0, 0), radius=0.05, length=0.2)
     sim = Simulator(model, colliders=[mesh, cyl])
     cam = DepthCamera(width=64, height=48, fx=60, fy=60, cx=31.5, cy=23.5, position=(0, 0, 1))
@@ -266,7 +254,7 @@ def test_the_candidate_grid_answers_as_the_walk_does(shape):
     from cloth_sim.contact.triangle_meshes import TriangleMesh, mesh_distance, pack
 
     if shape == "box":
-        v, f = box_mesh((0.3, 0.3, 0.1))
+        v, f = box_triangles((0.3, 0.3, 0.1))
     elif shape == "plate":
         v, f = quad(0.4)
     elif shape == "ell":  # (a closed mesh with a concave edge)

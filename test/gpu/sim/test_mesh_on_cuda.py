@@ -9,28 +9,16 @@ import pytest
 from cloth_sim import BatchSimulator, ClothModel, Simulator
 from cloth_sim.contact.colliders import Mesh
 from cloth_sim.contact.distance_grid import grid_for
+from cloth_sim.contact.triangle_meshes import box_triangles
 
 TAU = 0.005
-
-
-def box_mesh(half):
-    """A box's 8 corners and 12 outward triangles."""
-    hx, hy, hz = half
-    v = np.array(
-        [[sx * hx, sy * hy, sz * hz] for sz in (-1, 1) for sy in (-1, 1) for sx in (-1, 1)]
-    )
-    f = [
-        [0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
-        [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5],
-    ]  # fmt: skip
-    return v, np.array(f)
 
 
 def slab(**pose):
     """A 0.4 × 0.4 × 0.04 m box as 12 triangles, turned about z, under the sheet below."""
     pose.setdefault("position", (0.07, 0.07, -0.03))
     pose.setdefault("orientation", (0.96, 0.0, 0.0, 0.28))
-    return Mesh(box_mesh((0.2, 0.2, 0.02)), friction=0.3, name="slab", **pose)
+    return Mesh(box_triangles((0.2, 0.2, 0.02)), friction=0.3, name="slab", **pose)
 
 
 def sheet(z):
@@ -67,7 +55,7 @@ def test_a_cloth_over_a_mesh_edge_is_within_a_fraction_of_a_cell():
     interpolation is within a fraction of a cell of the exact distance (above it: the distance is
     convex there), so the device's cloth differs from the CPU's by at most half a cell (1.5 mm
     measured, cells of 3.1 mm) and keeps at least 0.9 of the thickness from the mesh (0.97)."""
-    mesh = Mesh(box_mesh((0.05, 0.2, 0.02)), position=(0.0, 0.07, -0.03), friction=0.3)
+    mesh = Mesh(box_triangles((0.05, 0.2, 0.02)), position=(0.0, 0.07, -0.03), friction=0.3)
     cell = grid_for(mesh.mesh, TAU).cell
     m = sheet(-0.004)
     kw = dict(integrator="symplectic_euler", dt=1e-3, colliders=[mesh], thickness=TAU)
