@@ -9,7 +9,6 @@ run yet (:func:`cloth_sim.backends.refusal`), it raises ``ValueError`` naming th
 
 from __future__ import annotations
 
-import copy
 import math
 
 import numpy as np
@@ -406,14 +405,10 @@ class CudaSimulator(RobotMethods):
                 "the cuda device yet (symplectic_euler sweeps it; teleport=True puts it there at "
                 "rest); device='cpu' sweeps it"
             )
-        if teleport:
-            self._worlds.set([0], colliders={i: (position, orientation)})
-        else:
-            self._worlds.sweep([0], i, position, orientation)
-            self._swept = True
-        shape = copy.copy(self._colliders[i])
-        shape.set_pose(position, orientation)
-        self._colliders[i] = shape
+        check_index(i, len(self._colliders), "move")
+        collider = self._colliders[i]
+        collider.set_pose(position, orientation)  # (checked: a bad pose moves nothing)
+        self._place_colliders([(collider, None)], teleport)
 
     @property
     def sweeps_colliders(self) -> bool:
@@ -456,12 +451,14 @@ class CudaSimulator(RobotMethods):
 
     def _place_colliders(self, placements, teleport: bool = False) -> None:
         """``[(collider, 4×4 transform)]`` from a robot's kinematics (the CPU's
-        :meth:`~cloth_sim.contact.colliders.Contacts.place`): each collider object placed, and
-        on the device swept there over the next step or, with ``teleport``, there now."""
+        :meth:`~cloth_sim.contact.colliders.Contacts.place`): each collider object placed (the
+        transform None: where it stands), and on the device swept there over the next step or,
+        with ``teleport``, there now."""
         index = {id(c): i for i, c in enumerate(self._colliders)}
         rows = []
         for collider, transform in placements:
-            collider.place(transform)
+            if transform is not None:  # (None: placed already, set_collider_pose)
+                collider.place(transform)
             rows.append((index[id(collider)], collider.position, collider.rotation))
         self._worlds.place_colliders([0], rows, teleport)
         self._swept = self._swept or not teleport

@@ -22,7 +22,6 @@ projection and Choi & Ko's nonlinear pairs (:func:`cloth_sim.backends.refusal` n
 
 from __future__ import annotations
 
-import copy
 import math
 
 import numba
@@ -238,6 +237,8 @@ class CudaWorlds:
         self.block_threads = block_threads
         self._out = cuda.device_array((worlds, 3), np.float64)
         self._cptr_device = cuda.to_device(self._cptr.astype(np.int32))
+        #: the recorded impulses copied to the host since the last step (:meth:`collider_wrench`)
+        self._impulses = None
         self._partial = cuda.device_array((1, 2), np.float64)
         #: each world's steps that ended above the tolerance, and the sweeps of every step
         #: (each world's); ``last_iterations``: the sweeps of the last step (of the last run of
@@ -431,32 +432,12 @@ class CudaWorlds:
         for name in changed:
             getattr(self.wor, name).copy_to_device(getattr(self._host, name))
 
-    def sweep(self, worlds, index: int, position, orientation) -> None:
-        """Collider ``index`` of ``worlds`` to ``position`` and ``orientation`` over the next
-        step: the contact stage sees it sweep there from where the step starts it (the CPU's
-        ``set_collider_pose`` without ``teleport``), until :meth:`settle_colliders`. Checked as
-        :meth:`set` checks a pose; nothing changes on bad input."""
-        ids = self._ids(worlds)
-        if not (isinstance(index, (int, np.integer)) and 0 <= index < len(self.colliders)):
-            raise ValueError(
-                f"collider index must be an integer in [0, {len(self.colliders) - 1}], got "
-                f"{index!r}"
-                if self.colliders
-                else "there are no colliders to move"
-            )
-        shape = copy.copy(self.colliders[index])
-        shape.set_pose(position, orientation)
-        new = {name: getattr(self._host, name).copy() for name in ("cpos", "crot")}
-        new["cpos"][ids, index] = shape.position
-        new["crot"][ids, index] = shape.rotation
-        self._host = self._host._replace(**new)
-        for name in ("cpos", "crot"):
-            getattr(self.wor, name).copy_to_device(getattr(self._host, name))
-
     def place_colliders(self, worlds, rows, teleport: bool) -> None:
-        """Colliders of ``worlds`` placed from the package's own kinematics (a robot's links), no
-        checks: ``rows`` ``[(index, position, rotation matrix)]``; swept there over the next step
-        (:meth:`sweep`), or with ``teleport`` there now, at rest (:meth:`set`). One copy to the
+        """Colliders of ``worlds`` placed where the caller has checked them (a robot's links, a
+        pose ``set_collider_pose`` checked): ``rows`` ``[(index, position, rotation matrix)]``,
+        swept there over the next step (the contact stage sees each sweep there from where the
+        step starts it, the CPU's ``set_collider_pose`` without ``teleport``, until
+        :meth:`settle_colliders`), or with ``teleport`` there now, at rest. One copy to the
         device for all of them."""
         ids = self._ids(worlds)
         names = _POSES if teleport else ("cpos", "crot")
@@ -668,6 +649,7 @@ class CudaWorlds:
         self.wor.free.copy_to_device(self._host.free)
         if self.records_wrenches:  # a vertex held now gave no impulse over the last step
             self.wor.cimp.copy_to_device(np.zeros(self.wor.cimp.shape, self.real))
+            self._impulses = None
 
     # ------------------------------------------------------------------ colliders' wrenches
     @property
@@ -692,7 +674,9 @@ class CudaWorlds:
         :meth:`~cloth_sim.contact.colliders.Contacts.wrench`); zeros where nothing is recorded."""
         if not self.records_wrenches or c >= self.wor.cimp.shape[2]:
             return np.zeros(3), np.zeros(3)
-        imp = self.wor.cimp[w].copy_to_host()[:, c].astype(np.float64).sum(axis=0)
+        if self._impulses is None:  # one copy a step, however many colliders are asked
+            self._impulses = self.wor.cimp.copy_to_host()
+        imp = self._impulses[w, :, c].astype(np.float64).sum(axis=0)
         return imp[:3] / dt, imp[3:] / dt
 
     # ------------------------------------------------------------------ state
@@ -842,6 +826,7 @@ class CudaWorlds:
         if n <= 0:
             return
         before = self.launches
+        self._impulses = None  # (the stage records them again)
         self._settle_dragged()
         mode = self.launch_mode()
         self._limit_now = self._limited()

@@ -95,7 +95,8 @@ def test_an_arm_with_a_mesh_link_sweeps_through_the_sheet_kept_off_its_links():
 
 def test_a_robot_under_vbd_is_refused_naming_it():
     """Under ``vbd`` the device does not sweep a collider: adding a robot, or switching to ``vbd``
-    with one in the scene, raises ``ValueError`` naming it, and nothing changes."""
+    with one in the scene, raises ``ValueError`` naming it, and nothing changes; a link moved by
+    ``set_collider_pose`` stays the robot's, and goes with it."""
     gripper = Robot.from_urdf(str(ROBOTS / "gripper.urdf"))
     sim = Simulator(sheet(), integrator="vbd", dt=1 / 60, device="cuda", precision="float64")
     with pytest.raises(ValueError, match=r"robot: a robot's links under vbd are not on the cuda"):
@@ -106,6 +107,10 @@ def test_a_robot_under_vbd_is_refused_naming_it():
     with pytest.raises(ValueError, match=r"robot: a robot's links under vbd"):
         sim.set_integrator("vbd")
     assert sim.integrator == "symplectic_euler" and list(sim.robots) == ["g"]
+    # a link moved by hand is still the robot's (the same collider object, as on the CPU)
+    pad = [c.name for c in sim.colliders].index("g/finger_left")
+    sim.set_collider_pose(pad, (0.1, 0.0, 0.0))
+    assert np.allclose(sim.colliders[pad].position, (0.1, 0.0, 0.0))
     assert sim.remove_robot("g").name == "pinch_gripper" and sim.colliders == []
 
 
