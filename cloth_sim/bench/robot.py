@@ -1,6 +1,7 @@
 """Robots in the scene, measured: forward kinematics (ours against yourdfpy's), what a mesh
-collider costs against the same shape as a primitive (a cloth resting on it, and one query), and
-the robot_sweep scene (an arm through a hanging 32×32 cloth): the deepest any vertex came into any
+collider costs against the same shape as a primitive (a cloth resting on it, and one query), the
+distance grids the cuda device reads meshes from (their bake and their error), and the robot_sweep
+scene (an arm through a hanging 32×32 cloth): the deepest any vertex came into any
 link, self-crossings by the independent check, and the real-time factor headless. Each comparison
 runs side by side in one process.
 
@@ -139,6 +140,57 @@ def mesh_queries(n: int = 200_000) -> None:
                 best = min(best, time.perf_counter() - t)
             ns[name] = best / n * 1e9
         print(f"| {where} | {ns['Box']:.0f} | {ns['Mesh']:.0f} | {ns['Mesh'] / ns['Box']:.1f} |")
+
+
+def distance_grids(thickness: float = 0.005, points: int = 20_000) -> None:
+    """The distance grids the cuda device reads a mesh collider from
+    (:mod:`cloth_sim.contact.distance_grid`), for meshes of three sizes at ``thickness``: the
+    grid's cell, band and nodes, the bake's wall time (the second of two: the first compiles),
+    and against the exact mesh queries at ``points`` random points within the band, the largest
+    error of the distance (in cells) and of the normal one cell out and farther (rad)."""
+    from ..contact import distance_grid
+    from ..contact.triangle_meshes import box_triangles
+
+    robot = Robot.from_urdf(str(find_scene("robot_sweep").parent.parent / "robots" / "arm.urdf"))
+    forearm = next(s for s in robot.shapes if s.link == "forearm").make("forearm", 0.5)
+    meshes = {
+        "box 0.4 x 0.4 x 0.1 m (12 triangles)": colliders.Mesh(box_triangles((0.2, 0.2, 0.05))),
+        "the demo arm's forearm": forearm,
+        "mannequin (tshirt_on_body)": colliders.Mesh(
+            str(find_scene("tshirt_on_body").parent.parent / "meshes" / "mannequin.obj")
+        ),
+    }
+    print(f"distance grids at a thickness of {thickness * 1e3:g} mm, against the exact queries")
+    print(
+        "| mesh | cell mm | band mm | nodes | bake ms | distance err (cells) | normal err (rad) |"
+        "\n|---|---|---|---|---|---|---|"
+    )
+    rng = np.random.default_rng(0)
+    for name, shape in meshes.items():
+        mesh = shape.mesh
+        cell, band = distance_grid.cell_for(mesh, thickness)
+        distance_grid.bake(mesh, cell, band)
+        t = time.perf_counter()
+        grid = distance_grid.bake(mesh, cell, band)
+        bake = time.perf_counter() - t
+        lo, hi = mesh.lo[0] - band, mesh.hi[0] + band
+        p = rng.uniform(lo, hi, (points, 3))
+        # (the mesh in its own frame: the collider at the origin, unturned)
+        exact = shape.signed_distance(p)
+        d, n = grid.at(p)
+        near = np.abs(exact) < band
+        eps = 1e-6
+        g = np.stack(
+            [(shape.signed_distance(p + eps * e) - shape.signed_distance(p - eps * e)) / (2 * eps)
+             for e in np.eye(3)], axis=1,
+        )  # fmt: skip
+        out = near & (exact > cell) & (np.linalg.norm(g, axis=1) > 0.5)
+        cos = np.sum(n[out] * g[out], axis=1) / np.linalg.norm(g[out], axis=1)
+        angle = float(np.max(np.arccos(np.clip(cos, -1.0, 1.0)), initial=0.0))
+        print(
+            f"| {name} | {cell * 1e3:.2f} | {band * 1e3:.1f} | {grid.values.size:,} | "
+            f"{bake * 1e3:.0f} | {np.max(np.abs(d - exact)[near]) / cell:.2f} | {angle:.2f} |"
+        )
 
 
 def sweep(seconds: float, collider_share: float | None = None) -> None:
@@ -374,6 +426,7 @@ def main(argv=None) -> None:
     forward_kinematics()
     mesh_against_primitive()
     mesh_queries()
+    distance_grids()
     sweep(args.seconds)
     if args.collider_share is not None:
         sweep(args.seconds, args.collider_share)
