@@ -26,6 +26,13 @@ METHODS: dict[str, tuple[str, ...] | None] = {
     "cuda": ("symplectic_euler", "vbd"),
 }
 
+#: the methods under which each device sweeps a collider moved over a step (a robot's links, a
+#: pose set without teleport) through its contact stage (``None``: every method)
+SWEEPS: dict[str, tuple[str, ...] | None] = {
+    "cpu": None,
+    "cuda": ("symplectic_euler",),
+}
+
 #: each device's implementation: ``(module, single-world class, batch class)``
 _IMPLEMENTATIONS = {
     "cuda": ("cloth_sim.cuda.simulator", "CudaSimulator", "CudaBatchSimulator"),
@@ -56,6 +63,13 @@ def check_device(device) -> str:
     if why is not None:
         raise ValueError(why)
     return device
+
+
+def sweeps_colliders(device: str, method: str) -> bool:
+    """Whether ``device`` sweeps a moving collider over a step of ``method`` (:data:`SWEEPS`):
+    where it does not, a robot is refused and a collider's pose is placed by teleport."""
+    methods = SWEEPS[device]
+    return methods is None or method in methods
 
 
 def check_method(method: str, device: str) -> None:

@@ -397,16 +397,17 @@ def device_refusal(cfg: dict, model, scene: Scene) -> tuple[str, tuple[str, ...]
     why = backends.problem(device)
     if why is not None:
         return f"device={device} is refused: {why}", ("device",)
+    sweeps = backends.sweeps_colliders(device, cfg["integrator"])
     refused = backends.refusal(
         device,
         cfg["integrator"],
         model,
         strain_limit_method=bool(cfg["strain_limit"]) and cfg["strain_limit_method"] != "provot",
         self_collision=cfg["self_collision"],
-        # a robot's links, and the grippers bound to them, sweep over each step: the device's
-        # symplectic Euler takes that, its vbd not yet (a gripper moved by its pose runs there)
-        grippers=bool(scene.gripper_links) and cfg["integrator"] != "symplectic_euler",
-        robot=scene.robot is not None and cfg["integrator"] != "symplectic_euler",
+        # a robot's links, and the grippers bound to them, sweep over each step (a gripper moved
+        # by its pose runs on every device)
+        grippers=bool(scene.gripper_links) and not sweeps,
+        robot=scene.robot is not None and not sweeps,
     )
     if refused is None:
         return None

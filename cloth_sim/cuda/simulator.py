@@ -257,7 +257,7 @@ class CudaSimulator(RobotMethods):
         """Switch method on the device; positions and velocities carry over. A robot's links
         sweep over each step, which only symplectic Euler takes here (:meth:`add_robot`): with a
         robot in the scene another method raises ``ValueError`` and nothing changes."""
-        if self.robot_placement.placed and name != "symplectic_euler":
+        if self.robot_placement.placed and not backends.sweeps_colliders("cuda", name):
             raise robots_refused(name)
         self._rebuild(name, options, self._colliders)
         self._counters = dict(steps=0)
@@ -414,7 +414,7 @@ class CudaSimulator(RobotMethods):
     def sweeps_colliders(self) -> bool:
         """Whether :meth:`set_collider_pose` sweeps a collider over the next step here (under
         symplectic Euler; under ``vbd`` a pose is placed by teleport only)."""
-        return self.integrator == "symplectic_euler"
+        return backends.sweeps_colliders("cuda", self.integrator)
 
     def add_collider(self, collider) -> int:
         """As :meth:`cloth_sim.Simulator.add_collider` (a mesh read from its distance grid,
@@ -447,7 +447,7 @@ class CudaSimulator(RobotMethods):
         """A robot's links are colliders on the device (a mesh read from its distance grid),
         swept over each step by symplectic Euler's contact stage as the joints move; under
         ``vbd`` the device sweeps no collider yet: the error naming it."""
-        return None if self.integrator == "symplectic_euler" else robots_refused(self.integrator)
+        return None if self.sweeps_colliders else robots_refused(self.integrator)
 
     def _place_colliders(self, placements, teleport: bool = False) -> None:
         """``[(collider, 4×4 transform)]`` from a robot's kinematics (the CPU's

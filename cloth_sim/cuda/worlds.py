@@ -94,6 +94,15 @@ def collider_rows(colliders) -> tuple:
     return kinds, pos, rot, geo, mu
 
 
+def _write_poses(new: dict, ids, rows, names) -> None:
+    """``rows`` ``[(index, position, rotation)]`` written for worlds ``ids`` into the pose arrays
+    ``new[name]`` of ``names`` (positions into ``cpos``/``cpos0``, rotations into
+    ``crot``/``crot0``)."""
+    for index, position, rotation in rows:
+        for name in names:
+            new[name][ids, index] = position if name.startswith("cpos") else rotation
+
+
 def mesh_grids(colliders, thickness: float, real) -> tuple:
     """The mesh colliders' distance grids for a cloth keeping ``thickness`` from them, in their
     order (:func:`collider_rows` numbers them so), packed as the kernels read them (``gbox, gdim,
@@ -422,12 +431,11 @@ class CudaWorlds:
                         f"{name}[{fam!r}] must be a finite number >= 0, got {value!r}"
                     )
                 new[table][ids, self.families.index(fam)] = v
+        placed = []
         for index, pose in (colliders or {}).items():
             shape = backends.placed_collider(self.colliders, index, pose)
-            for name in ("cpos", "cpos0"):
-                new[name][ids, index] = shape.position
-            for name in ("crot", "crot0"):
-                new[name][ids, index] = shape.rotation
+            placed.append((index, shape.position, shape.rotation))
+        _write_poses(new, ids, placed, _POSES)
         self._host = h._replace(**new)
         for name in changed:
             getattr(self.wor, name).copy_to_device(getattr(self._host, name))
@@ -442,9 +450,7 @@ class CudaWorlds:
         ids = self._ids(worlds)
         names = _POSES if teleport else ("cpos", "crot")
         new = {name: getattr(self._host, name).copy() for name in names}
-        for index, position, rotation in rows:
-            for name in names:
-                new[name][ids, index] = position if name.startswith("cpos") else rotation
+        _write_poses(new, ids, rows, names)
         self._host = self._host._replace(**new)
         for name in names:
             getattr(self.wor, name).copy_to_device(getattr(self._host, name))
