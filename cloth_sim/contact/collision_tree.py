@@ -83,7 +83,9 @@ class Primitives(NamedTuple):
     """What a search measures: the start positions ``x0`` and each particle's ``reach``; the
     triangles (and their reaches), the particles in none (``orphans``) and the edges (their
     boxes and reaches at ``x0``); per triangle the corners (``own_v``) and edges (``own_e``) it
-    is the first triangle of, −1 after them."""
+    is the first triangle of, −1 after them; per particle whether it is ``touched`` (a walk
+    measures only the pairs with a feature of a touched particle: all of them in a whole
+    search)."""
 
     x0: np.ndarray
     reach: np.ndarray
@@ -96,6 +98,7 @@ class Primitives(NamedTuple):
     elo: np.ndarray
     ehi: np.ndarray
     ereach: np.ndarray
+    touched: np.ndarray
 
 
 class TaskRows(NamedTuple):
@@ -335,13 +338,14 @@ def _traverse(tasks, tree, prim, rows, stack_size, leaf_cap):
         prim.tris,
         prim.orphans,
     )
-    edges, own_v, own_e, elo, ehi, ereach = (
+    edges, own_v, own_e, elo, ehi, ereach, touched = (
         prim.edges,
         prim.own_v,
         prim.own_e,
         prim.elo,
         prim.ehi,
         prim.ereach,
+        prim.touched,
     )
     vf, vf_d, ee, ee_d, counts = rows.vf, rows.vf_d, rows.ee, rows.ee_d, rows.counts
     cap_vf, cap_ee = rows.cap_vf, rows.cap_ee
@@ -416,6 +420,8 @@ def _traverse(tasks, tree, prim, rows, stack_size, leaf_cap):
                             )
                             if p < 0:
                                 break
+                            if touched[p] == 0 and imark[qv] == 0:
+                                continue  # neither the particle nor a corner is touched
                             d = _point_triangle(x0, reach, tri_reach, tris, ilo, ihi, p, v, qv)
                             if d >= 0.0:
                                 m_vf = _put(vf, vf_d, row_vf, m_vf, cap_vf, p, v, d)
@@ -444,6 +450,13 @@ def _traverse(tasks, tree, prim, rows, stack_size, leaf_cap):
                             f0, f1 = edges[f, 0], edges[f, 1]
                             if f0 == e0 or f0 == e1 or f1 == e0 or f1 == e1:
                                 continue
+                            if (
+                                touched[e0] == 0
+                                and touched[e1] == 0
+                                and touched[f0] == 0
+                                and touched[f1] == 0
+                            ):
+                                continue  # no end touched
                             # listed and measured lower edge first: the same bits whichever
                             # triangle saw it (pair_list measures the kept pairs again)
                             e_a, e_b = (e, f) if e < f else (f, e)
@@ -512,13 +525,35 @@ def _marks(tree, touched, tris, orphans):
     return mark, imark
 
 
+@numba.njit(cache=True, parallel=True)
+def _touching(vf, ee, tris, edges, touched):
+    """:func:`touching`'s two masks, each pair on its own."""
+    keep_vf = np.empty(vf.shape[0], np.bool_)
+    for q in numba.prange(vf.shape[0]):
+        t = vf[q, 1]
+        keep_vf[q] = (
+            touched[vf[q, 0]] or touched[tris[t, 0]] or touched[tris[t, 1]] or touched[tris[t, 2]]
+        )
+    keep_ee = np.empty(ee.shape[0], np.bool_)
+    for q in numba.prange(ee.shape[0]):
+        e, f = ee[q, 0], ee[q, 1]
+        keep_ee[q] = (
+            touched[edges[e, 0]] or touched[edges[e, 1]] or touched[edges[f, 0]]
+            or touched[edges[f, 1]]
+        )  # fmt: skip
+    return keep_vf, keep_ee
+
+
 def touching(vf, ee, tris, edges, touched) -> tuple[np.ndarray, np.ndarray]:
     """Which of the particle–triangle pairs ``vf`` and the edge pairs ``ee`` have a feature with a
     ``touched`` particle (a boolean per particle): the particle or a corner of the triangle, an end
     of either edge."""
-    return (
-        touched[vf[:, 0]] | touched[tris[vf[:, 1]]].any(axis=1),
-        touched[edges[ee[:, 0]]].any(axis=1) | touched[edges[ee[:, 1]]].any(axis=1),
+    return _touching(
+        np.ascontiguousarray(vf, np.int64),
+        np.ascontiguousarray(ee, np.int64),
+        tris,
+        edges,
+        np.ascontiguousarray(touched, np.bool_),
     )
 
 
@@ -582,6 +617,7 @@ class TriangleTree:
             elo=np.empty((n_edges, 3)),
             ehi=np.empty((n_edges, 3)),
             ereach=np.empty(n_edges),
+            touched=np.ones(n, np.int8),
         )
         self.tasks = _tasks(left, right, size, TASKS)
         depth = np.zeros(n_nodes, np.int64)
@@ -620,9 +656,11 @@ class TriangleTree:
 
     def _search(self, x0, radius, tree, touched=None):
         """The walk over ``tree`` (the hierarchy, marked: :class:`Hierarchy`) at ``x0``; with
-        ``touched``, only the pairs with a touched feature are kept."""
+        ``touched``, only the pairs with a touched feature are measured."""
         reach = read_only(reaches(radius, len(x0)), np.float64)
         prim = self.prim._replace(x0=x0, reach=reach)
+        if touched is not None:
+            prim = prim._replace(touched=touched.astype(np.int8))
         _refit(prim, tree)
         _edge_boxes(prim)
         while True:
@@ -641,11 +679,6 @@ class TriangleTree:
             self.caps = np.where(shrink, SHRINK_TO * need, self.caps)
         vf, vf_d = _join(rows.counts[:, 0], rows.cap_vf, rows.vf, rows.vf_d)
         ee, ee_d = _join(rows.counts[:, 1], rows.cap_ee, rows.ee, rows.ee_d)
-        if touched is not None:
-            # a marked item's own corners and edges are measured against the other item whether
-            # touched or not: only the pairs with a touched feature are asked for
-            keep, keep_e = touching(vf, ee, self.tris, self.edges, touched)
-            vf, vf_d, ee, ee_d = vf[keep], vf_d[keep], ee[keep_e], ee_d[keep_e]
         return vf, vf_d, ee, ee_d
 
     def pairs_touching(self, x0, radius, touched):

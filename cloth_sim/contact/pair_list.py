@@ -14,13 +14,30 @@ displacement plus the largest of the triangle's corners' (the triangle is the co
 hull); two segments' distance by the largest displacement of each one's ends. So a pair within
 ``r_p + r_T`` now was within ``r_p + D_p + r_T + D_T`` at the search, which the grown reaches cover
 while ``r_p + D_p`` stays below the particle's grown reach and ``r_T + D_T`` below the triangle's
-(and each edge's alike: :func:`_covers`). The kept pairs are measured by the tree's own distance
-functions and tests (the same box check first, the same strict comparison), and they come in the
-tree's order (its walk is fixed by the hierarchy's shape, and a search with larger reaches only
-adds pairs between those it finds with smaller ones), so the answer is the tree's pairs, in its
-order, with its distances, to the bit. The one exception would be a pair at its reach to within
-rounding that the tree's coarser box tests let pass while they reject it here: none was seen
+(and each edge's alike). The kept pairs are measured by the tree's own distance functions and
+tests (the same box check first, the same strict comparison), so the answer is the tree's
+pairs with its distances, to the bit, given in one order of theirs (:func:`tree_ranks`). The
+one exception
+would be a pair at its reach to within rounding
+that the tree's coarser box tests let pass while they reject it here: none was seen
 (``test_contacts.py`` compares the two answers at every query on a pile of cloth).
+
+**A particle that outran its skin is searched again alone.** The cover is a feature's, so the
+list keeps, per particle, the place and the reach its pairs were found with; the list holds every
+pair within those reaches at those places, whatever moment each place is of (the argument above
+asks nothing more: each side's displacement is measured from its own place). Where a particle
+outran its skin (:func:`_outran`: its own cover, then its triangles' and edges', each corner taken
+as searched again where it is marked), only its pairs are searched again
+(:meth:`TriangleTree.pairs_touching`, from its new place with its new reach, every other particle
+at its kept place): the list's pairs without a feature of it are unchanged by the move, and those
+with one are exactly what that search finds. So one fast particle no longer costs the whole
+cloth's walk. The answer holds the tree's pairs and distances, to the bit, in an order of the
+pairs' own (a refreshed list's order is its history's: the kept pairs first, then the
+refreshed; Gymnasium's check of an environment reset to a seed then stepped to other bits).
+On the resting T-shirt (``vbd``, a skin of half a thickness) 5–8 % of the particles are searched
+again a step (their own cover and their triangles' and edges'), where 40 % outran the bound that
+made ``vbd`` walk the whole tree every step; the refresh costs about half a whole walk (the
+touched particles are spread over the garment, and their leaves with them).
 
 A search made for one query alone (no skin) is kept the same way, and answers any later query it
 covers: after ``vbd``'s step the guard on the contact stage
@@ -29,7 +46,8 @@ small push, which ``vbd``'s last search, with its larger reaches, covers (on the
 2.3 → 0.6 ms a step, the same bits).
 
 The skin trades the search for the list's length: a thicker skin keeps the list longer and makes it
-longer. Its caller chooses it (self-collision: :data:`cloth_sim.contact.self_collision.SKIN`).
+longer. Its caller chooses it (the contact stage: :data:`cloth_sim.contact.self_collision.SKIN`;
+``vbd``: :data:`cloth_sim.integrators.vbd.SEARCH_SKIN`).
 
 **Where it pays** depends on the cloth: on the fold scene at 24×24 the kept pairs cost 0.6 of a
 search every step, at 32×32 and finer (a thickness near half the spacing: the grown reaches take
@@ -42,41 +60,61 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from .collision_tree import TriangleTree, reaches
+from .collision_tree import TriangleTree, reaches, touching
 from .geometry import closest_on_segments, point_triangle_distance, read_only
 
 #: room kept for rounding in the cover test (m): a list is searched again that much early
 ROUNDING = 1e-9
+#: the share of the particles at most whose pairs are searched again alone where they outran the
+#: list (:meth:`PairList.pairs`); beyond it the whole cloth is searched
+REFRESH_SHARE = 0.1
 
 
 @numba.njit(cache=True)
-def _covers(x0, reach, x_s, reach_s, tris, edges):
-    """Whether the search at ``x_s`` with reaches ``reach_s`` found every pair within ``reach`` at
-    ``x0`` (module docstring): each particle's, triangle's and edge's reach plus its (largest)
-    displacement since within what the search gave it."""
+def _outran(x0, reach, grown, x_s, reach_s, tris, edges):
+    """Per particle, whether its pairs must be searched again (at ``x0``, with the reaches
+    ``grown``) for the kept list, found within the reaches ``reach_s`` at the places ``x_s``, to
+    hold every pair within ``reach`` at ``x0`` (module docstring): its own reach plus its
+    displacement since beyond what the list gave it; then each triangle (edge) whose largest
+    corner's reach plus the largest of its corners' displacements is beyond the largest of their
+    kept reaches, each corner taken as searched again where it is marked, has all its corners
+    marked, until none is left (a corner searched again moves no more and may reach less: so
+    a marked corner's triangles are looked at again)."""
     n = x0.shape[0]
     moved = np.empty(n)
+    out = np.zeros(n, np.bool_)
     for i in range(n):
         dx, dy, dz = x0[i, 0] - x_s[i, 0], x0[i, 1] - x_s[i, 1], x0[i, 2] - x_s[i, 2]
         moved[i] = np.sqrt(dx * dx + dy * dy + dz * dz)
-        if not reach[i] + moved[i] <= reach_s[i] - ROUNDING:  # (a NaN searches again)
-            return False
-    for t in range(tris.shape[0]):
-        a, b, c = tris[t, 0], tris[t, 1], tris[t, 2]
-        need = max(reach[a], reach[b], reach[c]) + max(moved[a], moved[b], moved[c])
-        if need > max(reach_s[a], reach_s[b], reach_s[c]) - ROUNDING:
-            return False
-    for e in range(edges.shape[0]):
-        a, b = edges[e, 0], edges[e, 1]
-        need = max(reach[a], reach[b]) + max(moved[a], moved[b])
-        if need > max(reach_s[a], reach_s[b]) - ROUNDING:
-            return False
-    return True
+        if not reach[i] + moved[i] <= reach_s[i] - ROUNDING:  # (a NaN is outrun)
+            out[i] = True
+    changed = True
+    while changed:
+        changed = False
+        for t in range(tris.shape[0] + edges.shape[0]):
+            if t < tris.shape[0]:
+                a, b, c = tris[t, 0], tris[t, 1], tris[t, 2]
+            else:
+                a, b = edges[t - tris.shape[0], 0], edges[t - tris.shape[0], 1]
+                c = b
+            if out[a] and out[b] and out[c]:
+                continue
+            need, have = 0.0, 0.0
+            far = 0.0
+            for k in (a, b, c):
+                need = max(need, reach[k])
+                far = max(far, 0.0 if out[k] else moved[k])
+                have = max(have, grown[k] if out[k] else reach_s[k])
+            if not need + far <= have - ROUNDING:
+                out[a] = out[b] = out[c] = True
+                changed = True
+    return out
 
 
 @numba.njit(cache=True, parallel=True)
 def _near_now(x0, reach, tris, edges, vf, ee):
-    """Which kept pairs are still within reach at ``x0``, and their distances: the tree's tests
+    """The kept pairs still within reach at ``x0``, with their distances, in order (each kind
+    ``(pairs, distances)``): the tree's tests
     (:func:`cloth_sim.contact.collision_tree._point_triangle` and the edge–edge test of
     ``_traverse``) on each, every pair on its own (so the same at any thread count)."""
     keep_vf, vf_d = np.zeros(vf.shape[0], np.bool_), np.empty(vf.shape[0])
@@ -84,6 +122,8 @@ def _near_now(x0, reach, tris, edges, vf, ee):
         p, t = vf[q, 0], vf[q, 1]
         a, b, c = tris[t, 0], tris[t, 1], tris[t, 2]
         r, tr = reach[p], max(reach[a], reach[b], reach[c])
+        if r + tr <= 0.0:
+            continue  # nothing reaches: a distance is never below 0 (the guard's still cloth)
         outside = False
         for k in range(3):
             lo = min(x0[a, k], x0[b, k], x0[c, k]) - tr
@@ -101,6 +141,8 @@ def _near_now(x0, reach, tris, edges, vf, ee):
         e, f = ee[q, 0], ee[q, 1]
         e0, e1, f0, f1 = edges[e, 0], edges[e, 1], edges[f, 0], edges[f, 1]
         r = max(reach[e0], reach[e1]) + max(reach[f0], reach[f1])
+        if r <= 0.0:
+            continue
         apart = False
         for k in range(3):
             elo, ehi = min(x0[e0, k], x0[e1, k]), max(x0[e0, k], x0[e1, k])
@@ -113,37 +155,161 @@ def _near_now(x0, reach, tris, edges, vf, ee):
         if d >= r:
             continue
         keep_ee[q], ee_d[q] = True, d
-    return keep_vf, vf_d, keep_ee, ee_d
+    return _kept(vf, keep_vf, vf_d), _kept(ee, keep_ee, ee_d)
+
+
+@numba.njit(cache=True)
+def _kept(pairs, keep, dist):
+    """The ``pairs`` that ``keep`` marks, with their distances, in order."""
+    m = 0
+    for q in range(keep.shape[0]):
+        m += keep[q]
+    out, out_d = np.empty((m, 2), np.int64), np.empty(m)
+    m = 0
+    for q in range(keep.shape[0]):
+        if keep[q]:
+            out[m, 0], out[m, 1], out_d[m] = pairs[q, 0], pairs[q, 1], dist[q]
+            m += 1
+    return out, out_d
+
+
+@numba.njit(cache=True)
+def _ordered(pairs, dist, rank):
+    """``pairs`` and their distances by the ``rank`` of their first index (a permutation), then
+    by their second index (each pair is unique, so this order is the pairs' own, whatever order
+    they came in): a counting sort over the ranks, then an insertion sort of each (short) run."""
+    buckets = rank.shape[0]
+    ptr = np.zeros(buckets + 1, np.int64)
+    for q in range(pairs.shape[0]):
+        ptr[rank[pairs[q, 0]] + 1] += 1
+    for b in range(buckets):
+        ptr[b + 1] += ptr[b]
+    fill = ptr[:-1].copy()
+    out, out_d = np.empty_like(pairs), np.empty_like(dist)
+    for q in range(pairs.shape[0]):
+        b = rank[pairs[q, 0]]
+        r = fill[b]
+        fill[b] += 1
+        out[r, 0], out[r, 1], out_d[r] = pairs[q, 0], pairs[q, 1], dist[q]
+    for b in range(buckets):
+        for r in range(ptr[b] + 1, ptr[b + 1]):
+            j, key, d = r, out[r, 1], out_d[r]
+            while j > ptr[b] and out[j - 1, 1] > key:
+                out[j, 1], out_d[j] = out[j - 1, 1], out_d[j - 1]
+                j -= 1
+            out[j, 1], out_d[j] = key, d
+    return out, out_d
+
+
+@numba.njit(cache=True)
+def _spliced(pairs, gone, new):
+    """``pairs`` but those ``gone`` marks, then ``new``."""
+    m = new.shape[0]
+    for q in range(gone.shape[0]):
+        m += not gone[q]
+    out = np.empty((m, 2), np.int64)
+    m = 0
+    for q in range(gone.shape[0]):
+        if not gone[q]:
+            out[m, 0], out[m, 1] = pairs[q, 0], pairs[q, 1]
+            m += 1
+    for q in range(new.shape[0]):
+        out[m, 0], out[m, 1] = new[q, 0], new[q, 1]
+        m += 1
+    return out
+
+
+def tree_ranks(tree: TriangleTree) -> tuple[np.ndarray, np.ndarray]:
+    """Each particle's and each edge's place in the tree's leaf order (by the triangle that is
+    the first to hold it, then its place in that triangle; a lone particle where its leaf is): the
+    order the answers come in, the tree's own walk's as near as one order of the features can be
+    (an order by index interleaves far parts of a garment's panels: on the resting T-shirt the
+    layers settled to twice the motion a step)."""
+    order = tree.tree.order
+    n_tris = len(tree.tris)
+    own_v, own_e = tree.prim.own_v, tree.prim.own_e
+    n = max(int(tree.tris.max(initial=-1)), int(tree.orphans.max(initial=-1))) + 1
+    vrank = np.full(n, -1, np.int64)
+    erank = np.full(len(tree.edges), -1, np.int64)
+    nv = ne = 0
+    for k in order:
+        if k < n_tris:
+            for p in own_v[k]:
+                if p >= 0:
+                    vrank[p], nv = nv, nv + 1
+            for e in own_e[k]:
+                if e >= 0:
+                    erank[e], ne = ne, ne + 1
+        else:
+            vrank[tree.orphans[k - n_tris]], nv = nv, nv + 1
+    return vrank, erank
 
 
 class PairList:
-    """The tree's pairs, searched with a skin and kept while they cover a query (module
-    docstring). :meth:`pairs` answers as :meth:`TriangleTree.pairs` does; ``searches`` counts the
-    searches made for the list and ``queries`` the queries."""
+    """The tree's pairs, searched with a skin and kept while they cover a query, each particle's
+    part searched again where it outran its skin (module docstring). :meth:`pairs` answers with
+    :meth:`TriangleTree.pairs`' pairs and distances; ``searches`` counts the whole searches made
+    for the list, ``refreshes`` the searches of a few particles' pairs and ``queries`` the
+    queries."""
 
     def __init__(self, tree: TriangleTree):
         self.tree = tree
-        self._at = None  # (positions, reaches) of the last search
+        self._at = None  # (places, reaches) the kept pairs were found within, per particle
         self._vf = self._ee = None
-        self.searches = self.queries = 0
+        self.searches = self.refreshes = self.queries = 0
+        self._ranks = None if tree.empty else tree_ranks(tree)
 
     def pairs(self, x0, radius, skin):
-        """:meth:`TriangleTree.pairs`'s answer for ``x0`` and ``radius``, from the kept list where
-        it covers them, else from a new search with every reach grown by ``skin`` (m: a number,
-        or one per particle)."""
+        """:meth:`TriangleTree.pairs`'s pairs and distances for ``x0`` and ``radius``: from the
+        kept list where it covers them; where it does not for at most :data:`REFRESH_SHARE` of
+        the particles, those particles' pairs searched again from ``x0`` with their reaches grown
+        by ``skin`` (m: a number, or one per particle) and the list's other pairs kept; else from
+        a new search with every reach grown by ``skin``. The same pairs and distances as the tree
+        gives, in one order of theirs (:func:`tree_ranks`, :func:`_ordered`): the answer does
+        not depend on the list's history (which searches and refreshes made it), so a simulation
+        set back to a state steps on to the same bits."""
         x0 = read_only(x0, np.float64)
         reach = read_only(reaches(radius, len(x0)), np.float64)
         self.queries += 1
         tree = self.tree
-        if self._at is None or not _covers(x0, reach, *self._at, tree.tris, tree.edges):
-            grown = reach + np.asarray(skin, np.float64)
-            found = tree.pairs(x0, grown)
-            self._at = (x0.copy(), grown)
-            self._vf, self._ee = found[0], found[2]
+        grown = reach + np.asarray(skin, np.float64)
+        if self._at is not None:
+            out = _outran(x0, reach, grown, *self._at, tree.tris, tree.edges)
+            outran = np.count_nonzero(out)
+            if (
+                outran
+                and np.any(skin)
+                and outran <= REFRESH_SHARE * len(out)
+                and np.isfinite(grown[out]).all()  # (a NaN: searched whole)
+                and np.isfinite(x0[out]).all()
+            ):
+                self._refresh(x0, grown, out)
+                outran = 0
+        searched = None
+        if self._at is None or outran:
+            searched = tree.pairs(x0, grown)
+            self._at = (x0.copy(), np.array(grown, np.float64))
+            self._vf, self._ee = searched[0], searched[2]
             self.searches += 1
-            if not np.any(skin):
-                return found  # searched for this query alone: its answer
-        near_vf, vf_d, near_ee, ee_d = _near_now(
-            x0, reach, tree.tris, tree.edges, self._vf, self._ee
-        )
-        return self._vf[near_vf], vf_d[near_vf], self._ee[near_ee], ee_d[near_ee]
+        if searched is not None and not np.any(skin):
+            vf, vf_d, ee, ee_d = searched  # searched for this query alone: its answer
+        else:
+            (vf, vf_d), (ee, ee_d) = _near_now(
+                x0, reach, tree.tris, tree.edges, self._vf, self._ee
+            )
+        return (*_ordered(vf, vf_d, self._ranks[0]), *_ordered(ee, ee_d, self._ranks[1]))
+
+    def _refresh(self, x0, grown, out) -> None:
+        """The particles ``out`` (a boolean each) placed at ``x0`` with reaches ``grown``, every
+        other particle kept where the list has it; the pairs with a feature of theirs are those
+        within the reaches at those places (:meth:`TriangleTree.pairs_touching`), after the
+        list's other pairs (module docstring: why the list then covers as after a search)."""
+        tree = self.tree
+        places, reach = self._at
+        places[out] = x0[out]
+        reach[out] = grown[out]
+        vf, _, ee, _ = tree.pairs_touching(places, reach, out)
+        gone_vf, gone_ee = touching(self._vf, self._ee, tree.tris, tree.edges, out)
+        self._vf = _spliced(self._vf, gone_vf, vf)
+        self._ee = _spliced(self._ee, gone_ee, ee)
+        self.refreshes += 1

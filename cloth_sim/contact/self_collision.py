@@ -75,24 +75,30 @@ MAX_THICKNESS_FRACTION = 0.5
 #: two tried; a thicker skin keeps the list more steps and makes it longer)
 SKIN = 1.0
 
-#: the pairs are kept only while the grown reach of a pair, ``(1 + 2·SKIN)·thickness``, stays
-#: within this share of the shortest rest edge: beyond it the kept list takes in the flat cloth's
+#: the pairs are kept only while the grown reach of a pair, ``(1 + 2·skin)·thickness``, stays
+#: within this share of the median rest edge: beyond it the kept list takes in the flat cloth's
 #: next-but-one neighbours. On the fold scene (1 s from 0.5 s), the kept pairs against a search
 #: every step: 0.6× the cost at a ratio of 0.52 (24×24), 1.15× at 0.70 (32×32), 1.4× at 0.88
-#: (40×40), 1.3× at 1.06 (48×48), 1.8× at 1.42 (64×64)
+#: (40×40), 1.3× at 1.06 (48×48), 1.8× at 1.42 (64×64). (The median, not the shortest: a mesh's
+#: few short edges bring a few pairs into the list, not the cloth's; Newton's shirt has edges
+#: of 1.5 mm and a median of 10 mm, at a thickness of half the shortest.)
 KEEP_BELOW = 0.6
+
+
+def rest_edges(model) -> np.ndarray:
+    """The lengths of ``model``'s triangle edges at rest (each as often as triangles have it)."""
+    t = model.triangles
+    x = model.positions
+    edges = np.concatenate(
+        [x[t[:, 1]] - x[t[:, 0]], x[t[:, 2]] - x[t[:, 1]], x[t[:, 0]] - x[t[:, 2]]]
+    ).reshape(-1, 3)
+    return np.sqrt((edges * edges).sum(axis=1))
 
 
 def shortest_edge(model) -> float:
     """``model``'s shortest triangle edge at rest (0 without triangles)."""
-    t = model.triangles
-    if len(t) == 0:
-        return 0.0
-    x = model.positions
-    edges = np.concatenate(
-        [x[t[:, 1]] - x[t[:, 0]], x[t[:, 2]] - x[t[:, 1]], x[t[:, 0]] - x[t[:, 2]]]
-    )
-    return float(np.sqrt((edges * edges).sum(axis=1)).min())
+    lengths = rest_edges(model)
+    return float(lengths.min()) if len(lengths) else 0.0
 
 
 def thickness_limit(model) -> float:
@@ -132,7 +138,10 @@ class SelfCollision:
         self._moved = np.zeros(model.n_particles)
         self._no_clearance = np.full(model.n_particles, np.inf)
         self._pairs = None  # the candidate pairs' hierarchy and kept list, built at the first step
-        self._shortest_edge = shortest_edge(model)
+        lengths = rest_edges(model)
+        # the median rest edge: what the flat cloth's next neighbours are apart (a mesh's few
+        # short edges bring a few of them into a kept list, not the whole cloth's)
+        self._typical_edge = float(np.median(lengths)) if len(lengths) else 0.0
         self.last_pairs = self.last_pushed = self.last_slowed = self.last_edge_pairs = 0
 
     @property
@@ -159,13 +168,20 @@ class SelfCollision:
     def keeps_pairs(self) -> bool:
         """Whether the stage's searches keep their pairs on this cloth at this thickness
         (:data:`KEEP_BELOW`)."""
-        return (1 + 2 * SKIN) * self.thickness <= KEEP_BELOW * self._shortest_edge
+        return self.skin(SKIN) > 0.0
+
+    def skin(self, thicknesses: float) -> float:
+        """A skin of ``thicknesses`` thicknesses for the kept pairs, in metres, where it keeps
+        the flat cloth's neighbours out of the list on this cloth (:data:`KEEP_BELOW` of its
+        median rest edge), else 0."""
+        grown = (1 + 2 * thicknesses) * self.thickness
+        return thicknesses * self.thickness if grown <= KEEP_BELOW * self._typical_edge else 0.0
 
     @property
     def _skin(self) -> float:
         """The stage's own searches' skin (m): :data:`SKIN` thicknesses where it keeps its pairs
         (:attr:`keeps_pairs`), else none."""
-        return SKIN * self.thickness if self.keeps_pairs else 0.0
+        return self.skin(SKIN)
 
     def candidates(self, x0, reach, skin=0.0):
         """``(vf, vf_distance, ee, ee_distance)``: the particle–triangle and edge–edge pairs within

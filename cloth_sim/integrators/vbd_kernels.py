@@ -192,32 +192,37 @@ def contact_pairs(x, vt, ee, tris, edges, tri_edge, edge_owner, vertex_owner):
 
 
 @numba.njit(cache=True)
-def contact_records(n, idx, coef, use):
-    """Per vertex, the pairs ``use`` marks that it is in (CSR of ``4·pair + slot``, in pair order):
-    a counting sort."""
+def contact_records(n, idx, coef, energy):
+    """Per vertex, the pairs it is in (CSR of ``4·pair + slot``, in pair order): those that carry
+    the energy, and all of them, ``(ptr, rec, all_ptr, all_rec)``; one counting sort for both."""
     ptr = np.zeros(n + 1, np.int64)
+    aptr = np.zeros(n + 1, np.int64)
     for q in range(idx.shape[0]):
-        if not use[q]:
-            continue
         for slot in range(4):
             if coef[q, slot] != 0.0:
-                ptr[idx[q, slot] + 1] += 1
+                aptr[idx[q, slot] + 1] += 1
+                if energy[q]:
+                    ptr[idx[q, slot] + 1] += 1
     for i in range(n):
         ptr[i + 1] += ptr[i]
+        aptr[i + 1] += aptr[i]
     fill = ptr[:-1].copy()
+    afill = aptr[:-1].copy()
     rec = np.empty(ptr[n], np.int64)
+    arec = np.empty(aptr[n], np.int64)
     for q in range(idx.shape[0]):
-        if not use[q]:
-            continue
         for slot in range(4):
             if coef[q, slot] != 0.0:
                 v = idx[q, slot]
-                rec[fill[v]] = 4 * q + slot
-                fill[v] += 1
-    return ptr, rec
+                arec[afill[v]] = 4 * q + slot
+                afill[v] += 1
+                if energy[q]:
+                    rec[fill[v]] = 4 * q + slot
+                    fill[v] += 1
+    return ptr, rec, aptr, arec
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, parallel=True)
 def pack_records(rec, idx, coef, nrm, colour):
     """The energy records ``rec`` (``4·pair + slot``, each vertex's in a run:
     :func:`contact_records`) with their pairs' data copied in, record by record: ``(vertices
@@ -230,7 +235,7 @@ def pack_records(rec, idx, coef, nrm, colour):
     making them costs ~0.25 ms a search."""
     m = rec.shape[0]
     rv, rw, rn = np.empty((m, 4), np.int64), np.empty((m, 5)), np.empty((m, 3))
-    for q in range(m):
+    for q in numba.prange(m):  # (each record its own row: the same at any thread count)
         pair = rec[q] // 4
         own = idx[pair, rec[q] % 4]
         for slot in range(4):
@@ -243,12 +248,12 @@ def pack_records(rec, idx, coef, nrm, colour):
     return rv, rw, rn
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, parallel=True)
 def nearest_distances(ptr, rec, dist):
     """Each vertex's nearest pair distance over its records (``inf``: none)."""
     n = ptr.shape[0] - 1
     out = np.full(n, np.inf)
-    for i in range(n):
+    for i in numba.prange(n):
         for q in range(ptr[i], ptr[i + 1]):
             out[i] = min(out[i], dist[rec[q] // 4])
     return out
@@ -489,7 +494,7 @@ def keep_kinematic(v, start_v, free):
                 v[i, c] = start_v[i, c]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, parallel=True)
 def collider_allowances(x, allowance, bounded, co, cdepth, tau, allow, near):
     """How far each vertex may move from ``x`` before the next search (``allow``) and whether it
     can come within the thickness of a collider meanwhile (``near``: the iterations look at the
@@ -508,7 +513,7 @@ def collider_allowances(x, allowance, bounded, co, cdepth, tau, allow, near):
     ckind, cpos, crot, cgeo, creach = co.kinds, co.pos, co.rot, co.geo, co.reach
     cbank = (co.reals, co.ints, co.starts)
     reals, ints, starts = cbank
-    for i in range(x.shape[0]):
+    for i in numba.prange(x.shape[0]):  # (each vertex its own rows: the same at any thread count)
         b = allowance[i] if bounded else math.inf
         nearest = math.inf
         for c in range(ckind.shape[0]):
@@ -547,7 +552,7 @@ def collider_allowances(x, allowance, bounded, co, cdepth, tau, allow, near):
         near[i] = nearest - b < tau * 1.01
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, parallel=True)
 def overtaken(x, free, co, tau):
     """The initial guess of each free vertex that a moving collider of ``co`` overtook over the
     step (closer than ``τ`` to its new pose) put on its skin, ``τ`` out along its normal; returns
@@ -566,7 +571,7 @@ def overtaken(x, free, co, tau):
                     still = False
         if still:
             continue
-        for i in range(x.shape[0]):
+        for i in numba.prange(x.shape[0]):  # (a collider at a time; each vertex its own row)
             if not free[i]:
                 continue
             if beyond_reach(cpos, creach, c, x[i, 0], x[i, 1], x[i, 2]) >= tau:

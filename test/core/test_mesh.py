@@ -446,15 +446,20 @@ def test_the_tshirt_rests_on_its_table_with_self_contact_as_stiff_as_its_knit():
     """``self_contact_stiffness='cloth'``: self-contact as stiff as the knit around it
     (``vbd.SELF_CONTACT_SHARE`` of the springs at a vertex). The T-shirt settled on its table
     rests as it does without self-contact, its median vertex still to a hundredth of a
-    millimetre a step, and each step's relative residual near the one without; at the default
-    1e4 N/m, forty times the knit's stiffness, its layers jitter (0.08 mm a step, up to 2.5 mm,
-    a residual 1,000 times the weight)."""
+    millimetre a step; at the default 1e4 N/m, forty times the knit's stiffness, its layers
+    jitter (0.09 mm a step, a relative residual ~1,700 times the weight), and at the knit's
+    stiffness the residual is two orders of magnitude below that. It is not the residual without
+    self-contact (2.3): at rest it depends on the configuration the layers settle in, 2.5–49
+    over runs whose starts differ by a nanometre (2026-12-01), so that is not asserted."""
     scene = load_scene("tshirt")
     found = {}
-    for on in (False, True):
+    for case, on, options in (
+        ("off", False, {"self_contact_stiffness": "cloth"}),
+        ("cloth", True, {"self_contact_stiffness": "cloth"}),
+        ("default", True, {}),
+    ):
         sim = scene.build_simulator(
-            self_collision=on,
-            integrator_options={**scene.vbd_options(), "self_contact_stiffness": "cloth"},
+            self_collision=on, integrator_options={**scene.vbd_options(), **options}
         )
         assert sim.integrator_options["iterations"] == 3  # (the scene's)
         sim.advance(4.5)  # it lands at 0.14 s; with self-contact its layers settle by 4.5 s
@@ -464,9 +469,10 @@ def test_the_tshirt_rests_on_its_table_with_self_contact_as_stiff_as_its_knit():
             sim.step()
             moved.append(np.median(np.linalg.norm(sim.positions - x0, axis=1)))
             residual.append(sim.integrator_stats["last_residual"])
-        found[on] = float(np.mean(moved)), float(np.median(residual))
-    assert found[True][0] <= 1e-5  # m a step
-    assert found[True][1] <= 3.0 * found[False][1]
+        found[case] = float(np.mean(moved)), float(np.median(residual))
+    assert found["off"][0] <= 1e-5 and found["cloth"][0] <= 1e-5  # m a step
+    assert found["cloth"][0] <= 0.25 * found["default"][0]
+    assert found["cloth"][1] <= 0.1 * found["default"][1]
 
 
 # --------------------------------------------------------------------------- scenes and garments
