@@ -113,8 +113,7 @@ def _outran(x0, reach, grown, x_s, reach_s, tris, edges):
 
 @numba.njit(cache=True, parallel=True)
 def _near_now(x0, reach, tris, edges, vf, ee):
-    """The kept pairs still within reach at ``x0``, with their distances, in order (each kind
-    ``(pairs, distances)``): the tree's tests
+    """Which kept pairs are still within reach at ``x0``, and their distances: the tree's tests
     (:func:`cloth_sim.contact.collision_tree._point_triangle` and the edge–edge test of
     ``_traverse``) on each, every pair on its own (so the same at any thread count)."""
     keep_vf, vf_d = np.zeros(vf.shape[0], np.bool_), np.empty(vf.shape[0])
@@ -155,38 +154,27 @@ def _near_now(x0, reach, tris, edges, vf, ee):
         if d >= r:
             continue
         keep_ee[q], ee_d[q] = True, d
-    return _kept(vf, keep_vf, vf_d), _kept(ee, keep_ee, ee_d)
+    return keep_vf, vf_d, keep_ee, ee_d
 
 
 @numba.njit(cache=True)
-def _kept(pairs, keep, dist):
-    """The ``pairs`` that ``keep`` marks, with their distances, in order."""
-    m = 0
-    for q in range(keep.shape[0]):
-        m += keep[q]
-    out, out_d = np.empty((m, 2), np.int64), np.empty(m)
-    m = 0
-    for q in range(keep.shape[0]):
-        if keep[q]:
-            out[m, 0], out[m, 1], out_d[m] = pairs[q, 0], pairs[q, 1], dist[q]
-            m += 1
-    return out, out_d
-
-
-@numba.njit(cache=True)
-def _ordered(pairs, dist, rank):
-    """``pairs`` and their distances by the ``rank`` of their first index (a permutation), then
-    by their second index (each pair is unique, so this order is the pairs' own, whatever order
-    they came in): a counting sort over the ranks, then an insertion sort of each (short) run."""
+def _ordered(pairs, dist, keep, rank):
+    """The ``pairs`` that ``keep`` marks and their distances, by the ``rank`` of their first index
+    (a permutation), then by their second index (each pair is unique, so this order is the pairs'
+    own, whatever order they came in): a counting sort over the ranks, then an insertion sort of
+    each (short) run."""
     buckets = rank.shape[0]
     ptr = np.zeros(buckets + 1, np.int64)
     for q in range(pairs.shape[0]):
-        ptr[rank[pairs[q, 0]] + 1] += 1
+        if keep[q]:
+            ptr[rank[pairs[q, 0]] + 1] += 1
     for b in range(buckets):
         ptr[b + 1] += ptr[b]
     fill = ptr[:-1].copy()
-    out, out_d = np.empty_like(pairs), np.empty_like(dist)
+    out, out_d = np.empty((ptr[buckets], 2), np.int64), np.empty(ptr[buckets])
     for q in range(pairs.shape[0]):
+        if not keep[q]:
+            continue
         b = rank[pairs[q, 0]]
         r = fill[b]
         fill[b] += 1
@@ -293,11 +281,12 @@ class PairList:
             self.searches += 1
         if searched is not None and not np.any(skin):
             vf, vf_d, ee, ee_d = searched  # searched for this query alone: its answer
+            keep_vf, keep_ee = np.ones(len(vf), np.bool_), np.ones(len(ee), np.bool_)
         else:
-            (vf, vf_d), (ee, ee_d) = _near_now(
-                x0, reach, tree.tris, tree.edges, self._vf, self._ee
-            )
-        return (*_ordered(vf, vf_d, self._ranks[0]), *_ordered(ee, ee_d, self._ranks[1]))
+            vf, ee = self._vf, self._ee
+            keep_vf, vf_d, keep_ee, ee_d = _near_now(x0, reach, tree.tris, tree.edges, vf, ee)
+        vranks, eranks = self._ranks
+        return (*_ordered(vf, vf_d, keep_vf, vranks), *_ordered(ee, ee_d, keep_ee, eranks))
 
     def _refresh(self, x0, grown, out) -> None:
         """The particles ``out`` (a boolean each) placed at ``x0`` with reaches ``grown``, every
