@@ -215,21 +215,21 @@ def tree_ranks(tree: TriangleTree) -> tuple[np.ndarray, np.ndarray]:
     layers settled to twice the motion a step)."""
     order = tree.tree.order
     n_tris = len(tree.tris)
-    own_v, own_e = tree.prim.own_v, tree.prim.own_e
-    n = max(int(tree.tris.max(initial=-1)), int(tree.orphans.max(initial=-1))) + 1
-    vrank = np.full(n, -1, np.int64)
-    erank = np.full(len(tree.edges), -1, np.int64)
-    nv = ne = 0
-    for k in order:
-        if k < n_tris:
-            for p in own_v[k]:
-                if p >= 0:
-                    vrank[p], nv = nv, nv + 1
-            for e in own_e[k]:
-                if e >= 0:
-                    erank[e], ne = ne, ne + 1
-        else:
-            vrank[tree.orphans[k - n_tris]], nv = nv, nv + 1
+    is_tri = order < n_tris
+    none = np.full((len(order), 3), -1, np.int64)
+    rows = np.minimum(order, max(n_tris - 1, 0))
+    own_v = tree.prim.own_v[rows] if n_tris else none
+    own_e = tree.prim.own_e[rows] if n_tris else none
+    lone = none.copy()
+    lone[~is_tri, 0] = tree.orphans[order[~is_tri] - n_tris]
+    by_leaf = np.where(is_tri[:, None], own_v, lone).ravel()
+    by_leaf = by_leaf[by_leaf >= 0]
+    vrank = np.empty(len(by_leaf), np.int64)
+    vrank[by_leaf] = np.arange(len(by_leaf))
+    edges_by_leaf = np.where(is_tri[:, None], own_e, -1).ravel()
+    edges_by_leaf = edges_by_leaf[edges_by_leaf >= 0]
+    erank = np.empty(len(tree.edges), np.int64)
+    erank[edges_by_leaf] = np.arange(len(edges_by_leaf))
     return vrank, erank
 
 
