@@ -302,7 +302,7 @@ class VBD(Integrator):
         self._cut = np.zeros(n, np.int8)
         self._touch = np.zeros(n, np.int8)  # in contact in the last iteration: not extrapolated
         self._no_touch = np.zeros(n, np.int8)
-        self._seen = np.zeros((n, 1, 4))
+        self._seen = np.zeros((n, 1, 5))
         self._allow = np.full(n, np.inf)  # how far each vertex may move from the last search
         self._near = np.ones(n, np.bool_)  # may touch a collider before the next search
         self._candidates = False  # whether the last search's pairs serve self-contact
@@ -611,6 +611,14 @@ class VBD(Integrator):
         allow = self._allow
         if len(colliders.kinds):  # what a moving collider overtook starts on its skin
             overtaken(x, free, colliders, tau)
+        # each collider's distance and normal at a vertex, as colliders_at saw them for onset,
+        # and (its fifth number) the lower bound on that distance the last search left while
+        # the vertex stays within its allowance (collider_allowances: colliders_at asks nothing
+        # of a collider that bound keeps beyond the thickness)
+        seen = self._seen
+        if seen.shape[0] != len(x) or seen.shape[1] < len(colliders.kinds):
+            seen = self._seen = np.zeros((len(x), max(1, len(colliders.kinds)), 5))
+            self._candidates = False  # (the bounds are made with the search)
         if self_contact or len(colliders.kinds):
             # the initial guess, not the inertia: a layer resting on another or on a collider
             # is not going where gravity alone would take it
@@ -652,10 +660,6 @@ class VBD(Integrator):
             and not self_contact
             and not len(colliders.kinds)
         )
-        # each collider's distance and normal at a vertex, as colliders_at saw them for onset
-        seen = self._seen
-        if seen.shape[0] != len(x) or seen.shape[1] < len(colliders.kinds):
-            seen = self._seen = np.zeros((len(x), max(1, len(colliders.kinds)), 4))
         grid = None if self_contact or tether else self._grid_layout(forces)
         if grid is not None:
             contact = None
@@ -824,6 +828,7 @@ class VBD(Integrator):
             vt, vt_d, ee, ee_d = sc.candidates(x, 0.5 * tau + allowance, sc.skin(SEARCH_SKIN))
             self._rec = self._records(n, x, vt, vt_d, ee, ee_d, sc)
             self._found = (vt, vt_d, ee, ee_d, allowance)
+        clear = np.full((n, self._seen.shape[1]), -np.inf)
         collider_allowances(
             x,
             allowance,
@@ -833,8 +838,11 @@ class VBD(Integrator):
             tau,
             self._allow,
             self._near,
+            clear,
         )
         self._allow[~self.free] = np.inf
+        clear[~self.free] = -np.inf
+        self._seen[:, :, 4] = clear
         c["last_contacts"] = self._energy_pairs
         self._candidates = self_contact
         self._cd_colliders = (colliders.pos.copy(), colliders.rot.copy(), tau)
@@ -874,6 +882,7 @@ class VBD(Integrator):
         # the colliders' hold on the vertices searched again (the others' is as it was: the same
         # place, allowance and colliders)
         allow, near = self._allow[met], self._near[met]
+        clear = np.full((len(allow), self._seen.shape[1]), -np.inf)
         collider_allowances(
             np.ascontiguousarray(x_cd[met]),
             allowance[met],
@@ -883,8 +892,10 @@ class VBD(Integrator):
             tau,
             allow,
             near,
+            clear,
         )
         self._allow[met], self._near[met] = allow, near
+        self._seen[met, :, 4] = clear
         self.counters["last_contacts"] = self._energy_pairs
 
     def _detection_holds(self, y, colliders, tau, self_contact) -> bool:

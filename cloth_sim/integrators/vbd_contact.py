@@ -87,12 +87,21 @@ def colliders_at(i, x, xt, ckind, pose, pose0, cgeo, cmu, cbank, law, fh, seen):
     a primitive's, which :func:`onset` asks again (cheaper than storing them, measured on
     robot_sweep's eight links). (The arrays that the calls inside that are not inlined, the
     mesh's search, take are passed as they are: in a bundle of more, those calls would count the
-    bundle's references on every call.)"""
+    bundle's references on every call.) ``seen[i, c, 4]``: the last search's lower bound on the
+    distance while the vertex keeps within its allowance (a collider it keeps beyond ``τ`` is
+    asked nothing)."""
     tau, kc, eps = law
     cpos, crot, creach = pose
     cpos0, crot0 = pose0
     touched = False
     for c in range(ckind.shape[0]):
+        # kept beyond the thickness wherever the vertex may be until the next search (the
+        # search's bound, ``seen[i, c, 4]``: collider_allowances): no contact, without the
+        # query; that lower bound kept for onset, which asks only where a step is longer
+        clear = seen[i, c, 4]
+        if clear >= tau:
+            seen[i, c, 0], seen[i, c, 1], seen[i, c, 2], seen[i, c, 3] = clear, 0.0, 0.0, 0.0
+            continue
         # beyond its reach by the thickness: no contact, without the query (a robot's links each
         # asked by every vertex near any of them: most of a Franka Panda's step); a mesh's lower
         # bound kept for onset

@@ -495,7 +495,7 @@ def keep_kinematic(v, start_v, free):
 
 
 @numba.njit(cache=True, parallel=True)
-def collider_allowances(x, allowance, bounded, co, cdepth, tau, allow, near):
+def collider_allowances(x, allowance, bounded, co, cdepth, tau, allow, near, clear):
     """How far each vertex may move from ``x`` before the next search (``allow``) and whether it
     can come within the thickness of a collider meanwhile (``near``: the iterations look at the
     colliders only for those); ``co``: the colliders
@@ -509,7 +509,13 @@ def collider_allowances(x, allowance, bounded, co, cdepth, tau, allow, near):
     − 1.01 τ``) is held within that distance (its signed distances are 1-Lipschitz, so it cannot
     reach a skin within the step) and is not near: the iterations then skip the colliders' terms
     for it (on a 128×128 cloth over the ball and its floor, every vertex was near, and those
-    terms were most of the iterations' time; docs/BENCHMARKS.md §11)."""
+    terms were most of the iterations' time; docs/BENCHMARKS.md §11).
+
+    ``clear[i, c]``: a lower bound on vertex ``i``'s distance to collider ``c`` wherever it is
+    within its ``allow`` of ``x`` (the distance or its lower bound here, less ``allow``: the
+    distances are 1-Lipschitz), ``−inf`` where ``allow`` is unbounded. Where it is at least the
+    thickness the iterations ask that collider nothing (:func:`.colliders_at`): on Newton's shirt
+    with the FR3 at it, a vertex on the table near one link was asking all eleven."""
     ckind, cpos, crot, cgeo, creach = co.kinds, co.pos, co.rot, co.geo, co.reach
     cbank = (co.reals, co.ints, co.starts)
     reals, ints, starts = cbank
@@ -523,6 +529,7 @@ def collider_allowances(x, allowance, bounded, co, cdepth, tau, allow, near):
             if bounded and far >= (allowance[i] + tau * 1.01) * (1.0 + 1e-9):
                 # beyond its reach: d ≥ allowance + 1.01 τ, so it neither bounds the vertex below
                 # its allowance nor makes it near (the same as measured)
+                clear[i, c] = far
                 continue
             if not bounded and far >= (FAR * allowance[i] + tau * 1.01) * (1.0 + 1e-9):
                 # far beyond its reach: measured by the lower bound, the vertex is held within it
@@ -536,6 +543,7 @@ def collider_allowances(x, allowance, bounded, co, cdepth, tau, allow, near):
             else:
                 d = sdf(ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2])[0]
             nearest = min(nearest, d)
+            clear[i, c] = d
             if cdepth[c] < math.inf:
                 reach = max(d, 0.0) + 0.9 * cdepth[c]
                 if d < tau and ckind[c] == MESH and mesh_closed(cbank, int(cgeo[c, 0])):
@@ -550,6 +558,8 @@ def collider_allowances(x, allowance, bounded, co, cdepth, tau, allow, near):
                 b = min(b, room * (1.0 - 1e-9))
         allow[i] = b
         near[i] = nearest - b < tau * 1.01
+        for c in range(ckind.shape[0]):
+            clear[i, c] = clear[i, c] - b if b < math.inf else -math.inf
 
 
 @numba.njit(cache=True, parallel=True)

@@ -304,7 +304,8 @@ def test_a_vertex_far_from_every_collider_skips_their_terms_and_cannot_reach_the
     from a collider's reach, no less than FAR times its motion) for the step, so that no motion
     within its bound brings it inside a skin (the signed distances are 1-Lipschitz):
     checked by random motions up to the bound. With self-contact the allowance is the bound,
-    short of the far side of a thin collider."""
+    short of the far side of a thin collider. Either way each collider's lower bound on the
+    distance (what lets the iterations skip it) holds for every such motion."""
     tau = 0.005
     shapes = [
         colliders.Plane(),
@@ -325,8 +326,21 @@ def test_a_vertex_far_from_every_collider_skips_their_terms_and_cannot_reach_the
     d = np.min([c.signed_distance(x) for c in shapes], axis=0)
     for bounded in (False, True):
         allow, near = np.empty(len(x)), np.empty(len(x), np.bool_)
-        args = (co, VBD.depths(co), tau, allow, near)
+        clear = np.empty((len(x), len(shapes)))
+        args = (co, VBD.depths(co), tau, allow, near, clear)
         collider_allowances(x, allowance, bounded, *args)
+        # each collider's lower bound holds wherever the vertex is within its bound (the
+        # iterations ask nothing of a collider whose bound is beyond τ), and some are beyond τ
+        held = np.isfinite(allow)
+        assert (clear[~held] == -np.inf).all() and (clear[held] >= tau).any()
+        for _ in range(20):
+            step = rng.normal(size=x.shape)
+            step *= (np.where(held, allow, 0.0) * rng.uniform(0.0, 1.0, len(x)))[:, None] / (
+                np.linalg.norm(step, axis=1)[:, None]
+            )
+            y = x + step
+            for c, shape in enumerate(shapes):
+                assert (shape.signed_distance(y)[held] >= clear[held, c] - 1e-12).all()
         if bounded:  # its allowance, or less near the thin box (its far side)
             assert (allow <= allowance).all() and (allow < allowance).any()
             continue
