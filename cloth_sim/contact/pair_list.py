@@ -15,12 +15,11 @@ hull); two segments' distance by the largest displacement of each one's ends. So
 ``r_p + r_T`` now was within ``r_p + D_p + r_T + D_T`` at the search, which the grown reaches cover
 while ``r_p + D_p`` stays below the particle's grown reach and ``r_T + D_T`` below the triangle's
 (and each edge's alike). The kept pairs are measured by the tree's own distance functions and
-tests (the same box check first, the same strict comparison), so the answer is the tree's
-pairs with its distances, to the bit, given in one order of theirs (:func:`tree_ranks`). The
-one exception
-would be a pair at its reach to within rounding
-that the tree's coarser box tests let pass while they reject it here: none was seen
-(``test_contacts.py`` compares the two answers at every query on a pile of cloth).
+tests (the same box check first, the same strict comparison), so the answer is the tree's pairs
+with its distances, to the bit, given in one order of theirs (:func:`tree_ranks`). The one
+exception would be a pair at its reach to within rounding that the tree's coarser box tests let
+pass while they reject it here: none was seen (``test_contacts.py`` compares the two answers at
+every query on a pile of cloth).
 
 **A particle that outran its skin is searched again alone.** The cover is a feature's, so the
 list keeps, per particle, the place and the reach its pairs were found with; the list holds every
@@ -32,8 +31,9 @@ as searched again where it is marked), only its pairs are searched again
 at its kept place): the list's pairs without a feature of it are unchanged by the move, and those
 with one are exactly what that search finds. So one fast particle no longer costs the whole
 cloth's walk. The answer holds the tree's pairs and distances, to the bit, in an order of the
-pairs' own (a refreshed list's order is its history's: the kept pairs first, then the
-refreshed; Gymnasium's check of an environment reset to a seed then stepped to other bits).
+pairs' own: a refreshed list holds them in its history's order (the kept pairs first, then the
+refreshed), and answered in that order an environment reset to a seed stepped on to other bits
+(Gymnasium's check of TshirtFold).
 On the resting T-shirt (``vbd``, a skin of half a thickness) 5–8 % of the particles are searched
 again a step (their own cover and their triangles' and edges'), where 40 % outran the bound that
 made ``vbd`` walk the whole tree every step; the refresh costs about half a whole walk (the
@@ -245,7 +245,7 @@ class PairList:
         self._at = None  # (places, reaches) the kept pairs were found within, per particle
         self._vf = self._ee = None
         self.searches = self.refreshes = self.queries = 0
-        self._ranks = None if tree.empty else tree_ranks(tree)
+        self._ranks = None if tree.empty else tree_ranks(tree)  # (the answers' order)
 
     def pairs(self, x0, radius, skin):
         """:meth:`TriangleTree.pairs`'s pairs and distances for ``x0`` and ``radius``: from the
@@ -260,6 +260,8 @@ class PairList:
         reach = read_only(reaches(radius, len(x0)), np.float64)
         self.queries += 1
         tree = self.tree
+        if tree.empty:
+            return tree.pairs(x0, reach)  # (nothing to pair, nothing to keep)
         grown = reach + np.asarray(skin, np.float64)
         if self._at is not None:
             out = _outran(x0, reach, grown, *self._at, tree.tris, tree.edges)

@@ -121,8 +121,9 @@ from .vbd_residual import sweep_residual
 #: coarse enough for it (:meth:`~cloth_sim.contact.self_collision.SelfCollision.skin`): a search
 #: then walks the tree only where more than a tenth of the vertices outran their skins, and
 #: searches again the pairs of those that did (:mod:`cloth_sim.contact.pair_list`). On the
-#: resting T-shirt 2-5 % of the vertices outrun half a thickness a step: 9.9 → 7.4 ms a step
-#: (a quarter: 8.5, a third 7.2: a thicker skin keeps a longer list to measure again)
+#: resting T-shirt 5-8 % of the vertices are searched again a step: 9.07 → 7.28 ms a step (a
+#: quarter of a thickness: 8.5 ms, a third 7.2, in an earlier run where a half gave 7.4: a
+#: thicker skin keeps a longer list to measure again)
 SEARCH_SKIN = 0.5
 #: the share of the nearest found distance a vertex may move between two candidate searches
 GAMMA = 0.45

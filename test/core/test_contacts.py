@@ -571,6 +571,17 @@ def _same_pairs(want, got) -> bool:
     return True
 
 
+def test_the_kept_pairs_of_a_cloth_with_nothing_to_pair_are_none():
+    """A kept list over no particles answers no pairs, with a skin or without (it has no order
+    of its features to give them in)."""
+    from cloth_sim.contact.self_collision import _features
+
+    none = np.zeros((0, 3), np.int64)
+    kept = PairList(TriangleTree(none, np.zeros((0, 3)), _features(none, 0)))
+    for skin in (0.002, 0.0):
+        assert [len(a) for a in kept.pairs(np.zeros((0, 3)), 0.01, skin)] == [0, 0, 0, 0]
+
+
 def test_the_kept_pairs_refreshed_for_the_particles_that_outran_them_are_the_trees():
     """The kept list (pair_list) where some particles outran their skin: their pairs searched
     again from where they are, the others' kept (a pair's cover is its features': each one's
