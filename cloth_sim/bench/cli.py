@@ -132,10 +132,23 @@ def _bench_vbd_peers(args) -> int:
     return print_vbd_peer_table(tuple(args.sizes), args.seconds, args.twist_seconds, args.device)
 
 
+def _steps_by_iterations(text: str) -> tuple[int, int]:
+    """``'10x5'`` -> ``(10, 5)``: steps a frame by iterations a step, both at least 1."""
+    try:
+        steps, iterations = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        steps = iterations = 0
+    if steps < 1 or iterations < 1:
+        raise argparse.ArgumentTypeError(
+            f"--ours {text!r}: expected STEPSxITERATIONS, two integers >= 1 (e.g. 10x5)"
+        )
+    return steps, iterations
+
+
 def _bench_franka_peer(args) -> int:
     from .franka_peer import print_franka_table
 
-    print_franka_table(args.frames, args.newton)
+    print_franka_table(args.frames, args.newton, tuple(args.ours))
     return 0
 
 
@@ -315,6 +328,15 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "--newton",
         default=None,
         help="an .npz of Newton's run: read where it exists (its frames), else written there",
+    )
+    fr.add_argument(
+        "--ours",
+        type=_steps_by_iterations,
+        nargs="+",
+        default=[(10, 5)],
+        metavar="STEPSxITERATIONS",
+        help="cloth_sim's settings, a row each: vbd steps a frame x iterations a step "
+        "(default 10x5: Newton's substeps and iterations)",
     )
     fr.set_defaults(func=_bench_franka_peer)
     vf = bsub.add_parser(

@@ -1,8 +1,9 @@
 """Newton's ``example_cloth_franka`` beside cloth_sim on the CPU: its Franka FR3 arm and hand, its
 shirt, its settings, the same arm motion.
 
-``cloth-sim bench franka-peer [--frames 480] [--newton FILE]`` (``make bench-peers`` installs
-Newton, Warp and usd-core: ``requirements-peers.txt``, never in ``make test``).
+``cloth-sim bench franka-peer [--frames 480] [--newton FILE] [--ours 10x5 5x5 ...]``
+(``make bench-peers`` installs Newton, Warp and usd-core: ``requirements-peers.txt``, never in
+``make test``).
 
 **Newton's side** is its example as it ships (Newton 1.8 on NVIDIA Warp's CPU device): the FR3 with
 its hand on a fixed base, following end-effector key poses through Newton's IK solver (Featherstone
@@ -22,8 +23,9 @@ usd-core) at the same place, in the library's ``gray-interlock`` (a measured T-s
 cloth_sim has no FEM triangles, so the two fabrics are alike, not the same), the same table and
 floor, the same FR3 (:class:`cloth_sim.robot.Robot` from the same URDF) driven frame by frame
 through the joint positions Newton's IK produced: each frame's 10 substeps as 10 steps of
-``vbd``, 5 iterations each, the joints moving linearly between the frame's two positions (as
-Newton's substeps move them, at the joint velocity that reaches the frame's IK solution);
+``vbd``, 5 iterations each (``--ours`` adds rows at other steps a frame and iterations a step),
+the joints moving linearly between the frame's two positions (as Newton's substeps move them, at
+the joint velocity that reaches the frame's IK solution);
 self-contact on, friction 1.5 against the arm and the table, 0.25 between layers (Newton's). The
 thickness is the largest self-collision allows on this mesh, half its shortest edge (0.73 mm;
 Newton's self-contact margin is 2 mm and its body margin 8 mm).
@@ -153,9 +155,9 @@ def fr3() -> Robot:
     return Robot.from_urdf(URDF, package_paths=[ASSETS])
 
 
-def ours(q: np.ndarray) -> Simulator:
-    """cloth_sim's side at Newton's first frame (module docstring): ``vbd`` at a substep of
-    Newton's (1/600 s), 5 iterations."""
+def ours(q: np.ndarray, steps: int = SUBSTEPS, iterations: int = ITERATIONS) -> Simulator:
+    """cloth_sim's side at Newton's first frame (module docstring): ``vbd`` at ``steps`` steps a
+    frame (Newton's substeps: 1/600 s) and ``iterations`` iterations a step (Newton's: 5)."""
     vertices, tris = shirt_mesh()
     model = ClothModel.from_mesh(
         (vertices, tris),
@@ -167,14 +169,14 @@ def ours(q: np.ndarray) -> Simulator:
     sim = Simulator(
         model,
         integrator="vbd",
-        dt=FRAME / SUBSTEPS,
+        dt=FRAME / steps,
         thickness=thickness_limit(model),
         self_collision=True,
         colliders=[
             colliders.Box(TABLE_CENTER, TABLE_HALF, friction=FRICTION, name="table"),
             colliders.Plane(friction=FRICTION, name="floor"),
         ],
-        integrator_options={"iterations": ITERATIONS, "self_friction": SELF_FRICTION},
+        integrator_options={"iterations": iterations, "self_friction": SELF_FRICTION},
     )
     sim.add_robot(
         fr3(), name="fr3", position=ARM_BASE, joints=dict(zip(JOINTS, q[0])), friction=FRICTION
@@ -182,12 +184,13 @@ def ours(q: np.ndarray) -> Simulator:
     return sim
 
 
-def run_ours(q: np.ndarray) -> dict:
-    """cloth_sim's shirt under the arm driven through ``q`` (a row a frame): each frame
-    :data:`SUBSTEPS` steps, the joints moving linearly between the frame's two rows (as Newton's
-    substeps drive them: at the joint velocity that reaches the frame's IK solution); the
-    self-crossings between every two steps, outside the timed part."""
-    sim = ours(q)
+def run_ours(q: np.ndarray, steps: int = SUBSTEPS, iterations: int = ITERATIONS) -> dict:
+    """cloth_sim's shirt under the arm driven through ``q`` (a row a frame): each frame ``steps``
+    steps of ``iterations`` iterations (Newton's: :data:`SUBSTEPS`, :data:`ITERATIONS`), the
+    joints moving linearly between the frame's two rows (as Newton's substeps drive them: at the
+    joint velocity that reaches the frame's IK solution); the self-crossings between every two
+    steps, outside the timed part."""
+    sim = ours(q, steps, iterations)
     frames = len(q) - 1
     x = np.empty((frames + 1, sim.model.n_particles, 3))
     wall = np.empty(frames)
@@ -195,8 +198,8 @@ def run_ours(q: np.ndarray) -> dict:
     tris, before, crossed = sim.model.triangles, sim.positions.copy(), 0
     for f in range(frames):
         took = 0.0
-        for s in range(SUBSTEPS):
-            a = (s + 1) / SUBSTEPS
+        for s in range(steps):
+            a = (s + 1) / steps
             t = time.perf_counter()
             sim.set_joint_positions("fr3", dict(zip(JOINTS, (1.0 - a) * q[f] + a * q[f + 1])))
             sim.step()
@@ -227,9 +230,14 @@ def deepest(x: np.ndarray, q: np.ndarray) -> tuple[float, int]:
     return worst, at
 
 
-def print_franka_table(frames: int = 480, newton_file: str | None = None) -> None:
+def print_franka_table(
+    frames: int = 480,
+    newton_file: str | None = None,
+    ours_settings: tuple[tuple[int, int], ...] = ((SUBSTEPS, ITERATIONS),),
+) -> None:
     """Both sides over ``frames`` frames (Newton's run read from ``newton_file`` where it exists,
-    else run and, where a file is named, written there)."""
+    else run and, where a file is named, written there); cloth_sim a row for each of
+    ``ours_settings`` (``(steps a frame, iterations a step)``; Newton's own by default)."""
     if newton_file and Path(newton_file).is_file():
         with np.load(newton_file) as z:
             theirs = {k: z[k] for k in z.files}
@@ -246,22 +254,28 @@ def print_franka_table(frames: int = 480, newton_file: str | None = None) -> Non
         theirs = run_newton(frames)
         if newton_file:
             np.savez_compressed(newton_file, **theirs)
-    mine = run_ours(theirs["q"])
+    runs = [(f"Newton 1.8 (Warp CPU), {SUBSTEPS}x{ITERATIONS}", theirs, None)]
+    for steps, iterations in ours_settings:
+        mine = run_ours(theirs["q"], steps, iterations)
+        runs.append((f"cloth_sim vbd, {steps}x{iterations}", mine, steps))
     print(
         f"Newton's example_cloth_franka beside cloth_sim, {frames} frames of 1/60 s "
-        f"({frames * FRAME:.1f} s), 10 substeps x 5 iterations a frame, self-contact on, "
-        "both on the CPU"
+        f"({frames * FRAME:.1f} s), self-contact on, both on the CPU; STEPSxITERATIONS: steps "
+        "(substeps) a frame x iterations a step"
     )
     print(
-        "| | particles | ms a frame | real-time factor | deepest inside a link | at frame "
-        "| self-crossings (between substeps) |"
+        "| | particles | ms a frame | real-time factor | Newton's time / ours "
+        "| deepest inside a link | at frame | self-crossings (between steps) |"
     )
-    print("|---|---|---|---|---|---|---|")
-    for name, run in (("Newton 1.8 (Warp CPU)", theirs), ("cloth_sim", mine)):
+    print("|---|---|---|---|---|---|---|---|")
+    newton_wall = float(np.median(theirs["wall"][1:]))
+    for name, run, steps in runs:
         wall = float(np.median(run["wall"][1:]))
         depth, at = deepest(run["x"], theirs["q"])
+        checked = frames * (steps or SUBSTEPS)
         print(
             f"| {name} | {run['x'].shape[1]:,} | {wall * 1e3:.0f} | {FRAME / wall:.3f} | "
-            f"{depth * 1e3:.2f} mm | {at} | {run.get('crossed', 'not checked')} |"
+            f"{newton_wall / wall:.2f} | {depth * 1e3:.2f} mm | {at} | "
+            f"{run.get('crossed', 'not checked')} of {checked:,} |"
         )
-    print(f"(cloth_sim's thickness {mine['thickness'] * 1e3:.2f} mm; {FABRIC})")
+    print(f"(cloth_sim's thickness {runs[-1][1]['thickness'] * 1e3:.2f} mm; {FABRIC})")

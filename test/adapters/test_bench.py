@@ -177,3 +177,13 @@ def test_the_compile_profile_names_an_unknown_part(capsys):
     """A part that compile_kernels does not have is refused, naming the option and the parts."""
     with pytest.raises(SystemExit, match=r"--parts: 'steps2' is not one of grid_contacts"):
         cli_main(["bench", "compile", "--parts", "steps2"])
+
+
+@pytest.mark.parametrize("text", ["10", "0x5", "5x-1", "tenx5", "10x5x2"])
+def test_the_franka_peer_refuses_a_setting_that_is_not_steps_by_iterations(text, capsys):
+    """``--ours`` takes STEPSxITERATIONS, two integers >= 1; anything else is refused before
+    Newton or the shirt is touched, naming the option and the form."""
+    with pytest.raises(SystemExit):
+        cli_main(["bench", "franka-peer", "--ours", text])
+    err = capsys.readouterr().err
+    assert f"--ours {text!r}" in err and "STEPSxITERATIONS, two integers >= 1" in err
