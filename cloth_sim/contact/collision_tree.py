@@ -677,8 +677,11 @@ class TriangleTree:
             need = np.maximum(most + most // 4, MIN_ROWS)
             shrink = (self.caps > KEEP_ROWS) & (self.caps > SHRINK_ABOVE * need)
             self.caps = np.where(shrink, SHRINK_TO * need, self.caps)
-        vf, vf_d = _join(rows.counts[:, 0], rows.cap_vf, rows.vf, rows.vf_d)
-        ee, ee_d = _join(rows.counts[:, 1], rows.cap_ee, rows.ee, rows.ee_d)
+        # each column copied: a view of one is contiguous only where there is one task, and
+        # numba compiles a kernel again for each layout
+        vf_counts, ee_counts = rows.counts[:, 0].copy(), rows.counts[:, 1].copy()
+        vf, vf_d = _join(vf_counts, rows.cap_vf, rows.vf, rows.vf_d)
+        ee, ee_d = _join(ee_counts, rows.cap_ee, rows.ee, rows.ee_d)
         return vf, vf_d, ee, ee_d
 
     def pairs_touching(self, x0, radius, touched):

@@ -76,7 +76,10 @@ class TriangleMesh:
     ``hi``)."""
 
     def __init__(self, vertices, triangles, name: str, grid: bool = True):
-        v = np.ascontiguousarray(vertices, dtype=np.float64)
+        # a copy of its own: the caller's array may change after (a simulation's positions), and a
+        # read-only one (those positions' view) would make numba compile every kernel here again
+        # for read-only arrays
+        v = np.array(vertices, dtype=np.float64, order="C")
         t = np.ascontiguousarray(triangles, dtype=np.int64)
         a, b, c = (v[t[:, k]] for k in range(3))
         area2 = np.linalg.norm(np.cross(b - a, c - a), axis=1)

@@ -584,7 +584,8 @@ class VBD(Integrator):
         g = forces.gravity
         gn = float(np.linalg.norm(g))
         gh = g / gn if gn > 0 else g
-        along = np.clip(self._a_prev @ gh, 0.0, gn) if gn > 0 else self._a_prev[:, 0]
+        # (contiguous either way: a column's view would make numba compile the kernel again)
+        along = np.clip(self._a_prev @ gh, 0.0, gn) if gn > 0 else self._a_prev[:, 0].copy()
         initial_guess(x, y, xt, v, a, free, h, along, gn, gh, gn > 0)
         if direct:
             if self._newton is None:
