@@ -254,7 +254,7 @@ def print_franka_table(
         theirs = run_newton(frames)
         if newton_file:
             np.savez_compressed(newton_file, **theirs)
-    runs = [(f"Newton 1.8 (Warp CPU), {SUBSTEPS}x{ITERATIONS}", theirs, None)]
+    runs = [(f"Newton 1.8 (Warp CPU), {SUBSTEPS}x{ITERATIONS}", theirs, SUBSTEPS)]
     for steps, iterations in ours_settings:
         mine = run_ours(theirs["q"], steps, iterations)
         runs.append((f"cloth_sim vbd, {steps}x{iterations}", mine, steps))
@@ -272,10 +272,9 @@ def print_franka_table(
     for name, run, steps in runs:
         wall = float(np.median(run["wall"][1:]))
         depth, at = deepest(run["x"], theirs["q"])
-        checked = frames * (steps or SUBSTEPS)
         print(
             f"| {name} | {run['x'].shape[1]:,} | {wall * 1e3:.0f} | {FRAME / wall:.3f} | "
             f"{newton_wall / wall:.2f} | {depth * 1e3:.2f} mm | {at} | "
-            f"{run.get('crossed', 'not checked')} of {checked:,} |"
+            f"{run.get('crossed', 'not checked')} of {frames * steps:,} |"
         )
     print(f"(cloth_sim's thickness {runs[-1][1]['thickness'] * 1e3:.2f} mm; {FABRIC})")
