@@ -145,10 +145,10 @@ def contact_pairs(x, vt, ee, tris, edges, tri_edge, edge_owner, vertex_owner):
     sliding over an edge of the other layer without support for a step."""
     nv = vt.shape[0]
     m = nv + ee.shape[0]
-    idx = np.zeros((m, 4), np.int64)
-    coef = np.zeros((m, 4))
+    idx = np.empty((m, 4), np.int64)  # (every row written; a normal only where there is one)
+    coef = np.empty((m, 4))
     nrm = np.zeros((m, 3))
-    energy = np.zeros(m, np.bool_)
+    energy = np.empty(m, np.bool_)
     for q in numba.prange(m):  # each candidate in its own row (the same rows at any thread count)
         if q < nv:
             p, t = vt[q, 0], vt[q, 1]
@@ -191,34 +191,52 @@ def contact_pairs(x, vt, ee, tris, edges, tri_edge, edge_owner, vertex_owner):
     return idx, coef, nrm, energy
 
 
-@numba.njit(cache=True)
+#: the runs of pairs :func:`contact_records` counts and fills on the cores at once (a fixed
+#: number: the records are the same whatever the threads)
+RECORD_RUNS = 8
+
+
+@numba.njit(cache=True, parallel=True)
 def contact_records(n, idx, coef, energy):
     """Per vertex, the pairs it is in (CSR of ``4·pair + slot``, in pair order): those that carry
-    the energy, and all of them, ``(ptr, rec, all_ptr, all_rec)``; one counting sort for both."""
+    the energy, and all of them, ``(ptr, rec, all_ptr, all_rec)``. One counting sort for both, its
+    pairs cut into :data:`RECORD_RUNS` runs in order, each run counted and then filled on a core of
+    its own from where the runs before it end for each vertex, so each vertex's records stay in
+    pair order: the serial sort's arrays, 0.47 → 0.30 ms a search on the resting T-shirt (two
+    cores)."""
+    m = idx.shape[0]
+    size = (m + RECORD_RUNS - 1) // RECORD_RUNS
+    count = np.zeros((RECORD_RUNS, n), np.int64)
+    acount = np.zeros((RECORD_RUNS, n), np.int64)
+    for b in numba.prange(RECORD_RUNS):
+        for q in range(b * size, min(m, (b + 1) * size)):
+            for slot in range(4):
+                if coef[q, slot] != 0.0:
+                    acount[b, idx[q, slot]] += 1
+                    if energy[q]:
+                        count[b, idx[q, slot]] += 1
     ptr = np.zeros(n + 1, np.int64)
     aptr = np.zeros(n + 1, np.int64)
-    for q in range(idx.shape[0]):
-        for slot in range(4):
-            if coef[q, slot] != 0.0:
-                aptr[idx[q, slot] + 1] += 1
-                if energy[q]:
-                    ptr[idx[q, slot] + 1] += 1
-    for i in range(n):
-        ptr[i + 1] += ptr[i]
-        aptr[i + 1] += aptr[i]
-    fill = ptr[:-1].copy()
-    afill = aptr[:-1].copy()
+    for i in range(n):  # each run's first slot for each vertex, in place of its count
+        e, a = ptr[i], aptr[i]
+        for b in range(RECORD_RUNS):
+            c, ac = count[b, i], acount[b, i]
+            count[b, i], acount[b, i] = e, a
+            e += c
+            a += ac
+        ptr[i + 1], aptr[i + 1] = e, a
     rec = np.empty(ptr[n], np.int64)
     arec = np.empty(aptr[n], np.int64)
-    for q in range(idx.shape[0]):
-        for slot in range(4):
-            if coef[q, slot] != 0.0:
-                v = idx[q, slot]
-                arec[afill[v]] = 4 * q + slot
-                afill[v] += 1
-                if energy[q]:
-                    rec[fill[v]] = 4 * q + slot
-                    fill[v] += 1
+    for b in numba.prange(RECORD_RUNS):
+        for q in range(b * size, min(m, (b + 1) * size)):
+            for slot in range(4):
+                if coef[q, slot] != 0.0:
+                    v = idx[q, slot]
+                    arec[acount[b, v]] = 4 * q + slot
+                    acount[b, v] += 1
+                    if energy[q]:
+                        rec[count[b, v]] = 4 * q + slot
+                        count[b, v] += 1
     return ptr, rec, aptr, arec
 
 

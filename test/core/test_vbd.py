@@ -18,7 +18,13 @@ from test_contacts import _count_crossings, _fold
 from cloth_sim import ClothModel, Simulator, colliders
 from cloth_sim.integrators.vbd import VBD
 from cloth_sim.integrators.vbd_contact import moving_within_reach
-from cloth_sim.integrators.vbd_kernels import FAR, collider_allowances, colour_groups
+from cloth_sim.integrators.vbd_kernels import (
+    FAR,
+    RECORD_RUNS,
+    collider_allowances,
+    colour_groups,
+    contact_records,
+)
 from cloth_sim.physics.force_kernels import BUCKLE_TABLE, spring_energy
 from cloth_sim.scene import load_scene
 
@@ -235,6 +241,39 @@ def test_the_same_bits_at_any_thread_count():
         finally:
             numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
     assert out[1] == out[2]
+
+
+def test_contact_records_list_each_vertexs_pairs_in_pair_order_at_any_thread_count():
+    """The records (CSR of ``4·pair + slot`` per vertex, counted and filled in runs on every core)
+    against a loop over the pairs in order: each vertex's slots with a weight, in pair order, and
+    apart those of the pairs that carry the energy; the same arrays on one thread and on two, with
+    fewer pairs than runs and none."""
+    rng = np.random.default_rng(11)
+    n = 40
+    for m in (0, RECORD_RUNS - 3, 500):
+        idx = rng.integers(0, n, (m, 4))
+        coef = np.where(rng.random((m, 4)) < 0.2, 0.0, rng.normal(size=(m, 4)))
+        energy = rng.random(m) < 0.6
+        want_all = [[] for _ in range(n)]
+        want = [[] for _ in range(n)]
+        for q in range(m):
+            for slot in range(4):
+                if coef[q, slot] != 0.0:
+                    want_all[idx[q, slot]].append(4 * q + slot)
+                    if energy[q]:
+                        want[idx[q, slot]].append(4 * q + slot)
+        got = {}
+        for threads in (1, 2):
+            numba.set_num_threads(threads)
+            try:
+                got[threads] = contact_records(n, idx, coef, energy)
+            finally:
+                numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+        assert all(np.array_equal(a, b) for a, b in zip(got[1], got[2]))
+        ptr, rec, aptr, arec = got[1]
+        for i in range(n):
+            assert rec[ptr[i] : ptr[i + 1]].tolist() == want[i]
+            assert arec[aptr[i] : aptr[i + 1]].tolist() == want_all[i]
 
 
 @pytest.mark.parametrize("iterations", [1, 2, 3, 5])
