@@ -358,9 +358,9 @@ class PairList:
             self._at = (x0.copy(), np.array(grown, np.float64))
             self._kept = _in_order(vf, vf_d, ee, ee_d, self._ranks)
             self.searches += 1
-            if not np.any(skin):  # searched for this query alone: its answer
-                kept = self._kept
-                return kept.vf, kept.vf_d, kept.ee, kept.ee_d
+            if not np.any(skin):
+                # searched for this query alone: its answer, copied (the list reads its own)
+                return tuple(a.copy() for a in self._kept)
         kept = self._kept
         moved = _displacements(x0, self._at[0])
         return _near_now(x0, reach, tree.tris, tree.edges, kept, moved)
