@@ -85,21 +85,28 @@ REFRESH_SHARE = 0.1
 
 
 @numba.njit(cache=True)
-def _outran(x0, reach, grown, x_s, reach_s, tris, edges):
-    """Per particle, whether its pairs must be searched again (at ``x0``, with the reaches
-    ``grown``) for the kept list, found within the reaches ``reach_s`` at the places ``x_s``, to
-    hold every pair within ``reach`` at ``x0`` (module docstring): its own reach plus its
-    displacement since beyond what the list gave it; then each triangle (edge) whose largest
-    corner's reach plus the largest of its corners' displacements is beyond the largest of their
-    kept reaches, each corner taken as searched again where it is marked, has all its corners
-    marked, until none is left (a corner searched again moves no more and may reach less: so
-    a marked corner's triangles are looked at again)."""
-    n = x0.shape[0]
-    moved = np.empty(n)
+def _displacements(x0, places):
+    """Each particle's distance from its kept place to ``x0``."""
+    moved = np.empty(x0.shape[0])
+    for i in range(x0.shape[0]):
+        dx, dy, dz = x0[i, 0] - places[i, 0], x0[i, 1] - places[i, 1], x0[i, 2] - places[i, 2]
+        moved[i] = np.sqrt(dx * dx + dy * dy + dz * dz)
+    return moved
+
+
+@numba.njit(cache=True)
+def _outran(reach, grown, moved, reach_s, tris, edges):
+    """Per particle, whether its pairs must be searched again (where it is now, with the reaches
+    ``grown``) for the kept list, found within the reaches ``reach_s`` at the list's places, to
+    hold every pair within ``reach`` now (module docstring): its own reach plus its displacement
+    since (``moved``: :func:`_displacements`) beyond what the list gave it; then each triangle
+    (edge) whose largest corner's reach plus the largest of its corners' displacements is beyond
+    the largest of their kept reaches, each corner taken as searched again where it is marked, has
+    all its corners marked, until none is left (a corner searched again moves no more and may
+    reach less: so a marked corner's triangles are looked at again)."""
+    n = reach.shape[0]
     out = np.zeros(n, np.bool_)
     for i in range(n):
-        dx, dy, dz = x0[i, 0] - x_s[i, 0], x0[i, 1] - x_s[i, 1], x0[i, 2] - x_s[i, 2]
-        moved[i] = np.sqrt(dx * dx + dy * dy + dz * dz)
         if not reach[i] + moved[i] <= reach_s[i] - ROUNDING:  # (a NaN is outrun)
             out[i] = True
     changed = True
@@ -123,16 +130,6 @@ def _outran(x0, reach, grown, x_s, reach_s, tris, edges):
                 out[a] = out[b] = out[c] = True
                 changed = True
     return out
-
-
-@numba.njit(cache=True)
-def _displacements(x0, places):
-    """Each particle's distance from its kept place to ``x0``."""
-    moved = np.empty(x0.shape[0])
-    for i in range(x0.shape[0]):
-        dx, dy, dz = x0[i, 0] - places[i, 0], x0[i, 1] - places[i, 1], x0[i, 2] - places[i, 2]
-        moved[i] = np.sqrt(dx * dx + dy * dy + dz * dz)
-    return moved
 
 
 @numba.njit(cache=True, inline="always")
@@ -342,7 +339,8 @@ class PairList:
             return tree.pairs(x0, reach)  # (nothing to pair, nothing to keep)
         grown = reach + np.asarray(skin, np.float64)
         if self._at is not None:
-            out = _outran(x0, reach, grown, *self._at, tree.tris, tree.edges)
+            moved = _displacements(x0, self._at[0])  # (each particle's, from its kept place)
+            out = _outran(reach, grown, moved, self._at[1], tree.tris, tree.edges)
             outran = np.count_nonzero(out)
             if (
                 outran
@@ -352,6 +350,7 @@ class PairList:
                 and np.isfinite(x0[out]).all()
             ):
                 self._refresh(x0, grown, out)
+                moved[out] = 0.0  # (their kept places are where they are now)
                 outran = 0
         if self._at is None or outran:
             vf, vf_d, ee, ee_d = tree.pairs(x0, grown)
@@ -361,9 +360,8 @@ class PairList:
             if not np.any(skin):
                 # searched for this query alone: its answer, copied (the list reads its own)
                 return tuple(a.copy() for a in self._kept)
-        kept = self._kept
-        moved = _displacements(x0, self._at[0])
-        return _near_now(x0, reach, tree.tris, tree.edges, kept, moved)
+            moved = np.zeros(len(x0))  # (every kept place is where its particle is now)
+        return _near_now(x0, reach, tree.tris, tree.edges, self._kept, moved)
 
     def _refresh(self, x0, grown, out) -> None:
         """The particles ``out`` (a boolean each) placed at ``x0`` with reaches ``grown``, every
