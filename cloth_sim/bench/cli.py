@@ -166,6 +166,13 @@ def _bench_compile(args) -> int:
     return 0
 
 
+def _bench_hashes(args) -> int:
+    from .scene_hashes import print_scene_hashes
+
+    print_scene_hashes(args.steps, args.scenes, args.fresh_cache)
+    return 0
+
+
 def _bench_convergence(args) -> int:
     from .convergence import (
         print_accuracy_table,
@@ -360,6 +367,20 @@ def add_parser(sub) -> argparse.ArgumentParser:
         help="the parts at once in one shared cache, as make install runs them",
     )
     ck.set_defaults(func=_bench_compile)
+    hs = bsub.add_parser(
+        "hashes",
+        help="every shipped scene's state after a fixed run on its own integrator and on vbd, "
+        "hashed: diff two runs to see that a change kept the same bits",
+    )
+    hs.add_argument("--steps", type=int, default=300, help="steps a scene (default 300)")
+    hs.add_argument("--scenes", nargs="+", default=None, help="scene names (default: all)")
+    hs.add_argument(
+        "--fresh-cache",
+        action="store_true",
+        help="kernels compiled from the source into an empty cache first, as make install does "
+        "(a cached kernel keeps the old code of a function it inlines from another file)",
+    )
+    hs.set_defaults(func=_bench_hashes)
     cv = bsub.add_parser(
         "convergence",
         help="vbd on a library fabric: iterations a step against its residual, and substeps "
