@@ -15,7 +15,6 @@ the table prints each run's state hash.
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import os
 import statistics
@@ -30,6 +29,7 @@ def _child(size: int, seconds: float) -> dict:
     import numba
 
     from ..scene import load_scene
+    from .scene_hashes import state_hash
 
     sim = load_scene("hanging_provot").build_simulator(
         rows=size, cols=size, spacing=1.0 / (size - 1)
@@ -45,9 +45,7 @@ def _child(size: int, seconds: float) -> dict:
         t = time.perf_counter()
         sim.step(n)
         out[f"{label}_steady_ms"] = 1e3 * (time.perf_counter() - t) / n
-        out[f"{label}_hash"] = hashlib.sha1(
-            sim.positions.tobytes() + sim.velocities.tobytes()
-        ).hexdigest()[:12]
+        out[f"{label}_hash"] = state_hash(sim)
         sim.restore_state(saved)
         period = 1.0 / 60.0
         per_tick = max(1, int(round(period / sim.dt)))
