@@ -34,6 +34,7 @@ import yaml
 from scipy.optimize import differential_evolution, minimize
 
 from .contact.triangle_meshes import TriangleMesh, mesh_distance, pack
+from .kernel_cache import keep_true
 from .materials import Fabric
 from .scene import SceneError, load_scene
 from .simulator import SimulationDiverged
@@ -241,3 +242,6 @@ def write_scene(scene: str, fabric: Fabric, out) -> Path:
         + yaml.safe_dump(data, sort_keys=False)
     )
     return out
+
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

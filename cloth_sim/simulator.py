@@ -30,6 +30,7 @@ from .constraints.strain_limit import DEFAULT_STRAIN_LIMIT_PASSES, StrainLimit
 from .contact.colliders import Contacts
 from .contact.geometry import positive
 from .contact.self_collision import SelfCollision, Uncrossed, check_thickness
+from .kernel_cache import keep_true
 from .model import ClothModel
 from .parameters import SCHEMA, ParameterError
 from .physics import stability as stab
@@ -774,3 +775,5 @@ class Simulator(RobotMethods):
 
 
 __all__ = ["ParameterError", "SimulationDiverged", "Simulator"]
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

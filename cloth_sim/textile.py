@@ -32,6 +32,7 @@ import scipy.sparse.linalg as spla
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
+from .kernel_cache import keep_true
 from .materials import resolve
 from .materials.fabric import G_ACCEL
 from .model import ClothModel
@@ -466,3 +467,6 @@ def drape(
         "positions": sim.positions.copy(),
         "triangles": model.triangles,
     }
+
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

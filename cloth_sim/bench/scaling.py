@@ -19,6 +19,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
+from ..kernel_cache import keep_true
 from ..kinds import INTEGRATORS
 from ..scene import load_scene
 from ..simulator import SimulationDiverged, Simulator
@@ -356,3 +357,6 @@ def main(out: Path, quick: bool = False) -> dict:
     (out / "scaling.md").write_text(text)
     print(text)
     return {"rows": rows, "exponents": exponents, "skipping": skip_rows, "node": node_rows}
+
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

@@ -7,10 +7,10 @@ and after a change and ``diff`` the two tables: a refactor or a speed-up keeps e
 commit that changes a row says which and why.
 
 ``--fresh-cache`` hashes with kernels compiled from the source as it is now, as ``make install``
-compiles them (its parts side by side, :func:`cloth_sim.kernels.compile_kernels`, then the run),
-in an empty numba cache of their own. Without it the kernels come from the package's cache, which
-numba keys by each kernel's own file: a kernel that inlines or calls a function of another file
-keeps that function's old code after it changes, and its hash is the old code's.
+compiles them on a fresh clone (its parts side by side, :func:`cloth_sim.kernels.compile_kernels`,
+then the run), in an empty numba cache of their own: the table CI's kernels would give. Without
+it the kernels come from the package's cache, which :mod:`cloth_sim.kernel_cache` keeps true to
+the source (a kernel whose imported files changed compiles again), so the two tables agree.
 """
 
 from __future__ import annotations

@@ -12,6 +12,8 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from ..kernel_cache import keep_true
+
 #: a pass after the first visits every spring when more than ``1/FULL_PASS_SHARE`` of them may
 #: have changed (:func:`provot_passes`; a visit from its heap costs more than one in order)
 FULL_PASS_SHARE = 32
@@ -346,3 +348,5 @@ def follow_corrections(x, before, start, v, gain, mean):
 #: no anchors (a cloth whose attachments are off): what :func:`provot_passes` is given then
 NO_ANCHOR = np.full((1, 1), -1, np.int64)
 NO_REACH = np.zeros((1, 1))
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

@@ -67,6 +67,8 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from ..kernel_cache import keep_true
+
 #: ``ε``, in units of the largest inverse mass (see the module docstring)
 REGULARISATION = 1e-3
 #: the projection stops once no spring's strain exceeds ``τ`` by more than this. Each
@@ -626,3 +628,6 @@ def project(x, springs, rest, w, settings, work):
     stats[2] = k
     stats[3] = worst
     return outer
+
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

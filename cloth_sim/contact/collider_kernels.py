@@ -14,6 +14,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from ..kernel_cache import keep_true
 from . import triangle_meshes
 from .triangle_meshes import mesh_distance
 
@@ -610,3 +611,5 @@ NO_COLLIDERS = PackedColliders(
     np.zeros(0),
     *triangle_meshes.EMPTY,
 )
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

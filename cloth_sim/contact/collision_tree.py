@@ -34,6 +34,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from ..kernel_cache import keep_true
 from .geometry import closest_on_segments, point_triangle_distance, read_only
 
 #: the traversal's tasks each hold at most 1/TASKS of the items against themselves or of all pairs
@@ -719,3 +720,6 @@ class TriangleTree:
                 cap_ee,
             )
         return rows
+
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

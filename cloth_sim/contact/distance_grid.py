@@ -42,6 +42,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from ..kernel_cache import keep_true
 from . import triangle_meshes
 from .collider_kernels import mesh_sdf
 
@@ -219,3 +220,6 @@ def pack_grids(grids, real) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         start += g.values.size
     values = np.concatenate(chunks).astype(real) if chunks else np.zeros(1, real)
     return box, dims, values
+
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

@@ -13,6 +13,8 @@ import math
 import numba
 import numpy as np
 
+from ..kernel_cache import keep_true
+
 
 def vector(name: str, value, length: int = 3) -> np.ndarray:
     """``value`` as ``length`` finite float64s, or ``ValueError`` naming ``name``."""
@@ -214,3 +216,6 @@ def corners_d2(x, y, z, ax, ay, az, bx, by, bz, cx, cy, cz):
     py = wa * ay + wb * by + wc * cy
     pz = wa * az + wb * bz + wc * cz
     return (x - px) ** 2 + (y - py) ** 2 + (z - pz) ** 2, px, py, pz, wa, wb, wc
+
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

@@ -24,6 +24,7 @@ import math
 import numba
 import numpy as np
 
+from ..kernel_cache import keep_true
 from .geometry import corners_d2
 
 #: a cell's feature (:func:`find_features`): its kind, in column 0 of its row of ``cell_features``
@@ -525,3 +526,6 @@ def _crease_row(mesh, at, f1, i0, i1, row):
         if math.sqrt(_triangle_d2(v, t, k, centre[0], centre[1], centre[2])[0]) - r <= far:
             return False
     return True
+
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

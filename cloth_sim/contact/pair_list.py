@@ -74,6 +74,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from ..kernel_cache import keep_true
 from .collision_tree import TriangleTree, reaches, touching
 from .geometry import closest_on_segments, point_triangle_distance, read_only
 
@@ -381,3 +382,6 @@ class PairList:
             *_merged(kept.ee, kept.ee_d, gone_ee, new.ee, new.ee_d, eranks),
         )
         self.refreshes += 1
+
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

@@ -12,6 +12,7 @@ import math
 import numba
 import numpy as np
 
+from ..kernel_cache import keep_true
 from .geometry import closest_on_segments, point_triangle_distance
 
 
@@ -309,3 +310,6 @@ def displacements(x, x0, out):
             (x[p, 0] - x0[p, 0]) ** 2 + (x[p, 1] - x0[p, 1]) ** 2 + (x[p, 2] - x0[p, 2]) ** 2
         )
     return out
+
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

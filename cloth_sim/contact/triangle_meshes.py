@@ -50,6 +50,7 @@ import math
 import numba
 import numpy as np
 
+from ..kernel_cache import keep_true
 from .collision_tree import build_hierarchy
 from .geometry import corners_d2
 from .mesh_features import (
@@ -578,3 +579,6 @@ def _listed_distance(bank, m, x, y, z, cutoff, cid):
     # on the surface: the face's normal (outwards where the mesh is closed)
     f = bank[STARTS][FNORMALS] + 3 * btri
     return 0.0, bank[REALS][f], bank[REALS][f + 1], bank[REALS][f + 2]
+
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from ..kernel_cache import keep_true
 from ..physics.force_kernels import GATHER_KICK_DRIFT, combine_particle, runge_kutta_fused
 from .base import Integrator, VelocityOrigin, matrices, oscillator_matrix
 from .registry import register
@@ -261,3 +262,6 @@ class Verlet(Integrator):
                 [0.0, 1.0, 0.0],
             ]
         )
+
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

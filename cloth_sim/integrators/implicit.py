@@ -30,6 +30,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
+from ..kernel_cache import keep_true
 from ..physics import stability as stab
 from ..physics.forces import incidence, spring_sums
 from ..threads import start_pool
@@ -820,3 +821,6 @@ class Kang(_LinearisedImplicitEuler):
         self.counters["solves"] += 1
         v += dv
         x += np.multiply(v, dt, out=self._buffer("_new", x))  # no temporary
+
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

@@ -44,6 +44,7 @@ import numba
 import numpy as np
 import scipy.sparse as sp
 
+from ..kernel_cache import keep_true
 from ..physics.force_kernels import BUCKLE_TABLE, axial, spring_vector
 from .base import Integrator, Stability
 from .implicit import cholesky, constant_system, graph_product, same_system, system_key
@@ -226,3 +227,6 @@ class Liu2013(Integrator):
         v[free] = (cur[free] - x0[free]) / dt
         x[free] = cur[free]
         x[~free] = y[~free]
+
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

@@ -12,6 +12,7 @@ import math
 import numba
 
 from ..contact.collider_kernels import MESH, beyond_reach, carried, mesh_sdf, pose_change, sdf
+from ..kernel_cache import keep_true
 
 
 @numba.njit(cache=True, inline="always")
@@ -267,3 +268,6 @@ def moving_within_reach(x, free, co, allow, tau):
             if not beyond >= (allow[i] + 1.01 * tau) * (1.0 + 1e-9):  # (a NaN is near)
                 return True
     return False
+
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

@@ -30,6 +30,7 @@ import numpy as np
 from numba.core import types
 from numba.extending import overload
 
+from ..kernel_cache import keep_true
 from ..kinds import LINEAR
 from .vbd_contact import colliders_at, onset, truncate, within
 
@@ -596,3 +597,6 @@ def _touch_colour(span, blocks, FREE, stepped, mode, omega, contact):
                 B[0, t], B[1, t], B[2, t] = b0, b1, b2
                 if was_cut:
                     cut[v] = 1
+
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

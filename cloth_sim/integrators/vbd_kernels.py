@@ -25,6 +25,7 @@ import numpy as np
 from ..contact.collider_kernels import MESH, beyond_reach, mesh_sdf, sdf
 from ..contact.geometry import segment_parameters, triangle_weights
 from ..contact.triangle_meshes import mesh_closed
+from ..kernel_cache import keep_true
 from ..physics.bending import bending_row
 from .vbd_contact import colliders_at, onset, solve3, truncate, within
 from .vbd_terms import local_energy, self_contacts_at, springs_at
@@ -615,3 +616,6 @@ def overtaken(x, free, co, tau):
                 x[i, 2] += (tau - d) * nz
                 moved += 1
     return moved
+
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

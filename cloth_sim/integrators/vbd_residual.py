@@ -34,6 +34,8 @@ import math
 
 import numba
 
+from ..kernel_cache import keep_true
+
 #: the residual's unit of force per kilogram (standard gravity, m/s²)
 G0 = 9.80665
 
@@ -51,3 +53,6 @@ def sweep_residual(squared, masses, free):
             s += squared[i] / (w * w)
             n += 1
     return math.sqrt(s / n) if n else 0.0
+
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

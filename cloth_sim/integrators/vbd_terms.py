@@ -17,6 +17,7 @@ import math
 
 import numba
 
+from ..kernel_cache import keep_true
 from ..kinds import LINEAR
 from ..physics.force_kernels import axial
 from .vbd_contact import press, slide
@@ -182,3 +183,6 @@ def self_contacts_at(i, x, xs, xt, records, law, fh):
         sf = mu * lam * g
         fh = slide(sf * w, (tx, ty, tz), sf * w * w, (nx, ny, nz), fh)
     return fh
+
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

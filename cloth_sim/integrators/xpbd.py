@@ -32,6 +32,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from ..kernel_cache import keep_true
 from ..physics import stability as stab
 from ..physics.force_kernels import BUCKLE_TABLE, axial, spring_vector
 from ..physics.forces import GravityTerm, WindTerm
@@ -194,3 +195,6 @@ class XPBD(Integrator):
             np.copyto(x, p)
         self._origin = VelocityOrigin(start, h)
         self.counters["substeps"] += self.substeps
+
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

@@ -29,6 +29,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..contact.geometry import read_only
+from ..kernel_cache import keep_true
 from .mesh import half_edges, triangle_areas
 
 
@@ -227,3 +228,6 @@ def mesh_stencils(x: np.ndarray, triangles: np.ndarray, g: float):
         wts[r, 1 : k + 1] = W.data[lo_:hi_]
         wts[r, 0] = -W.data[lo_:hi_].sum()
     return sten, wts, g / area[inner]
+
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

@@ -33,7 +33,8 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 from scipy.optimize import brentq
 
-from ..model import LINEAR, TENSION_ONLY
+from ..kernel_cache import keep_true
+from ..kinds import LINEAR, TENSION_ONLY
 from .bending import bending_row
 
 BUCKLE_TABLE_SIZE = 513
@@ -568,3 +569,6 @@ def spring_jacobian_blocks(x, v, springs, rest, k, c, kind, tab, clamp, position
                 cv[s, p, q] = c[s] * uu
                 if position_damping:
                     dx[s, p, q] = cl * (u[p] * pr[q] + ru * (delta - uu))
+
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

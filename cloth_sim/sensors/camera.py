@@ -48,6 +48,7 @@ import numpy as np
 
 from ..contact.collider_kernels import BOX, CAPSULE, CYLINDER, MESH, PLANE, SPHERE
 from ..contact.geometry import matrix_quaternion, quaternion_matrix, unit_quaternion, vector
+from ..kernel_cache import keep_true
 
 NOISE_MODELS = (None, "kinect")
 #: the largest image side accepted
@@ -550,3 +551,6 @@ def camera_from_settings(settings: dict, seed: int = 0) -> DepthCamera:
         noise=noise,
         seed=seed,
     )
+
+
+keep_true(__name__)  # (its kernels compile again when a file it imports changes)

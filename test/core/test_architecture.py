@@ -153,6 +153,7 @@ def function_imports(source: str) -> list[tuple[int, str]]:
 #: the layers the model is built from: nothing here imports the model or anything above it
 BELOW_MODEL = {
     "cloth_sim.kinds",
+    "cloth_sim.kernel_cache",  # (numba only: the kernels of these layers end with it)
     "cloth_sim.lazy",
     "cloth_sim.parameters",
     "cloth_sim.materials",
