@@ -82,11 +82,12 @@ def colliders_at(i, x, xt, ckind, pose, pose0, cgeo, cmu, cbank, law, fh, seen):
     block's nine numbers and whether it touches one, flat (a tuple in a tuple, unpacked in a
     parallel loop, fails numba's array analysis). ``pose``: the colliders' positions, rotations
     and reaches now; ``pose0``: their positions and rotations at the step's start; ``law``:
-    ``(τ, the penalty's stiffness, friction's ε)``. A mesh collider's signed distance and normal
+    ``(τ, the penalty's stiffness, friction's ε)``. Each collider's signed distance and normal
     at ``x[i]`` go to ``seen[i, c]``, for :func:`onset` at the same point (beyond its reach by
-    the thickness: that lower bound and no normal, unasked): a mesh's query costs several times
-    a primitive's, which :func:`onset` asks again (cheaper than storing them, measured on
-    robot_sweep's eight links). (The arrays that the calls inside that are not inlined, the
+    the thickness: that lower bound and no normal, unasked), which reads them instead of asking
+    again (:func:`asked`: inlined a second time there, the queries doubled their share of the
+    sweeps' compilation; storing the primitives' answers costs a step nothing measurable). (The
+    arrays that the calls inside that are not inlined, the
     mesh's search, take are passed as they are: in a bundle of more, those calls would count the
     bundle's references on every call.) ``seen[i, c, 4]``: the last search's lower bound on the
     distance while the vertex keeps within its allowance (a collider it keeps beyond ``τ`` is
@@ -115,9 +116,9 @@ def colliders_at(i, x, xt, ckind, pose, pose0, cgeo, cmu, cbank, law, fh, seen):
             d, nx, ny, nz = mesh_sdf(
                 cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2], reals, ints, starts
             )
-            seen[i, c, 0], seen[i, c, 1], seen[i, c, 2], seen[i, c, 3] = d, nx, ny, nz
         else:
             d, nx, ny, nz = sdf(ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2])
+        seen[i, c, 0], seen[i, c, 1], seen[i, c, 2], seen[i, c, 3] = d, nx, ny, nz
         p = tau - d
         if p <= 0.0:
             continue
@@ -199,16 +200,31 @@ def truncate(i, p, x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, gamm
     return x_cd[i, 0] + t * ex, x_cd[i, 1] + t * ey, x_cd[i, 2] + t * ez, True
 
 
+@numba.njit(cache=True, error_model="numpy")
+def asked(shapes, c, x, y, z):
+    """Collider ``c``'s signed distance and normal at ``(x, y, z)`` (``shapes``: :func:`onset`'s),
+    for :func:`onset` where :func:`colliders_at` left no answer of its own: compiled on its own
+    and called, not inlined. Inlined in :func:`onset` as well as in :func:`colliders_at`, the
+    queries' code was in every sweep twice: ``vbd_grid._touch_colour`` took 63 s of one core to
+    compile, 31–34 s with this called (``cloth-sim bench compile``). ``error_model="numpy"``, as
+    the sweeps that call it (a division by zero does not raise)."""
+    kinds, pos, rot, geo, reals, ints, starts = shapes
+    if kinds[c] == MESH:
+        return mesh_sdf(pos, rot, geo, c, x, y, z, reals, ints, starts)
+    return sdf(kinds[c], pos, rot, geo, c, x, y, z)
+
+
 @numba.njit(cache=True, inline="always")
 def onset(i, s, x, records, tau, colliders, shapes, seen):
     """Vertex ``i``'s step ``s`` from ``x[i]`` with the part that would press a contact not yet
     pressed (distance at least ``τ``: not in the step's Hessian) taken off along that contact's
     normal, so that it stops at its onset (the next iteration sees it); the motion along the
     surface stays. The self-contact pairs by their linear distance, the first ``colliders``
-    colliders by their signed distance along their normal: a primitive's asked again (``shapes =
-    (kinds, positions, rotations, geometry, and the mesh bank's reals, ints and starts)``), a
-    mesh's as :func:`colliders_at` left it in ``seen[i]`` for the same point (asked here only
-    where that left its reach's lower bound and the step is longer than the bound's room).
+    colliders by their signed distance along their normal, as :func:`colliders_at` left it in
+    ``seen[i]`` for the same point; where that left only a lower bound, asked here through
+    :func:`asked` (``shapes = (kinds, positions, rotations, geometry, and the mesh bank's reals,
+    ints and starts)``) where the step is longer than the bound's room (a shorter step stops short
+    of the onset whatever the normal: ``n·s ≥ −|s| > τ − d``).
     ``s``: three numbers, and so is what it returns. ``records``: the vertices' self-contact
     records' ``(ptr, weights, normals, distances)``
     (:func:`cloth_sim.integrators.vbd.pack_records`)."""
@@ -224,20 +240,14 @@ def onset(i, s, x, records, tau, colliders, shapes, seen):
         if over > 0.0:
             f = over / (nx * nx + ny * ny + nz * nz)
             sx, sy, sz = sx + f * nx, sy + f * ny, sz + f * nz
-    ckind, cpos, crot, cgeo, reals, ints, starts = shapes
     for c in range(colliders):
-        if ckind[c] == MESH:
-            d, nx, ny, nz = seen[i, c, 0], seen[i, c, 1], seen[i, c, 2], seen[i, c, 3]
-            if nx == 0.0 and ny == 0.0 and nz == 0.0:
-                # beyond its reach by d ≥ τ (colliders_at did not ask it): a step shorter than
-                # d − τ stops short of the onset whatever the normal; a longer one asks
-                if d - tau >= math.sqrt(sx * sx + sy * sy + sz * sz) * (1.0 + 1e-9):
-                    continue
-                d, nx, ny, nz = mesh_sdf(
-                    cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2], reals, ints, starts
-                )
-        else:
-            d, nx, ny, nz = sdf(ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2])
+        d, nx, ny, nz = seen[i, c, 0], seen[i, c, 1], seen[i, c, 2], seen[i, c, 3]
+        if nx == 0.0 and ny == 0.0 and nz == 0.0:
+            # a lower bound d ≥ τ (colliders_at did not ask it): a step shorter than d − τ stops
+            # short of the onset whatever the normal; a longer one asks
+            if d - tau >= math.sqrt(sx * sx + sy * sy + sz * sz) * (1.0 + 1e-9):
+                continue
+            d, nx, ny, nz = asked(shapes, c, x[i, 0], x[i, 1], x[i, 2])
         if d < tau:
             continue
         over = (tau - d) - (nx * sx + ny * sy + nz * sz)
