@@ -12,9 +12,9 @@ package's ``__pycache__``, ``NUMBA_CACHE_DIR`` or the user's cache), the SHA-256
 the package that the module imports, directly or through others. When one of them differs on a
 later import, it empties the module's cached kernels before any of them is loaded, so they compile
 from the source as it is. The test is a superset: a file reached only through a non-kernel import
-(``model.py`` from ``force_kernels``) also empties it, which costs a compile, never a wrong result.
-The digests take ~5 ms a process (each file is read once). ``test_kernel_cache.py`` checks that
-every module with cached kernels calls it.
+(``physics/mesh.py`` from ``force_kernels``, through ``bending``) also empties it, which costs a
+compile, never a wrong result. The digests take ~5 ms a process (each file is read once).
+``test_kernel_cache.py`` checks that every module with cached kernels calls it.
 """
 
 from __future__ import annotations

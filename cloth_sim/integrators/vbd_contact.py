@@ -205,8 +205,9 @@ def asked(shapes, c, x, y, z):
     """Collider ``c``'s signed distance and normal at ``(x, y, z)`` (``shapes``: :func:`onset`'s),
     for :func:`onset` where :func:`colliders_at` left no answer of its own: compiled on its own
     and called, not inlined. Inlined in :func:`onset` as well as in :func:`colliders_at`, the
-    queries' code was in every sweep twice: ``vbd_grid._touch_colour`` took 63 s of one core to
-    compile, 31–34 s with this called (``cloth-sim bench compile``). ``error_model="numpy"``, as
+    queries' code was in every sweep twice: ``vbd_grid._touch_colour`` took 65.5 s of one core to
+    compile, 39.4 s with this called, and ``vbd_kernels.sweep`` 41.1 s, 25.7 s (``cloth-sim bench
+    compile``, side by side, 2026-12-02). ``error_model="numpy"``, as
     the sweeps that call it (a division by zero does not raise)."""
     kinds, pos, rot, geo, reals, ints, starts = shapes
     if kinds[c] == MESH:
