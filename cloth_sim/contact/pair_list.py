@@ -208,31 +208,42 @@ def _near_now(x0, reach, tris, edges, kept, moved):
 def _ordered(pairs, dist, keep, rank):
     """The ``pairs`` that ``keep`` marks and their distances, by the ``rank`` of their first index
     (a permutation), then by their second index (each pair is unique, so this order is the pairs'
-    own, whatever order they came in): a counting sort over the ranks, then an insertion sort of
-    each (short) run."""
+    own, whatever order they came in): a radix sort of two digits, each a stable counting sort
+    (by the second index, then by the first's rank), linear in the pairs. (It was one counting
+    sort by rank and an insertion sort of each rank's run, quadratic in a run's length: 3–5× the
+    time on a crumpled T-shirt's searches, whose particles and edges pair with up to ~750
+    items.)"""
     buckets = rank.shape[0]
-    ptr = np.zeros(buckets + 1, np.int64)
+    second = 0
     for q in range(pairs.shape[0]):
         if keep[q]:
-            ptr[rank[pairs[q, 0]] + 1] += 1
-    for b in range(buckets):
-        ptr[b + 1] += ptr[b]
-    fill = ptr[:-1].copy()
-    out, out_d = np.empty((ptr[buckets], 2), np.int64), np.empty(ptr[buckets])
+            second = max(second, pairs[q, 1] + 1)
+    by_second = np.zeros(second + 1, np.int64)
+    by_rank = np.zeros(buckets + 1, np.int64)
     for q in range(pairs.shape[0]):
-        if not keep[q]:
-            continue
-        b = rank[pairs[q, 0]]
-        r = fill[b]
-        fill[b] += 1
-        out[r, 0], out[r, 1], out_d[r] = pairs[q, 0], pairs[q, 1], dist[q]
+        if keep[q]:
+            by_second[pairs[q, 1] + 1] += 1
+            by_rank[rank[pairs[q, 0]] + 1] += 1
+    for b in range(second):
+        by_second[b + 1] += by_second[b]
     for b in range(buckets):
-        for r in range(ptr[b] + 1, ptr[b + 1]):
-            j, key, d = r, out[r, 1], out_d[r]
-            while j > ptr[b] and out[j - 1, 1] > key:
-                out[j, 1], out_d[j] = out[j - 1, 1], out_d[j - 1]
-                j -= 1
-            out[j, 1], out_d[j] = key, d
+        by_rank[b + 1] += by_rank[b]
+    m = by_rank[buckets]
+    # the first digit: by the second index, into a copy of the pairs' columns
+    first, other, d = np.empty(m, np.int64), np.empty(m, np.int64), np.empty(m)
+    for q in range(pairs.shape[0]):
+        if keep[q]:
+            b = pairs[q, 1]
+            r = by_second[b]
+            by_second[b] = r + 1
+            first[r], other[r], d[r] = pairs[q, 0], b, dist[q]
+    # the second: by the first index's rank, stable (so each rank's run stays in second order)
+    out, out_d = np.empty((m, 2), np.int64), np.empty(m)
+    for q in range(m):
+        b = rank[first[q]]
+        r = by_rank[b]
+        by_rank[b] = r + 1
+        out[r, 0], out[r, 1], out_d[r] = first[q], other[q], d[q]
     return out, out_d
 
 

@@ -15,7 +15,7 @@ from cloths import springy_fold
 from cloth_sim import ClothModel, Simulator, colliders, integrators
 from cloth_sim.bench.crossings import crossings  # the independent crossing check
 from cloth_sim.contact.collision_tree import TriangleTree
-from cloth_sim.contact.pair_list import PairList
+from cloth_sim.contact.pair_list import PairList, tree_ranks
 from cloth_sim.contact.self_collision import SKIN, Uncrossed
 from cloth_sim.scene import SceneError, load_scene, scene_from_dict
 
@@ -571,6 +571,18 @@ def _same_pairs(want, got) -> bool:
     return True
 
 
+def _in_rank_order(answer, ranks) -> bool:
+    """Whether an answer's pairs come by the tree's rank of their first index, then by their
+    second index, each once (pair_list's order: an answer does not depend on the list's
+    history)."""
+    for pairs, rank in ((answer[0], ranks[0]), (answer[2], ranks[1])):
+        keys = np.stack([rank[pairs[:, 0]], pairs[:, 1]], axis=1)
+        step = np.diff(keys, axis=0)
+        if not np.all((step[:, 0] > 0) | ((step[:, 0] == 0) & (step[:, 1] > 0))):
+            return False
+    return True
+
+
 def test_the_kept_pairs_of_a_cloth_with_nothing_to_pair_are_none():
     """A kept list over no particles answers no pairs, with a skin or without (it has no order
     of its features to give them in)."""
@@ -608,6 +620,7 @@ def test_the_kept_pairs_refreshed_for_the_particles_that_outran_them_are_the_tre
         if k % 10 == 0:  # the same arrays in the same order as a list with no history
             fresh = PairList(TriangleTree(tris, model.positions, features)).pairs(x, reach, skin)
             assert all(np.array_equal(a, b) for a, b in zip(got, fresh))
+            assert _in_rank_order(got, tree_ranks(tree)) and len(got[0]) and len(got[2])
     assert kept.refreshes >= 100 and 4 <= kept.searches <= 40, (kept.refreshes, kept.searches)
 
 
