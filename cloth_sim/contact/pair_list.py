@@ -205,38 +205,33 @@ def _near_now(x0, reach, tris, edges, kept, moved):
 
 
 @numba.njit(cache=True)
-def _ordered(pairs, dist, keep, rank):
-    """The ``pairs`` that ``keep`` marks and their distances, by the ``rank`` of their first index
-    (a permutation), then by their second index (each pair is unique, so this order is the pairs'
-    own, whatever order they came in): a radix sort of two digits, each a stable counting sort
-    (by the second index, then by the first's rank), linear in the pairs. (It was one counting
-    sort by rank and an insertion sort of each rank's run, quadratic in a run's length: 3–5× the
-    time on a crumpled T-shirt's searches, whose particles and edges pair with up to ~750
-    items.)"""
-    buckets = rank.shape[0]
+def _ordered(pairs, dist, rank):
+    """The ``pairs`` and their distances by the ``rank`` of their first index (a permutation),
+    then by their second index (each pair is unique, so this order is the pairs' own, whatever
+    order they came in): a radix sort of two digits, each a stable counting sort (by the second
+    index, then by the first's rank), linear in the pairs. (It was one counting sort by rank and
+    an insertion sort of each rank's run, quadratic in a run's length: 2.6–3.3× the time on a
+    crumpled T-shirt's searches, whose particles and edges pair with up to ~750 items.)"""
+    m, buckets = pairs.shape[0], rank.shape[0]
     second = 0
-    for q in range(pairs.shape[0]):
-        if keep[q]:
-            second = max(second, pairs[q, 1] + 1)
+    for q in range(m):
+        second = max(second, pairs[q, 1] + 1)
     by_second = np.zeros(second + 1, np.int64)
     by_rank = np.zeros(buckets + 1, np.int64)
-    for q in range(pairs.shape[0]):
-        if keep[q]:
-            by_second[pairs[q, 1] + 1] += 1
-            by_rank[rank[pairs[q, 0]] + 1] += 1
+    for q in range(m):
+        by_second[pairs[q, 1] + 1] += 1
+        by_rank[rank[pairs[q, 0]] + 1] += 1
     for b in range(second):
         by_second[b + 1] += by_second[b]
     for b in range(buckets):
         by_rank[b + 1] += by_rank[b]
-    m = by_rank[buckets]
     # the first digit: by the second index, into a copy of the pairs' columns
     first, other, d = np.empty(m, np.int64), np.empty(m, np.int64), np.empty(m)
-    for q in range(pairs.shape[0]):
-        if keep[q]:
-            b = pairs[q, 1]
-            r = by_second[b]
-            by_second[b] = r + 1
-            first[r], other[r], d[r] = pairs[q, 0], b, dist[q]
+    for q in range(m):
+        b = pairs[q, 1]
+        r = by_second[b]
+        by_second[b] = r + 1
+        first[r], other[r], d[r] = pairs[q, 0], b, dist[q]
     # the second: by the first index's rank, stable (so each rank's run stays in second order)
     out, out_d = np.empty((m, 2), np.int64), np.empty(m)
     for q in range(m):
@@ -289,8 +284,8 @@ def _in_order(vf, vf_d, ee, ee_d, ranks) -> Kept:
     """A search's answer as a :class:`Kept` list: its pairs in :func:`_ordered`'s order."""
     vranks, eranks = ranks
     return Kept(
-        *_ordered(vf, vf_d, np.ones(len(vf), np.bool_), vranks),
-        *_ordered(ee, ee_d, np.ones(len(ee), np.bool_), eranks),
+        *_ordered(vf, vf_d, vranks),
+        *_ordered(ee, ee_d, eranks),
     )
 
 
