@@ -220,7 +220,9 @@ def onset(i, s, x, records, tau, colliders, shapes, seen):
     """Vertex ``i``'s step ``s`` from ``x[i]`` with the part that would press a contact not yet
     pressed (distance at least ``τ``: not in the step's Hessian) taken off along that contact's
     normal, so that it stops at its onset (the next iteration sees it); the motion along the
-    surface stays. The self-contact pairs by their linear distance, the first ``colliders``
+    surface stays. (A self-contact pair within :data:`~cloth_sim.integrators.vbd_terms.NEAR` of
+    its onset is in the Hessian already, so its cut is rare: a cut moves one side of the pair
+    alone.) The self-contact pairs by their linear distance, the first ``colliders``
     colliders by their signed distance along their normal, as :func:`colliders_at` left it in
     ``seen[i]`` for the same point; where that left only a lower bound, asked here through
     :func:`asked` (``shapes = (kinds, positions, rotations, geometry, and the mesh bank's reals,

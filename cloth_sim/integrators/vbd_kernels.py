@@ -350,9 +350,10 @@ def sweep(verts, lo, hi, state, inertia, sp, co, sc, law, bounds, out):
         stepped[i] = f0 * f0 + f1 * f1 + f2 * f2  # its imbalance as the sweep found it
         sx, sy, sz = solve3(h0, h1, h2, h3, h4, h5, f0, f1, f2)
         if touch[i] or near[i]:
-            # a contact not yet pressed is not in the Hessian: a step past its onset would land
-            # deep inside (the next iteration pushing back out: the iterations cycled); the step
-            # stops at its onset, where the next iteration sees it
+            # a contact not yet pressed is not in the Hessian (a self-contact near its onset has
+            # its stiffness there: vbd_terms.NEAR): a step past its onset would land deep inside
+            # (the next iteration pushing back out: the iterations cycled); the step stops at its
+            # onset, where the next iteration sees it
             sx, sy, sz = onset(
                 i,
                 (sx, sy, sz),

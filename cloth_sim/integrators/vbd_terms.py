@@ -128,6 +128,21 @@ def local_energy(i, p, x, xt, y, m_h2, drag_h, springs, inv_h, bend):
     return e
 
 
+#: a self-contact pair not pressed but within this share of the thickness beyond it (``τ ≤ d <
+#: (1 + NEAR)·τ``) adds its penalty's stiffness ``k w² n nᵀ`` to the vertex's block, without a
+#: force: a proximal term along the pair's normal that vanishes at the sweeps' fixed point, so the
+#: step there is the penalty's own, but holds a vertex's step toward (or away from) the pair to
+#: what the pressed penalty would allow. Without it, the step that would cross the onset was cut
+#: there (:func:`~cloth_sim.integrators.vbd_contact.onset`): one side of the pair moved, the other
+#: not, and a vertex held at the onset felt no normal force and so no friction. The resting
+#: T-shirt walked across its table (in TshirtFold's start, variation 1, as stiff as the knit and
+#: converged at 20 iterations a step: its mean vertex 33 mm in 3 s; 0.7 mm with this) and its
+#: layers heaved (at 1e4 N/m and 8 s, 28 % of the vertices moving over 0.2 mm a step, kinetic
+#: energy 2.5e-5 J; 4.6 % and 5.0e-6 J with this). A tenth and a half of the thickness: 8.3 % and
+#: 7.1 %, 7.9e-6 and 5.0e-6 J (2026-12-03; docs/contacts.md)
+NEAR = 0.25
+
+
 @numba.njit(cache=True, inline="always")
 def self_contacts_at(i, x, xs, xt, records, law, fh):
     """Vertex ``i``'s self-contacts: ``½ k (τ − d)²`` on each pair's distance ``d`` along the
@@ -140,8 +155,9 @@ def self_contacts_at(i, x, xs, xt, records, law, fh):
     force of the iterate). A partner is read where it is now (``x``: another colour's, done
     earlier in this iteration or not yet begun), or, where its record marks it as of ``i``'s own
     colour (moved at the same time; its index stored as ``−v − 1``), where it was when the
-    iteration began (``xs``). ``law``: ``(τ, the penalty's stiffness, μ, friction's ε)``; returns
-    the block.
+    iteration began (``xs``). A pair not pressed but within :data:`NEAR` of it adds its
+    stiffness alone. ``law``: ``(τ, the penalty's stiffness, μ, friction's ε)``; returns the
+    block.
 
     (That choice is written out in the loop: as an inlined helper taking the three arrays, called
     for each of a record's vertices, numba counted the arrays' references at every call, 2.5× the
@@ -170,6 +186,8 @@ def self_contacts_at(i, x, xs, xt, records, law, fh):
                 uz += cw * (pz - xt[v, 2])
         rec_d[q] = d  # (for vbd_contact.onset, after the step is solved)
         if d >= tau:
+            if d < (1.0 + NEAR) * tau:  # not pressed, but near: its stiffness alone (NEAR)
+                fh = press(0.0, ks * w * w, (nx, ny, nz), fh)
             continue
         # ∂d/∂x_i = w n: the force pushes the pair apart along n
         lam = ks * (tau - d)

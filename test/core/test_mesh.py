@@ -442,15 +442,18 @@ def test_the_tshirt_never_crosses_itself():
     assert total == 0
 
 
-def test_the_tshirt_rests_on_its_table_with_self_contact_as_stiff_as_its_knit():
-    """``self_contact_stiffness='cloth'``: self-contact as stiff as the knit around it
-    (``vbd.SELF_CONTACT_SHARE`` of the springs at a vertex). The T-shirt settled on its table
-    rests as it does without self-contact, its median vertex still to a hundredth of a
-    millimetre a step; at the default 1e4 N/m, forty times the knit's stiffness, its layers
-    jitter (0.09 mm a step, a relative residual ~1,700 times the weight), and at the knit's
-    stiffness the residual is two orders of magnitude below that. It is not the residual without
-    self-contact (2.3): at rest it depends on the configuration the layers settle in, 2.5–49
-    over runs whose starts differ by a nanometre (2026-12-01), so that is not asserted."""
+def test_the_tshirt_rests_on_its_table_with_self_contact():
+    """The T-shirt settled on its table rests, with self-contact as stiff as the knit around it
+    (``self_contact_stiffness='cloth'``, ``vbd.SELF_CONTACT_SHARE`` of the springs at a vertex) as
+    without self-contact, its median vertex still to a hundredth of a millimetre a step, and at
+    the default 1e4 N/m, forty times the knit's stiffness, to two hundredths. At 1e4 N/m its
+    layers heaved (0.09 mm a step, a relative residual ~1,700 times the weight) while a step that
+    would press a pair not yet pressed was cut at the pair's onset, moving one side of it alone;
+    the pairs near their onset now add their stiffness to the step instead
+    (``vbd_terms.NEAR``): 0.011 mm. The residual at the knit's stiffness stays below the
+    default's. It is not the residual without self-contact (2.3): at rest it depends on the
+    configuration the layers settle in, 2.5–49 over runs whose starts differ by a nanometre
+    (2026-12-01), so that is not asserted."""
     scene = load_scene("tshirt")
     found = {}
     for case, on, options in (
@@ -471,8 +474,8 @@ def test_the_tshirt_rests_on_its_table_with_self_contact_as_stiff_as_its_knit():
             residual.append(sim.integrator_stats["last_residual"])
         found[case] = float(np.mean(moved)), float(np.median(residual))
     assert found["off"][0] <= 1e-5 and found["cloth"][0] <= 1e-5  # m a step
-    assert found["cloth"][0] <= 0.25 * found["default"][0]
-    assert found["cloth"][1] <= 0.1 * found["default"][1]
+    assert found["default"][0] <= 2e-5, found
+    assert found["cloth"][1] <= found["default"][1], found
 
 
 # --------------------------------------------------------------------------- scenes and garments

@@ -331,7 +331,10 @@ def test_the_tshirt_put_on_the_body_settles_on_its_shoulders_without_entering_or
     form's round arms (the shirt as cut is narrower than the arm there): the solid body pushes
     them out within 0.1 s, and from then on no vertex is deeper than 10 % of the thickness into
     the body at any step. (While meshes were two-sided, those seams stayed inside the arms for
-    the whole run, held at the thickness from the arms' inner surface.)"""
+    the whole run, held at the thickness from the arms' inner surface.) It comes to rest by 3 s:
+    its fastest vertex at 0.073 m/s then (0.015 before the self-contact pairs near their onset
+    were put in the step's Hessian, ``vbd_terms.NEAR``, which slows the settling of the unconverged
+    steps here; 0.114 and 0.061 at 2.5 s)."""
     from cloth_sim.bench.crossings import crossings
     from cloth_sim.scene import load_scene
 
@@ -339,7 +342,7 @@ def test_the_tshirt_put_on_the_body_settles_on_its_shoulders_without_entering_or
     body = sim.colliders[0]
     h, prev, crossed = sim.thickness, sim.positions.copy(), 0
     assert body.signed_distance(sim.positions).min() < -0.03  # the seams in the arms
-    while sim.time < 2.5:
+    while sim.time < 3.0:
         sim.step()
         if sim.time > 0.1:
             assert body.signed_distance(sim.positions).min() >= 0.9 * h
