@@ -148,14 +148,14 @@ REUSE_OVER = 0.02
 #: ``self_contact_stiffness='cloth'``: the self-contact penalty's stiffness as this share of the
 #: cloth's springs' stiffness summed at its median vertex (:meth:`VBD.self_contact_stiffness_for`).
 #: On the T-shirt (gray-interlock, 1/60 s × 3; 247 N/m at 1), side by side with the default 1e4
-#: N/m (~40): at 1 it rests on its table (a vertex's vertical range over 0.67 s at 8 s: 0.34 mm at
-#: the 99th percentile, kinetic energy 1.2e-8 J) where at 1e4 N/m its layers heave (11.4 mm,
-#: 2.5e-5 J; 1,000 N/m: 4.0 mm), and a search serves several steps; at 0.4 it rests too but the
-#: scripted TshirtFlatten fell to 0.45 ± 0.20 of flat over six variations (0.64 ± 0.08 at 1, 0.60
-#: ± 0.12 at 1e4 N/m). Not the default: the scripted TshirtFold reaches 0.78 ± 0.04 at 1 against
-#: 0.84 ± 0.03 at 1e4 N/m (six variations, 2026-12-03), and converged (20 iterations a step)
-#: 0.63 / −0.12 against 0.84 / 0.84 on two: the part of the shirt that should stay is dragged
-#: along (docs/contacts.md, with what else was tried)
+#: N/m (~40): at 1 it rests on its table (a vertex's vertical range over 0.67 s at 8 s: 0.55 mm at
+#: the 99th percentile, kinetic energy 1.9e-8 J) where at 1e4 N/m a few of its vertices still
+#: heave (8.6 mm, 5.0e-6 J; 11.4 mm and 2.5e-5 J before the near pairs' stiffness,
+#: ``vbd_terms.NEAR``), and a search serves about two steps; at 0.4 it rested too but the
+#: scripted TshirtFlatten fell to 0.45 ± 0.20 of flat over six variations (0.64 ± 0.08 at 1; an
+#: earlier day's code). Not the default: the scripted TshirtFold reaches 0.73 at 1 against 0.82
+#: at 1e4 N/m over six variations (2026-12-03): the part of the shirt that should stay moves
+#: more (docs/contacts.md, with what else was tried)
 SELF_CONTACT_SHARE = 1.0
 #: IPC's friction smoothing: relative tangential motion below EPS_V·h (m) is static
 EPS_V = 1e-3
@@ -389,9 +389,9 @@ class VBD(Integrator):
         cloth's own stiffness at a vertex; ``contact_stiffness`` where it has none). As stiff as
         the cloth around it, two layers in contact converge in the sweeps as the cloth does: a
         resting garment rests, where a penalty forty times stiffer than the T-shirt's knit makes
-        its layers heave (by up to centimetres) and the candidate search run every step. Under a
-        stack of layers the penalty yields their weight over the stiffness: 26 µm under ten of
-        the T-shirt's, 0.6 % of its thickness."""
+        some of its vertices heave (by millimetres) and the candidate search run every step.
+        Under a stack of layers the penalty yields their weight over the stiffness: 26 µm under
+        ten of the T-shirt's, 0.6 % of its thickness."""
         ks = self.self_contact_stiffness
         if ks is None:
             return self.contact_stiffness
