@@ -450,8 +450,9 @@ def test_the_tshirt_rests_on_its_table_with_self_contact():
     layers heaved (0.09 mm a step, a relative residual ~1,700 times the weight) while a step that
     would press a pair not yet pressed was cut at the pair's onset, moving one side of it alone;
     the pairs near their onset now add their stiffness to the step instead
-    (``vbd_terms.NEAR``): 0.011 mm. The residual at the knit's stiffness stays below the
-    default's. It is not the residual without self-contact (2.3): at rest it depends on the
+    (``vbd_terms.NEAR``): 0.011 mm. The relative residual at the knit's stiffness is a tenth of
+    the default's (72 against 706; two orders of magnitude below it before, when the default's
+    was ~1,700). It is not the residual without self-contact (2.3): at rest it depends on the
     configuration the layers settle in, 2.5–49 over runs whose starts differ by a nanometre
     (2026-12-01), so that is not asserted."""
     scene = load_scene("tshirt")
@@ -475,7 +476,7 @@ def test_the_tshirt_rests_on_its_table_with_self_contact():
         found[case] = float(np.mean(moved)), float(np.median(residual))
     assert found["off"][0] <= 1e-5 and found["cloth"][0] <= 1e-5  # m a step
     assert found["default"][0] <= 2e-5, found
-    assert found["cloth"][1] <= found["default"][1], found
+    assert found["cloth"][1] <= 0.2 * found["default"][1], found
 
 
 # --------------------------------------------------------------------------- scenes and garments
