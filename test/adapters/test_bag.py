@@ -342,15 +342,14 @@ def test_record_play_record_gives_the_same_bytes_in_the_same_order(node_bag, tmp
         assert [bytes(m.data) for m in b] == [bytes(m.data) for m in a], topic
         # Timing: the replayed receive times keep the recorded spacing. Offsets are taken against
         # their median, which removes the constant transport latency; what is left is sleep and
-        # scheduling jitter of two processes on a loaded 2-core machine. 95 % within 15 ms, all
-        # within 100 ms, and the total span within 2 %.
+        # scheduling jitter of two processes on a loaded 2-core machine. At most 5 % of a topic's
+        # messages (and at least one: /diagnostics has four, and CI once saw one of them 62 ms
+        # late with the other three within 0.1 ms) more than 15 ms off, all within 100 ms, and
+        # the total span within 2 %.
         offs = np.array([mb.log_time - ma.log_time for ma, mb in zip(a, b)], dtype=float) / 1e6
         dev = np.abs(offs - np.median(offs))
-        assert np.percentile(dev, 95) < 15.0 and dev.max() < 100.0, (
-            topic,
-            np.percentile(dev, 95),
-            dev.max(),
-        )
+        late = int((dev >= 15.0).sum())
+        assert late <= max(1, len(dev) // 20) and dev.max() < 100.0, (topic, late, len(dev), dev)
         if len(a) > 10:
             span_a, span_b = a[-1].log_time - a[0].log_time, b[-1].log_time - b[0].log_time
             assert span_b == pytest.approx(span_a, rel=0.02)
