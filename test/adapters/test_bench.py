@@ -13,6 +13,8 @@ import numpy as np
 import pytest
 
 from cloth_sim.bench.compile import listening
+from cloth_sim.bench.robot import INSIDE_SHARE
+from cloth_sim.bench.robot import sweep as robot_sweep
 from cloth_sim.cli import main as cli_main
 
 
@@ -144,6 +146,21 @@ def test_the_garment_contacts_table_has_its_three_cases_and_counts_crossings(cap
     assert out.count("\n| tshirt |") == 3 and "| heave, p99 (mm) | kinetic energy (J) |" in out
     # the shirt is still landing in this short run: every case's layers move
     assert all(r["heave_mm"] > 0.0 and r["kinetic"] > 0.0 for r in rows)
+
+
+def test_the_robot_sweep_line_tallies_the_steps_with_a_vertex_inside_a_link(capsys):
+    """``python -m cloth_sim.bench.robot``'s robot_sweep line: the deepest vertex inside a link,
+    which link and when, and the steps that ended with a vertex deeper than a tenth of the
+    thickness: a run with a deepest beyond that tenth has such a step, one within it none; every
+    step is counted once."""
+    seconds = 1.1  # (the arm reaches the cloth at ~0.8 s)
+    row = robot_sweep(seconds)
+    assert row["steps"] == round(seconds * 120) and 0 <= row["steps_inside"] <= row["steps"]
+    assert (row["inside"] > INSIDE_SHARE) == (row["steps_inside"] > 0)
+    assert row["link"].startswith("arm/") and 0.0 < row["at"] <= seconds + 1e-9
+    out = capsys.readouterr().out
+    tally = f"{row['steps_inside']} of {row['steps']} steps ending with a vertex over 10% of h"
+    assert tally in out
 
 
 def test_the_compile_profile_charges_each_kernel_its_own_seconds():
