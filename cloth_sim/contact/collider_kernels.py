@@ -251,19 +251,25 @@ def spread_tasks(n):
 CONTACT_CHUNK = 256
 
 
-# the distance queries of resolve_contacts, compiled on their own and called from its parallel
-# loop: with sdf inlined at its five call sites (as elsewhere) the kernel took 77 s to compile,
-# 21 s with these called, at the same speed a thread as the serial kernel it replaced
+# the distance queries compiled on their own, for kernels outside the iterations' hot loops to
+# call: with sdf inlined at its five call sites (as elsewhere) resolve_contacts took 77 s to
+# compile, 21 s with these called, at the same speed a thread as the serial kernel it replaced;
+# vbd's collider_allowances and overtaken (once a search, once a step) compiled in 10.9 and
+# 9.2 s of their own with both queries inlined, 3.4 and 1.8 s with these called (the queries 1.9 s
+# once, shared with resolve_contacts; an empty cache, 2026-12-03): the same bits, and
+# collider_allowances 11 µs slower a call on robot_sweep's arm (66 → 77 µs), 0.38 ms faster on
+# tshirt_on_body's mannequin (3.75 → 3.37 ms), side by side in one process
 @numba.njit(cache=True)
-def _sdf_called(kind, pos, rot, geo, c, x, y, z):
+def sdf_called(kind, pos, rot, geo, c, x, y, z):
     """:func:`sdf`, not inlined."""
     return sdf(kind, pos, rot, geo, c, x, y, z)
 
 
 @numba.njit(cache=True)
-def _mesh_sdf_called(pos, rot, geo, c, x, y, z, reals, ints, starts):
-    """:func:`mesh_sdf`, not inlined."""
-    return mesh_sdf(pos, rot, geo, c, x, y, z, reals, ints, starts)
+def mesh_sdf_called(pos, rot, geo, c, x, y, z, reals, ints, starts, cutoff):
+    """:func:`mesh_sdf`, not inlined (``cutoff`` given at every call: one signature to compile,
+    ``math.inf`` for none)."""
+    return mesh_sdf(pos, rot, geo, c, x, y, z, reals, ints, starts, cutoff)
 
 
 @numba.njit(cache=True, parallel=True)
@@ -324,7 +330,7 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
                     # a half-space after an integrator that kept the path off it: only (2) and (3)
                     # below can act, and only within its edge; farther, its clearance is all there
                     # is to measure (the same as below, without carrying the path's ends)
-                    d = _sdf_called(k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])[0]
+                    d = sdf_called(k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])[0]
                     if d >= h * (1.0 + CONTACT_TOLERANCE):
                         clearance[p] = min(clearance[p], max(d - h, 0.0))
                         continue
@@ -368,11 +374,11 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
                 d = nx = ny = nz = 0.0
                 if continuous:
                     if k == MESH:
-                        r0, mx, my, mz = _mesh_sdf_called(
-                            pos, rot, geo, c, sx, sy, sz, reals, ints, starts
+                        r0, mx, my, mz = mesh_sdf_called(
+                            pos, rot, geo, c, sx, sy, sz, reals, ints, starts, math.inf
                         )
                     else:
-                        r0, mx, my, mz = _sdf_called(k, pos, rot, geo, c, sx, sy, sz)
+                        r0, mx, my, mz = sdf_called(k, pos, rot, geo, c, sx, sy, sz)
                     d0 = r0 - h
                     ex, ey, ez = x[p, 0] - sx, x[p, 1] - sy, x[p, 2] - sz
                     length = math.sqrt(ex * ex + ey * ey + ez * ez)
@@ -382,11 +388,12 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
                         # points the other way: a straight path between opposite sides crosses the
                         # solid): stay
                         if k == MESH:
-                            de, fx, fy, fz = _mesh_sdf_called(
-                                pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2], reals, ints, starts
-                            )
+                            de, fx, fy, fz = mesh_sdf_called(
+                                pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2],
+                                reals, ints, starts, math.inf,
+                            )  # fmt: skip
                         else:
-                            de, fx, fy, fz = _sdf_called(
+                            de, fx, fy, fz = sdf_called(
                                 k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2]
                             )
                         known = True
@@ -401,11 +408,11 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
                         for _ in range(_MARCH_STEPS):
                             qx, qy, qz = sx + t * ex, sy + t * ey, sz + t * ez
                             if k == MESH:
-                                d, nx, ny, nz = _mesh_sdf_called(
-                                    pos, rot, geo, c, qx, qy, qz, reals, ints, starts
+                                d, nx, ny, nz = mesh_sdf_called(
+                                    pos, rot, geo, c, qx, qy, qz, reals, ints, starts, math.inf
                                 )
                             else:
-                                d, nx, ny, nz = _sdf_called(k, pos, rot, geo, c, qx, qy, qz)
+                                d, nx, ny, nz = sdf_called(k, pos, rot, geo, c, qx, qy, qz)
                             if d - h <= 1e-3 * h:
                                 hit = True
                                 known = True  # (x[p] is set to this point below)
@@ -420,11 +427,12 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
                 # (2) projection with friction on the motion relative to the collider
                 if not known:
                     if k == MESH:
-                        d, nx, ny, nz = _mesh_sdf_called(
-                            pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2], reals, ints, starts
-                        )
+                        d, nx, ny, nz = mesh_sdf_called(
+                            pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2],
+                            reals, ints, starts, math.inf,
+                        )  # fmt: skip
                     else:
-                        d, nx, ny, nz = _sdf_called(k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])
+                        d, nx, ny, nz = sdf_called(k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])
                 # (0 once projected onto the skin)
                 clearance[p] = min(clearance[p], max(d - h, 0.0))
                 if d >= h * (1.0 + CONTACT_TOLERANCE):
@@ -515,13 +523,14 @@ def _crease_ask(kinds, pos, rot, geo, reach, bank, h, c, x, y, z):
         return far, 0.0, 0.0, 0.0
     if kinds[c] == MESH:
         r, t, s = bank
-        return mesh_sdf(pos, rot, geo, c, x, y, z, r, t, s, far)
-    return sdf(kinds[c], pos, rot, geo, c, x, y, z)
+        return mesh_sdf_called(pos, rot, geo, c, x, y, z, r, t, s, far)
+    return sdf_called(kinds[c], pos, rot, geo, c, x, y, z)
 
 
 # compiled on its own, not inlined: resolve_contacts took 55 s to compile with it inlined (its
 # four distance queries copied in), 21 s without it and 11 s for it, at the same speed (called
-# once a touching particle, where there is more than one collider)
+# once a touching particle, where there is more than one collider); its own queries called
+# (_crease_ask), 16.9 → 0.9 s of its own (an empty cache, 2026-12-03; the same bits)
 @numba.njit(cache=True)
 def crease(x, p, kinds, pos, rot, geo, reach, bank, h):
     """Particle ``p`` after the colliders' projections, one after the other: where two colliders

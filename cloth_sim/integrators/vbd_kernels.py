@@ -22,7 +22,7 @@ import math
 import numba
 import numpy as np
 
-from ..contact.collider_kernels import MESH, beyond_reach, mesh_sdf, sdf
+from ..contact.collider_kernels import MESH, beyond_reach, mesh_sdf_called, sdf_called
 from ..contact.geometry import segment_parameters, triangle_weights
 from ..contact.triangle_meshes import mesh_closed
 from ..kernel_cache import keep_true
@@ -559,9 +559,11 @@ def collider_allowances(x, allowance, bounded, co, cdepth, tau, allow, near, cle
                 d = far
             elif ckind[c] == MESH:
                 xi, yi, zi = x[i, 0], x[i, 1], x[i, 2]
-                d = mesh_sdf(cpos, crot, cgeo, c, xi, yi, zi, reals, ints, starts)[0]
+                d = mesh_sdf_called(
+                    cpos, crot, cgeo, c, xi, yi, zi, reals, ints, starts, math.inf
+                )[0]
             else:
-                d = sdf(ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2])[0]
+                d = sdf_called(ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2])[0]
             nearest = min(nearest, d)
             clear[i, c] = d
             if cdepth[c] < math.inf:
@@ -608,9 +610,13 @@ def overtaken(x, free, co, tau):
                 continue
             if ckind[c] == MESH:
                 xi, yi, zi = x[i, 0], x[i, 1], x[i, 2]
-                d, nx, ny, nz = mesh_sdf(cpos, crot, cgeo, c, xi, yi, zi, reals, ints, starts, tau)
+                d, nx, ny, nz = mesh_sdf_called(
+                    cpos, crot, cgeo, c, xi, yi, zi, reals, ints, starts, tau
+                )
             else:
-                d, nx, ny, nz = sdf(ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2])
+                d, nx, ny, nz = sdf_called(
+                    ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2]
+                )
             if d < tau:
                 x[i, 0] += (tau - d) * nx
                 x[i, 1] += (tau - d) * ny
