@@ -200,7 +200,7 @@ def truncate(i, p, x_cd, allow, gptr, grec, pidx, pcoef, pnrm, pdist, dmin, gamm
     return x_cd[i, 0] + t * ex, x_cd[i, 1] + t * ey, x_cd[i, 2] + t * ez, True
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", fastmath=False)
 def asked(shapes, c, x, y, z):
     """Collider ``c``'s signed distance and normal at ``(x, y, z)`` (``shapes``: :func:`onset`'s),
     for :func:`onset` where :func:`colliders_at` left no answer of its own: compiled on its own
@@ -208,7 +208,13 @@ def asked(shapes, c, x, y, z):
     queries' code was in every sweep twice: ``vbd_grid._touch_colour`` took 65.5 s of one core to
     compile, 39.4 s with this called, and ``vbd_kernels.sweep`` 41.1 s, 25.7 s (``cloth-sim bench
     compile``, side by side, 2026-12-02). ``error_model="numpy"``, as
-    the sweeps that call it (a division by zero does not raise)."""
+    the sweeps that call it (a division by zero does not raise). ``fastmath=False`` said, not
+    left to numba: a callee that sets no flag takes its first caller's, and its cached build serves
+    every later caller. Left unset, ``asked`` contracted its arithmetic into fused multiply-adds
+    where ``vbd_grid``'s kernels (``fastmath={"contract"}``) compiled it first, as ``make install``
+    does, and not where ``sweep`` did, as a process compiling lazily does: robot_sweep and drape on
+    ``vbd`` ended on other bits by how their kernels had been compiled
+    (``test_kernel_cache.py``)."""
     kinds, pos, rot, geo, reals, ints, starts = shapes
     if kinds[c] == MESH:
         return mesh_sdf(pos, rot, geo, c, x, y, z, reals, ints, starts)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import ast
+import dis
+import importlib
 import json
 import os
 import subprocess
@@ -10,6 +12,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from numba.core.dispatcher import Dispatcher
 
 import cloth_sim
 from cloth_sim.integrators import vbd_kernels
@@ -168,3 +171,55 @@ def test_the_record_sits_beside_the_kernels_cache():
     assert {p.relative_to(ROOT).as_posix() for p in module_sources(name, ROOT)} == set(
         kept["sources"]
     )
+
+
+def _kernel_modules() -> list[str]:
+    """The package's modules that cache kernels (``cloth_sim.cuda`` aside: its kernels are
+    numba-cuda's)."""
+    names = []
+    for path in sorted(ROOT.rglob("*.py")):
+        rel = path.relative_to(ROOT.parent).with_suffix("")
+        if rel.parts[1] != "cuda" and _cached_kernels(ast.parse(path.read_bytes())):
+            names.append(".".join(rel.parts))
+    return names
+
+
+def _callees(kernel: Dispatcher) -> list[Dispatcher]:
+    """The jitted functions ``kernel``'s code names as globals."""
+    f = kernel.py_func
+    named = {i.argval for i in dis.get_instructions(f) if i.opname == "LOAD_GLOBAL"}
+    return [
+        f.__globals__[n] for n in sorted(named) if isinstance(f.__globals__.get(n), Dispatcher)
+    ]
+
+
+def test_a_callee_of_a_fastmath_kernel_says_its_own_fastmath():
+    """numba compiles a jitted function that sets no ``fastmath`` with its first caller's (a flag
+    it inherits), and caches that build for every later caller: a function that a kernel with
+    ``fastmath`` calls, compiled on its own, would contract its arithmetic or not by which kernel
+    compiled it first (robot_sweep and drape on ``vbd`` ended on other bits after ``make
+    install``'s compilation than in a process compiling lazily, 2026-12-03). Every such callee,
+    reached through inlined helpers too, says its own."""
+    kernels = {}
+    for name in _kernel_modules():
+        module = importlib.import_module(name)
+        kernels.update(
+            {(name, k): v for k, v in vars(module).items() if isinstance(v, Dispatcher)}
+        )
+    roots = [k for k in kernels.values() if k.targetoptions.get("fastmath")]
+    assert roots, "no kernel with fastmath: the check has nothing to walk"
+    reached, todo = {}, list(roots)
+    while todo:
+        for callee in _callees(todo.pop()):
+            key = (callee.py_func.__module__, callee.py_func.__qualname__)
+            if key not in reached:
+                reached[key] = callee
+                todo.append(callee)
+    compiled_alone = {
+        key: d for key, d in reached.items() if d.targetoptions.get("inline", "never") == "never"
+    }
+    assert ("cloth_sim.integrators.vbd_contact", "asked") in compiled_alone
+    unsaid = sorted(
+        ".".join(k) for k, d in compiled_alone.items() if "fastmath" not in d.targetoptions
+    )
+    assert unsaid == [], "callees of a fastmath kernel that leave fastmath to their caller"
