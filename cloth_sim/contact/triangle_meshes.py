@@ -409,7 +409,7 @@ def _box_distance2(bank, node, x, y, z):
     return dx * dx + dy * dy + dz * dz
 
 
-@numba.njit(cache=True, fastmath=False)  # (said: a callee inherits its first caller's)
+@numba.njit(cache=True, fastmath=False)  # (said: numba gives a callee its first caller's)
 def _nearest(bank, m, x, y, z, cutoff):
     """The nearest point of mesh ``m`` to ``(x, y, z)`` within ``cutoff``: its squared distance,
     the point, its triangle (−1: none that near) and its barycentric weights there."""
@@ -483,7 +483,7 @@ def _pseudonormal(bank, k, wa, wb, wc):
     return r[f], r[f + 1], r[f + 2]
 
 
-@numba.njit(cache=True, fastmath=False)  # (said: a callee inherits its first caller's)
+@numba.njit(cache=True, fastmath=False)  # (said: numba gives a callee its first caller's)
 def _inside_box(bank, m, x, y, z):
     """Whether ``(x, y, z)`` lies inside mesh ``m``'s root box."""
     r, root = bank[REALS], bank[INTS][bank[STARTS][ROOT] + m]
@@ -536,7 +536,7 @@ def mesh_distance(reals, ints, starts, m, x, y, z, cutoff=np.inf):
     return _listed_distance((reals, ints, starts), m, x, y, z, cutoff, cid)
 
 
-@numba.njit(cache=True, fastmath=False)  # (said: a callee inherits its first caller's)
+@numba.njit(cache=True, fastmath=False)  # (said: numba gives a callee its first caller's)
 def _listed_distance(bank, m, x, y, z, cutoff, cid):
     """:func:`mesh_distance` from the nearest point: from the candidate grid's cell ``cid`` that
     holds ``(x, y, z)`` (−1: none) where that is the answer, the nearest listed triangle lying
