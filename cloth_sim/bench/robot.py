@@ -15,12 +15,14 @@ robot_sweep's cloth and through the robots issue's sheet (:func:`sweep_sheet`).
 from __future__ import annotations
 
 import argparse
+import math
 import time
 
 import numpy as np
 
 from ..bench.crossings import crossings
 from ..contact import colliders
+from ..integrators.vbd_options import COLLIDER_SHARE, VBDOptions
 from ..kernels import compile_kernels
 from ..model import ClothModel
 from ..robot import Robot
@@ -198,16 +200,20 @@ def distance_grids(thickness: float = 0.005, points: int = 20_000) -> None:
 INSIDE_SHARE = 0.1
 
 
-def sweep(seconds: float, collider_share: float | None = None) -> dict:
+def sweep(seconds: float, collider_share: float | str = "default") -> dict:
     """robot_sweep headless: the deepest vertex inside a link (the links' own signed distances:
     a closed mesh, as the forearm is, is a solid), which link and when, the steps that ended with
     some vertex more than :data:`INSIDE_SHARE` of the thickness inside one, the self-crossings and
-    the speed; with ``collider_share``, vbd's option that cuts a step so that no link moves more
-    than that share of the thickness a substep. Prints a line and returns its figures."""
+    the speed; ``collider_share``: vbd's option that cuts a step so that no link near the cloth
+    moves more than that many thicknesses a substep ("default": as it ships, 'auto'; None: off).
+    Prints a line and returns its figures."""
     scene = load_scene("robot_sweep")
     sim = scene.build_simulator()
-    if collider_share is not None:
+    if collider_share != "default":
         sim.set_integrator("vbd", **{**sim.integrator_options, "collider_share": collider_share})
+    collider_share = VBDOptions.of(sim.integrator_options).collider_share
+    if collider_share == "auto":
+        collider_share = f"auto ({COLLIDER_SHARE:g} with self-contact)"
     links = list(sim.colliders)
     tris = sim.model.triangles
     h = sim.thickness
@@ -233,7 +239,7 @@ def sweep(seconds: float, collider_share: float | None = None) -> dict:
     )  # fmt: skip
     print(
         f"robot_sweep ({sim.model.n_particles} particles, {sim.integrator}, dt {sim.dt:.4g} s, "
-        f"collider_share {collider_share}, "
+        f"collider_share {collider_share if collider_share is not None else 'off'}, "
         f"{sum(s.triangles for s in sim.robots['arm'].shapes)} mesh triangles, "
         f"self-collision {'on' if sim.self_collision else 'off'}), {seconds:g} s: deepest "
         f"inside a link {row['inside']:.1%} of the thickness h ({where}, t = {when:.3f} s), "
@@ -426,6 +432,19 @@ def pinch_sheet(share, gap: float) -> None:
     )
 
 
+def _share(text: str) -> float | None:
+    """``--collider-share``: a number of thicknesses > 0, or ``off`` (None)."""
+    if text == "off":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0.0 < value < math.inf:
+        raise argparse.ArgumentTypeError(f"a number > 0 or 'off', got {text!r}")
+    return value
+
+
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--seconds", type=float, default=4.6, help="robot_sweep's simulated time")
@@ -434,9 +453,10 @@ def main(argv=None) -> None:
     )
     p.add_argument(
         "--collider-share",
-        type=float,
-        default=None,
-        help="robot_sweep again with vbd's collider_share (e.g. 0.4), beside it as it ships",
+        type=_share,
+        default="default",
+        help="robot_sweep again with vbd's collider_share (a number of thicknesses, or 'off'), "
+        "beside it as it ships",
     )
     args = p.parse_args(argv)
     compile_kernels()
@@ -445,7 +465,7 @@ def main(argv=None) -> None:
     mesh_queries()
     distance_grids()
     sweep(args.seconds)
-    if args.collider_share is not None:
+    if args.collider_share != "default":
         sweep(args.seconds, args.collider_share)
     if args.published:
         share = robot_data_share()
@@ -462,7 +482,10 @@ def main(argv=None) -> None:
                 "panda", share, dt=1 / 60, iterations=10, self_collision=False,
                 swing_time=swing_time,
             )  # fmt: skip
-        sweep_sheet("panda", share, dt=1 / 60, iterations=10)
+        # with self-contact: as it ships (collider_share 'auto': substeps where a link near the
+        # cloth travels over 2.5 thicknesses a step), beside the same uncut
+        for options in (None, {"collider_share": None}):
+            sweep_sheet("panda", share, options, dt=1 / 60, iterations=10)
         for gap in (0.005, 0.002, 0.0):  # one thickness, and a vertex trapped between two skins
             pinch_sheet(share, gap)
 

@@ -140,6 +140,26 @@ class Collider:
             return self.mesh.extent
         return math.inf
 
+    @property
+    def hull(self) -> tuple[np.ndarray, float] | None:
+        """Points in the shape's own frame and a radius: the shape lies within that radius of
+        their convex hull (None: a half-space, unbounded). A rigid motion moves no point of the
+        shape farther than it moves the farthest of those points plus the radius times the chord
+        its turn sweeps (:meth:`Contacts.travels`)."""
+        g = self.geometry
+        if self.kind == SPHERE:
+            return np.zeros((1, 3)), float(g[0])
+        if self.kind == BOX:
+            signs = np.array([[a, b, c] for a in (-1, 1) for b in (-1, 1) for c in (-1, 1)])
+            return signs * g[:3], 0.0
+        if self.kind == CAPSULE:
+            return np.array([-g[:3], g[:3]]), float(g[3])
+        if self.kind == CYLINDER:  # (within its radius of its axis)
+            return np.array([[0.0, 0.0, -g[1]], [0.0, 0.0, g[1]]]), float(g[0])
+        if self.kind == MESH:
+            return self.mesh.vertices, 0.0
+        return None
+
     def signed_distance(self, points) -> np.ndarray:
         """Signed distance of ``(k, 3)`` points from the surface (negative inside)."""
         pts = read_only(np.reshape(points, (-1, 3)), np.float64)
@@ -418,6 +438,7 @@ class Contacts:
         self._geo = np.array([c.geometry for c in cs], dtype=np.float64).reshape(-1, 4)
         self._mu = np.array([c.friction for c in cs], dtype=np.float64)
         self._reach = np.array([c.reach for c in cs], dtype=np.float64)
+        self._hulls = [c.hull for c in cs]
         # the meshes packed for the kernels, each Mesh's row naming its index in the bank
         meshes = [c.mesh for c in cs if c.mesh is not None]
         self._bank = triangle_meshes.pack(meshes) if meshes else triangle_meshes.EMPTY
@@ -523,6 +544,28 @@ class Contacts:
         np.copyto(self._pos0, self._pos)
         np.copyto(self._rot0, self._rot)
 
+    def travels(self, packed: PackedColliders) -> np.ndarray:
+        """How far any point of each collider moves over ``packed``'s step (its poses there, in
+        this stage's order, as :meth:`packed` and :func:`packed_between` give them): the farthest
+        move of the points of its :attr:`Collider.hull`, ``|Δpos + ΔR·q|`` (exact for a box or a
+        mesh: the move is affine in the point, so its largest over a convex hull is at a corner),
+        plus the hull's radius times the chord the turn sweeps, ``‖ΔR‖/√2`` (Frobenius, a
+        rotation's); a half-space's shift."""
+        out = np.zeros(len(self._hulls))
+        for i, hull in enumerate(self._hulls):
+            shift = packed.pos[i] - packed.pos0[i]
+            turn = packed.rot[i] - packed.rot0[i]
+            if not (shift.any() or turn.any()):
+                continue  # (a still one, however many corners it has)
+            if hull is None:
+                out[i] = np.linalg.norm(shift)
+                continue
+            points, radius = hull
+            moves = shift + points @ turn.T
+            farthest = np.sqrt(np.einsum("ij,ij->i", moves, moves).max())
+            out[i] = farthest + radius * np.linalg.norm(turn) / math.sqrt(2.0)
+        return out
+
     def packed(self) -> PackedColliders:
         """The colliders as the contact kernels read them (an integrator that resolves contacts
         inside its step reads them here)."""
@@ -562,18 +605,3 @@ def packed_between(packed: PackedColliders, s0: float, s1: float) -> PackedColli
 
     start, end = at(s0), at(s1)
     return packed._replace(pos=end[0], rot=end[1], pos0=start[0], rot0=start[1])
-
-
-def collider_travel(packed: PackedColliders) -> float:
-    """The farthest any point within a collider's reach travels over the step (``packed``:
-    :meth:`Contacts.packed`): its position's move plus its reach times the angle it turned (a
-    half-space's turn is not counted: its reach is unbounded)."""
-    kinds, pos, rot, pos0, rot0 = packed.kinds, packed.pos, packed.rot, packed.pos0, packed.rot0
-    reach = packed.reach
-    if not len(kinds):
-        return 0.0
-    moved = np.linalg.norm(pos - pos0, axis=1)
-    cos = (np.einsum("cij,cij->c", rot, rot0) - 1.0) / 2.0  # trace(R R0ᵀ)
-    angle = np.arccos(np.clip(cos, -1.0, 1.0))
-    turned = np.where(np.isfinite(reach), reach * angle, 0.0)
-    return float((moved + turned).max())

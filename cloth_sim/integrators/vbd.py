@@ -83,14 +83,14 @@ import numba
 import numpy as np
 
 from ..contact.collider_kernels import BOX, CAPSULE, CYLINDER, MESH, NO_COLLIDERS, SPHERE
-from ..contact.colliders import collider_travel, packed_between
+from ..contact.colliders import packed_between
 from ..contact.collision_tree import touching
 from ..kinds import LINEAR
 from ..physics.force_kernels import BUCKLE_TABLE
 from ..physics.forces import incidence
 from .base import Integrator, Stability, VelocityOrigin
 from .registry import register
-from .vbd_contact import moving_within_reach
+from .vbd_contact import moving_within_reach, travel_within_reach
 from .vbd_grid import GridLayout
 from .vbd_kernels import (
     MAX_SUBSTEPS,
@@ -114,7 +114,7 @@ from .vbd_kernels import (
     summed_at,
 )
 from .vbd_newton import NewtonSolve, applies, direct_is_cheaper
-from .vbd_options import VBDOptions
+from .vbd_options import COLLIDER_SHARE, VBDOptions
 from .vbd_residual import sweep_residual
 
 #: the skin of the candidate pairs kept between searches, in thicknesses, where the cloth is
@@ -177,12 +177,15 @@ class VBD(Integrator):
     two measures;
     ``substeps`` ('auto' where neither it nor ``iterations`` is given, else 1): backward-Euler
     steps a step is cut into, 'auto' from the cloth's stiffness over its inertia
-    (:meth:`substeps_for`); ``collider_share`` (default None, off): a step whose colliders'
-    surfaces travel farther than this share of the thickness is cut into as many more substeps,
+    (:meth:`substeps_for`); ``collider_share`` (default 'auto':
+    :data:`~.vbd_options.COLLIDER_SHARE`, 2.5, where the cloth self-collides, else off; None: off):
+    a step in which a collider within reach of the cloth travels farther than this many
+    thicknesses is cut into as many more substeps,
     each seeing the colliders' motion in part
-    (:func:`~cloth_sim.contact.colliders.collider_travel`): a link overtaking the cloth faster than
-    its bounds let it give way otherwise ends inside (0.4 keeps the Franka Panda's 1.8 m/s sweep
-    and robot_sweep out of every link, at 3-20 times the cost; docs/robots.md); ``rho`` (default
+    (:meth:`~cloth_sim.contact.colliders.Contacts.travels`,
+    :func:`~.vbd_contact.travel_within_reach`): a link overtaking the cloth faster than its bounds
+    let it give way otherwise ends inside (robot_sweep, and a Franka Panda swung through a sheet
+    at 1/60 s a step; docs/robots.md); ``rho`` (default
     0.8), the Chebyshev acceleration's spectral radius estimate, 0 for none (measured on the
     swinging 48×48 cloth: 0.8 is the best of 0.5, 0.8, 0.9 and 0.95 at 1/240 s, 15× closer to the
     converged step than none after 10 iterations; docs/BENCHMARKS.md); ``contact_stiffness`` (N/m,
@@ -266,7 +269,9 @@ class VBD(Integrator):
         if substeps is None:  # the work is chosen where neither is given
             substeps = "auto" if self.chosen_iterations else 1
         self.substeps = None if substeps == "auto" else int(substeps)
-        self.collider_share = None if o.collider_share is None else float(o.collider_share)
+        share = o.collider_share
+        #: None (off), "auto" (:data:`~.vbd_options.COLLIDER_SHARE` with self-contact) or a number
+        self.collider_share = share if share in (None, "auto") else float(share)
         self._substeps_of, self._substeps_n, self._substeps_wanted = None, 1, 1
         self.self_friction = float(o.self_friction)
         self.tethers = o.tethers
@@ -463,9 +468,17 @@ class VBD(Integrator):
         # a direct solve needs no substeps for its convergence
         n = 1 if direct and self.substeps is None else self.substeps_for(forces, dt)
         share = self.collider_share
-        if packed is not None and share is not None:  # a collider moves ≤ share·τ a substep
-            parts = math.ceil(collider_travel(packed) / (share * contacts.thickness))
-            n = max(n, min(MAX_SUBSTEPS, parts))
+        if share == "auto":  # where self-contact's bounds hold the cloth back (COLLIDER_SHARE)
+            sc = self._self_collision
+            share = COLLIDER_SHARE if sc is not None and sc.active else None
+        if packed is not None and share is not None:
+            # a collider within reach of the cloth moves ≤ share·τ a substep (the vertices
+            # reaching as far as their allowance of the inertial guess, x + dt·v, would let them)
+            tau = contacts.thickness
+            reach = allowances(state.x, state.x + dt * state.v, tau)
+            travels = contacts.travels(packed)
+            travel = travel_within_reach(state.x, self.free, packed, reach, tau, travels)
+            n = max(n, min(MAX_SUBSTEPS, math.ceil(travel / (share * tau))))
         # a step's time budget is shared by its substeps
         budget = None if self.time_budget is None else self.time_budget / n
         iterations, worst, on_grid = 0, 0.0, False

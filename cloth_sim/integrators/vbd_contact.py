@@ -266,27 +266,53 @@ def onset(i, s, x, records, tau, colliders, shapes, seen):
 
 
 @numba.njit(cache=True)
+def comes_within(x, free, pos, reach, c, motion, allow, tau):
+    """Whether collider ``c`` (``pos``, ``reach``: every collider's position and reach at the
+    step's end), its points moving at most ``motion`` over the step, could come within ``tau`` of
+    a free vertex of ``x`` moving at most its ``allow``: it was within its reach of its position
+    at the step's end, and within that reach plus ``motion`` all along. A half-space always
+    could."""
+    if not reach[c] < math.inf:
+        return True
+    for i in range(x.shape[0]):
+        if not free[i]:
+            continue
+        beyond = beyond_reach(pos, reach, c, x[i, 0], x[i, 1], x[i, 2]) - motion
+        if not beyond >= (allow[i] + 1.01 * tau) * (1.0 + 1e-9):  # (a NaN is near)
+            return True
+    return False
+
+
+@numba.njit(cache=True)
 def moving_within_reach(x, free, co, allow, tau):
     """Whether a collider of ``co`` that moved over the step (from ``pos0``, ``rot0`` to ``pos``,
-    ``rot``) could come within ``tau`` of a free vertex of ``x`` moving at most its ``allow``: a
-    half-space that moved always could; any other was within its reach of ``pos`` at the step's
-    end, and within its reach plus how far its points moved (``|Δpos| + reach·‖Δrot‖``) over the
-    step. One that moved far from the cloth is asked nothing, as a still one."""
+    ``rot``) could come within ``tau`` of a free vertex of ``x`` moving at most its ``allow``
+    (:func:`comes_within`, its points moving at most ``|Δpos| + reach·‖ΔR‖``). One that moved far
+    from the cloth is asked nothing, as a still one."""
     kinds, pos, rot, pos0, rot0, reach = co.kinds, co.pos, co.rot, co.pos0, co.rot0, co.reach
     for c in range(kinds.shape[0]):
         shift, turn = pose_change(pos, rot, pos0, rot0, c)
         if shift == 0.0 and turn == 0.0:
             continue
-        if not reach[c] < math.inf:
+        if comes_within(x, free, pos, reach, c, shift + reach[c] * turn, allow, tau):
             return True
-        motion = shift + reach[c] * turn
-        for i in range(x.shape[0]):
-            if not free[i]:
-                continue
-            beyond = beyond_reach(pos, reach, c, x[i, 0], x[i, 1], x[i, 2]) - motion
-            if not beyond >= (allow[i] + 1.01 * tau) * (1.0 + 1e-9):  # (a NaN is near)
-                return True
     return False
+
+
+@numba.njit(cache=True)
+def travel_within_reach(x, free, co, allow, tau, travel):
+    """The farthest ``travel[c]`` (how far collider ``c``'s points moved over the step:
+    :meth:`~cloth_sim.contact.colliders.Contacts.travels`) among the colliders of ``co`` that
+    could come within ``tau`` of a free vertex of ``x`` moving at most its ``allow``
+    (:func:`comes_within`); 0 where none did. A link moving fast far from the cloth is not
+    counted."""
+    farthest = 0.0
+    for c in range(co.kinds.shape[0]):
+        if travel[c] > farthest and comes_within(
+            x, free, co.pos, co.reach, c, travel[c], allow, tau
+        ):
+            farthest = travel[c]
+    return farthest
 
 
 keep_true(__name__)  # (its kernels compile again when a file it imports changes)

@@ -14,6 +14,17 @@ TOLERANCE = 1e-2
 CHECK_EVERY = 5
 #: the implicit step a substep solves: ``bdf2`` (second order) or backward ``euler``
 SCHEMES = ("bdf2", "euler")
+#: the thicknesses a collider within reach of the cloth may travel in a substep where the cloth
+#: self-collides (``collider_share="auto"``): a faster one cuts the step into substeps
+#: (:meth:`~cloth_sim.contact.colliders.Contacts.travels`). Self-contact's bounds are what hold
+#: the cloth back: each layer moves at most γ of its gap to the next between two searches, so a
+#: fold a link pushes follows it slower than the link goes. robot_sweep at its 1/120 s, where the
+#: links near the cloth travel up to 3.1 thicknesses a step: uncut, a fold the upper arm pushed
+#: ended 1.23 thicknesses inside it, and so at a share of 3 (3 % of the steps cut); at 2.5, 48 %
+#: of the steps in two, 0 inside and 0 crossings over its 4.6 s. Without self-contact a vertex may
+#: move as far as the link pushes it, and the Panda swung through a sheet at 1/60 s a step ended
+#: 0 mm inside a link either way, at a quarter of the time uncut (docs/robots.md)
+COLLIDER_SHARE = 2.5
 
 
 def _is_number(x) -> bool:
@@ -48,8 +59,9 @@ class VBDOptions:
     #: 'auto' (chosen from the cloth and dt), an integer, or None (auto where ``iterations`` is
     #: not given, else 1)
     substeps: int | str | None = None
-    #: the share of the thickness a collider may travel in a substep (None: off)
-    collider_share: float | None = None
+    #: the thicknesses a collider within reach of the cloth may travel in a substep ('auto':
+    #: :data:`COLLIDER_SHARE` where the cloth self-collides, else any; None: any)
+    collider_share: float | str | None = "auto"
     #: the colliders' contact penalty's stiffness (N/m)
     contact_stiffness: float = 1e4
     #: the self-contact penalty's stiffness (N/m; None: ``contact_stiffness``; 'cloth': as stiff
@@ -109,10 +121,11 @@ class VBDOptions:
                 f"iterations is not given, else 1) or an integer in [1, 10000], got {s!r}"
             )
         share = self.collider_share
-        if share is not None and not (_is_number(share) and 0.0 < share < math.inf):
+        if share not in (None, "auto") and not (_is_number(share) and 0.0 < share < math.inf):
             raise ValueError(
-                "collider_share must be None (off) or a number > 0 (the share of the thickness "
-                f"a collider may travel in a substep), got {share!r}"
+                "collider_share must be 'auto' (2.5 where the cloth self-collides, else off), "
+                "None (off) or a number > 0 (the thicknesses a collider within reach of the "
+                f"cloth may travel in a substep), got {share!r}"
             )
         if not (_is_number(self.rho) and 0.0 <= self.rho < 1.0):
             raise ValueError(f"rho must be a number in [0, 1), got {self.rho!r}")

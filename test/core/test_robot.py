@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from cloth_sim import ClothModel, Simulator
 from cloth_sim.contact.geometry import quaternion_matrix
@@ -204,36 +205,58 @@ def test_a_link_sweeping_at_1_m_s_pushes_a_hanging_cloth_aside_without_entering(
 
 def test_a_fast_link_is_taken_in_parts_of_a_share_of_the_thickness():
     """collider_share: the demo arm swung 0.0125 rad in a step of 1/240 s (3 rad/s, its forearm's
-    tip ~9 mm) is taken in substeps in none of which any vertex of its mesh forearm moves more
-    than the share of the thickness; collider_travel, which sets their number, is a position's
-    move plus the reach times the angle turned."""
-    from cloth_sim.contact.collider_kernels import BOX, NO_COLLIDERS
-    from cloth_sim.contact.colliders import collider_travel
+    tip ~9 mm) beside the cloth is taken in substeps in none of which any vertex of its mesh
+    forearm moves more than the share of the thickness; the same swing 2 m from the cloth, and the
+    same swing with the option off, in one step. 'auto', the default, cuts a step only where the
+    cloth self-collides, at 2.5 thicknesses a substep (twice the swing: two substeps). Contacts.
+    travels, which sets their number, is exact for a mesh (its vertices' largest move) and a box
+    (its corners')."""
+    from cloth_sim.contact.colliders import Box, Contacts, Sphere
 
     n, h, share = 8, 0.005, 0.4
-    model = ClothModel.grid(n, n, 0.05, 0.001, stiffness=100.0, pinned=[(n - 1, 0)])
-    sim = Simulator(
-        model, integrator="vbd", dt=1 / 240, thickness=h,
-        integrator_options={"iterations": 2, "collider_share": share},
-    )  # fmt: skip
-    sim.add_robot(Robot.from_urdf(ARM), name="arm", position=(0.0, -2.0, 0.0))
-    forearm = next(c for c in sim.colliders if c.name.endswith("forearm"))
-    before = forearm.vertices
-    sim.set_joint_positions("arm", {"shoulder_yaw": 3.0 / 240})
-    moved = float(np.linalg.norm(forearm.vertices - before, axis=1).max())
-    sim.step()
-    parts = sim.integrator_stats["last_substeps"]
-    assert moved > h and parts > 1
-    assert moved / parts <= share * h
-    # a box of reach 0.3 m moved 4 mm and turned 0.01 rad about z: 4 mm + 3 mm
+
+    def swung(where, options, turn=3.0 / 240, self_collision=False):
+        model = ClothModel.grid(n, n, 0.05, 0.001, stiffness=100.0, pinned=[(n - 1, 0)])
+        sim = Simulator(
+            model, integrator="vbd", dt=1 / 240, thickness=h, self_collision=self_collision,
+            integrator_options={"iterations": 2, **options},
+        )  # fmt: skip
+        sim.add_robot(Robot.from_urdf(ARM), name="arm", position=where)
+        forearm = next(c for c in sim.colliders if c.name.endswith("forearm"))
+        before = forearm.vertices
+        sim.set_joint_positions("arm", {"shoulder_yaw": turn})
+        moved = float(np.linalg.norm(forearm.vertices - before, axis=1).max())
+        travels = sim._contacts.travels(sim._contacts.packed())  # (before the step ends it)
+        k = next(i for i, c in enumerate(sim.colliders) if c is forearm)
+        sim.step()
+        return moved, travels[k], sim.integrator_stats["last_substeps"]
+
+    # the arm 0.15 m under the cloth, its forearm within its reach (0.3 m) of the cloth
+    below = (-0.3, 0.15, -0.3)
+    moved, travel, parts = swung(below, {"collider_share": share})
+    assert travel == pytest.approx(moved, rel=1e-12)
+    assert moved > h and parts == math.ceil(moved / (share * h))
+    assert swung((0.0, -2.0, 0.0), {"collider_share": share})[2] == 1  # far from the cloth
+    assert swung(below, {"collider_share": None})[2] == 1  # off
+    moved, _, parts = swung(below, {}, turn=6.0 / 240, self_collision=True)
+    assert 2.5 * h < moved < 5 * h and parts == 2
+    assert swung(below, {}, turn=6.0 / 240)[2] == 1
+
+    # a box of half extents (0.1, 0.2, 0.3) moved 4 mm along x and turned 0.01 rad about z: its
+    # corners' largest move; a sphere of radius 0.1 the same: its centre's plus 0.1 × the chord
+    model = ClothModel.grid(2, 2, 0.05, 0.001, stiffness=1.0)
+    contacts = Contacts(model, [Box(half_extents=(0.1, 0.2, 0.3)), Sphere(radius=0.1)], h)
     turn = np.array([[math.cos(0.01), -math.sin(0.01), 0], [math.sin(0.01), math.cos(0.01), 0],
                      [0, 0, 1]])  # fmt: skip
-    packed = NO_COLLIDERS._replace(
-        kinds=np.array([BOX]), pos=np.array([[0.004, 0.0, 0.0]]), rot=turn[None],
-        pos0=np.zeros((1, 3)), rot0=np.eye(3)[None], geo=np.zeros((1, 4)), mu=np.zeros(1),
-        reach=np.array([0.3]),
-    )  # fmt: skip
-    assert collider_travel(packed) == pytest.approx(0.004 + 0.3 * 0.01, rel=1e-9)
+    quaternion = Rotation.from_matrix(turn).as_quat(scalar_first=True)
+    for i in range(2):
+        contacts.set_pose(i, (0.004, 0.0, 0.0), quaternion)
+    corners = np.array([[a, b, c] for a in (-1, 1) for b in (-1, 1) for c in (-1, 1)])
+    corners = corners * [0.1, 0.2, 0.3]
+    expected = np.linalg.norm(corners @ turn.T + [0.004, 0, 0] - corners, axis=1).max()
+    box, ball = contacts.travels(contacts.packed())
+    assert box == pytest.approx(expected, rel=1e-9)
+    assert ball == pytest.approx(0.004 + 0.1 * 2 * math.sin(0.005), rel=1e-9)
 
 
 def test_bad_robot_input_is_refused_by_name_and_changes_nothing(tmp_path):

@@ -509,6 +509,8 @@ def test_counters_report_iterations_and_the_residual():
         ({"iterations": float("inf")}, "iterations"),
         ({"substeps": float("nan")}, "substeps"),
         ({"scheme": "bdf3"}, "scheme"),
+        ({"collider_share": "fast"}, r"collider_share must be 'auto' \(2.5 where the cloth"),
+        ({"collider_share": 0.0}, "collider_share"),
         ({"iteration": 10}, "no option 'iteration'; its options: iterations, rho"),
     ],
 )
