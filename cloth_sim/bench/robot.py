@@ -200,17 +200,16 @@ def distance_grids(thickness: float = 0.005, points: int = 20_000) -> None:
 INSIDE_SHARE = 0.1
 
 
-def sweep(seconds: float, collider_share: float | str = "default") -> dict:
+def sweep(seconds: float, options: dict | None = None) -> dict:
     """robot_sweep headless: the deepest vertex inside a link (the links' own signed distances:
     a closed mesh, as the forearm is, is a solid), which link and when, the steps that ended with
     some vertex more than :data:`INSIDE_SHARE` of the thickness inside one, the self-crossings and
-    the speed; ``collider_share``: vbd's option that cuts a step so that no link near the cloth
-    moves more than that many thicknesses a substep ("default": as it ships, 'auto'; None: off).
-    Prints a line and returns its figures."""
+    the speed; ``options``: vbd's options over the scene's (``collider_share``: the thicknesses a
+    link near the cloth may move a substep). Prints a line and returns its figures."""
     scene = load_scene("robot_sweep")
     sim = scene.build_simulator()
-    if collider_share != "default":
-        sim.set_integrator("vbd", **{**sim.integrator_options, "collider_share": collider_share})
+    if options:
+        sim.set_integrator("vbd", **{**sim.integrator_options, **options})
     collider_share = VBDOptions.of(sim.integrator_options).collider_share
     if collider_share == "auto":
         collider_share = f"auto ({COLLIDER_SHARE:g} with self-contact)"
@@ -432,17 +431,17 @@ def pinch_sheet(share, gap: float) -> None:
     )
 
 
-def _share(text: str) -> float | None:
-    """``--collider-share``: a number of thicknesses > 0, or ``off`` (None)."""
+def _share(text: str) -> dict:
+    """``--collider-share``: a number of thicknesses > 0, or ``off``; as vbd's option."""
     if text == "off":
-        return None
+        return {"collider_share": None}
     try:
         value = float(text)
     except ValueError:
         value = math.nan
     if not 0.0 < value < math.inf:
         raise argparse.ArgumentTypeError(f"a number > 0 or 'off', got {text!r}")
-    return value
+    return {"collider_share": value}
 
 
 def main(argv=None) -> None:
@@ -454,7 +453,6 @@ def main(argv=None) -> None:
     p.add_argument(
         "--collider-share",
         type=_share,
-        default="default",
         help="robot_sweep again with vbd's collider_share (a number of thicknesses, or 'off'), "
         "beside it as it ships",
     )
@@ -465,7 +463,7 @@ def main(argv=None) -> None:
     mesh_queries()
     distance_grids()
     sweep(args.seconds)
-    if args.collider_share != "default":
+    if args.collider_share is not None:
         sweep(args.seconds, args.collider_share)
     if args.published:
         share = robot_data_share()

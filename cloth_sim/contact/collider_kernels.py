@@ -251,25 +251,22 @@ def spread_tasks(n):
 CONTACT_CHUNK = 256
 
 
-# the distance queries compiled on their own, for kernels outside the iterations' hot loops to
-# call: with sdf inlined at its five call sites (as elsewhere) resolve_contacts took 77 s to
-# compile, 21 s with these called, at the same speed a thread as the serial kernel it replaced;
+# the distance query compiled on its own, for kernels outside the iterations' hot loops to call:
+# with sdf inlined at its five call sites (as elsewhere) resolve_contacts took 77 s to compile,
+# 21 s with the queries called, at the same speed a thread as the serial kernel it replaced;
 # vbd's collider_allowances and overtaken (once a search, once a step) compiled in 10.9 and
-# 9.2 s of their own with both queries inlined, 3.4 and 1.8 s with these called (the queries 1.9 s
+# 9.2 s of their own with both queries inlined, 3.4 and 1.8 s with them called (the queries 1.9 s
 # once, shared with resolve_contacts; an empty cache, 2026-12-03): the same bits, and
 # collider_allowances 11 µs slower a call on robot_sweep's arm (66 → 77 µs), 0.38 ms faster on
 # tshirt_on_body's mannequin (3.75 → 3.37 ms), side by side in one process
 @numba.njit(cache=True)
-def sdf_called(kind, pos, rot, geo, c, x, y, z):
-    """:func:`sdf`, not inlined."""
+def collider_distance(kind, pos, rot, geo, c, x, y, z, reals, ints, starts, cutoff):
+    """Collider ``c``'s signed distance and outward normal at ``(x, y, z)``, whatever its
+    ``kind``: :func:`mesh_sdf` within ``cutoff`` (``math.inf`` for none: given at every call, one
+    signature to compile) for a mesh, :func:`sdf` for any other; not inlined."""
+    if kind == MESH:
+        return mesh_sdf(pos, rot, geo, c, x, y, z, reals, ints, starts, cutoff)
     return sdf(kind, pos, rot, geo, c, x, y, z)
-
-
-@numba.njit(cache=True)
-def mesh_sdf_called(pos, rot, geo, c, x, y, z, reals, ints, starts, cutoff):
-    """:func:`mesh_sdf`, not inlined (``cutoff`` given at every call: one signature to compile,
-    ``math.inf`` for none)."""
-    return mesh_sdf(pos, rot, geo, c, x, y, z, reals, ints, starts, cutoff)
 
 
 @numba.njit(cache=True, parallel=True)
@@ -330,7 +327,10 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
                     # a half-space after an integrator that kept the path off it: only (2) and (3)
                     # below can act, and only within its edge; farther, its clearance is all there
                     # is to measure (the same as below, without carrying the path's ends)
-                    d = sdf_called(k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])[0]
+                    d = collider_distance(
+                        k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2],
+                        reals, ints, starts, math.inf,
+                    )[0]  # fmt: skip
                     if d >= h * (1.0 + CONTACT_TOLERANCE):
                         clearance[p] = min(clearance[p], max(d - h, 0.0))
                         continue
@@ -373,12 +373,9 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
                 known = False
                 d = nx = ny = nz = 0.0
                 if continuous:
-                    if k == MESH:
-                        r0, mx, my, mz = mesh_sdf_called(
-                            pos, rot, geo, c, sx, sy, sz, reals, ints, starts, math.inf
-                        )
-                    else:
-                        r0, mx, my, mz = sdf_called(k, pos, rot, geo, c, sx, sy, sz)
+                    r0, mx, my, mz = collider_distance(
+                        k, pos, rot, geo, c, sx, sy, sz, reals, ints, starts, math.inf
+                    )
                     d0 = r0 - h
                     ex, ey, ez = x[p, 0] - sx, x[p, 1] - sy, x[p, 2] - sz
                     length = math.sqrt(ex * ex + ey * ey + ez * ez)
@@ -387,15 +384,10 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
                         # went past the middle of the solid or through it (the normal at the end
                         # points the other way: a straight path between opposite sides crosses the
                         # solid): stay
-                        if k == MESH:
-                            de, fx, fy, fz = mesh_sdf_called(
-                                pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2],
-                                reals, ints, starts, math.inf,
-                            )  # fmt: skip
-                        else:
-                            de, fx, fy, fz = sdf_called(
-                                k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2]
-                            )
+                        de, fx, fy, fz = collider_distance(
+                            k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2],
+                            reals, ints, starts, math.inf,
+                        )  # fmt: skip
                         known = True
                         d, nx, ny, nz = de, fx, fy, fz
                         if fx * mx + fy * my + fz * mz < 0.0:
@@ -407,12 +399,9 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
                         hit = False
                         for _ in range(_MARCH_STEPS):
                             qx, qy, qz = sx + t * ex, sy + t * ey, sz + t * ez
-                            if k == MESH:
-                                d, nx, ny, nz = mesh_sdf_called(
-                                    pos, rot, geo, c, qx, qy, qz, reals, ints, starts, math.inf
-                                )
-                            else:
-                                d, nx, ny, nz = sdf_called(k, pos, rot, geo, c, qx, qy, qz)
+                            d, nx, ny, nz = collider_distance(
+                                k, pos, rot, geo, c, qx, qy, qz, reals, ints, starts, math.inf
+                            )
                             if d - h <= 1e-3 * h:
                                 hit = True
                                 known = True  # (x[p] is set to this point below)
@@ -426,13 +415,10 @@ def resolve_contacts(x, v, x0, pinned, masses, co, h, dt, continuous, out):
                             x[p, 0], x[p, 1], x[p, 2] = sx + t * ex, sy + t * ey, sz + t * ez
                 # (2) projection with friction on the motion relative to the collider
                 if not known:
-                    if k == MESH:
-                        d, nx, ny, nz = mesh_sdf_called(
-                            pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2],
-                            reals, ints, starts, math.inf,
-                        )  # fmt: skip
-                    else:
-                        d, nx, ny, nz = sdf_called(k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2])
+                    d, nx, ny, nz = collider_distance(
+                        k, pos, rot, geo, c, x[p, 0], x[p, 1], x[p, 2],
+                        reals, ints, starts, math.inf,
+                    )  # fmt: skip
                 # (0 once projected onto the skin)
                 clearance[p] = min(clearance[p], max(d - h, 0.0))
                 if d >= h * (1.0 + CONTACT_TOLERANCE):
@@ -521,10 +507,8 @@ def _crease_ask(kinds, pos, rot, geo, reach, bank, h, c, x, y, z):
     far = h * _CREASE_FAR
     if beyond_reach(pos, reach, c, x, y, z) > far:
         return far, 0.0, 0.0, 0.0
-    if kinds[c] == MESH:
-        r, t, s = bank
-        return mesh_sdf_called(pos, rot, geo, c, x, y, z, r, t, s, far)
-    return sdf_called(kinds[c], pos, rot, geo, c, x, y, z)
+    r, t, s = bank
+    return collider_distance(kinds[c], pos, rot, geo, c, x, y, z, r, t, s, far)
 
 
 # compiled on its own, not inlined: resolve_contacts took 55 s to compile with it inlined (its

@@ -22,7 +22,7 @@ import math
 import numba
 import numpy as np
 
-from ..contact.collider_kernels import MESH, beyond_reach, mesh_sdf_called, sdf_called
+from ..contact.collider_kernels import MESH, beyond_reach, collider_distance
 from ..contact.geometry import segment_parameters, triangle_weights
 from ..contact.triangle_meshes import mesh_closed
 from ..kernel_cache import keep_true
@@ -557,13 +557,11 @@ def collider_allowances(x, allowance, bounded, co, cdepth, tau, allow, near, cle
                 # the query (a Franka Panda's meshes asked by every vertex of a 32×32 cloth at
                 # every search: 22 of a step's 35 ms)
                 d = far
-            elif ckind[c] == MESH:
-                xi, yi, zi = x[i, 0], x[i, 1], x[i, 2]
-                d = mesh_sdf_called(
-                    cpos, crot, cgeo, c, xi, yi, zi, reals, ints, starts, math.inf
-                )[0]
             else:
-                d = sdf_called(ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2])[0]
+                xi, yi, zi = x[i, 0], x[i, 1], x[i, 2]
+                d = collider_distance(
+                    ckind[c], cpos, crot, cgeo, c, xi, yi, zi, reals, ints, starts, math.inf
+                )[0]
             nearest = min(nearest, d)
             clear[i, c] = d
             if cdepth[c] < math.inf:
@@ -608,15 +606,10 @@ def overtaken(x, free, co, tau):
                 continue
             if beyond_reach(cpos, creach, c, x[i, 0], x[i, 1], x[i, 2]) >= tau:
                 continue
-            if ckind[c] == MESH:
-                xi, yi, zi = x[i, 0], x[i, 1], x[i, 2]
-                d, nx, ny, nz = mesh_sdf_called(
-                    cpos, crot, cgeo, c, xi, yi, zi, reals, ints, starts, tau
-                )
-            else:
-                d, nx, ny, nz = sdf_called(
-                    ckind[c], cpos, crot, cgeo, c, x[i, 0], x[i, 1], x[i, 2]
-                )
+            xi, yi, zi = x[i, 0], x[i, 1], x[i, 2]
+            d, nx, ny, nz = collider_distance(
+                ckind[c], cpos, crot, cgeo, c, xi, yi, zi, reals, ints, starts, tau
+            )
             if d < tau:
                 x[i, 0] += (tau - d) * nx
                 x[i, 1] += (tau - d) * ny
