@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.spatial.transform import Rotation, Slerp
+from scipy.spatial.transform import Rotation
 
 from ..physics.mesh import check_indices, read_mesh
 from . import triangle_meshes
@@ -546,7 +546,7 @@ class Contacts:
 
     def travels(self, packed: PackedColliders) -> np.ndarray:
         """How far any point of each collider moves over ``packed``'s step (its poses there, in
-        this stage's order, as :meth:`packed` and :func:`packed_between` give them): the farthest
+        this stage's order, as :meth:`packed` and :func:`packed_parts` give them): the farthest
         move of the points of its :attr:`Collider.hull`, ``|Δpos + ΔR·q|`` (exact for a box or a
         mesh: the move is affine in the point, so its largest over a convex hull is at a corner),
         plus the hull's radius times the chord the turn sweeps, ``‖ΔR‖/√2`` (Frobenius, a
@@ -582,26 +582,25 @@ class Contacts:
         )
 
 
-def packed_between(packed: PackedColliders, s0: float, s1: float) -> PackedColliders:
-    """:meth:`Contacts.packed` over the part ``[s0, s1]`` of the step (``0 ≤ s0 < s1 ≤ 1``): each
-    collider's pose at ``s0`` as the start and at ``s1`` as the end, its position interpolated
-    linearly and its rotation by spherical interpolation between the step's two poses (a
-    substep of an integrator that steps the step's motion in parts)."""
+def packed_parts(packed: PackedColliders, n: int) -> list[PackedColliders]:
+    """:meth:`Contacts.packed` over each of the ``n`` equal parts of the step (an integrator that
+    steps the step's motion in parts): part ``k`` starts at each collider's pose at ``k/n`` and
+    ends at its pose at ``(k+1)/n`` (the same arrays as the next part's start), its position
+    interpolated linearly and its rotation by spherical interpolation between the step's two
+    poses, ``R0·exp(s·log(R0ᵀR1))`` (scipy's :class:`~scipy.spatial.transform.Slerp`, for all
+    the colliders at once)."""
     kinds, pos, rot, pos0, rot0 = packed.kinds, packed.pos, packed.rot, packed.pos0, packed.rot0
-    if not len(kinds):
-        return packed
-
-    def at(s):
-        if s == 0.0:
-            return pos0, rot0
-        if s == 1.0:
-            return pos, rot
+    if n == 1 or not len(kinds):
+        return [packed] * n
+    start = Rotation.from_matrix(rot0)
+    turn = (start.inv() * Rotation.from_matrix(rot)).as_rotvec()
+    poses = [(pos0, rot0)]
+    for k in range(1, n):
+        s = k / n
         p = np.ascontiguousarray(pos0 + s * (pos - pos0))
-        r = np.empty_like(rot)
-        for i in range(len(kinds)):
-            turn = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([rot0[i], rot[i]])))
-            r[i] = turn([s]).as_matrix()[0]
-        return p, r
-
-    start, end = at(s0), at(s1)
-    return packed._replace(pos=end[0], rot=end[1], pos0=start[0], rot0=start[1])
+        poses.append((p, (start * Rotation.from_rotvec(turn * s)).as_matrix()))
+    poses.append((pos, rot))
+    return [
+        packed._replace(pos=e[0], rot=e[1], pos0=b[0], rot0=b[1])
+        for b, e in zip(poses[:-1], poses[1:])
+    ]

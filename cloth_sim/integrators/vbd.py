@@ -83,7 +83,7 @@ import numba
 import numpy as np
 
 from ..contact.collider_kernels import BOX, CAPSULE, CYLINDER, MESH, NO_COLLIDERS, SPHERE
-from ..contact.colliders import packed_between
+from ..contact.colliders import packed_parts
 from ..contact.collision_tree import touching
 from ..kinds import LINEAR
 from ..physics.force_kernels import BUCKLE_TABLE
@@ -483,10 +483,8 @@ class VBD(Integrator):
         budget = None if self.time_budget is None else self.time_budget / n
         iterations, worst, on_grid = 0, 0.0, False
         strain = self._strain_limit
-        for part in range(n):
-            colliders = packed
-            if n > 1 and packed is not None:
-                colliders = packed_between(packed, part / n, (part + 1) / n)
+        parts = [None] * n if packed is None else packed_parts(packed, n)
+        for part, colliders in enumerate(parts):
             done, res, blocks = self._substep(state, forces, dt / n, colliders, budget, direct)
             if part < n - 1 and strain is not None and strain.active:
                 # each substep's stretch corrected before the next (the last: the simulator's

@@ -203,31 +203,38 @@ def test_substeps_are_steps_of_their_own():
 
 
 def test_a_moving_collider_is_taken_in_parts_over_the_substeps():
-    """packed_between: the step's own poses at its ends, a continuous path between (the end of a
+    """packed_parts: the step's own poses at its ends, a continuous path between (the end of a
     part is the start of the next), the position interpolated linearly and the rotation on the
-    sphere (half of a quarter turn about z is an eighth turn)."""
+    sphere (a quarter turn about z in three parts is 30° a part), each collider on its own path
+    (a still one stays where it is)."""
     from scipy.spatial.transform import Rotation
 
     from cloth_sim.contact.collider_kernels import BOX, NO_COLLIDERS
-    from cloth_sim.contact.colliders import packed_between
+    from cloth_sim.contact.colliders import packed_parts
 
     turn = Rotation.from_euler("z", 90, degrees=True).as_matrix()
     packed = NO_COLLIDERS._replace(
-        kinds=np.array([BOX]),
-        pos=np.array([[0.4, 0.0, 0.2]]),
-        rot=turn[None].copy(),
-        pos0=np.zeros((1, 3)),
-        rot0=np.eye(3)[None].copy(),
-        geo=np.array([[0.1, 0.1, 0.1, 0.0]]),
-        mu=np.array([0.5]),
-        reach=np.array([0.2]),
+        kinds=np.array([BOX, BOX]),
+        pos=np.array([[0.6, 0.0, 0.3], [1.0, 1.0, 1.0]]),
+        rot=np.stack([turn, np.eye(3)]),
+        pos0=np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]),
+        rot0=np.stack([np.eye(3), np.eye(3)]),
+        geo=np.array([[0.1, 0.1, 0.1, 0.0]] * 2),
+        mu=np.array([0.5, 0.5]),
+        reach=np.array([0.2, 0.2]),
     )
-    whole = packed_between(packed, 0.0, 1.0)
+    (whole,) = packed_parts(packed, 1)
     for a, b in zip(whole, packed):
         np.testing.assert_array_equal(a, b)
-    first, second = packed_between(packed, 0.0, 0.5), packed_between(packed, 0.5, 1.0)
-    np.testing.assert_array_equal(first.pos, second.pos0)
-    np.testing.assert_array_equal(first.rot, second.rot0)
-    np.testing.assert_allclose(first.pos[0], (0.2, 0.0, 0.1), atol=1e-15)
-    angle = Rotation.from_matrix(first.rot[0]).as_euler("xyz", degrees=True)
-    np.testing.assert_allclose(angle, (0.0, 0.0, 45.0), atol=1e-9)
+    parts = packed_parts(packed, 3)
+    for a, b in zip(parts[:-1], parts[1:]):
+        np.testing.assert_array_equal(a.pos, b.pos0)
+        np.testing.assert_array_equal(a.rot, b.rot0)
+    np.testing.assert_array_equal(parts[0].pos0, packed.pos0)
+    np.testing.assert_array_equal(parts[-1].rot, packed.rot)
+    for k, part in enumerate(parts, start=1):
+        np.testing.assert_allclose(part.pos[0], (0.2 * k, 0.0, 0.1 * k), atol=1e-15)
+        angle = Rotation.from_matrix(part.rot[0]).as_euler("xyz", degrees=True)
+        np.testing.assert_allclose(angle, (0.0, 0.0, 30.0 * k), atol=1e-9)
+        np.testing.assert_allclose(part.pos[1], (1.0, 1.0, 1.0), atol=1e-15)
+        np.testing.assert_allclose(part.rot[1], np.eye(3), atol=1e-15)
