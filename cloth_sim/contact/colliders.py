@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.spatial import ConvexHull, QhullError
 from scipy.spatial.transform import Rotation
 
 from ..physics.mesh import check_indices, read_mesh
@@ -95,6 +96,15 @@ def check_index(i, count: int, doing: str) -> None:
         )
 
 
+def hull_corners(points: np.ndarray) -> np.ndarray:
+    """The corners of ``points``' convex hull (qhull, :class:`scipy.spatial.ConvexHull`); all
+    the points where they span no solid (qhull needs one)."""
+    try:
+        return points[ConvexHull(points).vertices]
+    except QhullError:
+        return points
+
+
 class Collider:
     """Base class: ``kind``, ``friction``, ``name``, a pose (``position``, ``rotation``) and the
     shape's local parameters ``geometry`` (4 numbers)."""
@@ -156,8 +166,8 @@ class Collider:
             return np.array([-g[:3], g[:3]]), float(g[3])
         if self.kind == CYLINDER:  # (within its radius of its axis)
             return np.array([[0.0, 0.0, -g[1]], [0.0, 0.0, g[1]]]), float(g[0])
-        if self.kind == MESH:
-            return self.mesh.vertices, 0.0
+        if self.kind == MESH:  # (its hull's corners: the farthest move is at one of them)
+            return hull_corners(self.mesh.vertices), 0.0
         return None
 
     def signed_distance(self, points) -> np.ndarray:

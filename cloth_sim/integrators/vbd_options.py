@@ -123,9 +123,9 @@ class VBDOptions:
         share = self.collider_share
         if share not in (None, "auto") and not (_is_number(share) and 0.0 < share < math.inf):
             raise ValueError(
-                "collider_share must be 'auto' (2.5 where the cloth self-collides, else off), "
-                "None (off) or a number > 0 (the thicknesses a collider within reach of the "
-                f"cloth may travel in a substep), got {share!r}"
+                f"collider_share must be 'auto' ({COLLIDER_SHARE:g} where the cloth "
+                "self-collides, else off), None (off) or a number > 0 (the thicknesses a "
+                f"collider within reach of the cloth may travel in a substep), got {share!r}"
             )
         if not (_is_number(self.rho) and 0.0 <= self.rho < 1.0):
             raise ValueError(f"rho must be a number in [0, 1), got {self.rho!r}")

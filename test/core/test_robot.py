@@ -259,6 +259,34 @@ def test_a_fast_link_is_taken_in_parts_of_a_share_of_the_thickness():
     assert ball == pytest.approx(0.004 + 0.1 * 2 * math.sin(0.005), rel=1e-9)
 
 
+def test_a_mesh_travels_as_far_as_its_hulls_corners_and_a_flat_one_keeps_every_vertex():
+    """Contacts.travels reads a mesh's hull corners only (hull_corners: qhull's vertices of
+    the mesh's convex hull): the same box subdivided, its edge and face points on the hull but
+    not its corners, travels exactly as its eight corners do; a flat mesh spans no solid, and
+    every vertex is kept."""
+    import trimesh
+
+    from cloth_sim.contact.colliders import Contacts, Mesh, hull_corners
+
+    box = trimesh.creation.box(extents=(0.2, 0.4, 0.6)).subdivide().subdivide()
+    assert len(box.vertices) > 8
+    corners = hull_corners(np.asarray(box.vertices))
+    expected = np.array([[a, b, c] for a in (-1, 1) for b in (-1, 1) for c in (-1, 1)])
+    expected = expected * [0.1, 0.2, 0.3]
+    assert sorted(map(tuple, corners)) == sorted(map(tuple, expected))
+    flat = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.5, 0.5, 0.0]])
+    np.testing.assert_array_equal(hull_corners(flat), flat)
+
+    model = ClothModel.grid(2, 2, 0.05, 0.001, stiffness=1.0)
+    contacts = Contacts(model, [Mesh((box.vertices, box.faces))], 0.005)
+    turn = Rotation.from_rotvec([0.0, 0.02, 0.01])
+    contacts.set_pose(0, (0.0, 0.003, -0.002), turn.as_quat(scalar_first=True))
+    every = np.asarray(box.vertices)
+    moves = every @ turn.as_matrix().T + [0.0, 0.003, -0.002] - every
+    (travel,) = contacts.travels(contacts.packed())
+    assert travel == pytest.approx(np.linalg.norm(moves, axis=1).max(), rel=1e-12)
+
+
 def test_bad_robot_input_is_refused_by_name_and_changes_nothing(tmp_path):
     with pytest.raises(ValueError, match="does not parse"):
         Robot.from_urdf("<robot name='x'><link name='a'></robot>")
